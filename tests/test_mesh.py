@@ -1,0 +1,63 @@
+"""Mesh builders and OBJ input/output (numpy only; no Taichi runtime needed)."""
+
+import numpy as np
+import pytest
+
+import ti_cloth as tc
+
+
+def test_grid_layout_and_counts():
+    rows, cols, width, height = 4, 6, 2.5, 1.5
+    mesh = tc.grid_mesh(rows, cols, size=(width, height), plane="xz", origin=(1.0, 2.0, 3.0))
+    assert mesh.vertex_count == rows * cols
+    assert mesh.triangle_count == 2 * (rows - 1) * (cols - 1)
+    v = mesh.vertices
+    np.testing.assert_allclose(v[0], [1.0, 2.0, 3.0])
+    np.testing.assert_allclose(v[cols - 1], [1.0 + width, 2.0, 3.0])        # columns along x
+    np.testing.assert_allclose(v[(rows - 1) * cols], [1.0, 2.0, 3.0 + height])  # rows along z
+    np.testing.assert_allclose(v[:, 1], 2.0)
+    np.testing.assert_allclose(mesh.triangle_areas().sum(), width * height)
+    assert len(mesh.boundary_edges()) == 2 * (rows - 1) + 2 * (cols - 1)
+    assert len(mesh.boundary_vertices()) == 2 * rows + 2 * cols - 4
+    assert len(mesh.edges()) == rows * (cols - 1) + cols * (rows - 1) + (rows - 1) * (cols - 1)
+
+
+def test_load_obj_splits_quads_and_save_round_trips(tmp_path):
+    obj = tmp_path / "quad.obj"
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 0 0\nf 1 2 3 4\nf 2 5 3\n")
+    mesh = tc.load_mesh(obj)
+    assert mesh.vertex_count == 5 and mesh.triangle_count == 3
+    np.testing.assert_allclose(mesh.triangle_areas().sum(), 1.0 + 0.5)
+    out = tmp_path / "out.obj"
+    tc.save_mesh(out, mesh)
+    again = tc.load_mesh(out)
+    np.testing.assert_array_equal(again.triangles, mesh.triangles)
+    np.testing.assert_allclose(again.vertices, mesh.vertices)
+    assert not list(tmp_path.glob(".*tmp*")), "temporary file left behind"
+
+
+def test_load_mesh_errors(tmp_path):
+    with pytest.raises(FileNotFoundError, match="missing.obj"):
+        tc.load_mesh(tmp_path / "missing.obj")
+
+
+@pytest.mark.parametrize("vertices, triangles, field", [
+    (np.zeros((0, 3)), np.zeros((0, 3), int), "vertices"),
+    (np.zeros((3, 2)), [[0, 1, 2]], "vertices.shape"),
+    ([[0, 0, 0], [1, 0, 0], [0, np.nan, 0]], [[0, 1, 2]], "vertices[2, 1]"),
+    ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 3]], "triangles"),
+    ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1]], "triangles.shape"),
+    ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 1]], "triangles[[0]]"),
+])
+def test_mesh_rejects_bad_input(vertices, triangles, field):
+    with pytest.raises(ValueError, match=__import__("re").escape(field)):
+        tc.Mesh(vertices, triangles)
+
+
+@pytest.mark.parametrize("kwargs, field", [
+    (dict(rows=1, cols=4), "rows"), (dict(rows=3, cols=2.5), "cols"),
+    (dict(rows=3, cols=3, size=(1.0, -1.0)), "size"), (dict(rows=3, cols=3, plane="xx"), "plane"),
+])
+def test_grid_mesh_rejects_bad_input(kwargs, field):
+    with pytest.raises(ValueError, match=field):
+        tc.grid_mesh(**kwargs)

@@ -1,0 +1,23 @@
+"""ti_cloth: mass-spring cloth, strings, hair and soft bodies in Taichi.
+
+Nothing here calls ti.init; call ti_cloth.init(arch=..., precision=...) first.
+"""
+from .backend import init
+from .errors import SimulationDiverged
+from .forces import ForceSettings
+from .integrators import INTEGRATORS, PBD, ExplicitEuler, Integrator, SymplecticEuler, Verlet
+from .material import PRESETS, Material, SpringKind, SpringParams
+from .mesh import Mesh, grid_mesh, load_mesh, save_mesh
+from .model import Model
+from .simulation import Handle, Simulation
+from .stability import stable_dt
+from .state import State
+from .tearing import Tearing
+from .topology import Cloth
+
+__all__ = [
+    "init", "SimulationDiverged", "ForceSettings", "INTEGRATORS", "Integrator", "ExplicitEuler",
+    "SymplecticEuler", "Verlet", "PBD", "PRESETS", "Material", "SpringKind", "SpringParams",
+    "Mesh", "grid_mesh", "load_mesh", "save_mesh", "Model", "Handle", "Simulation", "stable_dt",
+    "State", "Tearing", "Cloth",
+]

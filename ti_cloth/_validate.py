@@ -1,0 +1,55 @@
+"""Input checks shared by the public constructors: every failure names the field, the value
+and what is allowed."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def require(ok: bool, field: str, value, allowed: str) -> None:
+    """Raise ValueError("<field> must be <allowed>, got <value>") unless `ok`."""
+    if not ok:
+        raise ValueError(f"{field} must be {allowed}, got {value!r}")
+
+
+def finite_number(field: str, value, minimum: float | None = None, *, strict: bool = False,
+                  unit: str = "") -> float:
+    """`value` as a float, finite and >= minimum (> minimum when `strict`)."""
+    unit = f" {unit}" if unit else ""
+    bound = "" if minimum is None else f" {'>' if strict else '>='} {minimum}{unit}"
+    allowed = f"a finite number{bound}"
+    require(isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool),
+            field, value, allowed)
+    value = float(value)
+    require(math.isfinite(value), field, value, allowed)
+    if minimum is not None:
+        require(value > minimum if strict else value >= minimum, field, value, allowed)
+    return value
+
+
+def as_array(field: str, value, dtype, shape: tuple) -> np.ndarray:
+    """`value` as a numpy array of `dtype` whose shape matches `shape` (None = any length);
+    float arrays must be finite."""
+    try:
+        array = np.asarray(value, dtype=dtype)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{field} must be an array of {np.dtype(dtype).name} with shape "
+                         f"{_shape_text(shape)}, got {value!r:.80}") from err
+    if array.size == 0 and len(shape) == 2 and shape[1] is not None:
+        array = array.reshape(0, shape[1])
+    ok = array.ndim == len(shape) and all(s is None or s == n for s, n in zip(shape, array.shape))
+    require(ok, f"{field}.shape", array.shape, _shape_text(shape))
+    if np.issubdtype(array.dtype, np.floating):
+        bad = np.argwhere(~np.isfinite(array))
+        require(len(bad) == 0, f"{field}[{', '.join(map(str, bad[0])) if len(bad) else ''}]",
+                array[tuple(bad[0])] if len(bad) else None, "finite")
+    if np.issubdtype(np.dtype(dtype), np.integer):
+        require(np.array_equal(array, np.asarray(value)) if np.size(value) else True, field,
+                value, "integers")
+    return array
+
+
+def _shape_text(shape: tuple) -> str:
+    return "(" + ", ".join("N" if s is None else str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"

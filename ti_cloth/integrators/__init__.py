@@ -1,0 +1,27 @@
+"""Integrators, one module each, and the registry that maps names to them."""
+
+from __future__ import annotations
+
+from .base import Integrator
+from .explicit_euler import ExplicitEuler
+from .pbd import PBD
+from .symplectic_euler import SymplecticEuler
+from .verlet import Verlet
+
+INTEGRATORS: dict[str, type[Integrator]] = {
+    cls.name: cls for cls in (ExplicitEuler, SymplecticEuler, Verlet, PBD)
+}
+
+
+def make_integrator(spec) -> Integrator:
+    """An Integrator from its name (default options) or an Integrator instance as is."""
+    if isinstance(spec, Integrator):
+        return spec
+    if spec not in INTEGRATORS:
+        raise ValueError(f"integrator must be one of {sorted(INTEGRATORS)} or an Integrator "
+                         f"instance, got {spec!r}")
+    return INTEGRATORS[spec]()
+
+
+__all__ = ["Integrator", "ExplicitEuler", "SymplecticEuler", "Verlet", "PBD", "INTEGRATORS",
+           "make_integrator"]

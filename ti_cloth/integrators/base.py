@@ -1,0 +1,29 @@
+"""What every integrator offers: a name, its order of accuracy and one verb, step()."""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+
+class Integrator:
+    """Advances a State by one step of dt [s] on a fixed Model.
+
+    step(model, state, dt, forces, step) reads like a list of physical concerns; `step` is the
+    global step index, recorded by the divergence guard. Options are keyword-only arguments of
+    the constructor, validated there.
+    """
+
+    name: ClassVar[str]
+    order: ClassVar[int]           # global order of accuracy in positions, smooth conservative forces
+    position_based: ClassVar[bool] = False  # True: springs are constraints, k and kd unused
+
+    def step(self, model, state, dt: float, forces, step: int) -> None:
+        raise NotImplementedError
+
+    def options(self) -> dict:
+        """Constructor options, for reports and repr."""
+        return {}
+
+    def __repr__(self) -> str:
+        opts = ", ".join(f"{k}={v!r}" for k, v in self.options().items())
+        return f"{type(self).__name__}({opts})"

@@ -1,0 +1,87 @@
+"""Model: the fixed description of a body as Taichi fields, built once from a Cloth."""
+
+from __future__ import annotations
+
+import numpy as np
+import taichi as ti
+
+from . import backend
+from .state import State
+from .topology import Cloth, color_springs
+
+
+@ti.data_oriented
+class Model:
+    """Masses, springs and per-particle spring adjacency, uploaded once and never changed.
+
+    particle_mass         [kg], shape (particle_count,)
+    particle_inv_mass     [1/kg]; 0 for pinned particles (lecture: "set 1/m to zero")
+    particle_rest_position [m]
+    spring_indices        (i, j) per spring, shape (spring_count,)
+    spring_rest_length    [m]
+    spring_stiffness      [N/m]
+    spring_damping        [kg/s]
+    spring_kind           SpringKind value
+    particle_spring_start CSR offsets, shape (particle_count + 1,): particle i's springs are
+                          adjacency_spring[start[i]:start[i + 1]], their other ends adjacency_other;
+                          forces are gathered per particle in this fixed order (deterministic,
+                          no float atomics)
+
+    Python attributes read at compile time (fixed for the model's life):
+    particle_count, spring_count, relative_damping.
+    """
+
+    def __init__(self, cloth: Cloth, pinned: np.ndarray | None = None):
+        real = backend.real()
+        self.cloth = cloth
+        self.particle_count = n = cloth.particle_count
+        self.spring_count = s = cloth.spring_count
+        self.relative_damping = cloth.damping == "relative"
+        self.pinned = cloth.pinned if pinned is None else np.asarray(pinned, bool)
+        inv_mass = np.where(self.pinned, 0.0, 1.0 / np.where(cloth.particle_mass > 0,
+                                                              cloth.particle_mass, 1.0))
+
+        self.particle_mass = _upload(ti.field(real, shape=n), cloth.particle_mass)
+        self.particle_inv_mass = _upload(ti.field(real, shape=n), inv_mass)
+        self.particle_rest_position = _upload(ti.Vector.field(3, real, shape=n),
+                                              cloth.particle_position)
+        s1 = max(s, 1)
+        self.spring_indices = _upload(ti.Vector.field(2, ti.i32, shape=s1), cloth.spring_indices)
+        self.spring_rest_length = _upload(ti.field(real, shape=s1), cloth.spring_rest_length)
+        self.spring_stiffness = _upload(ti.field(real, shape=s1), cloth.spring_stiffness)
+        self.spring_damping = _upload(ti.field(real, shape=s1), cloth.spring_damping)
+        self.spring_kind = _upload(ti.field(ti.i32, shape=s1), cloth.spring_kind)
+
+        ends = cloth.spring_indices
+        owner = np.concatenate([ends[:, 0], ends[:, 1]])
+        other = np.concatenate([ends[:, 1], ends[:, 0]])
+        spring = np.concatenate([np.arange(s), np.arange(s)])
+        order = np.lexsort((other, owner))
+        start = np.concatenate([[0], np.cumsum(np.bincount(owner, minlength=n))])
+        self.particle_spring_start = _upload(ti.field(ti.i32, shape=n + 1), start)
+        self.adjacency_spring = _upload(ti.field(ti.i32, shape=max(2 * s, 1)), spring[order])
+        self.adjacency_other = _upload(ti.field(ti.i32, shape=max(2 * s, 1)), other[order])
+        self._colouring = None
+
+    def state(self) -> State:
+        """A fresh State at the rest configuration, at rest, with every spring intact."""
+        state = State(self.particle_count, self.spring_count)
+        state.particle_position.copy_from(self.particle_rest_position)
+        state.particle_prev_position.copy_from(self.particle_rest_position)
+        return state
+
+    def spring_colouring(self):
+        """(order field, colour offsets tuple): springs grouped so that no two in a colour share
+        a particle; built on first use (only position-based integrators need it)."""
+        if self._colouring is None:
+            order, offsets = color_springs(self.cloth.spring_indices, self.particle_count)
+            field = _upload(ti.field(ti.i32, shape=max(self.spring_count, 1)), order)
+            self._colouring = (field, tuple(int(o) for o in offsets))
+        return self._colouring
+
+
+def _upload(field, values):
+    """Copy `values` into `field`; fields padded to length 1 (no springs) take no values."""
+    if len(values) == field.shape[0]:
+        field.from_numpy(np.ascontiguousarray(values, dtype=ti.lang.util.to_numpy_type(field.dtype)))
+    return field

@@ -1,0 +1,56 @@
+"""State: the time-varying part of a simulation, as struct-of-arrays Taichi fields."""
+
+
+import taichi as ti
+
+from . import backend
+
+# Largest coordinate or speed the divergence guard accepts; anything beyond (or NaN) flags
+# the step. Well inside f32 range, so an exponential blow-up is caught before it overflows.
+GUARD_LIMIT = 1e30
+NO_BAD_STEP = 2**31 - 1
+
+
+@ti.data_oriented
+class State:
+    """Per-particle and per-spring quantities that change every step.
+
+    particle_position       current positions [m], shape (particle_count,)
+    particle_velocity       velocities [m/s], shape (particle_count,)
+    particle_prev_position  positions one step earlier [m] (Verlet and PBD history)
+    particle_force          total force of the last evaluation [N]
+    spring_alive            1 while a spring exists, 0 once torn (Stuyck 4.5); lives here, not
+                            in the Model, so the Model stays immutable and state() starts whole
+    spring_torn_step        step index at which each spring tore, -1 if intact
+    first_bad_step          smallest step index whose result held a NaN, an inf or a coordinate
+                            beyond the guard limit (NO_BAD_STEP if none)
+    position_limit          largest |coordinate| [m] the guard accepts
+    prev_valid              False until particle_prev_position holds a real previous step
+    """
+
+    def __init__(self, particle_count: int, spring_count: int):
+        real = backend.real()
+        self.particle_position = ti.Vector.field(3, real, shape=particle_count)
+        self.particle_velocity = ti.Vector.field(3, real, shape=particle_count)
+        self.particle_prev_position = ti.Vector.field(3, real, shape=particle_count)
+        self.particle_force = ti.Vector.field(3, real, shape=particle_count)
+        # Taichi fields cannot have length 0; kernels loop over model.spring_count instead.
+        self.spring_alive = ti.field(ti.i8, shape=max(spring_count, 1))
+        self.spring_torn_step = ti.field(ti.i32, shape=max(spring_count, 1))
+        self.first_bad_step = ti.field(ti.i32, shape=())
+        self.position_limit = ti.field(real, shape=())
+        self.spring_alive.fill(1)
+        self.spring_torn_step.fill(-1)
+        self.first_bad_step[None] = NO_BAD_STEP
+        self.position_limit[None] = 1e6
+        self.prev_valid = False
+
+
+@ti.func
+def store_particle(state: ti.template(), i, x, v, step):
+    """Write particle i's new position and velocity; flag the step if either is not finite
+    or the position left the guard box (the comparison is false for NaN)."""
+    state.particle_position[i] = x
+    state.particle_velocity[i] = v
+    if not ((abs(x) <= state.position_limit[None]).all() and (abs(v) <= GUARD_LIMIT).all()):
+        ti.atomic_min(state.first_bad_step[None], step)

@@ -1,0 +1,46 @@
+"""Tearable cloth (Stuyck 4.5): springs stretched too far are removed."""
+
+
+from dataclasses import dataclass
+
+import numpy as np
+import taichi as ti
+
+from ._validate import finite_number
+
+
+@dataclass(frozen=True)
+class Tearing:
+    """A spring tears when |x_i - x_j| > (1 + stretch) * rest length (Stuyck 4.5).
+
+    stretch: tear strain, > 0 (0.5 = tears at 150 % of its rest length). Springs of zero rest
+        length have no strain and never tear.
+    """
+
+    stretch: float = 0.5
+
+    def __post_init__(self):
+        object.__setattr__(self, "stretch", finite_number("Tearing.stretch", self.stretch, 0.0,
+                                                          strict=True))
+
+
+@ti.kernel
+def tear_springs(model: ti.template(), state: ti.template(), stretch: float, step: ti.i32):
+    """Remove every intact spring longer than (1 + stretch) x rest; record the step it tore."""
+    for s in range(model.spring_count):
+        rest = model.spring_rest_length[s]
+        if state.spring_alive[s] != 0 and rest > 0:
+            i, j = model.spring_indices[s][0], model.spring_indices[s][1]
+            if (state.particle_position[i] - state.particle_position[j]).norm() > (1.0 + stretch) * rest:
+                state.spring_alive[s] = ti.i8(0)
+                state.spring_torn_step[s] = step
+
+
+def torn_triangles(triangle_edge_spring: np.ndarray, torn: np.ndarray) -> np.ndarray:
+    """Indices of triangles with at least one torn edge spring (a renderer drops them).
+
+    torn: boolean mask over springs.
+    """
+    edge = triangle_edge_spring
+    hit = np.where(edge >= 0, torn[np.maximum(edge, 0)], False)
+    return np.flatnonzero(hit.any(axis=1))

@@ -1,0 +1,267 @@
+"""Host-side topology (numpy): springs by kind with rest lengths, lumped masses, pins -> Cloth.
+
+Spring rules
+------------
+* Grid meshes (`Mesh.grid_shape` set) follow Stuyck fig. 4.2 exactly: stretch springs between
+  axis neighbours, shear springs on both diagonals of every quad, bend springs between 2-ring
+  neighbours along each axis (skipping the particle in between).
+* Any other triangle mesh: a stretch spring on every edge, and a bend spring between the two
+  vertices opposite each interior edge (an edge shared by exactly two triangles). Edges on
+  three or more triangles get no bend spring. There are no shear springs: on a general
+  triangulation the edges already resist shear.
+* Explicit springs: "it is totally up to you which particles you connect" (Stuyck 4.3); pass
+  `springs=` as an (S, 2) index array (all stretch) or a mapping {kind: (S, 2) array}.
+
+Generated springs never repeat a particle pair; where two rules give the same pair the first
+kind in STRETCH, SHEAR, BEND order keeps it. Explicit springs that repeat a pair are rejected.
+Rest lengths are distances in the reference configuration.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from ._validate import as_array, finite_number, require
+from .material import Material, SpringKind
+from .mesh import Mesh
+
+
+def grid_springs(rows: int, cols: int) -> dict[SpringKind, np.ndarray]:
+    """Stuyck fig. 4.2 springs of a row-major rows x cols grid, as {kind: (S, 2) int64}.
+
+    Counts: stretch rows(cols-1) + cols(rows-1); shear 2(rows-1)(cols-1);
+    bend rows(cols-2) + cols(rows-2) (each term 0 when the grid is too small).
+    """
+    index = np.arange(rows * cols).reshape(rows, cols)
+
+    def pairs(a, b):
+        return np.stack([a.ravel(), b.ravel()], axis=1)
+
+    return {
+        SpringKind.STRETCH: np.concatenate([pairs(index[:, :-1], index[:, 1:]),
+                                            pairs(index[:-1, :], index[1:, :])]),
+        SpringKind.SHEAR: np.concatenate([pairs(index[:-1, :-1], index[1:, 1:]),
+                                          pairs(index[:-1, 1:], index[1:, :-1])]),
+        SpringKind.BEND: np.concatenate([pairs(index[:, :-2], index[:, 2:]),
+                                         pairs(index[:-2, :], index[2:, :])]),
+    }
+
+
+def mesh_springs(triangles: np.ndarray) -> dict[SpringKind, np.ndarray]:
+    """Stretch springs on every edge and bend springs across every interior edge."""
+    directed = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    opposite = triangles[:, [2, 0, 1]].ravel()
+    edges, inverse, counts = np.unique(directed, axis=0, return_inverse=True, return_counts=True)
+    inverse = inverse.ravel()
+    order = np.argsort(inverse, kind="stable")
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    interior = np.flatnonzero(counts == 2)
+    bend = np.stack([opposite[order[starts[interior]]], opposite[order[starts[interior] + 1]]], axis=1)
+    return {SpringKind.STRETCH: edges, SpringKind.BEND: bend}
+
+
+def unique_springs(springs: Mapping[SpringKind, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Merge springs by kind into (indices (S, 2) with i < j, kind (S,)), dropping repeated
+    pairs (the lower kind wins) and pairs that join a particle to itself."""
+    kinds = sorted(springs)
+    pairs = np.concatenate([np.sort(np.asarray(springs[k], np.int64).reshape(-1, 2), axis=1)
+                            for k in kinds])
+    kind = np.concatenate([np.full(len(springs[k]), int(k), np.int64) for k in kinds])
+    keep = pairs[:, 0] != pairs[:, 1]
+    pairs, kind = pairs[keep], kind[keep]
+    _, first = np.unique(pairs, axis=0, return_index=True)
+    first = np.sort(first)
+    return pairs[first].reshape(-1, 2), kind[first]
+
+
+def lumped_masses(vertices: np.ndarray, triangles: np.ndarray, density: float) -> np.ndarray:
+    """Stuyck 4.2: each triangle's rest area x density, one third to each corner [kg].
+
+    Raises ValueError for a triangle of zero area, which would carry no mass.
+    """
+    p = vertices[triangles]
+    cross = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    area = 0.5 * np.linalg.norm(cross, axis=1)
+    longest = np.max(np.linalg.norm(p - p[:, [1, 2, 0]], axis=2), axis=1)
+    degenerate = np.flatnonzero(area <= 1e-12 * longest ** 2)
+    if len(degenerate):
+        t = int(degenerate[0])
+        raise ValueError(f"triangles[{t}] (vertices {triangles[t].tolist()}) must have an area > 0 m^2, "
+                         f"got {area[t]:.3g} m^2 ({len(degenerate)} degenerate triangle(s) in total); "
+                         "remove degenerate triangles before building a cloth")
+    return np.bincount(triangles.ravel(), weights=np.repeat(area * density / 3.0, 3),
+                       minlength=len(vertices))
+
+
+def color_springs(indices: np.ndarray, particle_count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Partition springs into colours in which no two springs share a particle.
+
+    Returns (order, offsets): springs order[offsets[c]:offsets[c + 1]] form colour c. Each
+    colour is a maximal matching grown by deterministic random priorities, so springs of one
+    colour can be relaxed in parallel with Gauss-Seidel semantics (lecture: "relaxation").
+    """
+    rng = np.random.default_rng(0)
+    priority = rng.permutation(len(indices))
+    colour = np.full(len(indices), -1)
+    remaining = np.arange(len(indices))
+    offsets = [0]
+    while remaining.size:
+        taken = np.zeros(particle_count, bool)
+        candidates = remaining
+        while candidates.size:
+            a, b = indices[candidates, 0], indices[candidates, 1]
+            best = np.full(particle_count, -1)
+            np.maximum.at(best, a, priority[candidates])
+            np.maximum.at(best, b, priority[candidates])
+            won = (best[a] == priority[candidates]) & (best[b] == priority[candidates])
+            colour[candidates[won]] = len(offsets) - 1
+            taken[a[won]] = taken[b[won]] = True
+            candidates = candidates[~won]
+            candidates = candidates[~(taken[indices[candidates, 0]] | taken[indices[candidates, 1]])]
+        remaining = remaining[colour[remaining] < 0]
+        offsets.append(len(indices) - len(remaining))
+    order = np.argsort(colour, kind="stable")
+    return order, np.asarray(offsets, np.int64)
+
+
+class Cloth:
+    """A mass-spring body ready to simulate: rest positions, lumped masses, springs, pins.
+
+    Arrays (read-only numpy, entity-first names):
+      particle_position  rest positions [m], (N, 3)
+      particle_mass      masses [kg], (N,): area x density / 3 per triangle corner (Stuyck 4.2),
+                         + hem_mass on boundary particles, then `particle_mass_override`
+      pinned             (N,) bool; pinned particles have inverse mass 0
+      spring_indices     (S, 2) int, i < j
+      spring_rest_length (S,) [m], from the reference configuration
+      spring_stiffness   (S,) [N/m]
+      spring_damping     (S,) [kg/s]
+      spring_kind        (S,) SpringKind values
+      triangle_edge_spring (T, 3): spring along edge (t0,t1), (t1,t2), (t2,t0), or -1
+    """
+
+    def __init__(self, mesh: Mesh, material: Material, pinned=(), springs=None,
+                 particle_mass_override: Mapping[int, float] | None = None,
+                 particle_mass=None):
+        require(isinstance(mesh, Mesh), "mesh", mesh, "a ti_cloth.Mesh")
+        require(isinstance(material, Material), "material", material, "a ti_cloth.Material")
+        self.mesh = mesh
+        self.material = material
+        n = mesh.vertex_count
+        self.particle_position = mesh.vertices
+
+        if particle_mass is not None:
+            mass = as_array("particle_mass", particle_mass, np.float64, (n,)).copy()
+            require(bool(np.all(mass >= 0)), "particle_mass", mass.min(), "masses >= 0 kg")
+        else:
+            require(mesh.triangle_count > 0, "mesh.triangles", mesh.triangles.shape,
+                    "at least one triangle (masses come from triangle areas; pass particle_mass= "
+                    "for a mesh without triangles)")
+            mass = lumped_masses(mesh.vertices, mesh.triangles, material.density)
+            mass[mesh.boundary_vertices()] += material.hem_mass
+        for i, m in (particle_mass_override or {}).items():
+            require(isinstance(i, (int, np.integer)) and 0 <= i < n, "particle_mass_override key",
+                    i, f"a particle index in [0, {n - 1}]")
+            mass[i] = finite_number(f"particle_mass_override[{i}]", m, 0.0, unit="kg")
+        self.pinned = _pin_mask(pinned, n)
+        massless = np.flatnonzero((mass <= 0) & ~self.pinned)
+        require(len(massless) == 0, f"particle_mass[{massless[:1].tolist()}]", 0.0,
+                f"> 0 kg for every unpinned particle ({len(massless)} massless: "
+                f"{massless[:5].tolist()}...); pin them, give them triangles or set their mass")
+        self.particle_mass = mass
+
+        if springs is not None:
+            pairs, kind = _explicit_springs(springs, n)
+        elif mesh.grid_shape is not None:
+            pairs, kind = unique_springs(grid_springs(*mesh.grid_shape))
+        elif mesh.triangle_count:
+            pairs, kind = unique_springs(mesh_springs(mesh.triangles))
+        else:
+            pairs, kind = np.zeros((0, 2), np.int64), np.zeros(0, np.int64)
+        self.spring_indices = pairs
+        self.spring_kind = kind
+        x = self.particle_position
+        self.spring_rest_length = np.linalg.norm(x[pairs[:, 0]] - x[pairs[:, 1]], axis=1)
+        params = [material.springs(k) for k in SpringKind]
+        self.spring_stiffness = np.array([p.k for p in params])[kind]
+        self.spring_damping = np.array([p.kd for p in params])[kind]
+        self.triangle_edge_spring = _edge_springs(mesh.triangles, pairs, n)
+        for name in ("particle_mass", "pinned", "spring_indices", "spring_kind", "spring_rest_length",
+                     "spring_stiffness", "spring_damping", "triangle_edge_spring"):
+            getattr(self, name).flags.writeable = False
+
+    @classmethod
+    def from_particles(cls, positions, particle_mass, springs, material: Material | None = None,
+                       pinned=()) -> "Cloth":
+        """A body without a surface: particles [m], masses [kg], explicit springs (S, 2) or
+        {kind: (S, 2)}; spring constants come from `material` by kind."""
+        return cls(Mesh(positions, np.zeros((0, 3), np.int64)), material or Material(),
+                   pinned=pinned, springs=springs, particle_mass=particle_mass)
+
+    @property
+    def particle_count(self) -> int:
+        return len(self.particle_position)
+
+    @property
+    def spring_count(self) -> int:
+        return len(self.spring_indices)
+
+    @property
+    def damping(self) -> str:
+        return self.material.damping
+
+    def spring_count_by_kind(self) -> dict[str, int]:
+        return {k.name.lower(): int(np.sum(self.spring_kind == k)) for k in SpringKind}
+
+    def __repr__(self) -> str:
+        return (f"Cloth(particles={self.particle_count}, springs={self.spring_count_by_kind()}, "
+                f"pinned={int(self.pinned.sum())}, mass={self.particle_mass.sum():.4g} kg)")
+
+
+def _pin_mask(pinned, n: int) -> np.ndarray:
+    pinned = np.asarray(pinned)
+    if pinned.dtype == bool:
+        require(pinned.shape == (n,), "pinned.shape", pinned.shape, f"({n},) for a boolean mask")
+        return pinned.copy()
+    index = as_array("pinned", pinned, np.int64, (None,))
+    bad = index[(index < 0) | (index >= n)]
+    require(len(bad) == 0, "pinned", bad[:3].tolist(), f"particle indices in [0, {n - 1}]")
+    mask = np.zeros(n, bool)
+    mask[index] = True
+    return mask
+
+
+def _explicit_springs(springs, n: int) -> tuple[np.ndarray, np.ndarray]:
+    if not isinstance(springs, Mapping):
+        springs = {SpringKind.STRETCH: springs}
+    by_kind = {}
+    for key, value in springs.items():
+        try:
+            kind = SpringKind[key.upper()] if isinstance(key, str) else SpringKind(key)
+        except (KeyError, ValueError):
+            raise ValueError(f"springs key must be one of {[k.name.lower() for k in SpringKind]}, "
+                             f"got {key!r}") from None
+        pairs = as_array(f"springs[{kind.name.lower()}]", value, np.int64, (None, 2))
+        bad = np.flatnonzero((pairs < 0).any(1) | (pairs >= n).any(1) | (pairs[:, 0] == pairs[:, 1]))
+        require(len(bad) == 0, f"springs[{kind.name.lower()}][{bad[:1].tolist()}]",
+                pairs[bad[:1]].tolist(), f"two different particle indices in [0, {n - 1}]")
+        by_kind[kind] = pairs
+    total = sum(len(p) for p in by_kind.values())
+    pairs, kind = unique_springs(by_kind)
+    require(len(pairs) == total, "springs", f"{total - len(pairs)} repeated particle pair(s)",
+            "each particle pair connected at most once")
+    return pairs, kind
+
+
+def _edge_springs(triangles: np.ndarray, pairs: np.ndarray, n: int) -> np.ndarray:
+    """For each triangle edge, the index of the spring joining its ends, or -1."""
+    if len(triangles) == 0 or len(pairs) == 0:
+        return np.full((len(triangles), 3), -1, np.int64)
+    edges = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    keys = pairs[:, 0] * n + pairs[:, 1]
+    order = np.argsort(keys)
+    wanted = edges[:, 0] * n + edges[:, 1]
+    pos = np.minimum(np.searchsorted(keys[order], wanted), len(keys) - 1)
+    return np.where(keys[order][pos] == wanted, order[pos], -1).reshape(-1, 3)
