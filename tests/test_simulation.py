@@ -1,0 +1,173 @@
+"""Conservation, pins, handles, tearing, determinism, input errors and the divergence guard."""
+
+import numpy as np
+import pytest
+
+import ti_cloth as tc
+from ti_cloth import tearing as tearing_module
+from conftest import report
+
+ALL = list(tc.INTEGRATORS)
+
+
+def hanging_cloth(rows=8, cols=8, pinned=(56, 63), **material):
+    soft = dict(density=0.2, stretch=tc.SpringParams(200.0, 0.2), shear=tc.SpringParams(20.0, 0.02),
+                bend=tc.SpringParams(2.0, 0.002))
+    return tc.Cloth(tc.grid_mesh(rows, cols, size=(0.5, 0.5)), tc.Material(**(soft | material)),
+                    pinned=pinned)
+
+
+def stable_step(cloth, integrator, fraction=0.5):
+    limit = tc.stable_dt(cloth, integrator)
+    return 1e-3 if np.isinf(limit) else fraction * limit
+
+
+@pytest.mark.parametrize("integrator", ALL)
+def test_pinned_particles_never_move(f64, integrator):
+    cloth = hanging_cloth()
+    sim = tc.Simulation(cloth, integrator=integrator, dt=stable_step(cloth, integrator))
+    sim.step(int(0.05 / sim.dt))
+    x = sim.positions()
+    assert np.array_equal(x[cloth.pinned], cloth.particle_position[cloth.pinned])
+    assert np.abs(x[~cloth.pinned] - cloth.particle_position[~cloth.pinned]).max() > 1e-5  # it moved
+
+
+@pytest.mark.parametrize("integrator", ALL)
+def test_cloth_at_rest_without_gravity_stays_at_rest(f64, integrator):
+    cloth = hanging_cloth(pinned=())
+    sim = tc.Simulation(cloth, integrator=integrator, dt=stable_step(cloth, integrator), gravity=(0, 0, 0))
+    sim.step(500)
+    # only rounding of rest lengths (1e-16 relative) can act: a bound of 1e-9 m over < 1 s
+    drift = np.abs(sim.positions() - cloth.particle_position).max()
+    report(f"{integrator} drift [m]", drift, "< 1e-9")
+    assert drift < 1e-9
+
+
+@pytest.mark.parametrize("integrator", ALL)
+def test_momentum_conserved_without_gravity_or_pins(f64, integrator):
+    cloth = hanging_cloth(pinned=(), damping="relative")
+    rng = np.random.default_rng(3)
+    sim = tc.Simulation(cloth, integrator=integrator, dt=stable_step(cloth, integrator, 0.3),
+                        gravity=(0, 0, 0))
+    sim.set_positions(cloth.particle_position + rng.normal(scale=0.003, size=(64, 3)))
+    sim.set_velocities(rng.normal(scale=0.1, size=(64, 3)))
+    m = cloth.particle_mass[:, None]
+    p0 = (m * sim.velocities()).sum(axis=0)
+    sim.step(200)
+    p1 = (m * sim.velocities()).sum(axis=0)
+    scale = (m * np.abs(sim.velocities())).sum()
+    report(f"{integrator} momentum", p1, p0)
+    np.testing.assert_allclose(p1, p0, atol=1e-12 * scale)
+
+
+def test_handle_moves_its_particle_along_the_path(f64):
+    cloth = hanging_cloth(pinned=(56,))
+    path = lambda t: (0.0, 0.0, 0.2 * np.sin(3 * t))
+    sim = tc.Simulation(cloth, integrator="symplectic_euler", dt=2e-4, handles=[tc.Handle([63], path)])
+    assert sim.model.pinned[63]
+    for _ in range(5):
+        sim.step(100)
+        np.testing.assert_allclose(sim.positions()[63], cloth.particle_position[63] + path(sim.time),
+                                   atol=1e-12)
+    assert np.array_equal(sim.positions()[56], cloth.particle_position[56])
+
+
+def test_tearing_removes_exactly_the_overstretched_springs(f64):
+    cloth = hanging_cloth(pinned=())
+    sim = tc.Simulation(cloth, integrator="symplectic_euler", dt=1e-6, gravity=(0, 0, 0), tearing=0.3)
+    x = cloth.particle_position.copy()
+    x[27] += (0.0, 0.0, 0.1)   # pull one particle off the sheet
+    x[0] += (0.02, 0.0, 0.0)
+    sim.set_positions(x)
+    sim.step(1)
+    p = sim.positions()
+    i, j = cloth.spring_indices.T
+    over = np.linalg.norm(p[i] - p[j], axis=1) > 1.3 * cloth.spring_rest_length
+    report("torn", sim.torn_springs().tolist(), np.flatnonzero(over).tolist())
+    assert over.sum() > 0
+    assert np.array_equal(sim.torn_springs(), np.flatnonzero(over))
+    assert sim.torn_count == over.sum()
+    torn_edges = np.isin(cloth.triangle_edge_spring, np.flatnonzero(over)).any(axis=1)
+    assert np.array_equal(sim.torn_triangles(), np.flatnonzero(torn_edges))
+    sim.step(1)   # once torn a spring stays torn; nothing else is over-stretched yet
+    assert np.array_equal(sim.torn_springs(), np.flatnonzero(over))
+
+
+def test_without_tearing_nothing_is_removed_and_the_kernel_never_runs(f64, monkeypatch):
+    compiled = len(tearing_module.tear_springs._primal.compiled_kernels)
+    calls = []
+    monkeypatch.setattr(tearing_module, "tear_springs", lambda *a: calls.append(a))
+    cloth = hanging_cloth(pinned=())
+    sim = tc.Simulation(cloth, integrator="symplectic_euler", dt=1e-6, gravity=(0, 0, 0))
+    x = cloth.particle_position.copy()
+    x[27] += (0.0, 0.0, 0.1)
+    sim.set_positions(x)
+    sim.step(3)
+    assert sim.torn_count == 0 and calls == []
+    monkeypatch.undo()
+    assert len(tearing_module.tear_springs._primal.compiled_kernels) == compiled
+
+
+@pytest.mark.parametrize("integrator", ALL)
+def test_two_runs_are_bit_identical(f32, integrator):
+    cloth = hanging_cloth(16, 16, pinned=(240, 255))
+    runs = []
+    for _ in range(2):
+        sim = tc.Simulation(cloth, integrator=integrator, dt=stable_step(cloth, integrator), drag=0.1)
+        sim.step(200)
+        runs.append(sim.positions())
+    assert np.array_equal(runs[0], runs[1])
+
+
+def test_unstable_step_raises_divergence_with_step_and_stable_dt(f64):
+    cloth = hanging_cloth()
+    limit = tc.stable_dt(cloth, "symplectic_euler")
+    sim = tc.Simulation(cloth, integrator="symplectic_euler", dt=20 * limit)
+    with pytest.raises(tc.SimulationDiverged) as err:
+        sim.step(2000)
+    print(err.value)
+    assert 0 <= err.value.step < 2000 and err.value.time == pytest.approx((err.value.step + 1) * sim.dt)
+    assert err.value.stable_dt == pytest.approx(limit)
+    assert f"step {err.value.step}" in str(err.value) and "stable dt" in str(err.value)
+    with pytest.raises(tc.SimulationDiverged):
+        sim.step(1)
+
+
+@pytest.mark.parametrize("kwargs, field", [
+    (dict(dt=0.0), "dt"), (dict(dt=-1e-3), "dt"), (dict(dt=float("nan")), "dt"),
+    (dict(integrator="leapfrog"), "integrator"), (dict(gravity=(0, -9.8)), "gravity.shape"),
+    (dict(drag=-1.0), "drag"), (dict(tearing=-0.1), "Tearing.stretch"),
+    (dict(handles=[tc.Handle([99], lambda t: (0, 0, 0))]), "Handle.particles"),
+    (dict(position_limit=0.0), "position_limit"),
+])
+def test_simulation_rejects_bad_input(f64, kwargs, field):
+    with pytest.raises(ValueError, match=field) as err:
+        tc.Simulation(hanging_cloth(), **kwargs)
+    print(err.value)
+
+
+@pytest.mark.parametrize("make, field", [
+    (lambda: tc.Verlet(damping=1.0), "Verlet.damping"), (lambda: tc.PBD(iterations=0), "PBD.iterations"),
+    (lambda: tc.PBD(stiffness={"stretch": 2.0}), "PBD.stiffness"),
+    (lambda: tc.PBD(stiffness={"twist": 1.0}), "PBD.stiffness keys"),
+    (lambda: tc.init(precision="f16"), "precision"), (lambda: tc.init(arch="tpu"), "arch"),
+])
+def test_integrator_and_backend_options_validated(make, field):
+    with pytest.raises(ValueError, match=field):
+        make()
+
+
+def test_energy_reports_each_spring_kind(f64):
+    cloth = hanging_cloth(pinned=())
+    sim = tc.Simulation(cloth, gravity=(0, -9.81, 0))
+    x = cloth.particle_position * np.array([1.1, 1.0, 1.0])  # stretch along x by 10 %
+    sim.set_positions(x)
+    e = sim.energy()
+    i, j = cloth.spring_indices.T
+    dl = np.linalg.norm(x[i] - x[j], axis=1) - cloth.spring_rest_length
+    for kind in tc.SpringKind:
+        sel = cloth.spring_kind == kind
+        expected = 0.5 * np.sum(cloth.spring_stiffness[sel] * dl[sel] ** 2)
+        assert e[f"spring_{kind.name.lower()}"] == pytest.approx(expected, rel=1e-12)
+    assert e["gravity"] == pytest.approx(9.81 * np.sum(cloth.particle_mass * x[:, 1]), rel=1e-12)
+    assert e["kinetic"] == 0.0
