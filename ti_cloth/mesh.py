@@ -52,11 +52,11 @@ class Mesh:
 
     def edges(self) -> np.ndarray:
         """Unique undirected edges (i < j), shape (edge_count, 2), sorted lexicographically."""
-        return np.unique(_directed_edges(self.triangles), axis=0).reshape(-1, 2)
+        return np.unique(triangle_edges(self.triangles), axis=0).reshape(-1, 2)
 
     def boundary_edges(self) -> np.ndarray:
         """Edges used by exactly one triangle (i < j), shape (B, 2)."""
-        edges, counts = np.unique(_directed_edges(self.triangles), axis=0, return_counts=True)
+        edges, counts = np.unique(triangle_edges(self.triangles), axis=0, return_counts=True)
         return edges[counts == 1].reshape(-1, 2)
 
     def boundary_vertices(self) -> np.ndarray:
@@ -73,8 +73,8 @@ class Mesh:
         return f"Mesh(vertex_count={self.vertex_count}, triangle_count={self.triangle_count}{grid})"
 
 
-def _directed_edges(triangles: np.ndarray) -> np.ndarray:
-    """The three edges of every triangle as sorted pairs, shape (3T, 2)."""
+def triangle_edges(triangles: np.ndarray) -> np.ndarray:
+    """The edges (t0,t1), (t1,t2), (t2,t0) of every triangle as sorted pairs, shape (3T, 2)."""
     e = triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
     return np.sort(e, axis=1)
 

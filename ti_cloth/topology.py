@@ -25,7 +25,7 @@ import numpy as np
 
 from ._validate import as_array, finite_number, require
 from .material import Material, SpringKind
-from .mesh import Mesh
+from .mesh import Mesh, triangle_edges
 
 
 def grid_springs(rows: int, cols: int) -> dict[SpringKind, np.ndarray]:
@@ -51,7 +51,7 @@ def grid_springs(rows: int, cols: int) -> dict[SpringKind, np.ndarray]:
 
 def mesh_springs(triangles: np.ndarray) -> dict[SpringKind, np.ndarray]:
     """Stretch springs on every edge and bend springs across every interior edge."""
-    directed = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    directed = triangle_edges(triangles)
     opposite = triangles[:, [2, 0, 1]].ravel()
     edges, inverse, counts = np.unique(directed, axis=0, return_inverse=True, return_counts=True)
     inverse = inverse.ravel()
@@ -259,7 +259,7 @@ def _edge_springs(triangles: np.ndarray, pairs: np.ndarray, n: int) -> np.ndarra
     """For each triangle edge, the index of the spring joining its ends, or -1."""
     if len(triangles) == 0 or len(pairs) == 0:
         return np.full((len(triangles), 3), -1, np.int64)
-    edges = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    edges = triangle_edges(triangles)
     keys = pairs[:, 0] * n + pairs[:, 1]
     order = np.argsort(keys)
     wanted = edges[:, 0] * n + edges[:, 1]
