@@ -10,10 +10,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import taichi as ti
 
 ARCHS = {"cpu": "cpu", "cuda": "cuda", "vulkan": "vulkan", "gpu": "gpu"}
 PRECISIONS = {"f32": ti.f32, "f64": ti.f64}
+NUMPY_PRECISIONS = {"f32": np.float32, "f64": np.float64}
 
 
 @dataclass(frozen=True)
@@ -63,3 +65,8 @@ def config() -> BackendConfig:
 def real():
     """The Taichi float type of the active precision (ti.f32 or ti.f64)."""
     return PRECISIONS[config().precision]
+
+
+def numpy_real():
+    """The numpy float type matching `real()`."""
+    return NUMPY_PRECISIONS[config().precision]

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
+from . import backend
 from . import tearing as tearing_module
 from ._validate import as_array, finite_number, require
 from .errors import SimulationDiverged
@@ -130,7 +131,7 @@ class Simulation:
             targets.append(self.cloth.particle_position[h.particles] + offset)
         target = np.concatenate(targets)
         require(bool(np.isfinite(target).all()), f"Handle.path({t})", target, "finite displacements")
-        _move_handles(self.state, self._handle_index, target, self.dt)
+        _move_handles(self.state, self._handle_index, target.astype(backend.numpy_real()), self.dt)
 
     def positions(self) -> np.ndarray:
         """Particle positions [m], (N, 3) float64 copy."""
@@ -143,13 +144,13 @@ class Simulation:
     def set_positions(self, positions) -> None:
         """Overwrite positions [m] (N, 3); Verlet-type history restarts from the velocities."""
         x = as_array("positions", positions, np.float64, (self.cloth.particle_count, 3))
-        self.state.particle_position.from_numpy(x.astype(self.state.particle_position.to_numpy().dtype))
+        self.state.particle_position.from_numpy(x.astype(backend.numpy_real()))
         self.state.prev_valid = False
 
     def set_velocities(self, velocities) -> None:
         """Overwrite velocities [m/s] (N, 3); Verlet-type history restarts from them."""
         v = as_array("velocities", velocities, np.float64, (self.cloth.particle_count, 3))
-        self.state.particle_velocity.from_numpy(v.astype(self.state.particle_velocity.to_numpy().dtype))
+        self.state.particle_velocity.from_numpy(v.astype(backend.numpy_real()))
         self.state.prev_valid = False
 
     def spring_alive(self) -> np.ndarray:

@@ -140,6 +140,10 @@ class Cloth:
       spring_damping     (S,) [kg/s]
       spring_kind        (S,) SpringKind values
       triangle_edge_spring (T, 3): spring along edge (t0,t1), (t1,t2), (t2,t0), or -1
+
+    pinned: particle indices or an (N,) bool mask. springs: explicit springs (see module doc).
+    particle_mass_override: {index: kg} applied last. particle_mass: (N,) masses [kg] that
+    replace the area-lumped ones and hem mass (bodies without triangles need it).
     """
 
     def __init__(self, mesh: Mesh, material: Material, pinned=(), springs=None,
