@@ -81,7 +81,7 @@ class Model:
 
 
 def _upload(field, values):
-    """Copy `values` into `field`; fields padded to length 1 (no springs) take no values."""
-    if len(values) == field.shape[0]:
+    """Copy `values` into `field`; a field padded to length 1 (no springs) takes no values."""
+    if len(values):
         field.from_numpy(np.ascontiguousarray(values, dtype=ti.lang.util.to_numpy_type(field.dtype)))
     return field
