@@ -61,3 +61,12 @@ def test_mesh_rejects_bad_input(vertices, triangles, field):
 def test_grid_mesh_rejects_bad_input(kwargs, field):
     with pytest.raises(ValueError, match=field):
         tc.grid_mesh(**kwargs)
+
+
+def test_import_does_not_start_taichi():
+    import subprocess
+    import sys
+
+    code = ("import ti_cloth, taichi as ti; assert ti.lang.impl.get_runtime().prog is None; "
+            "import ti_cloth.render")
+    subprocess.run([sys.executable, "-c", code], check=True)
