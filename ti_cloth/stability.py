@@ -32,9 +32,10 @@ def stable_dt(cloth, integrator="symplectic_euler", drag: float = 0.0, pinned=No
     stable step exists, e.g. explicit Euler on undamped springs).
 
     Per mode of angular frequency w and damping rate g (linear analysis of the update matrix):
-    explicit Euler h < g / w^2 and, for an overdamped mode (g > 2w), also
-    h < (g - sqrt(g^2 - 4 w^2)) / w^2 (the update must not overshoot); symplectic Euler and Verlet h < (sqrt(g^2 + 4 w^2) - g) / w^2
-    (= 2 / w undamped); position-based integrators have no limit. The Gershgorin bound
+    explicit Euler h < g / w^2, tightened for an overdamped mode (g > 2w) to the smaller root
+    (g - sqrt(g^2 - 4 w^2)) / w^2 so the update does not overshoot (g / w^2 is the midpoint of
+    the two roots, so one expression covers both cases); symplectic Euler and Verlet
+    h < (sqrt(g^2 + 4 w^2) - g) / w^2 (= 2 / w undamped); position-based integrators have no limit. The Gershgorin bound
     overestimates w, so the prediction errs on the safe side.
     """
     integrator = make_integrator(integrator)
@@ -46,6 +47,5 @@ def stable_dt(cloth, integrator="symplectic_euler", drag: float = 0.0, pinned=No
         return math.inf
     w2, g = omega2[stiff], gamma[stiff]
     if integrator.name == "explicit_euler":
-        overshoot = (g - np.sqrt(np.maximum(g * g - 4.0 * w2, 0.0))) / w2
-        return float(np.min(np.where(g * g > 4.0 * w2, np.minimum(g / w2, overshoot), g / w2)))
+        return float(np.min((g - np.sqrt(np.maximum(g * g - 4.0 * w2, 0.0))) / w2))
     return float(np.min((np.sqrt(g * g + 4.0 * w2) - g) / w2))
