@@ -1,10 +1,18 @@
-"""Image layout and files: the one place Taichi's (width, height, bottom-left origin) arrays
-become numpy's (height, width, top-left origin) images, and atomic PNG / GIF writing."""
+"""Images and files: the one place Taichi's (width, height, bottom-left origin) arrays become
+numpy's (height, width, top-left origin) images; atomic PNG writing; frame sequences assembled
+into an animated GIF or an MP4 (the latter through the optional imageio-ffmpeg)."""
 
+from __future__ import annotations
+
+import importlib.util
 from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
+
+from .._validate import finite_number, require
+
+MP4_HINT = "pip install 'ti_cloth[video]' (or: pip install imageio-ffmpeg)"
 
 
 def from_taichi(image: np.ndarray) -> np.ndarray:
@@ -20,22 +28,104 @@ def frame_path(folder, index: int) -> Path:
     return Path(folder) / f"frame_{index:05d}.png"
 
 
+def _temporary(path: Path) -> Path:
+    """A hidden name beside `path` with the same extension (writers pick the format from it)."""
+    return path.with_name(f".{path.stem}.tmp{path.suffix}")
+
+
 def write_png(path, image: np.ndarray) -> Path:
     """Write an (H, W, 3) uint8 image under a temporary name, then rename: an interrupted run
     never leaves a half-written frame."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp.png")
+    tmp = _temporary(path)
     iio.imwrite(tmp, image)
     tmp.replace(path)
     return path
 
 
-def write_gif(frames, path, fps: float = 30.0) -> Path:
-    """Assemble PNG files (or arrays) into an animated GIF, written atomically."""
+def _images(frames, width: int | None = None):
+    """Frames given as PNG paths or (H, W, 3) arrays, optionally resized to `width` pixels."""
+    for frame in frames:
+        image = iio.imread(frame) if isinstance(frame, (str, Path)) else np.asarray(frame)
+        if width is not None and image.shape[1] != width:
+            from PIL import Image
+
+            height = max(1, round(image.shape[0] * width / image.shape[1]))
+            image = np.asarray(Image.fromarray(image).resize((width, height), Image.LANCZOS))
+        yield image
+
+
+def write_gif(frames, path, fps: float = 30.0, width: int | None = None) -> Path:
+    """Assemble frames (PNG paths or arrays) into a looping GIF, written atomically;
+    width: resize to this many pixels wide (GIFs of full-HD frames are large)."""
     path = Path(path)
-    images = [iio.imread(f) if isinstance(f, (str, Path)) else f for f in frames]
-    tmp = path.with_name(f".{path.stem}.tmp.gif")
+    fps = finite_number("fps", fps, 0.0, strict=True, unit="frames/s")
+    require(width is None or (isinstance(width, int) and width > 0), "width", width,
+            "a positive int or None")
+    images = list(_images(frames, width))
+    require(len(images) > 0, "frames", frames, "at least one frame")
+    tmp = _temporary(path)
     iio.imwrite(tmp, np.stack(images), duration=1000.0 / fps, loop=0)
     tmp.replace(path)
     return path
+
+
+def write_mp4(frames, path, fps: float = 30.0, quality: float = 8.0) -> Path:
+    """Assemble frames (PNG paths or arrays) into an H.264 MP4, written atomically.
+    Needs the optional imageio-ffmpeg package; quality: 0 (smallest) to 10 (best)."""
+    if importlib.util.find_spec("imageio_ffmpeg") is None:
+        raise ImportError(f"writing MP4 needs the optional package imageio-ffmpeg: {MP4_HINT}")
+    import imageio.v2 as iio2
+
+    path = Path(path)
+    fps = finite_number("fps", fps, 0.0, strict=True, unit="frames/s")
+    quality = finite_number("quality", quality, 0.0)
+    require(quality <= 10, "quality", quality, "a number in [0, 10]")
+    tmp = _temporary(path)
+    count = 0
+    with iio2.get_writer(tmp, format="FFMPEG", mode="I", fps=fps, codec="libx264",
+                         quality=quality, pixelformat="yuv420p", macro_block_size=2) as writer:
+        for image in _images(frames):
+            writer.append_data(image)
+            count += 1
+    if count == 0:
+        tmp.unlink(missing_ok=True)
+        require(False, "frames", frames, "at least one frame")
+    tmp.replace(path)
+    return path
+
+
+class FrameSequence:
+    """Numbered PNG frames in `folder` (frame_00000.png, ...), each written atomically as it
+    comes, then assembled by `close` into `<name>.gif` and/or `<name>.mp4`. Frames left in the
+    folder by an earlier, longer run are removed when the sequence starts."""
+
+    def __init__(self, folder, *, fps: float = 30.0, gif: bool = True, mp4: bool = False,
+                 name: str | None = None, gif_width: int | None = None):
+        self.folder = Path(folder)
+        self.fps = finite_number("fps", fps, 0.0, strict=True, unit="frames/s")
+        if mp4 and importlib.util.find_spec("imageio_ffmpeg") is None:
+            raise ImportError(f"mp4=True needs the optional package imageio-ffmpeg: {MP4_HINT}")
+        self.gif, self.mp4, self.gif_width = gif, mp4, gif_width
+        self.name = name or self.folder.name
+        self.paths: list[Path] = []
+        self.folder.mkdir(parents=True, exist_ok=True)
+        for stale in self.folder.glob("frame_[0-9][0-9][0-9][0-9][0-9].png"):
+            stale.unlink()
+
+    def write(self, image: np.ndarray) -> Path:
+        """Write the next frame; returns its path."""
+        path = write_png(frame_path(self.folder, len(self.paths)), image)
+        self.paths.append(path)
+        return path
+
+    def close(self) -> list[Path]:
+        """Assemble the GIF / MP4 from the frames written so far; returns their paths."""
+        outputs = []
+        if self.paths and self.gif:
+            outputs.append(write_gif(self.paths, self.folder / f"{self.name}.gif", self.fps,
+                                     self.gif_width))
+        if self.paths and self.mp4:
+            outputs.append(write_mp4(self.paths, self.folder / f"{self.name}.mp4", self.fps))
+        return outputs

@@ -1,0 +1,431 @@
+"""The renderer behind a small interface: begin a frame, draw things, end it as an image.
+
+    renderer = Renderer(1280, 720, camera=Camera.fit(cloth), supersample=2)
+    renderer.begin()
+    renderer.draw_plane(point=(0, -1, 0))
+    renderer.draw_simulation(sim, SurfaceStyle(checker=0.1))
+    image = renderer.end()            # (720, 1280, 3) uint8, top-left origin
+
+`NullRenderer` has the same methods and draws nothing (tests, benchmarks). The simulation never
+imports this module; `draw_simulation` only reads a Simulation's public methods.
+"""
+
+from __future__ import annotations
+
+import weakref
+from dataclasses import dataclass, fields
+
+import numpy as np
+import taichi as ti
+
+from .._validate import as_array, finite_number, require
+from . import raster, shapes
+from .camera import Camera
+from .image import from_taichi
+from .strain import vertex_strain
+
+COLLIDER_COLOUR = (0.62, 0.66, 0.72)
+
+
+def _colour(field: str, value) -> tuple:
+    rgb = as_array(field, value, np.float64, (3,))
+    require(bool(((rgb >= 0) & (rgb <= 1)).all()), field, tuple(rgb), "an RGB triple in [0, 1]")
+    return tuple(float(c) for c in rgb)
+
+
+def _unit(field: str, value) -> tuple:
+    v = as_array(field, value, np.float64, (3,))
+    require(np.linalg.norm(v) > 0, field, tuple(v), "a non-zero vector")
+    return tuple(v / np.linalg.norm(v))
+
+
+def _validate_colours(instance) -> None:
+    for f in fields(instance):
+        if f.name.endswith("colour") or f.name in ("front", "back", "top", "bottom"):
+            object.__setattr__(instance, f.name, _colour(f"{type(instance).__name__}.{f.name}",
+                                                          getattr(instance, f.name)))
+
+
+@dataclass(frozen=True)
+class Light:
+    """A directional light. direction: towards the light (world, need not be unit).
+    ambient: the fraction of the colour shown with no light at all, in [0, 1]."""
+
+    direction: tuple = (0.35, 1.0, 0.55)
+    ambient: float = 0.35
+
+    def __post_init__(self):
+        object.__setattr__(self, "direction", _unit("Light.direction", self.direction))
+        ambient = finite_number("Light.ambient", self.ambient, 0.0)
+        require(ambient <= 1.0, "Light.ambient", ambient, "a number in [0, 1]")
+        object.__setattr__(self, "ambient", ambient)
+
+
+@dataclass(frozen=True)
+class Background:
+    """Vertical gradient behind everything: `top` at the top row, `bottom` at the bottom."""
+
+    top: tuple = (0.96, 0.97, 0.99)
+    bottom: tuple = (0.70, 0.75, 0.83)
+
+    def __post_init__(self):
+        _validate_colours(self)
+
+
+@dataclass(frozen=True)
+class SurfaceStyle:
+    """How a body is drawn.
+
+    front, back: colours of the two sides (front = counter-clockwise triangle winding as seen).
+    checker: cell size [m] of a checker on the rest coordinates (0: off; None: a tenth of the
+        body's largest rest extent); checker_contrast in [0, 1].
+    strain: colour by per-particle strain instead of front/back, blue (0) to red (strain_max).
+    wireframe: triangle edge width [pixels] (0: off). particles: dot radius [pixels] (0: off),
+        pinned particles in pin_colour. line_width: [pixels] for bodies without triangles
+        (strings, hair), drawn in front colour.
+    """
+
+    front: tuple = (0.80, 0.27, 0.22)
+    back: tuple = (0.95, 0.78, 0.42)
+    checker: float | None = None
+    checker_contrast: float = 0.3
+    strain: bool = False
+    strain_max: float = 0.1
+    wireframe: float = 0.0
+    wire_colour: tuple = (0.15, 0.15, 0.18)
+    particles: float = 0.0
+    particle_colour: tuple = (0.1, 0.1, 0.12)
+    pin_colour: tuple = (0.9, 0.2, 0.2)
+    line_width: float = 2.0
+
+    def __post_init__(self):
+        _validate_colours(self)
+        if self.checker is not None:
+            object.__setattr__(self, "checker", finite_number("SurfaceStyle.checker", self.checker,
+                                                              0.0, unit="m"))
+        contrast = finite_number("SurfaceStyle.checker_contrast", self.checker_contrast, 0.0)
+        require(contrast <= 1.0, "SurfaceStyle.checker_contrast", contrast, "a number in [0, 1]")
+        require(isinstance(self.strain, bool), "SurfaceStyle.strain", self.strain, "True or False")
+        finite_number("SurfaceStyle.strain_max", self.strain_max, 0.0, strict=True)
+        for name in ("wireframe", "particles"):
+            finite_number(f"SurfaceStyle.{name}", getattr(self, name), 0.0, unit="pixels")
+        finite_number("SurfaceStyle.line_width", self.line_width, 0.0, strict=True, unit="pixels")
+
+
+class _Topology:
+    """A triangle list uploaded once, with the vertex -> triangle lists the normal gather reads."""
+
+    def __init__(self, triangles: np.ndarray, vertex_count: int):
+        t = as_array("triangles", triangles, np.int64, (None, 3))
+        if len(t):
+            require(t.min() >= 0 and t.max() < vertex_count, "triangles",
+                    (int(t.min()), int(t.max())), f"vertex indices in [0, {vertex_count - 1}]")
+        corner_vertex = t.ravel()
+        order = np.argsort(corner_vertex, kind="stable")
+        start = np.zeros(vertex_count + 1, np.int32)
+        start[1:] = np.cumsum(np.bincount(corner_vertex, minlength=vertex_count))
+        self.vertex_count, self.triangle_count = vertex_count, len(t)
+        self.triangles = _device(t.astype(np.int32) if len(t) else np.zeros((1, 3), np.int32))
+        self.vertex_start = _device(start)
+        self.vertex_triangles = _device((order // 3).astype(np.int32) if len(t)
+                                        else np.zeros(1, np.int32))
+
+
+def _device(array: np.ndarray):
+    """A Taichi ndarray holding a copy of `array`."""
+    dtype = {np.float32: ti.f32, np.int32: ti.i32}[array.dtype.type]
+    nd = ti.ndarray(dtype, array.shape)
+    nd.from_numpy(np.ascontiguousarray(array))
+    return nd
+
+
+class Renderer:
+    """Rasterises bodies, lines, particles, a ground plane and collider shapes into an image of
+    width x height pixels, supersampled `supersample` x `supersample` times per pixel (box
+    filter). Runs on whatever arch ti_cloth was initialised with; needs no window or display."""
+
+    def __init__(self, width: int = 1280, height: int = 720, camera: Camera | None = None, *,
+                 supersample: int = 2, light: Light = Light(), background: Background = Background()):
+        for name, value, top in (("width", width, 16384), ("height", height, 16384),
+                                 ("supersample", supersample, 8)):
+            require(isinstance(value, (int, np.integer)) and 1 <= value <= top, name, value,
+                    f"an int in [1, {top}]")
+        require(camera is None or isinstance(camera, Camera), "camera", camera, "a Camera or None")
+        require(isinstance(light, Light), "light", light, "a Light")
+        require(isinstance(background, Background), "background", background, "a Background")
+        self.width, self.height, self.supersample = int(width), int(height), int(supersample)
+        self.camera, self.light, self.background = camera, light, background
+        self._samples = ti.ndarray(ti.i64, (self.width * supersample, self.height * supersample))
+        self._image = ti.ndarray(ti.u8, (self.width, self.height, 3))
+        self._scratch: dict[str, object] = {}
+        self._topologies: dict[int, tuple] = {}
+        self._cam = None
+        self._open = True
+
+    def __enter__(self) -> Renderer:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # -- frame ------------------------------------------------------------------------------
+
+    def begin(self, camera: Camera | None = None) -> None:
+        """Start a frame (clears it), optionally with a new camera."""
+        require(self._open, "renderer", "closed", "open (begin called after close)")
+        if camera is not None:
+            require(isinstance(camera, Camera), "camera", camera, "a Camera")
+            self.camera = camera
+        require(self.camera is not None, "camera", None, "set (pass camera= or Camera.fit(...))")
+        self._cam = self._upload("camera", self.camera.packed(self.width * self.supersample,
+                                                               self.height * self.supersample))
+        raster.clear(self._samples)
+
+    def end(self) -> np.ndarray:
+        """Finish the frame: (height, width, 3) uint8 RGB, row 0 at the top."""
+        self._require_frame()
+        bg = self.background
+        raster.resolve(self._samples, self._image, bg.top, bg.bottom, self.supersample)
+        self._cam = None
+        return from_taichi(self._image.to_numpy())
+
+    def close(self) -> None:
+        """Release the buffers; the renderer cannot be used after."""
+        self._scratch.clear()
+        self._topologies.clear()
+        self._samples = self._image = self._cam = None
+        self._open = False
+
+    # -- bodies -----------------------------------------------------------------------------
+
+    def draw_mesh(self, positions, triangles, *, rest_positions=None, hidden=None, strain=None,
+                  colours=None, style: SurfaceStyle = SurfaceStyle()) -> None:
+        """Triangles over `positions` [m] (N, 3). rest_positions (N, 3) carry the checker;
+        hidden: triangle indices or an (T,) bool mask not to draw (torn triangles);
+        strain: (N,) per-particle strain when style.strain; colours: (N, 3) per-vertex RGB
+        for both sides instead of style.front/back. `triangles` is taken as fixed
+        topology: it is uploaded once per array object."""
+        self._require_frame()
+        x = as_array("positions", positions, np.float32, (None, 3))
+        topology = self._topology(triangles, len(x))
+        if topology.triangle_count == 0:
+            return
+        visible = np.ones(topology.triangle_count, np.int32)
+        if hidden is not None:
+            hidden = np.asarray(hidden)
+            if hidden.dtype == bool:
+                visible[as_array("hidden", hidden, bool, (topology.triangle_count,))] = 0
+            else:
+                hidden = as_array("hidden", hidden, np.int64, (None,))
+                require(len(hidden) == 0 or (hidden.min() >= 0 and hidden.max() < len(visible)),
+                        "hidden", hidden.tolist()[:5], f"triangle indices in [0, {len(visible) - 1}]")
+                visible[hidden] = 0
+        checker = style.checker
+        if rest_positions is not None:
+            rest = as_array("rest_positions", rest_positions, np.float32, (len(x), 3))
+            if checker is None:
+                checker = float(np.ptp(rest, axis=0).max()) / 10
+        else:
+            rest, checker = np.zeros((1, 3), np.float32), 0.0
+        if style.strain:
+            require(strain is not None, "strain", None, "an (N,) array when style.strain is on")
+            strain = as_array("strain", strain, np.float32, (len(x),))
+        else:
+            strain = np.zeros(1, np.float32)
+        per_vertex = colours is not None
+        colours = (self._colours("colours", colours, len(x)) if per_vertex
+                   else np.zeros((1, 3), np.float32))
+        position = self._upload("position", x)
+        visible = self._upload("visible", visible)
+        screen = self._buffer("screen", (len(x), 4))
+        normal = self._buffer("normal", (len(x), 3))
+        raster.vertex_stage(self._cam, position, topology.triangles, visible, topology.vertex_start,
+                            topology.vertex_triangles, screen, normal)
+        light, ss = self.light, self.supersample
+        raster.raster_triangles(
+            self._samples, self._cam, topology.triangles, visible, screen, normal,
+            self._upload("rest", rest), self._upload("strain", strain),
+            self._upload("vertex_colour", colours), style.front, style.back, style.wire_colour,
+            light.direction, light.ambient, max(checker, 1e-9), style.checker_contrast,
+            style.strain_max, style.wireframe * ss,
+            per_vertex, checker > 0, style.strain, style.wireframe > 0)
+
+    def draw_lines(self, positions, segments, *, width: float = 2.0, colour=(0.25, 0.2, 0.15)) -> None:
+        """Segments between `positions` [m] (N, 3), `width` pixels wide, lit as fibres;
+        colour: one RGB or (N, 3) per vertex (interpolated along each segment)."""
+        self._require_frame()
+        x = as_array("positions", positions, np.float32, (None, 3))
+        segments = as_array("segments", segments, np.int32, (None, 2))
+        if len(segments) == 0:
+            return
+        require(segments.min() >= 0 and segments.max() < len(x), "segments",
+                (int(segments.min()), int(segments.max())), f"indices in [0, {len(x) - 1}]")
+        width = finite_number("width", width, 0.0, strict=True, unit="pixels")
+        raster.raster_segments(self._samples, self._cam, self._upload("position", x),
+                               self._upload("segments", segments),
+                               self._upload("colour", self._colours("colour", colour, len(x))),
+                               width * self.supersample, self.light.direction, self.light.ambient)
+
+    def draw_points(self, positions, *, radius: float = 3.0, colour=(0.1, 0.1, 0.12)) -> None:
+        """Flat discs `radius` pixels wide at `positions` [m]; colour: one RGB or (N, 3)."""
+        self._require_frame()
+        x = as_array("positions", positions, np.float32, (None, 3))
+        radius = finite_number("radius", radius, 0.0, strict=True, unit="pixels")
+        if len(x):
+            raster.raster_discs(self._samples, self._cam, self._upload("position", x),
+                                self._upload("colour", self._colours("colour", colour, len(x))),
+                                radius * self.supersample, 1e-3)
+
+    def draw_simulation(self, sim, style: SurfaceStyle = SurfaceStyle()) -> None:
+        """The body of a Simulation at its current time: its triangles (torn ones dropped),
+        or, for bodies without triangles, its stretch springs as lines; plus particles."""
+        from ..material import SpringKind
+
+        cloth, x = sim.cloth, sim.positions()
+        alive = sim.spring_alive()
+        if len(cloth.mesh.triangles):
+            strain = (vertex_strain(x, cloth.spring_indices, cloth.spring_rest_length, alive)
+                      if style.strain else None)
+            self.draw_mesh(x, cloth.mesh.triangles, rest_positions=cloth.particle_position,
+                           hidden=sim.torn_triangles(), strain=strain, style=style)
+        else:
+            keep = alive & (cloth.spring_kind == SpringKind.STRETCH)
+            self.draw_lines(x, cloth.spring_indices[keep], width=style.line_width, colour=style.front)
+        if style.particles > 0:
+            colours = np.where(sim.model.pinned[:, None], style.pin_colour, style.particle_colour)
+            self.draw_points(x, radius=style.particles, colour=colours)
+
+    # -- ground and colliders ---------------------------------------------------------------
+
+    def draw_plane(self, point=(0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0), *,
+                   colour=(0.86, 0.87, 0.89), checker: float = 0.25, contrast: float = 0.12,
+                   fade: float = 30.0) -> None:
+        """The infinite plane through `point` [m] with `normal`; a checker of `checker` metres
+        (0: plain) whose contrast fades to nothing at depth `fade` [m] (no moire at the horizon)."""
+        self._require_frame()
+        n = np.asarray(_unit("normal", normal))
+        point = as_array("point", point, np.float64, (3,))
+        helper = np.eye(3)[np.argmin(np.abs(n))]
+        u = np.cross(n, helper)
+        u /= np.linalg.norm(u)
+        checker = finite_number("checker", checker, 0.0, unit="m")
+        contrast = finite_number("contrast", contrast, 0.0)
+        require(contrast <= 1, "contrast", contrast, "a number in [0, 1]")
+        shapes.raster_plane(self._samples, self._cam, point, n, u, np.cross(n, u),
+                            _colour("colour", colour), checker, contrast,
+                            finite_number("fade", fade, 0.0, strict=True, unit="m"),
+                            self.light.direction, self.light.ambient)
+
+    def draw_sphere(self, centre, radius: float, *, colour=COLLIDER_COLOUR) -> None:
+        """A sphere of `radius` [m] at `centre` [m]."""
+        self._require_frame()
+        shapes.raster_sphere(self._samples, self._cam, as_array("centre", centre, np.float64, (3,)),
+                             finite_number("radius", radius, 0.0, strict=True, unit="m"),
+                             _colour("colour", colour), self.light.direction, self.light.ambient)
+
+    def draw_box(self, lo, hi, *, colour=COLLIDER_COLOUR) -> None:
+        """The axis-aligned box between corners `lo` and `hi` [m]."""
+        self._require_frame()
+        lo, hi = as_array("lo", lo, np.float64, (3,)), as_array("hi", hi, np.float64, (3,))
+        require(bool((hi > lo).all()), "hi", tuple(hi), f"greater than lo {tuple(lo)} on every axis")
+        shapes.raster_box(self._samples, self._cam, lo, hi, _colour("colour", colour),
+                          self.light.direction, self.light.ambient)
+
+    def draw_capsule(self, a, b, radius: float, *, colour=COLLIDER_COLOUR) -> None:
+        """The capsule around segment a-b [m] with `radius` [m]."""
+        self._require_frame()
+        shapes.raster_capsule(self._samples, self._cam, as_array("a", a, np.float64, (3,)),
+                              as_array("b", b, np.float64, (3,)),
+                              finite_number("radius", radius, 0.0, strict=True, unit="m"),
+                              _colour("colour", colour), self.light.direction, self.light.ambient)
+
+    # -- buffers ----------------------------------------------------------------------------
+
+    def _require_frame(self) -> None:
+        require(self._cam is not None, "renderer", "not drawing", "inside begin() ... end()")
+
+    def _colours(self, field: str, colour, n: int) -> np.ndarray:
+        c = np.asarray(colour, np.float64)
+        if c.shape == (3,):
+            c = np.broadcast_to(_colour(field, c), (n, 3))
+        else:
+            c = as_array(field, c, np.float64, (n, 3))
+            require(bool(((c >= 0) & (c <= 1)).all()), field, "out of range", "RGB values in [0, 1]")
+        return c.astype(np.float32)
+
+    def _buffer(self, name: str, shape: tuple, dtype=ti.f32):
+        nd = self._scratch.get(name)
+        if nd is None or tuple(nd.shape) != tuple(shape) or nd.dtype != dtype:
+            nd = self._scratch[name] = ti.ndarray(dtype, shape)
+        return nd
+
+    def _upload(self, name: str, array: np.ndarray):
+        array = np.ascontiguousarray(array)
+        dtype = {np.float32: ti.f32, np.int32: ti.i32}[array.dtype.type]
+        nd = self._buffer(name, array.shape, dtype)
+        nd.from_numpy(array)
+        return nd
+
+    def _topology(self, triangles, vertex_count: int) -> _Topology:
+        key = (id(triangles), vertex_count)
+        cached = self._topologies.get(key)
+        if cached is not None and cached[0]() is triangles:
+            return cached[1]
+        topology = _Topology(triangles, vertex_count)
+        try:
+            self._topologies[key] = (weakref.ref(triangles), topology)
+        except TypeError:          # lists and tuples cannot be weakly referenced: no caching
+            pass
+        return topology
+
+
+class NullRenderer:
+    """The Renderer interface doing nothing: for tests and benchmarks that must not pay for
+    drawing. `end` returns None; `frames` counts the frames begun and ended."""
+
+    def __init__(self, width: int = 1280, height: int = 720, camera: Camera | None = None, *,
+                 supersample: int = 2, light: Light = Light(), background: Background = Background()):
+        self.width, self.height, self.camera = width, height, camera
+        self.frames = 0
+
+    def __enter__(self) -> NullRenderer:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def begin(self, camera: Camera | None = None) -> None:
+        self.camera = camera or self.camera
+
+    def end(self) -> None:
+        self.frames += 1
+
+    def close(self) -> None:
+        pass
+
+    def draw_mesh(self, positions, triangles, *, rest_positions=None, hidden=None, strain=None,
+                  colours=None, style: SurfaceStyle = SurfaceStyle()) -> None:
+        pass
+
+    def draw_lines(self, positions, segments, *, width: float = 2.0, colour=(0.25, 0.2, 0.15)) -> None:
+        pass
+
+    def draw_points(self, positions, *, radius: float = 3.0, colour=(0.1, 0.1, 0.12)) -> None:
+        pass
+
+    def draw_simulation(self, sim, style: SurfaceStyle = SurfaceStyle()) -> None:
+        pass
+
+    def draw_plane(self, point=(0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0), *,
+                   colour=(0.86, 0.87, 0.89), checker: float = 0.25, contrast: float = 0.12,
+                   fade: float = 30.0) -> None:
+        pass
+
+    def draw_sphere(self, centre, radius: float, *, colour=COLLIDER_COLOUR) -> None:
+        pass
+
+    def draw_box(self, lo, hi, *, colour=COLLIDER_COLOUR) -> None:
+        pass
+
+    def draw_capsule(self, a, b, radius: float, *, colour=COLLIDER_COLOUR) -> None:
+        pass

@@ -1,0 +1,131 @@
+"""Ground plane and collider shapes, ray-cast per sample instead of tessellated: exact
+silhouettes, an infinite plane up to the horizon, and depths comparable with the rasterised
+cloth (both are distances along the viewing direction), written with the same atomic minimum."""
+
+import taichi as ti
+
+from .raster import camera_basis, lambert, ndarray_f32_1, pack, samples_type
+
+MISS = -1.0
+
+
+@ti.func
+def camera_ray(cam: ti.template(), x, y):
+    """Ray through the centre of sample (x, y): origin, unit direction, and depth per unit t."""
+    eye, right, up, forward = camera_basis(cam)
+    u = (x + 0.5 - cam[13]) / cam[12]
+    v = (y + 0.5 - cam[14]) / cam[12]
+    origin, direction = eye, (forward + u * right + v * up).normalized()
+    if cam[15] != 0:
+        origin, direction = eye + u * right + v * up, forward
+    return origin, direction, direction.dot(forward)
+
+
+@ti.func
+def hit_sphere(o, d, centre, radius):
+    """Nearest t >= 0 where o + t d (|d| = 1) meets the sphere, else MISS; with the normal."""
+    oc = o - centre
+    b = oc.dot(d)
+    h = b * b - (oc.norm_sqr() - radius * radius)
+    t = MISS
+    if h >= 0:
+        t = -b - ti.sqrt(h)
+    return t, (o + t * d - centre) / radius
+
+
+@ti.func
+def hit_box(o, d, lo, hi):
+    """Slab test against the axis-aligned box [lo, hi]; t of entry (or MISS) and its normal."""
+    inv = 1.0 / ti.select(ti.abs(d) > 1e-12, d, 1e-12)
+    t1, t2 = (lo - o) * inv, (hi - o) * inv
+    t_min, t_max = ti.min(t1, t2), ti.max(t1, t2)
+    entry, leave = ti.max(t_min[0], t_min[1], t_min[2]), ti.min(t_max[0], t_max[1], t_max[2])
+    normal = ti.Vector([0.0, 0.0, 0.0])
+    for k in ti.static(range(3)):
+        if t_min[k] == entry:
+            normal = ti.Vector([0.0, 0.0, 0.0])
+            normal[k] = -1.0 if d[k] > 0 else 1.0
+    return ti.select(entry <= leave and entry >= 0, entry, MISS), normal
+
+
+@ti.func
+def hit_capsule(o, d, a, b, radius):
+    """Ray against the capsule of segment a-b and `radius` (Quilez's closed form): the body's
+    quadratic, then the nearer end sphere; t (or MISS) and the normal."""
+    ba, oa = b - a, o - a
+    baba, bard, baoa = ba.dot(ba), ba.dot(d), ba.dot(oa)
+    k2 = baba - bard * bard
+    k1 = baba * oa.dot(d) - baoa * bard
+    k0 = baba * oa.dot(oa) - baoa * baoa - radius * radius * baba
+    t = MISS
+    h = k1 * k1 - k2 * k0
+    if h >= 0 and k2 > 1e-12:
+        t_body = (-k1 - ti.sqrt(h)) / k2
+        along = baoa + t_body * bard
+        if along > 0 and along < baba:
+            t = t_body
+    if t == MISS:
+        end_a, _ = hit_sphere(o, d, a, radius)
+        end_b, _ = hit_sphere(o, d, b, radius)
+        t = ti.select(end_a >= 0 and (end_b < 0 or end_a < end_b), end_a, end_b)
+    p = o + t * d - a
+    normal = (p - ba * ti.math.clamp(p.dot(ba) / ti.max(baba, 1e-12), 0.0, 1.0)) / radius
+    return t, normal
+
+
+@ti.func
+def plot_hit(samples: ti.template(), x, y, t, depth_per_t, near, colour):
+    depth = t * depth_per_t
+    if t >= 0 and depth > near:
+        ti.atomic_min(samples[x, y], pack(depth, colour))
+
+
+@ti.kernel
+def raster_plane(samples: samples_type, cam: ndarray_f32_1, point: ti.math.vec3,
+                 normal: ti.math.vec3, axis_u: ti.math.vec3, axis_v: ti.math.vec3,
+                 colour: ti.math.vec3, cell: float, contrast: float, fade: float,
+                 light: ti.math.vec3, ambient: float):
+    """The infinite plane through `point` with unit `normal`, lit from either side, with a
+    checker of `cell` metres along axis_u, axis_v (0: plain) fading out by depth `fade` [m]."""
+    for x, y in samples:
+        o, d, depth_per_t = camera_ray(cam, x, y)
+        denominator = d.dot(normal)
+        if ti.abs(denominator) > 1e-9:
+            t = (point - o).dot(normal) / denominator
+            albedo = colour
+            if cell > 0:
+                p = o + t * d - point
+                cells = ti.cast(ti.floor(p.dot(axis_u) / cell), ti.i32) + ti.cast(
+                    ti.floor(p.dot(axis_v) / cell), ti.i32)
+                weight = contrast * ti.max(1.0 - t * depth_per_t / fade, 0.0)
+                albedo = colour * (1.0 - weight * (cells & 1))
+            facing = -ti.math.sign(denominator)
+            plot_hit(samples, x, y, t, depth_per_t, cam[16],
+                     lambert(albedo, normal * facing, light, ambient))
+
+
+@ti.kernel
+def raster_sphere(samples: samples_type, cam: ndarray_f32_1, centre: ti.math.vec3,
+                  radius: float, colour: ti.math.vec3, light: ti.math.vec3, ambient: float):
+    for x, y in samples:
+        o, d, depth_per_t = camera_ray(cam, x, y)
+        t, n = hit_sphere(o, d, centre, radius)
+        plot_hit(samples, x, y, t, depth_per_t, cam[16], lambert(colour, n, light, ambient))
+
+
+@ti.kernel
+def raster_box(samples: samples_type, cam: ndarray_f32_1, lo: ti.math.vec3, hi: ti.math.vec3,
+               colour: ti.math.vec3, light: ti.math.vec3, ambient: float):
+    for x, y in samples:
+        o, d, depth_per_t = camera_ray(cam, x, y)
+        t, n = hit_box(o, d, lo, hi)
+        plot_hit(samples, x, y, t, depth_per_t, cam[16], lambert(colour, n, light, ambient))
+
+
+@ti.kernel
+def raster_capsule(samples: samples_type, cam: ndarray_f32_1, a: ti.math.vec3, b: ti.math.vec3,
+                   radius: float, colour: ti.math.vec3, light: ti.math.vec3, ambient: float):
+    for x, y in samples:
+        o, d, depth_per_t = camera_ray(cam, x, y)
+        t, n = hit_capsule(o, d, a, b, radius)
+        plot_hit(samples, x, y, t, depth_per_t, cam[16], lambert(colour, n, light, ambient))
