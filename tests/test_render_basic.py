@@ -1,10 +1,15 @@
-"""Image layout, atomic PNG writing and the 2-D dots-and-lines view."""
+"""Image layout, atomic PNG writing, frame sequences, GIF/MP4 and the 2-D dots-and-lines view."""
+
+import importlib.util
+from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
+import pytest
 
 import ti_cloth as tc
-from ti_cloth.render import SpringView, frame_path, from_taichi, write_gif, write_png
+from ti_cloth.render import (FrameSequence, SpringView, frame_path, from_taichi, write_gif,
+                             write_mp4, write_png)
 
 
 def test_taichi_layout_becomes_top_left_numpy():
@@ -40,3 +45,79 @@ def test_spring_view_puts_a_top_left_particle_top_left(f32):
     dark = image.sum(axis=2) < 200                              # the free particle, bottom-right
     rows, cols = np.nonzero(dark)
     assert rows.min() > 54 and cols.min() > 54
+
+
+def frames_of(count, h=16, w=24):
+    """Distinct test frames: a bar moving right."""
+    images = []
+    for k in range(count):
+        image = np.full((h, w, 3), 40, np.uint8)
+        image[:, 2 * k: 2 * k + 4] = (230, 120, 30)
+        images.append(image)
+    return images
+
+
+def test_frame_sequence_writes_numbered_frames_and_a_gif(tmp_path):
+    folder = tmp_path / "demo"
+    folder.mkdir()
+    (folder / "frame_00007.png").write_bytes(b"stale frame of an earlier, longer run")
+    (folder / "notes.txt").write_text("not ours")
+    sequence = FrameSequence(folder, fps=10)
+    for image in frames_of(3):
+        sequence.write(image)
+    outputs = sequence.close()
+    assert sorted(p.name for p in folder.iterdir()) == [
+        "demo.gif", "frame_00000.png", "frame_00001.png", "frame_00002.png", "notes.txt"]
+    assert outputs == [folder / "demo.gif"]
+    gif = iio.imread(folder / "demo.gif", index=None)
+    assert gif.shape[:3] == (3, 16, 24)
+
+
+def test_gif_can_be_resized(tmp_path):
+    gif = write_gif(frames_of(2), tmp_path / "small.gif", width=12)
+    assert iio.imread(gif, index=None).shape[:3] == (2, 8, 12)
+
+
+def test_an_interrupted_run_keeps_every_finished_frame(tmp_path, monkeypatch):
+    sequence = FrameSequence(tmp_path, gif=False)
+    images = frames_of(3)
+    sequence.write(images[0])
+    sequence.write(images[1])
+
+    def crash(path, image, **kwargs):                 # dies half-way through writing frame 2
+        Path(path).write_bytes(b"\x89PNG half")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("ti_cloth.render.image.iio.imwrite", crash)
+    with pytest.raises(KeyboardInterrupt):
+        sequence.write(images[2])
+    monkeypatch.undo()
+    finished = sorted(p.name for p in tmp_path.glob("frame_*.png"))
+    assert finished == ["frame_00000.png", "frame_00001.png"]
+    assert np.array_equal(iio.imread(tmp_path / "frame_00001.png"), images[1])
+    assert not list(tmp_path.glob(".*tmp*")), "the half-written temporary file was left behind"
+
+
+@pytest.mark.skipif(importlib.util.find_spec("imageio_ffmpeg") is None,
+                    reason="imageio-ffmpeg (the optional MP4 writer) is not installed")
+def test_mp4_holds_every_frame(tmp_path):
+    images = frames_of(5, h=32, w=48)
+    path = write_mp4(images, tmp_path / "clip.mp4", fps=10)
+    import imageio.v2 as iio2
+
+    with iio2.get_reader(path, format="FFMPEG") as reader:
+        video = [frame for frame in reader]
+    assert len(video) == 5 and video[0].shape == (32, 48, 3)
+    for got, sent in zip(video, images):            # lossy codec: compare in float, loosely
+        assert np.abs(got.astype(float) - sent.astype(float)).mean() < 8.0
+    assert not list(tmp_path.glob(".*tmp*"))
+
+
+def test_mp4_without_imageio_ffmpeg_says_what_to_install(tmp_path, monkeypatch):
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "imageio_ffmpeg" else real(name, *a))
+    with pytest.raises(ImportError, match=r"imageio-ffmpeg.*pip install"):
+        write_mp4(frames_of(2), tmp_path / "clip.mp4")
+    with pytest.raises(ImportError, match="imageio-ffmpeg"):
+        FrameSequence(tmp_path, mp4=True)

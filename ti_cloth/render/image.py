@@ -5,6 +5,7 @@ into an animated GIF or an MP4 (the latter through the optional imageio-ffmpeg).
 from __future__ import annotations
 
 import importlib.util
+from contextlib import contextmanager
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -28,19 +29,25 @@ def frame_path(folder, index: int) -> Path:
     return Path(folder) / f"frame_{index:05d}.png"
 
 
-def _temporary(path: Path) -> Path:
-    """A hidden name beside `path` with the same extension (writers pick the format from it)."""
-    return path.with_name(f".{path.stem}.tmp{path.suffix}")
+@contextmanager
+def _atomic(path: Path):
+    """Yield a hidden temporary name beside `path` (same extension: writers pick the format
+    from it); rename it to `path` when the block succeeds, delete it when it fails."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
+    try:
+        yield tmp
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def write_png(path, image: np.ndarray) -> Path:
     """Write an (H, W, 3) uint8 image under a temporary name, then rename: an interrupted run
     never leaves a half-written frame."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = _temporary(path)
-    iio.imwrite(tmp, image)
-    tmp.replace(path)
+    with _atomic(path) as tmp:
+        iio.imwrite(tmp, image)
     return path
 
 
@@ -65,9 +72,8 @@ def write_gif(frames, path, fps: float = 30.0, width: int | None = None) -> Path
             "a positive int or None")
     images = list(_images(frames, width))
     require(len(images) > 0, "frames", frames, "at least one frame")
-    tmp = _temporary(path)
-    iio.imwrite(tmp, np.stack(images), duration=1000.0 / fps, loop=0)
-    tmp.replace(path)
+    with _atomic(path) as tmp:
+        iio.imwrite(tmp, np.stack(images), duration=1000.0 / fps, loop=0)
     return path
 
 
@@ -82,17 +88,14 @@ def write_mp4(frames, path, fps: float = 30.0, quality: float = 8.0) -> Path:
     fps = finite_number("fps", fps, 0.0, strict=True, unit="frames/s")
     quality = finite_number("quality", quality, 0.0)
     require(quality <= 10, "quality", quality, "a number in [0, 10]")
-    tmp = _temporary(path)
-    count = 0
-    with iio2.get_writer(tmp, format="FFMPEG", mode="I", fps=fps, codec="libx264",
-                         quality=quality, pixelformat="yuv420p", macro_block_size=2) as writer:
-        for image in _images(frames):
-            writer.append_data(image)
-            count += 1
-    if count == 0:
-        tmp.unlink(missing_ok=True)
-        require(False, "frames", frames, "at least one frame")
-    tmp.replace(path)
+    with _atomic(path) as tmp:
+        count = 0
+        with iio2.get_writer(tmp, format="FFMPEG", mode="I", fps=fps, codec="libx264",
+                             quality=quality, pixelformat="yuv420p", macro_block_size=2) as writer:
+            for image in _images(frames):
+                writer.append_data(image)
+                count += 1
+        require(count > 0, "frames", frames, "at least one frame")
     return path
 
 

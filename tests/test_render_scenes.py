@@ -1,0 +1,182 @@
+"""Whole frames: golden images, torn triangles, cameras that frame a body, the null renderer,
+and rendering with no display."""
+
+import inspect
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import ti_cloth as tc
+from conftest import assert_matches_golden, report
+from ti_cloth.render import Background, Camera, Light, NullRenderer, Renderer, SurfaceStyle
+
+
+def draped_sheet(n=16):
+    """An n x n sheet over [-1, 1]^2 lifted by a bump; its front edge curls up and back over
+    itself (radius 0.15 m), so the back side shows."""
+    mesh = tc.grid_mesh(n, n, size=(2.0, 2.0), plane="xz", origin=(-1.0, 0.0, -1.0))
+    x = mesh.vertices.copy()
+    x[:, 1] = 0.1 + 0.7 * np.exp(-2.5 * (x[:, 0] ** 2 + np.minimum(x[:, 2], 0.6) ** 2))
+    curl = x[:, 2] > 0.6
+    arc = (x[curl, 2] - 0.6) / 0.15
+    x[curl, 2] = 0.6 + 0.15 * np.sin(arc)
+    x[curl, 1] += 0.15 * (1 - np.cos(arc))
+    return mesh, x
+
+
+def render_drape():
+    mesh, x = draped_sheet()
+    camera = Camera(position=(1.6, 1.5, 2.6), target=(0.0, 0.3, 0.0), fov=40.0)
+    with Renderer(96, 64, camera, supersample=2) as r:
+        r.begin()
+        r.draw_plane(point=(0.0, 0.0, 0.0), checker=0.5)
+        r.draw_sphere((0.0, 0.35, 0.0), 0.3)
+        r.draw_mesh(x, mesh.triangles, rest_positions=mesh.vertices, style=SurfaceStyle(checker=0.25))
+        return r.end()
+
+
+def render_hair_and_wire():
+    mesh, x = draped_sheet(8)
+    strands = np.array([[0.5 + 0.1 * s, 1.2 - 0.15 * k, 0.1 * np.sin(k + s)]
+                        for s in range(5) for k in range(6)])
+    segments = np.array([[s * 6 + k, s * 6 + k + 1] for s in range(5) for k in range(5)])
+    cloth = tc.Cloth(mesh, tc.Material())
+    strain = tc.render.vertex_strain(x, cloth.spring_indices, cloth.spring_rest_length)
+    camera = Camera.fit(np.concatenate([x, strands]), orthographic=True, aspect=96 / 64)
+    with Renderer(96, 64, camera, supersample=2, light=Light(ambient=0.5),
+                  background=Background(top=(1.0, 1.0, 1.0), bottom=(0.8, 0.8, 0.8))) as r:
+        r.begin()
+        r.draw_box((-1.2, -0.3, -1.2), (-0.6, 0.2, -0.6))
+        r.draw_capsule((0.6, 0.0, -0.8), (1.1, 0.3, -0.8), 0.12)
+        r.draw_mesh(x, mesh.triangles, strain=strain,
+                    style=SurfaceStyle(strain=True, strain_max=0.5, wireframe=0.6))
+        r.draw_lines(strands, segments, width=1.5, colour=(0.3, 0.2, 0.1))
+        r.draw_points(x[::7], radius=1.5)
+        return r.end()
+
+
+@pytest.mark.parametrize("name, scene", [("drape", render_drape), ("hair_and_wire", render_hair_and_wire)])
+def test_golden_image(f32, tmp_path, name, scene):
+    assert_matches_golden(scene(), name, tmp_path)
+
+
+def test_golden_comparison_fails_on_a_changed_image_and_writes_a_diff(f32, tmp_path):
+    image = render_drape().copy()
+    image[20:30, 40:50] = 255 - image[20:30, 40:50]        # 100 of 6144 pixels: 1.6 %
+    with pytest.raises(AssertionError, match="diff image"):
+        assert_matches_golden(image, "drape", tmp_path)
+    assert (tmp_path / "drape.diff.png").exists() and (tmp_path / "drape.actual.png").exists()
+    assert_matches_golden(np.clip(render_drape().astype(int) + 1, 0, 255).astype(np.uint8),
+                          "drape", tmp_path / "ok")      # one level everywhere is within tolerance
+
+
+def test_a_torn_triangle_disappears(f32):
+    # a 3 x 3 sheet facing the camera, every particle pinned; a handle pulls corner 0 straight
+    # away from the (orthographic) camera, so nothing moves on screen, until its springs tear
+    mesh = tc.grid_mesh(3, 3, size=(2.0, 2.0), plane="xy")
+    cloth = tc.Cloth(mesh, tc.Material(), pinned=range(1, 9))
+    pull = tc.Handle([0], lambda t: (0.0, 0.0, -10.0 * t))
+    sim = tc.Simulation(cloth, dt=1e-3, tearing=0.2, handles=[pull])
+    camera = Camera(position=(1.0, 1.0, 10.0), target=(1.0, 1.0, 0.0), orthographic=True, height=3.0)
+    r = Renderer(60, 60, camera, supersample=1, light=Light(ambient=1.0),
+                 background=Background(top=(0.0, 0.0, 0.0), bottom=(0.0, 0.0, 0.0)))
+    red = SurfaceStyle(front=(1.0, 0.0, 0.0), back=(1.0, 0.0, 0.0), checker=0.0)
+
+    def frame(hidden_by_tearing=True):
+        r.begin()
+        if hidden_by_tearing:
+            r.draw_simulation(sim, red)
+        else:
+            r.draw_mesh(sim.positions(), mesh.triangles, style=red)
+        return r.end()[::-1]                    # y up: 20 px per metre, world (0, 0) at (10, 10)
+
+    quad0, quad1 = (20, 20), (20, 40)           # centres of the first and second cell (y, x)
+    before = frame()
+    assert before[quad0].tolist() == [255, 0, 0] and before[quad1].tolist() == [255, 0, 0]
+    sim.step(100)                               # 0.7 m out of plane: strain 0.22 > 0.2
+    report("torn triangles", sim.torn_triangles().tolist(), [0, 1])
+    assert sim.torn_triangles().tolist() == [0, 1]
+    after = frame()
+    assert after[quad0].tolist() == [0, 0, 0] and after[quad1].tolist() == [255, 0, 0]
+    assert frame(hidden_by_tearing=False)[quad0].tolist() == [255, 0, 0]   # still there untorn
+
+
+@pytest.mark.parametrize("orthographic", [False, True])
+@pytest.mark.parametrize("aspect", [16 / 9, 9 / 16])
+@pytest.mark.parametrize("direction", [(0.55, 0.4, 1.0), (0.0, 1.0, 0.01), (-1.0, 0.5, 0.3)])
+def test_camera_fit_frames_the_whole_body(orthographic, aspect, direction):
+    mesh = tc.grid_mesh(5, 7, size=(3.0, 1.0), plane="xz", origin=(10.0, 2.0, -4.0))
+    width, height = (160, 90) if aspect > 1 else (90, 160)
+    camera = Camera.fit(mesh, direction=direction, orthographic=orthographic, aspect=aspect)
+    lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    screen, depth = camera.project(corners, width, height)
+    extent = (screen.max(axis=0) - screen.min(axis=0)) / [width, height]
+    report("screen box", (screen.min(axis=0).round(1), screen.max(axis=0).round(1)), (width, height))
+    assert np.all(depth > camera.near)
+    assert np.all(screen >= 0) and np.all(screen <= [width, height])
+    assert extent.max() > 0.25                   # framed, not a speck
+
+
+@pytest.mark.parametrize("kwargs, field", [
+    (dict(position=(0, 0, 0), target=(0, 0, 0)), "Camera.target"),
+    (dict(position=(0, 0, 1), target=(0, 0, 0), up=(0, 0, 1)), "Camera.up"),
+    (dict(fov=180.0), "Camera.fov"), (dict(orthographic=True, height=0.0), "Camera.height"),
+    (dict(position=(0, np.nan, 1)), r"Camera.position\[1\]"),
+])
+def test_camera_rejects_bad_input_by_name(kwargs, field):
+    with pytest.raises(ValueError, match=field):
+        Camera(**kwargs)
+
+
+def parameters(function):
+    return list(inspect.signature(function).parameters.values())
+
+
+def test_null_renderer_has_the_renderer_interface_and_draws_nothing(f32):
+    public = [name for name in vars(Renderer) if not name.startswith("_")]
+    for name in public:
+        assert parameters(getattr(Renderer, name)) == parameters(getattr(NullRenderer, name)), name
+    assert parameters(Renderer.__init__) == parameters(NullRenderer.__init__)
+    with NullRenderer(64, 64, Camera()) as r:
+        for _ in range(3):
+            r.begin()
+            r.draw_sphere((0, 0, 0), 1.0)
+            assert r.end() is None
+    assert r.frames == 3
+
+
+def test_simulation_never_imports_the_renderer():
+    code = ("import sys, ti_cloth as tc; tc.init('cpu'); "
+            "sim = tc.Simulation(tc.Cloth(tc.grid_mesh(3, 3), tc.Material())); sim.step(2); "
+            "assert 'ti_cloth.render' not in sys.modules, 'renderer imported'")
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_renders_with_no_display_and_opens_no_window(tmp_path):
+    # no DISPLAY / WAYLAND_DISPLAY, and Taichi's window classes replaced by ones that raise
+    code = f"""
+import taichi as ti
+def no_window(*args, **kwargs):
+    raise RuntimeError("a window was opened")
+ti.ui.Window = no_window
+ti.GUI.show = no_window
+import numpy as np, ti_cloth as tc
+from ti_cloth.render import Camera, Renderer, SpringView, write_png
+tc.init("cpu")
+cloth = tc.Cloth(tc.grid_mesh(4, 4), tc.Material(), pinned=[0, 3])
+sim = tc.Simulation(cloth, dt=1e-4)
+sim.step(5)
+with Renderer(64, 48, Camera.fit(cloth)) as r:
+    r.begin(); r.draw_plane(point=(0, -0.5, 0)); r.draw_simulation(sim); image = r.end()
+write_png({str(tmp_path / "frame.png")!r}, image)
+view = SpringView(bounds=((0, 0), (1, 1)), res=(32, 32))
+write_png({str(tmp_path / "springs.png")!r},
+          view.render(sim.positions(), cloth.spring_indices, cloth.spring_kind, cloth.pinned))
+"""
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    subprocess.run([sys.executable, "-c", code], check=True, env=env, timeout=300)
+    assert (tmp_path / "frame.png").exists() and (tmp_path / "springs.png").exists()
