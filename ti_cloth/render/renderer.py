@@ -156,7 +156,7 @@ class Renderer:
         self.width, self.height, self.supersample = int(width), int(height), int(supersample)
         self.camera, self.light, self.background = camera, light, background
         self._samples = ti.ndarray(ti.i64, (self.width * supersample, self.height * supersample))
-        self._image = ti.ndarray(ti.u8, (self.width, self.height, 3))
+        self._image = np.empty((self.width, self.height, 3), np.uint8)   # written by resolve
         self._scratch: dict[str, object] = {}
         self._topologies: dict[int, tuple] = {}
         self._cam = None
@@ -179,15 +179,26 @@ class Renderer:
         require(self.camera is not None, "camera", None, "set (pass camera= or Camera.fit(...))")
         self._cam = self._upload("camera", self.camera.packed(self.width * self.supersample,
                                                                self.height * self.supersample))
-        raster.clear(self._samples)
+        self._uncleared = True             # a first draw_plane clears as it goes
+
+    def _require_frame(self) -> None:
+        require(self._cam is not None, "renderer", "not drawing", "inside begin() ... end()")
+
+    def _samples_ready(self):
+        """The sample buffer, cleared if nothing has been drawn this frame."""
+        self._require_frame()
+        if self._uncleared:
+            raster.clear(self._samples)
+            self._uncleared = False
+        return self._samples
 
     def end(self) -> np.ndarray:
         """Finish the frame: (height, width, 3) uint8 RGB, row 0 at the top."""
-        self._require_frame()
+        samples = self._samples_ready()
         bg = self.background
-        raster.resolve(self._samples, self._image, bg.top, bg.bottom, self.supersample)
+        raster.resolve(samples, self._image, bg.top, bg.bottom, self.supersample)
         self._cam = None
-        return from_taichi(self._image.to_numpy())
+        return from_taichi(self._image)
 
     def close(self) -> None:
         """Release the buffers; the renderer cannot be used after."""
@@ -243,7 +254,7 @@ class Renderer:
                             topology.vertex_triangles, screen, normal)
         light, ss = self.light, self.supersample
         raster.raster_triangles(
-            self._samples, self._cam, topology.triangles, visible, screen, normal,
+            self._samples_ready(), self._cam, topology.triangles, visible, screen, normal,
             self._upload("rest", rest), self._upload("strain", strain),
             self._upload("vertex_colour", colours), style.front, style.back, style.wire_colour,
             light.direction, light.ambient, max(checker, 1e-9), style.checker_contrast,
@@ -261,7 +272,7 @@ class Renderer:
         require(segments.min() >= 0 and segments.max() < len(x), "segments",
                 (int(segments.min()), int(segments.max())), f"indices in [0, {len(x) - 1}]")
         width = finite_number("width", width, 0.0, strict=True, unit="pixels")
-        raster.raster_segments(self._samples, self._cam, self._upload("position", x),
+        raster.raster_segments(self._samples_ready(), self._cam, self._upload("position", x),
                                self._upload("segments", segments),
                                self._upload("colour", self._colours("colour", colour, len(x))),
                                width * self.supersample, self.light.direction, self.light.ambient)
@@ -272,13 +283,14 @@ class Renderer:
         x = as_array("positions", positions, np.float32, (None, 3))
         radius = finite_number("radius", radius, 0.0, strict=True, unit="pixels")
         if len(x):
-            raster.raster_discs(self._samples, self._cam, self._upload("position", x),
+            raster.raster_discs(self._samples_ready(), self._cam, self._upload("position", x),
                                 self._upload("colour", self._colours("colour", colour, len(x))),
                                 radius * self.supersample, 1e-3)
 
     def draw_simulation(self, sim, style: SurfaceStyle = SurfaceStyle()) -> None:
         """The body of a Simulation at its current time: its triangles (torn ones dropped),
         or, for bodies without triangles, its stretch springs as lines; plus particles."""
+        self._require_frame()
         from ..material import SpringKind
 
         cloth, x = sim.cloth, sim.positions()
@@ -311,15 +323,16 @@ class Renderer:
         checker = finite_number("checker", checker, 0.0, unit="m")
         contrast = finite_number("contrast", contrast, 0.0)
         require(contrast <= 1, "contrast", contrast, "a number in [0, 1]")
-        shapes.raster_plane(self._samples, self._cam, point, n, u, np.cross(n, u),
-                            _colour("colour", colour), checker, contrast,
-                            finite_number("fade", fade, 0.0, strict=True, unit="m"),
-                            self.light.direction, self.light.ambient)
+        colour = _colour("colour", colour)
+        fade = finite_number("fade", fade, 0.0, strict=True, unit="m")
+        clear_first, self._uncleared = self._uncleared, False
+        shapes.raster_plane(self._samples, self._cam, point, n, u, np.cross(n, u), colour, checker,
+                            contrast, fade, self.light.direction, self.light.ambient, clear_first)
 
     def draw_sphere(self, centre, radius: float, *, colour=COLLIDER_COLOUR) -> None:
         """A sphere of `radius` [m] at `centre` [m]."""
         self._require_frame()
-        shapes.raster_sphere(self._samples, self._cam, as_array("centre", centre, np.float64, (3,)),
+        shapes.raster_sphere(self._samples_ready(), self._cam, as_array("centre", centre, np.float64, (3,)),
                              finite_number("radius", radius, 0.0, strict=True, unit="m"),
                              _colour("colour", colour), self.light.direction, self.light.ambient)
 
@@ -328,21 +341,18 @@ class Renderer:
         self._require_frame()
         lo, hi = as_array("lo", lo, np.float64, (3,)), as_array("hi", hi, np.float64, (3,))
         require(bool((hi > lo).all()), "hi", tuple(hi), f"greater than lo {tuple(lo)} on every axis")
-        shapes.raster_box(self._samples, self._cam, lo, hi, _colour("colour", colour),
+        shapes.raster_box(self._samples_ready(), self._cam, lo, hi, _colour("colour", colour),
                           self.light.direction, self.light.ambient)
 
     def draw_capsule(self, a, b, radius: float, *, colour=COLLIDER_COLOUR) -> None:
         """The capsule around segment a-b [m] with `radius` [m]."""
         self._require_frame()
-        shapes.raster_capsule(self._samples, self._cam, as_array("a", a, np.float64, (3,)),
+        shapes.raster_capsule(self._samples_ready(), self._cam, as_array("a", a, np.float64, (3,)),
                               as_array("b", b, np.float64, (3,)),
                               finite_number("radius", radius, 0.0, strict=True, unit="m"),
                               _colour("colour", colour), self.light.direction, self.light.ambient)
 
     # -- buffers ----------------------------------------------------------------------------
-
-    def _require_frame(self) -> None:
-        require(self._cam is not None, "renderer", "not drawing", "inside begin() ... end()")
 
     def _colours(self, field: str, colour, n: int) -> np.ndarray:
         c = np.asarray(colour, np.float64)

@@ -1,24 +1,34 @@
 """Ground plane and collider shapes, ray-cast per sample instead of tessellated: exact
 silhouettes, an infinite plane up to the horizon, and depths comparable with the rasterised
-cloth (both are distances along the viewing direction), written with the same atomic minimum."""
+cloth (both are distances along the viewing direction), merged by the same minimum of keys.
+Each sample belongs to one thread here, so a plain minimum replaces the atomic one."""
 
 import taichi as ti
 
-from .raster import camera_basis, lambert, ndarray_f32_1, pack, samples_type
+from .raster import EMPTY, camera_basis, lambert, ndarray_f32_1, pack, samples_type
 
 MISS = -1.0
 
 
 @ti.func
 def camera_ray(cam: ti.template(), x, y):
-    """Ray through the centre of sample (x, y): origin, unit direction, and depth per unit t."""
+    """Ray through the centre of sample (x, y): origin and direction, scaled so that its
+    component along the viewing direction is 1 (t is then the depth)."""
     eye, right, up, forward = camera_basis(cam)
     u = (x + 0.5 - cam[13]) / cam[12]
     v = (y + 0.5 - cam[14]) / cam[12]
-    origin, direction = eye, (forward + u * right + v * up).normalized()
+    origin, direction = eye, forward + u * right + v * up
     if cam[15] != 0:
         origin, direction = eye + u * right + v * up, forward
-    return origin, direction, direction.dot(forward)
+    return origin, direction
+
+
+@ti.func
+def unit_camera_ray(cam: ti.template(), x, y):
+    """camera_ray with a unit direction, and the depth per unit of its parameter t."""
+    origin, direction = camera_ray(cam, x, y)
+    length = direction.norm()
+    return origin, direction / length, 1.0 / length
 
 
 @ti.func
@@ -74,22 +84,32 @@ def hit_capsule(o, d, a, b, radius):
 
 
 @ti.func
-def plot_hit(samples: ti.template(), x, y, t, depth_per_t, near, colour):
+def hit_key(t, depth_per_t, near, colour):
+    """The sample key of a hit at ray parameter t (EMPTY for a miss or a hit behind `near`)."""
+    key = ti.i64(EMPTY)
     depth = t * depth_per_t
     if t >= 0 and depth > near:
-        ti.atomic_min(samples[x, y], pack(depth, colour))
+        key = pack(depth, colour)
+    return key
+
+
+@ti.func
+def plot_hit(samples: ti.template(), x, y, t, depth_per_t, near, colour):
+    samples[x, y] = ti.min(samples[x, y], hit_key(t, depth_per_t, near, colour))
 
 
 @ti.kernel
 def raster_plane(samples: samples_type, cam: ndarray_f32_1, point: ti.math.vec3,
                  normal: ti.math.vec3, axis_u: ti.math.vec3, axis_v: ti.math.vec3,
                  colour: ti.math.vec3, cell: float, contrast: float, fade: float,
-                 light: ti.math.vec3, ambient: float):
+                 light: ti.math.vec3, ambient: float, clear_first: ti.template()):
     """The infinite plane through `point` with unit `normal`, lit from either side, with a
-    checker of `cell` metres along axis_u, axis_v (0: plain) fading out by depth `fade` [m]."""
+    checker of `cell` metres along axis_u, axis_v (0: plain) fading out by depth `fade` [m].
+    clear_first: the frame's clear fused into this pass (one sweep over the samples, not two)."""
     for x, y in samples:
-        o, d, depth_per_t = camera_ray(cam, x, y)
+        o, d = camera_ray(cam, x, y)
         denominator = d.dot(normal)
+        key = ti.i64(EMPTY)
         if ti.abs(denominator) > 1e-9:
             t = (point - o).dot(normal) / denominator
             albedo = colour
@@ -97,18 +117,21 @@ def raster_plane(samples: samples_type, cam: ndarray_f32_1, point: ti.math.vec3,
                 p = o + t * d - point
                 cells = ti.cast(ti.floor(p.dot(axis_u) / cell), ti.i32) + ti.cast(
                     ti.floor(p.dot(axis_v) / cell), ti.i32)
-                weight = contrast * ti.max(1.0 - t * depth_per_t / fade, 0.0)
+                weight = contrast * ti.max(1.0 - t / fade, 0.0)
                 albedo = colour * (1.0 - weight * (cells & 1))
             facing = -ti.math.sign(denominator)
-            plot_hit(samples, x, y, t, depth_per_t, cam[16],
-                     lambert(albedo, normal * facing, light, ambient))
+            key = hit_key(t, 1.0, cam[16], lambert(albedo, normal * facing, light, ambient))
+        if ti.static(clear_first):
+            samples[x, y] = key
+        else:
+            samples[x, y] = ti.min(samples[x, y], key)
 
 
 @ti.kernel
 def raster_sphere(samples: samples_type, cam: ndarray_f32_1, centre: ti.math.vec3,
                   radius: float, colour: ti.math.vec3, light: ti.math.vec3, ambient: float):
     for x, y in samples:
-        o, d, depth_per_t = camera_ray(cam, x, y)
+        o, d, depth_per_t = unit_camera_ray(cam, x, y)
         t, n = hit_sphere(o, d, centre, radius)
         plot_hit(samples, x, y, t, depth_per_t, cam[16], lambert(colour, n, light, ambient))
 
@@ -117,7 +140,7 @@ def raster_sphere(samples: samples_type, cam: ndarray_f32_1, centre: ti.math.vec
 def raster_box(samples: samples_type, cam: ndarray_f32_1, lo: ti.math.vec3, hi: ti.math.vec3,
                colour: ti.math.vec3, light: ti.math.vec3, ambient: float):
     for x, y in samples:
-        o, d, depth_per_t = camera_ray(cam, x, y)
+        o, d, depth_per_t = unit_camera_ray(cam, x, y)
         t, n = hit_box(o, d, lo, hi)
         plot_hit(samples, x, y, t, depth_per_t, cam[16], lambert(colour, n, light, ambient))
 
@@ -126,6 +149,6 @@ def raster_box(samples: samples_type, cam: ndarray_f32_1, lo: ti.math.vec3, hi: 
 def raster_capsule(samples: samples_type, cam: ndarray_f32_1, a: ti.math.vec3, b: ti.math.vec3,
                    radius: float, colour: ti.math.vec3, light: ti.math.vec3, ambient: float):
     for x, y in samples:
-        o, d, depth_per_t = camera_ray(cam, x, y)
+        o, d, depth_per_t = unit_camera_ray(cam, x, y)
         t, n = hit_capsule(o, d, a, b, radius)
         plot_hit(samples, x, y, t, depth_per_t, cam[16], lambert(colour, n, light, ambient))
