@@ -290,3 +290,29 @@ def test_renderer_rejects_bad_input_by_name(f32):
         SurfaceStyle(front=(2.0, 0.0, 0.0))
     with pytest.raises(ValueError, match="Light.ambient"):
         Light(ambient=1.5)
+
+
+def test_string_draws_as_lines_with_pins_as_dots(f32):
+    # a body without triangles (the lecture's string): its stretch springs become lines
+    x = np.array([[4.0, 16.5, 0.0], [12.0, 16.5, 0.0], [20.0, 16.5, 0.0], [28.0, 16.5, 0.0]])
+    body = tc.Cloth.from_particles(x, [0.1] * 4, [[0, 1], [1, 2], [2, 3]], pinned=[0])
+    sim = tc.Simulation(body, gravity=(0.0, 0.0, 0.0))
+    r = flat_renderer(32, 32)
+    r.begin()
+    r.draw_simulation(sim, SurfaceStyle(front=RED, line_width=3.0, particles=2.0,
+                                        particle_colour=GREEN, pin_colour=BLUE))
+    image = r.end()[::-1]
+    line = mask(image, RED) | mask(image, GREEN) | mask(image, BLUE)
+    report("rows covered at x = 8", np.flatnonzero(line[:, 8]).tolist(), [15, 16, 17])
+    assert np.flatnonzero(line[:, 8]).tolist() == [15, 16, 17]
+    assert mask(image, BLUE)[16, 4] and mask(image, GREEN)[16, 20] and mask(image, RED)[16, 8]
+
+
+def test_empty_frame_shows_the_background_gradient(f32):
+    top, bottom = (1.0, 1.0, 1.0), (0.0, 0.0, 1.0)
+    r = Renderer(4, 10, pixel_camera(4, 10), supersample=1, background=Background(top, bottom))
+    r.begin()
+    image = r.end().astype(float)          # row k from the top: centre (9.5 - k) / 10 of the way up
+    expected_red = [255 * (9.5 - k) / 10 for k in range(10)]
+    report("red channel down the image", image[:, 0, 0].tolist(), [round(v) for v in expected_red])
+    assert np.allclose(image[:, 0, 0], expected_red, atol=0.51) and np.all(image[..., 2] == 255)
