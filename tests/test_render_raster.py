@@ -316,3 +316,23 @@ def test_empty_frame_shows_the_background_gradient(f32):
     expected_red = [255 * (9.5 - k) / 10 for k in range(10)]
     report("red channel down the image", image[:, 0, 0].tolist(), [round(v) for v in expected_red])
     assert np.allclose(image[:, 0, 0], expected_red, atol=0.51) and np.all(image[..., 2] == 255)
+
+
+def test_checker_cells_sit_on_the_rest_coordinates(f32):
+    # a 16 x 16 px quad, 4 px cells: cell (i, j) is darkened when i + j is odd. With rest
+    # positions shifted by one cell the pattern inverts; without any, it follows the positions
+    quad = np.array([[0, 0, 0], [16, 0, 0], [16, 16, 0], [0, 16, 0]], float)
+    r = flat_renderer(16, 16)
+
+    def red(rest):
+        r.begin()
+        r.draw_mesh(quad, [[0, 1, 2], [0, 2, 3]], rest_positions=rest,
+                    style=SurfaceStyle(front=RED, checker=4.0, checker_contrast=0.5))
+        return r.end()[::-1][..., 0].astype(int)
+
+    y, x = np.mgrid[0:16, 0:16]
+    odd = ((x // 4 + y // 4) % 2).astype(bool)
+    expected = np.where(odd, 128, 255)
+    assert np.array_equal(red(None), expected)
+    assert np.array_equal(red(quad), expected)
+    assert np.array_equal(red(quad + [4.0, 0.0, 0.0]), np.where(odd, 255, 128))

@@ -12,6 +12,9 @@ screen terms: y up, so a left edge runs downwards and a top edge runs leftwards 
 counter-clockwise triangle). Each edge function is evaluated from the edge's lexicographically
 smaller end, so the two triangles sharing an edge compute exactly opposite values: no sample
 along a shared edge is skipped or drawn twice.
+
+Triangles and segments with a vertex behind the camera's near plane are skipped, not clipped:
+keep the camera outside the bodies it looks at.
 """
 
 import taichi as ti
@@ -178,8 +181,8 @@ def raster_triangles(samples: samples_type, cam: ndarray_f32_1, triangles: ndarr
                         q = ti.Vector([wa * screen[ia, 3], wb * screen[ib, 3], wc * screen[ic, 3]])
                         mu = q / q.sum()
                         depth = mu.dot(ti.Vector([screen[ia, 2], screen[ib, 2], screen[ic, 2]]))
-                        n = (mu[0] * row3(normal, ia) + mu[1] * row3(normal, ib)
-                             + mu[2] * row3(normal, ic)).normalized() * facing
+                        n = mu[0] * row3(normal, ia) + mu[1] * row3(normal, ib) + mu[2] * row3(normal, ic)
+                        n *= facing / ti.max(n.norm(), 1e-12)    # opposite normals at a crease: 0
                         colour = albedo
                         if ti.static(use_colours):
                             colour = (mu[0] * row3(vertex_colour, ia) + mu[1] * row3(vertex_colour, ib)

@@ -211,7 +211,9 @@ class Renderer:
 
     def draw_mesh(self, positions, triangles, *, rest_positions=None, hidden=None, strain=None,
                   colours=None, style: SurfaceStyle = SurfaceStyle()) -> None:
-        """Triangles over `positions` [m] (N, 3). rest_positions (N, 3) carry the checker;
+        """Triangles over `positions` [m] (N, 3). rest_positions (N, 3) carry the checker
+        (without them an explicit style.checker follows the current positions, an automatic
+        one is off);
         hidden: triangle indices or an (T,) bool mask not to draw (torn triangles);
         strain: (N,) per-particle strain when style.strain; colours: (N, 3) per-vertex RGB
         for both sides instead of style.front/back. `triangles` is taken as fixed
@@ -231,12 +233,14 @@ class Renderer:
                 require(len(hidden) == 0 or (hidden.min() >= 0 and hidden.max() < len(visible)),
                         "hidden", hidden.tolist()[:5], f"triangle indices in [0, {len(visible) - 1}]")
                 visible[hidden] = 0
-        checker = style.checker
+        checker, rest = style.checker, None
         if rest_positions is not None:
             rest = as_array("rest_positions", rest_positions, np.float32, (len(x), 3))
             if checker is None:
                 checker = float(np.ptp(rest, axis=0).max()) / 10
-        else:
+        elif checker:                   # asked for, but no rest shape: the current one
+            rest = x
+        if rest is None or not checker:
             rest, checker = np.zeros((1, 3), np.float32), 0.0
         if style.strain:
             require(strain is not None, "strain", None, "an (N,) array when style.strain is on")
@@ -382,6 +386,7 @@ class Renderer:
         if cached is not None and cached[0]() is triangles:
             return cached[1]
         topology = _Topology(triangles, vertex_count)
+        self._topologies = {k: v for k, v in self._topologies.items() if v[0]() is not None}
         try:
             self._topologies[key] = (weakref.ref(triangles), topology)
         except TypeError:          # lists and tuples cannot be weakly referenced: no caching
