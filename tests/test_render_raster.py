@@ -336,3 +336,16 @@ def test_checker_cells_sit_on_the_rest_coordinates(f32):
     assert np.array_equal(red(None), expected)
     assert np.array_equal(red(quad), expected)
     assert np.array_equal(red(quad + [4.0, 0.0, 0.0]), np.where(odd, 255, 128))
+
+
+def test_colliders_of_a_simulation_are_drawn_where_their_paths_put_them(f32):
+    sphere = tc.Sphere(centre=(8.0, 8.0, 0.0), radius=4.0, path=lambda t: (8.0 * t, 0.0, 0.0))
+    sim = tc.Simulation(tc.Cloth.from_particles([[0.0, 30.0, 0.0]], [1.0], np.zeros((0, 2), int)),
+                        dt=0.125, gravity=(0.0, 0.0, 0.0), colliders=[sphere])
+    sim.step(8)                                       # t = 1 s: the centre is at (16, 8)
+    r = Renderer(32, 32, pixel_camera(32, 32), supersample=1, light=FLAT, background=BLACK)
+    r.begin()
+    r.draw_colliders(sim)
+    drawn = r.end()[::-1].any(axis=2)
+    y, x = np.mgrid[0:32, 0:32] + 0.5
+    assert np.array_equal(drawn, (x - 16) ** 2 + (y - 8) ** 2 <= 16)

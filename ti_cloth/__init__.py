@@ -3,6 +3,7 @@
 Nothing here calls ti.init; call ti_cloth.init(arch=..., precision=...) first.
 """
 from .backend import init
+from .colliders import Box, Capsule, Collider, Plane, Sphere
 from .errors import SimulationDiverged
 from .forces import ForceSettings
 from .integrators import INTEGRATORS, PBD, ExplicitEuler, Integrator, SymplecticEuler, Verlet
@@ -16,7 +17,7 @@ from .tearing import Tearing
 from .topology import Cloth
 
 __all__ = [
-    "init", "SimulationDiverged", "ForceSettings", "INTEGRATORS", "Integrator", "ExplicitEuler",
+    "init", "Box", "Capsule", "Collider", "Plane", "Sphere", "SimulationDiverged", "ForceSettings", "INTEGRATORS", "Integrator", "ExplicitEuler",
     "SymplecticEuler", "Verlet", "PBD", "PRESETS", "Material", "SpringKind", "SpringParams",
     "Mesh", "grid_mesh", "load_mesh", "save_mesh", "Model", "Handle", "Simulation", "stable_dt",
     "State", "Tearing", "Cloth",

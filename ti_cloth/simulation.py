@@ -10,6 +10,7 @@ import taichi as ti
 from . import backend
 from . import tearing as tearing_module
 from ._validate import as_array, finite_number, require
+from .colliders import ColliderSet, record_step_start, resolve_collisions
 from .errors import SimulationDiverged
 from .forces import ForceSettings, energies
 from .integrators import make_integrator
@@ -60,12 +61,16 @@ class Simulation:
     tearing: None (off: the tear kernel is never compiled nor launched), a tear strain
         (float) or a Tearing.
     handles: scripted particles (Handle); their particles are pinned.
+    colliders: Plane, Sphere, Box, Capsule objects (none: the collision kernels are never
+        compiled nor launched).
     position_limit: the divergence guard flags any |coordinate| beyond this [m].
+
+    Each step: the integrator, then collisions, then handles, then tearing.
     """
 
     def __init__(self, cloth: Cloth, integrator="symplectic_euler", dt: float = 1e-3,
                  gravity=(0.0, -9.81, 0.0), drag: float = 0.0, tearing=None,
-                 handles: Sequence[Handle] = (), position_limit: float = 1e6):
+                 handles: Sequence[Handle] = (), colliders=(), position_limit: float = 1e6):
         require(isinstance(cloth, Cloth), "cloth", cloth, "a ti_cloth.Cloth")
         self.cloth = cloth
         self.integrator = make_integrator(integrator)
@@ -91,6 +96,8 @@ class Simulation:
         self.state = self.model.state()
         self.state.position_limit[None] = finite_number("position_limit", position_limit, 0.0,
                                                         strict=True, unit="m")
+        colliders = tuple(colliders)
+        self.colliders = ColliderSet(colliders, cloth.particle_count) if colliders else None
         self.step_count = 0
         self._diverged: SimulationDiverged | None = None
         if self.handles:
@@ -109,8 +116,14 @@ class Simulation:
         if self._diverged is not None:
             raise self._diverged
         for _ in range(n):
+            if self.colliders is not None:
+                record_step_start(self.state, self.colliders)
             self.integrator.step(self.model, self.state, self.dt, self.forces, self.step_count)
             self.step_count += 1
+            if self.colliders is not None:
+                if self.colliders.moving:
+                    self.colliders.place(self.time, self.dt)
+                resolve_collisions(self.model, self.state, self.colliders, self.dt)
             if self.handles:
                 self._apply_handles(self.time)
             if self.tearing is not None:

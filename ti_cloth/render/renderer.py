@@ -313,6 +313,22 @@ class Renderer:
 
     # -- ground and colliders ---------------------------------------------------------------
 
+    def draw_colliders(self, sim) -> None:
+        """Every collider of a Simulation where its path has it at the simulation's time."""
+        from ..colliders import Box, Capsule, Plane, Sphere
+
+        self._require_frame()
+        for c in sim.colliders.colliders if sim.colliders is not None else ():
+            offset = c.offset(sim.time)
+            if isinstance(c, Plane):
+                self.draw_plane(np.add(c.point, offset), c.normal)
+            elif isinstance(c, Sphere):
+                self.draw_sphere(np.add(c.centre, offset), c.radius)
+            elif isinstance(c, Box):
+                self.draw_box(np.add(c.lo, offset), np.add(c.hi, offset))
+            elif isinstance(c, Capsule):
+                self.draw_capsule(np.add(c.a, offset), np.add(c.b, offset), c.radius)
+
     def draw_plane(self, point=(0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0), *,
                    colour=(0.86, 0.87, 0.89), checker: float = 0.25, contrast: float = 0.12,
                    fade: float = 30.0) -> None:
@@ -429,6 +445,9 @@ class NullRenderer:
         pass
 
     def draw_simulation(self, sim, style: SurfaceStyle = SurfaceStyle()) -> None:
+        pass
+
+    def draw_colliders(self, sim) -> None:
         pass
 
     def draw_plane(self, point=(0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0), *,

@@ -1,0 +1,259 @@
+"""Colliders: an infinite plane, a sphere, an axis-aligned box and a capsule, each with a
+thickness, Coulomb friction and an optional scripted path.
+
+The response is applied after every step, at position level, so it is the same for every
+integrator: a particle closer than `thickness` to a shape is projected out along the shape's
+normal; its displacement over the step relative to the shape loses its tangential part when
+that part is at most static_friction x the penetration depth (it sticks), and is shortened by
+kinetic_friction x depth otherwise (it slides: Coulomb's law with the depth standing in for the
+normal impulse, as in position-based contact, Macklin et al. 2014). The velocity becomes that
+displacement / dt, without any component into the shape (restitution 0); Verlet-type history is
+rewritten to match. A resting particle on a slope of angle a gains depth g cos(a) dt^2 and
+tangential displacement g sin(a) dt^2 per step, so it sticks exactly when tan(a) <= static.
+"""
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import taichi as ti
+
+from . import backend
+from ._validate import as_array, finite_number, require
+
+PLANE, SPHERE, BOX, CAPSULE = 0, 1, 2, 3
+
+
+@dataclass(frozen=True, kw_only=True)
+class Collider:
+    """thickness: particles are kept this far outside the surface [m], >= 0.
+    static_friction, kinetic_friction: Coulomb coefficients, >= 0 (kinetic None: = static).
+    path: t [s] -> displacement [m] of the whole shape from where it was defined, or None."""
+
+    thickness: float = 0.0
+    static_friction: float = 0.0
+    kinetic_friction: float | None = None
+    path: Callable[[float], object] | None = None
+
+    def __post_init__(self):
+        name = type(self).__name__
+        object.__setattr__(self, "thickness", finite_number(f"{name}.thickness", self.thickness,
+                                                            0.0, unit="m"))
+        static = finite_number(f"{name}.static_friction", self.static_friction, 0.0)
+        kinetic = static if self.kinetic_friction is None else finite_number(
+            f"{name}.kinetic_friction", self.kinetic_friction, 0.0)
+        object.__setattr__(self, "static_friction", static)
+        object.__setattr__(self, "kinetic_friction", kinetic)
+        require(self.path is None or callable(self.path), f"{name}.path", self.path,
+                "None or a callable t -> displacement")
+
+    def offset(self, t: float) -> np.ndarray:
+        """Displacement [m] of the shape at time t."""
+        if self.path is None:
+            return np.zeros(3)
+        offset = as_array(f"{type(self).__name__}.path({t})", self.path(t), np.float64, (3,))
+        return offset
+
+    def packed(self) -> tuple[int, np.ndarray, np.ndarray, float]:
+        """(kind, a, b, radius) as the collision kernel reads them."""
+        raise NotImplementedError
+
+
+def _vector(owner: Collider, name: str) -> None:
+    value = as_array(f"{type(owner).__name__}.{name}", getattr(owner, name), np.float64, (3,))
+    object.__setattr__(owner, name, tuple(float(v) for v in value))
+
+
+@dataclass(frozen=True, kw_only=True)
+class Plane(Collider):
+    """The infinite plane through `point` [m]; `normal` points to the free side."""
+
+    point: tuple = (0.0, 0.0, 0.0)
+    normal: tuple = (0.0, 1.0, 0.0)
+
+    def __post_init__(self):
+        super().__post_init__()
+        _vector(self, "point")
+        _vector(self, "normal")
+        length = float(np.linalg.norm(self.normal))
+        require(length > 0, "Plane.normal", self.normal, "a non-zero vector")
+        object.__setattr__(self, "normal", tuple(float(v) / length for v in self.normal))
+
+    def packed(self):
+        return PLANE, np.asarray(self.point), np.asarray(self.normal), 0.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class Sphere(Collider):
+    """A sphere of `radius` [m] around `centre` [m]."""
+
+    centre: tuple = (0.0, 0.0, 0.0)
+    radius: float = 1.0
+
+    def __post_init__(self):
+        super().__post_init__()
+        _vector(self, "centre")
+        object.__setattr__(self, "radius", finite_number("Sphere.radius", self.radius, 0.0,
+                                                         strict=True, unit="m"))
+
+    def packed(self):
+        return SPHERE, np.asarray(self.centre), np.zeros(3), self.radius
+
+
+@dataclass(frozen=True, kw_only=True)
+class Box(Collider):
+    """The axis-aligned box between corners `lo` and `hi` [m]."""
+
+    lo: tuple = (-0.5, -0.5, -0.5)
+    hi: tuple = (0.5, 0.5, 0.5)
+
+    def __post_init__(self):
+        super().__post_init__()
+        _vector(self, "lo")
+        _vector(self, "hi")
+        require(all(h > l for l, h in zip(self.lo, self.hi)), "Box.hi", self.hi,
+                f"greater than Box.lo {self.lo} on every axis")
+
+    def packed(self):
+        return BOX, np.asarray(self.lo), np.asarray(self.hi), 0.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class Capsule(Collider):
+    """The points within `radius` [m] of the segment a-b [m]."""
+
+    a: tuple = (0.0, 0.0, 0.0)
+    b: tuple = (1.0, 0.0, 0.0)
+    radius: float = 0.1
+
+    def __post_init__(self):
+        super().__post_init__()
+        _vector(self, "a")
+        _vector(self, "b")
+        object.__setattr__(self, "radius", finite_number("Capsule.radius", self.radius, 0.0,
+                                                         strict=True, unit="m"))
+
+    def packed(self):
+        return CAPSULE, np.asarray(self.a), np.asarray(self.b), self.radius
+
+
+@ti.func
+def signed_distance(kind, a, b, radius, x):
+    """Distance [m] from x to the shape's surface (negative inside) and the outward normal."""
+    d, n = 0.0, ti.Vector([0.0, 1.0, 0.0])
+    if kind == PLANE:
+        n = b
+        d = (x - a).dot(n)
+    elif kind == SPHERE or kind == CAPSULE:
+        centre = a
+        if kind == CAPSULE:
+            ab = b - a
+            centre = a + ab * ti.math.clamp((x - a).dot(ab) / ti.max(ab.dot(ab), 1e-30), 0.0, 1.0)
+        r = x - centre
+        length = r.norm()
+        d = length - radius
+        if length > 0:
+            n = r / length
+    else:                                       # BOX, a = lo, b = hi
+        half, mid = 0.5 * (b - a), 0.5 * (a + b)
+        q = ti.abs(x - mid) - half
+        sign = ti.math.sign(x - mid)
+        outside = ti.max(q, 0.0)
+        if outside.norm() > 0:
+            d = outside.norm()
+            n = outside * sign / d
+        else:                                   # inside: leave through the nearest face
+            d = ti.max(q[0], q[1], q[2])
+            n = ti.Vector([0.0, 0.0, 0.0])
+            for k in ti.static(range(3)):
+                if q[k] == d and n.norm() == 0:
+                    n[k] = ti.select(sign[k] >= 0, 1.0, -1.0)
+    return d, n
+
+
+@ti.data_oriented
+class ColliderSet:
+    """The colliders of one simulation as Taichi fields (one row per collider), and the
+    particle positions at the start of the current step (`step_start`) the response needs."""
+
+    def __init__(self, colliders, particle_count: int):
+        self.colliders = tuple(colliders)
+        for c in self.colliders:
+            require(isinstance(c, Collider) and type(c) is not Collider, "colliders", c,
+                    "Plane, Sphere, Box or Capsule objects")
+        real, count = backend.real(), len(self.colliders)
+        self.count = count
+        self.kind = ti.field(ti.i32, shape=count)
+        self.a = ti.Vector.field(3, real, shape=count)
+        self.b = ti.Vector.field(3, real, shape=count)
+        self.radius = ti.field(real, shape=count)
+        self.thickness = ti.field(real, shape=count)
+        self.static_friction = ti.field(real, shape=count)
+        self.kinetic_friction = ti.field(real, shape=count)
+        self.velocity = ti.Vector.field(3, real, shape=count)
+        self.step_start = ti.Vector.field(3, real, shape=particle_count)
+        packed = [c.packed() for c in self.colliders]
+        np_real = backend.numpy_real()
+        self.kind.from_numpy(np.array([p[0] for p in packed], np.int32))
+        self.radius.from_numpy(np.array([p[3] for p in packed], np_real))
+        self.thickness.from_numpy(np.array([c.thickness for c in self.colliders], np_real))
+        self.static_friction.from_numpy(np.array([c.static_friction for c in self.colliders], np_real))
+        self.kinetic_friction.from_numpy(np.array([c.kinetic_friction for c in self.colliders], np_real))
+        self.moving = any(c.path is not None for c in self.colliders)
+        self._rest = [(p[1], p[2]) for p in packed]
+        self.place(0.0, 1.0)
+
+    def place(self, t: float, dt: float) -> None:
+        """Put every collider where its path says at time t; velocity from t - dt to t."""
+        a, b, v = [], [], []
+        for c, (a0, b0) in zip(self.colliders, self._rest):
+            offset = c.offset(t)
+            a.append(a0 + offset)
+            b.append(b0 if isinstance(c, Plane) else b0 + offset)   # a plane's b is its normal
+            v.append((offset - c.offset(t - dt)) / dt if c.path is not None else np.zeros(3))
+        np_real = backend.numpy_real()
+        self.a.from_numpy(np.array(a, np_real))
+        self.b.from_numpy(np.array(b, np_real))
+        self.velocity.from_numpy(np.array(v, np_real))
+
+
+@ti.kernel
+def record_step_start(state: ti.template(), colliders: ti.template()):
+    for i in colliders.step_start:
+        colliders.step_start[i] = state.particle_position[i]
+
+
+@ti.kernel
+def resolve_collisions(model: ti.template(), state: ti.template(), colliders: ti.template(),
+                       dt: float):
+    """Project every free particle out of every collider, in collider order, with Coulomb
+    friction on its displacement over the step (see the module doc)."""
+    for i in range(model.particle_count):
+        if model.particle_inv_mass[i] > 0:
+            x0 = colliders.step_start[i]
+            x = state.particle_position[i]
+            v = state.particle_velocity[i]
+            touched = False
+            for c in range(colliders.count):
+                d, n = signed_distance(colliders.kind[c], colliders.a[c], colliders.b[c],
+                                       colliders.radius[c], x)
+                depth = colliders.thickness[c] - d
+                if depth > 0:
+                    x += depth * n
+                    vc = colliders.velocity[c]
+                    slide = x - x0 - vc * dt
+                    tangential = slide - slide.dot(n) * n
+                    length = tangential.norm()
+                    if length <= colliders.static_friction[c] * depth:
+                        x -= tangential
+                    else:
+                        x -= tangential * ti.min(colliders.kinetic_friction[c] * depth / length, 1.0)
+                    v = (x - x0) / dt
+                    approach = (v - vc).dot(n)
+                    if approach < 0:
+                        v -= approach * n
+                    touched = True
+            if touched:
+                state.particle_position[i] = x
+                state.particle_velocity[i] = v
+                state.particle_prev_position[i] = x - v * dt
