@@ -13,6 +13,7 @@ from .model import Model
 from .simulation import Handle, Simulation
 from .stability import stable_dt
 from .state import State
+from .strain_limit import StrainLimit
 from .tearing import Tearing
 from .topology import Cloth
 
@@ -20,5 +21,5 @@ __all__ = [
     "init", "Box", "Capsule", "Collider", "Plane", "Sphere", "SimulationDiverged", "ForceSettings", "INTEGRATORS", "Integrator", "ExplicitEuler",
     "SymplecticEuler", "Verlet", "PBD", "PRESETS", "Material", "SpringKind", "SpringParams",
     "Mesh", "grid_mesh", "load_mesh", "save_mesh", "Model", "Handle", "Simulation", "stable_dt",
-    "State", "Tearing", "Cloth",
+    "State", "StrainLimit", "Tearing", "Cloth",
 ]

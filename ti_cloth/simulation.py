@@ -16,6 +16,7 @@ from .forces import ForceSettings, energies
 from .integrators import make_integrator
 from .model import Model
 from .stability import stable_dt
+from .strain_limit import StrainLimit, StrainLimiter
 from .state import NO_BAD_STEP
 from .tearing import Tearing, torn_triangles
 from .topology import Cloth
@@ -63,14 +64,17 @@ class Simulation:
     handles: scripted particles (Handle); their particles are pinned.
     colliders: Plane, Sphere, Box, Capsule objects (none: the collision kernels are never
         compiled nor launched).
+    strain_limit: None (off: never compiled nor launched) or a StrainLimit (Provot 1995).
     position_limit: the divergence guard flags any |coordinate| beyond this [m].
 
-    Each step: the integrator, then collisions, then handles, then tearing.
+    Each step: the integrator, then strain limiting, then collisions (so nothing ends inside a
+    collider), then handles, then tearing.
     """
 
     def __init__(self, cloth: Cloth, integrator="symplectic_euler", dt: float = 1e-3,
                  gravity=(0.0, -9.81, 0.0), drag: float = 0.0, tearing=None,
-                 handles: Sequence[Handle] = (), colliders=(), position_limit: float = 1e6):
+                 handles: Sequence[Handle] = (), colliders=(), strain_limit=None,
+                 position_limit: float = 1e6):
         require(isinstance(cloth, Cloth), "cloth", cloth, "a ti_cloth.Cloth")
         self.cloth = cloth
         self.integrator = make_integrator(integrator)
@@ -96,6 +100,10 @@ class Simulation:
         self.state = self.model.state()
         self.state.position_limit[None] = finite_number("position_limit", position_limit, 0.0,
                                                         strict=True, unit="m")
+        require(strain_limit is None or isinstance(strain_limit, StrainLimit), "strain_limit",
+                strain_limit, "None or a StrainLimit")
+        self.strain_limiter = (StrainLimiter(strain_limit, cloth.particle_count)
+                               if strain_limit is not None and cloth.spring_count else None)
         colliders = tuple(colliders)
         self.colliders = ColliderSet(colliders, cloth.particle_count) if colliders else None
         self.step_count = 0
@@ -120,6 +128,8 @@ class Simulation:
                 record_step_start(self.state, self.colliders)
             self.integrator.step(self.model, self.state, self.dt, self.forces, self.step_count)
             self.step_count += 1
+            if self.strain_limiter is not None:
+                self.strain_limiter.apply(self.model, self.state, self.dt, self.forces.tearing)
             if self.colliders is not None:
                 if self.colliders.moving:
                     self.colliders.place(self.time, self.dt)
