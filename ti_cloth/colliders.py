@@ -218,12 +218,6 @@ class ColliderSet:
 
 
 @ti.kernel
-def record_step_start(state: ti.template(), colliders: ti.template()):
-    for i in colliders.step_start:
-        colliders.step_start[i] = state.particle_position[i]
-
-
-@ti.kernel
 def resolve_collisions(model: ti.template(), state: ti.template(), colliders: ti.template(),
                        dt: float):
     """Project every free particle out of every collider, in collider order, with Coulomb

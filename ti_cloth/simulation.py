@@ -10,14 +10,14 @@ import taichi as ti
 from . import backend
 from . import tearing as tearing_module
 from ._validate import as_array, finite_number, require
-from .colliders import ColliderSet, record_step_start, resolve_collisions
+from .colliders import ColliderSet, resolve_collisions
 from .errors import SimulationDiverged
 from .forces import ForceSettings, energies
 from .integrators import make_integrator
 from .model import Model
 from .stability import stable_dt
 from .strain_limit import StrainLimit, StrainLimiter
-from .state import NO_BAD_STEP
+from .state import NO_BAD_STEP, copy_positions
 from .tearing import Tearing, torn_triangles
 from .topology import Cloth
 
@@ -125,7 +125,7 @@ class Simulation:
             raise self._diverged
         for _ in range(n):
             if self.colliders is not None:
-                record_step_start(self.state, self.colliders)
+                copy_positions(self.state, self.colliders.step_start)
             self.integrator.step(self.model, self.state, self.dt, self.forces, self.step_count)
             self.step_count += 1
             if self.strain_limiter is not None:

@@ -54,3 +54,10 @@ def store_particle(state: ti.template(), i, x, v, step):
     state.particle_velocity[i] = v
     if not ((abs(x) <= state.position_limit[None]).all() and (abs(v) <= GUARD_LIMIT).all()):
         ti.atomic_min(state.first_bad_step[None], step)
+
+
+@ti.kernel
+def copy_positions(state: ti.template(), target: ti.template()):
+    """target[i] = particle_position[i] (a snapshot for corrections applied after a step)."""
+    for i in target:
+        target[i] = state.particle_position[i]

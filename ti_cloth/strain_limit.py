@@ -1,6 +1,7 @@
 """Strain limiting (Provot 1995): after a step, springs stretched beyond (1 + max_strain) x
-rest are pulled back to that length, mass-weighted, for a few Gauss-Seidel passes. The standard
-cure for "too stretchy" cloth without tiny steps or stiff springs."""
+rest are pulled back to that length, mass-weighted, for a few Gauss-Seidel passes (the PBD
+relaxation kernel, one-sided), colour by colour, so deterministic. The standard cure for "too
+stretchy" cloth without tiny steps or stiff springs."""
 
 from dataclasses import dataclass
 
@@ -8,7 +9,9 @@ import taichi as ti
 
 from . import backend
 from ._validate import finite_number, require
+from .constraints import relax_springs
 from .material import SpringKind
+from .state import copy_positions
 
 
 @dataclass(frozen=True)
@@ -46,41 +49,11 @@ class StrainLimiter:
 
     def apply(self, model, state, dt: float, tearing: bool) -> None:
         order, offsets = model.spring_colouring()
-        _record(state, self)
-        for _ in range(self.limit.passes):
-            _limit_pass(model, state, order, offsets, self.limit.max_strain,
-                        self.limit.kind_mask(), tearing)
+        copy_positions(state, self.before)
+        for _ in range(self.limit.passes):   # the lecture's relaxation, for stretched springs only
+            relax_springs(model, state, order, offsets, self.limit.kind_mask(), tearing,
+                          self.limit.max_strain, True)
         _follow_velocity(state, self, dt)
-
-
-@ti.kernel
-def _record(state: ti.template(), limiter: ti.template()):
-    for i in limiter.before:
-        limiter.before[i] = state.particle_position[i]
-
-
-@ti.kernel
-def _limit_pass(model: ti.template(), state: ti.template(), order: ti.template(),
-                offsets: ti.template(), max_strain: float, kinds: ti.math.vec3,
-                tearing: ti.template()):
-    """One sweep, colour by colour (springs of a colour share no particle: deterministic):
-    a spring longer than (1 + max_strain) L is shortened to it, each end moving by its share
-    of the inverse mass (pins do not move)."""
-    for c in ti.static(range(len(offsets) - 1)):
-        for t in range(offsets[c], offsets[c + 1]):
-            s = order[t]
-            alive = True
-            if ti.static(tearing):
-                alive = state.spring_alive[s] != 0
-            p, q = model.spring_indices[s][0], model.spring_indices[s][1]
-            wp, wq = model.particle_inv_mass[p], model.particle_inv_mass[q]
-            d = state.particle_position[q] - state.particle_position[p]
-            length = d.norm()
-            longest = (1.0 + max_strain) * model.spring_rest_length[s]
-            if alive and kinds[model.spring_kind[s]] > 0 and wp + wq > 0 and length > longest:
-                dx = (length - longest) / length * d
-                state.particle_position[p] += wp / (wp + wq) * dx
-                state.particle_position[q] -= wq / (wp + wq) * dx
 
 
 @ti.kernel

@@ -65,5 +65,5 @@ class PBD(Integrator):
             order, offsets = model.spring_colouring()
             stiffness = ti.math.vec3(*(self.stiffness[k.name.lower()] for k in SpringKind))
             for _ in range(self.iterations):
-                relax_springs(model, state, order, offsets, stiffness, forces.tearing)
+                relax_springs(model, state, order, offsets, stiffness, forces.tearing, 0.0, False)
         _update_velocity(model, state, dt, step)
