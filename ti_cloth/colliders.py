@@ -201,16 +201,18 @@ class ColliderSet:
         self.kinetic_friction.from_numpy(np.array([c.kinetic_friction for c in self.colliders], np_real))
         self.moving = any(c.path is not None for c in self.colliders)
         self._rest = [(p[1], p[2]) for p in packed]
-        self.place(0.0, 1.0)
+        self.place(0.0)
 
-    def place(self, t: float, dt: float) -> None:
-        """Put every collider where its path says at time t; velocity from t - dt to t."""
+    def place(self, t: float, dt: float | None = None) -> None:
+        """Put every collider where its path says at time t; velocity from t - dt to t
+        (zero when dt is None: at the start)."""
         a, b, v = [], [], []
         for c, (a0, b0) in zip(self.colliders, self._rest):
             offset = c.offset(t)
             a.append(a0 + offset)
             b.append(b0 if isinstance(c, Plane) else b0 + offset)   # a plane's b is its normal
-            v.append((offset - c.offset(t - dt)) / dt if c.path is not None else np.zeros(3))
+            moving = c.path is not None and dt is not None
+            v.append((offset - c.offset(t - dt)) / dt if moving else np.zeros(3))
         np_real = backend.numpy_real()
         self.a.from_numpy(np.array(a, np_real))
         self.b.from_numpy(np.array(b, np_real))
