@@ -19,6 +19,9 @@ import numpy as np
 import taichi as ti
 
 from .._validate import as_array, finite_number, require
+from ..colliders import Box, Capsule, Plane, Sphere
+from ..material import SpringKind
+from ..tearing import torn_triangles
 from . import raster, shapes
 from .camera import Camera
 from .image import from_taichi
@@ -295,15 +298,14 @@ class Renderer:
         """The body of a Simulation at its current time: its triangles (torn ones dropped),
         or, for bodies without triangles, its stretch springs as lines; plus particles."""
         self._require_frame()
-        from ..material import SpringKind
-
         cloth, x = sim.cloth, sim.positions()
         alive = sim.spring_alive()
         if len(cloth.mesh.triangles):
             strain = (vertex_strain(x, cloth.spring_indices, cloth.spring_rest_length, alive)
                       if style.strain else None)
             self.draw_mesh(x, cloth.mesh.triangles, rest_positions=cloth.particle_position,
-                           hidden=sim.torn_triangles(), strain=strain, style=style)
+                           hidden=torn_triangles(cloth.triangle_edge_spring, ~alive),
+                           strain=strain, style=style)
         else:
             keep = alive & (cloth.spring_kind == SpringKind.STRETCH)
             self.draw_lines(x, cloth.spring_indices[keep], width=style.line_width, colour=style.front)
@@ -315,8 +317,6 @@ class Renderer:
 
     def draw_colliders(self, sim) -> None:
         """Every collider of a Simulation where its path has it at the simulation's time."""
-        from ..colliders import Box, Capsule, Plane, Sphere
-
         self._require_frame()
         for c in sim.colliders.colliders if sim.colliders is not None else ():
             offset = c.offset(sim.time)
@@ -352,25 +352,27 @@ class Renderer:
     def draw_sphere(self, centre, radius: float, *, colour=COLLIDER_COLOUR) -> None:
         """A sphere of `radius` [m] at `centre` [m]."""
         self._require_frame()
-        shapes.raster_sphere(self._samples_ready(), self._cam, as_array("centre", centre, np.float64, (3,)),
-                             finite_number("radius", radius, 0.0, strict=True, unit="m"),
-                             _colour("colour", colour), self.light.direction, self.light.ambient)
+        centre = as_array("centre", centre, np.float64, (3,))
+        self._draw_solid(shapes.SPHERE, centre, centre,
+                         finite_number("radius", radius, 0.0, strict=True, unit="m"), colour)
 
     def draw_box(self, lo, hi, *, colour=COLLIDER_COLOUR) -> None:
         """The axis-aligned box between corners `lo` and `hi` [m]."""
         self._require_frame()
         lo, hi = as_array("lo", lo, np.float64, (3,)), as_array("hi", hi, np.float64, (3,))
         require(bool((hi > lo).all()), "hi", tuple(hi), f"greater than lo {tuple(lo)} on every axis")
-        shapes.raster_box(self._samples_ready(), self._cam, lo, hi, _colour("colour", colour),
-                          self.light.direction, self.light.ambient)
+        self._draw_solid(shapes.BOX, lo, hi, 0.0, colour)
 
     def draw_capsule(self, a, b, radius: float, *, colour=COLLIDER_COLOUR) -> None:
         """The capsule around segment a-b [m] with `radius` [m]."""
         self._require_frame()
-        shapes.raster_capsule(self._samples_ready(), self._cam, as_array("a", a, np.float64, (3,)),
-                              as_array("b", b, np.float64, (3,)),
-                              finite_number("radius", radius, 0.0, strict=True, unit="m"),
-                              _colour("colour", colour), self.light.direction, self.light.ambient)
+        self._draw_solid(shapes.CAPSULE, as_array("a", a, np.float64, (3,)),
+                         as_array("b", b, np.float64, (3,)),
+                         finite_number("radius", radius, 0.0, strict=True, unit="m"), colour)
+
+    def _draw_solid(self, shape: str, a, b, radius: float, colour) -> None:
+        shapes.raster_solid(self._samples_ready(), self._cam, shape, a, b, radius,
+                            _colour("colour", colour), self.light.direction, self.light.ambient)
 
     # -- buffers ----------------------------------------------------------------------------
 

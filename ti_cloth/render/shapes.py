@@ -127,28 +127,22 @@ def raster_plane(samples: samples_type, cam: ndarray_f32_1, point: ti.math.vec3,
             samples[x, y] = ti.min(samples[x, y], key)
 
 
-@ti.kernel
-def raster_sphere(samples: samples_type, cam: ndarray_f32_1, centre: ti.math.vec3,
-                  radius: float, colour: ti.math.vec3, light: ti.math.vec3, ambient: float):
-    for x, y in samples:
-        o, d, depth_per_t = unit_camera_ray(cam, x, y)
-        t, n = hit_sphere(o, d, centre, radius)
-        plot_hit(samples, x, y, t, depth_per_t, cam[16], lambert(colour, n, light, ambient))
+SPHERE, BOX, CAPSULE = "sphere", "box", "capsule"
 
 
 @ti.kernel
-def raster_box(samples: samples_type, cam: ndarray_f32_1, lo: ti.math.vec3, hi: ti.math.vec3,
-               colour: ti.math.vec3, light: ti.math.vec3, ambient: float):
+def raster_solid(samples: samples_type, cam: ndarray_f32_1, shape: ti.template(),
+                 a: ti.math.vec3, b: ti.math.vec3, radius: float, colour: ti.math.vec3,
+                 light: ti.math.vec3, ambient: float):
+    """A sphere (centre a, radius), a box (corners a, b) or a capsule (segment a-b, radius);
+    `shape` picks the ray test at compile time."""
     for x, y in samples:
         o, d, depth_per_t = unit_camera_ray(cam, x, y)
-        t, n = hit_box(o, d, lo, hi)
-        plot_hit(samples, x, y, t, depth_per_t, cam[16], lambert(colour, n, light, ambient))
-
-
-@ti.kernel
-def raster_capsule(samples: samples_type, cam: ndarray_f32_1, a: ti.math.vec3, b: ti.math.vec3,
-                   radius: float, colour: ti.math.vec3, light: ti.math.vec3, ambient: float):
-    for x, y in samples:
-        o, d, depth_per_t = unit_camera_ray(cam, x, y)
-        t, n = hit_capsule(o, d, a, b, radius)
+        t, n = MISS, ti.Vector([0.0, 0.0, 0.0])
+        if ti.static(shape == SPHERE):
+            t, n = hit_sphere(o, d, a, radius)
+        elif ti.static(shape == BOX):
+            t, n = hit_box(o, d, a, b)
+        else:
+            t, n = hit_capsule(o, d, a, b, radius)
         plot_hit(samples, x, y, t, depth_per_t, cam[16], lambert(colour, n, light, ambient))
