@@ -16,10 +16,11 @@ from .state import State
 from .strain_limit import StrainLimit
 from .tearing import Tearing
 from .topology import Cloth
+from .wind import Wind
 
 __all__ = [
     "init", "Box", "Capsule", "Collider", "Plane", "Sphere", "SimulationDiverged", "ForceSettings", "INTEGRATORS", "Integrator", "ExplicitEuler",
     "SymplecticEuler", "Verlet", "PBD", "PRESETS", "Material", "SpringKind", "SpringParams",
     "Mesh", "grid_mesh", "load_mesh", "save_mesh", "Model", "Handle", "Simulation", "stable_dt",
-    "State", "StrainLimit", "Tearing", "Cloth",
+    "State", "StrainLimit", "Tearing", "Cloth", "Wind",
 ]

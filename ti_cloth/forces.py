@@ -13,6 +13,7 @@ import numpy as np
 import taichi as ti
 
 from .material import SpringKind
+from .wind import accumulate_wind
 
 
 @dataclass(frozen=True)
@@ -23,11 +24,13 @@ class ForceSettings:
     drag: uniform air drag [1/s]: f_i = -drag * m_i * v_i (mass-proportional, so the same
         deceleration everywhere and independent of resolution). 0 compiles it out.
     tearing: springs carry an alive flag that force loops must test (compile-time switch).
+    wind: a wind.WindField (per-triangle aerodynamics) or None (its kernel is never compiled).
     """
 
     gravity: tuple[float, float, float] = (0.0, -9.81, 0.0)
     drag: float = 0.0
     tearing: bool = False
+    wind: object = None
 
 
 @ti.func
@@ -82,9 +85,11 @@ def accumulate_forces(model: ti.template(), state: ti.template(), gravity: ti.ma
 
 
 def compute_forces(model, state, forces: ForceSettings, springs: bool = True) -> None:
-    """Launch accumulate_forces with the scene's switches."""
+    """Launch accumulate_forces with the scene's switches, then the wind kernel if any."""
     accumulate_forces(model, state, ti.math.vec3(*forces.gravity), forces.drag, forces.drag > 0,
                       springs and model.spring_count > 0, forces.tearing)
+    if forces.wind is not None:
+        accumulate_wind(model, state, forces.wind, forces.tearing)
 
 
 def energies(cloth, positions: np.ndarray, velocities: np.ndarray, gravity,

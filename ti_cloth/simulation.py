@@ -20,6 +20,7 @@ from .strain_limit import StrainLimit, StrainLimiter
 from .state import NO_BAD_STEP, copy_positions
 from .tearing import Tearing, torn_triangles
 from .topology import Cloth
+from .wind import WindField
 
 
 @dataclass(frozen=True)
@@ -67,12 +68,12 @@ class Simulation:
     strain_limit: None (off: never compiled nor launched) or a StrainLimit (Provot 1995).
     position_limit: the divergence guard flags any |coordinate| beyond this [m].
 
-    Each step: the integrator, then strain limiting, then collisions (so nothing ends inside a
-    collider), then handles, then tearing.
+    Each step: the integrator (wind held at its value at the step start), then strain limiting,
+    then collisions (so nothing ends inside a collider), then handles, then tearing.
     """
 
     def __init__(self, cloth: Cloth, integrator="symplectic_euler", dt: float = 1e-3,
-                 gravity=(0.0, -9.81, 0.0), drag: float = 0.0, tearing=None,
+                 gravity=(0.0, -9.81, 0.0), drag: float = 0.0, wind=None, tearing=None,
                  handles: Sequence[Handle] = (), colliders=(), strain_limit=None,
                  position_limit: float = 1e6):
         require(isinstance(cloth, Cloth), "cloth", cloth, "a ti_cloth.Cloth")
@@ -90,7 +91,9 @@ class Simulation:
             bad = h.particles[(h.particles < 0) | (h.particles >= cloth.particle_count)]
             require(len(bad) == 0, "Handle.particles", bad.tolist(),
                     f"particle indices in [0, {cloth.particle_count - 1}]")
-        self.forces = ForceSettings(gravity=tuple(gravity), drag=drag, tearing=tearing is not None)
+        self.wind = WindField(wind, cloth) if wind is not None else None
+        self.forces = ForceSettings(gravity=tuple(gravity), drag=drag, tearing=tearing is not None,
+                                    wind=self.wind)
 
         pinned = cloth.pinned.copy()
         if self.handles:
@@ -126,6 +129,8 @@ class Simulation:
         for _ in range(n):
             if self.colliders is not None:
                 copy_positions(self.state, self.colliders.step_start)
+            if self.wind is not None:
+                self.wind.update(self.time)
             self.integrator.step(self.model, self.state, self.dt, self.forces, self.step_count)
             self.step_count += 1
             if self.strain_limiter is not None:

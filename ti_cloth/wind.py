@@ -1,0 +1,181 @@
+"""Wind and per-triangle aerodynamics (a flat-plate model), compiled in only when a scene has wind.
+
+Each triangle of area A and unit normal n sees the air velocity relative to its own motion,
+u = w(centroid, t) - (v_a + v_b + v_c) / 3. With q = 1/2 rho |u|^2 A, u_hat = u / |u| and
+c = n . u_hat (the cosine between the normal and the flow), its force is
+
+    drag = q (C_drag |c| + C_friction) u_hat            along the flow; |c| A is the area facing it
+    lift = q C_lift c (n - c u_hat)                      across the flow, |lift| = q C_lift |c| sin
+
+and a third of it goes to each corner. Lift vanishes both face-on (c = +-1) and edge-on (c = 0),
+where only the skin-friction drag C_friction remains. In still air (w = 0) the same model is an
+aerodynamic damping that resists motion across the surface far more than along it, unlike the
+uniform `drag` of ForceSettings (the cheap option, kept).
+
+The wind field: w(x, t) = velocity (1 + gust sin(2 pi t / gust_period)) + turbulence * sum of
+`TURBULENCE_MODES` travelling sine waves carried along by the mean wind (frozen turbulence),
+each with a random wave vector of length 2 pi / turbulence_scale and a direction perpendicular
+to it (so the fluctuation is divergence-free, like incompressible air); their sum is scaled so
+its root-mean-square speed is `turbulence`.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+import taichi as ti
+
+from . import backend
+from ._validate import as_array, finite_number, require
+
+TURBULENCE_MODES = 8
+
+
+@dataclass(frozen=True, kw_only=True)
+class Wind:
+    """Moving air acting on every triangle of a body.
+
+    velocity: mean wind [m/s], shape (3,).
+    gust: relative amplitude of a periodic gust, >= 0: the mean wind is scaled by
+        1 + gust sin(2 pi t / gust_period).
+    gust_period: [s], > 0.
+    turbulence: RMS speed [m/s] of the spatially varying part, >= 0 (0: uniform wind, the
+        turbulence code is not compiled).
+    turbulence_scale: wavelength [m] of the turbulent waves, > 0.
+    air_density: [kg/m^3], > 0 (1.2 at sea level).
+    drag_coefficient, lift_coefficient, friction_coefficient: C_drag, C_lift, C_friction of the
+        flat-plate model (module doc), >= 0.
+    seed: random seed of the turbulent waves.
+    """
+
+    velocity: tuple = (0.0, 0.0, 0.0)
+    gust: float = 0.0
+    gust_period: float = 2.0
+    turbulence: float = 0.0
+    turbulence_scale: float = 1.0
+    air_density: float = 1.2
+    drag_coefficient: float = 1.0
+    lift_coefficient: float = 1.0
+    friction_coefficient: float = 0.02
+    seed: int = 0
+
+    def __post_init__(self):
+        velocity = as_array("Wind.velocity", self.velocity, np.float64, (3,))
+        object.__setattr__(self, "velocity", tuple(float(v) for v in velocity))
+        for name, strict, unit in (("gust", False, ""), ("gust_period", True, "s"),
+                                   ("turbulence", False, "m/s"), ("turbulence_scale", True, "m"),
+                                   ("air_density", True, "kg/m^3"), ("drag_coefficient", False, ""),
+                                   ("lift_coefficient", False, ""),
+                                   ("friction_coefficient", False, "")):
+            object.__setattr__(self, name, finite_number(f"Wind.{name}", getattr(self, name), 0.0,
+                                                         strict=strict, unit=unit))
+        require(isinstance(self.seed, (int, np.integer)) and not isinstance(self.seed, bool),
+                "Wind.seed", self.seed, "an int")
+
+    def mean_velocity(self, t: float) -> np.ndarray:
+        """The spatially uniform part of the wind [m/s] at time t."""
+        return np.asarray(self.velocity) * (1.0 + self.gust * np.sin(2 * np.pi * t / self.gust_period))
+
+    def turbulence_modes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(wave vectors [1/m] (K, 3), unit directions (K, 3) perpendicular to them, phases (K,))."""
+        rng = np.random.default_rng(self.seed)
+        wave = rng.normal(size=(TURBULENCE_MODES, 3))
+        wave /= np.linalg.norm(wave, axis=1, keepdims=True)
+        direction = np.cross(wave, rng.normal(size=(TURBULENCE_MODES, 3)))
+        direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+        phase = rng.uniform(0.0, 2 * np.pi, TURBULENCE_MODES)
+        return wave * (2 * np.pi / self.turbulence_scale), direction, phase
+
+
+@ti.data_oriented
+class WindField:
+    """A Wind bound to one body: its triangles, the particle -> triangle adjacency used to
+    gather the triangle forces deterministically, the turbulence modes and per-step values."""
+
+    def __init__(self, wind: Wind, cloth):
+        require(isinstance(wind, Wind), "wind", wind, "None or a ti_cloth.Wind")
+        triangles = cloth.mesh.triangles
+        require(len(triangles) > 0, "wind", wind,
+                "used only with a body that has triangles (strings and hair: use drag=)")
+        self.wind = wind
+        real, np_real = backend.real(), backend.numpy_real()
+        self.triangle_count = len(triangles)
+        self.triangle = ti.Vector.field(3, ti.i32, shape=self.triangle_count)
+        self.triangle.from_numpy(triangles.astype(np.int32))
+        self.triangle_edge_spring = ti.Vector.field(3, ti.i32, shape=self.triangle_count)
+        self.triangle_edge_spring.from_numpy(cloth.triangle_edge_spring.astype(np.int32))
+        self.triangle_force = ti.Vector.field(3, real, shape=self.triangle_count)
+
+        corner_of = triangles.ravel()
+        order = np.argsort(corner_of, kind="stable")
+        start = np.concatenate([[0], np.cumsum(np.bincount(corner_of, minlength=cloth.particle_count))])
+        self.particle_triangle_start = ti.field(ti.i32, shape=cloth.particle_count + 1)
+        self.particle_triangle_start.from_numpy(start.astype(np.int32))
+        self.adjacency_triangle = ti.field(ti.i32, shape=len(corner_of))
+        self.adjacency_triangle.from_numpy((order // 3).astype(np.int32))
+
+        wave, direction, phase = wind.turbulence_modes()
+        self.mode_wave = ti.Vector.field(3, real, shape=TURBULENCE_MODES)
+        self.mode_direction = ti.Vector.field(3, real, shape=TURBULENCE_MODES)
+        self.mode_phase = ti.field(real, shape=TURBULENCE_MODES)
+        self.mode_wave.from_numpy(wave.astype(np_real))
+        self.mode_direction.from_numpy(direction.astype(np_real))
+        self.mode_phase.from_numpy(phase.astype(np_real))
+        self.mean = ti.math.vec3(0.0)
+        self.drift = ti.math.vec3(0.0)
+        self.update(0.0)
+
+    def update(self, t: float) -> None:
+        """Set the wind for the step that starts at time t (held fixed during the step)."""
+        self.mean = ti.math.vec3(*self.wind.mean_velocity(t))
+        self.drift = ti.math.vec3(*(np.asarray(self.wind.velocity) * t))
+
+    @ti.func
+    def turbulence_at(self, x):
+        """The turbulent part of the wind at x [m] (x already moved back by the drift)."""
+        u = ti.Vector([0.0, 0.0, 0.0])
+        for k in ti.static(range(TURBULENCE_MODES)):
+            u += self.mode_direction[k] * ti.sin(self.mode_wave[k].dot(x) + self.mode_phase[k])
+        return u * ti.sqrt(2.0 / TURBULENCE_MODES)
+
+
+@ti.kernel
+def _accumulate_wind(model: ti.template(), state: ti.template(), wind: ti.template(),
+                     mean: ti.math.vec3, drift: ti.math.vec3, tearing: ti.template()):
+    """The WindField is a template argument, so its frozen Wind's coefficients are
+    compile-time constants; only the per-step mean wind and drift are passed."""
+    for t in range(wind.triangle_count):
+        a, b, c = wind.triangle[t][0], wind.triangle[t][1], wind.triangle[t][2]
+        xa, xb, xc = state.particle_position[a], state.particle_position[b], state.particle_position[c]
+        u = mean - (state.particle_velocity[a] + state.particle_velocity[b]
+                    + state.particle_velocity[c]) / 3.0
+        if ti.static(wind.wind.turbulence > 0):
+            u += wind.wind.turbulence * wind.turbulence_at((xa + xb + xc) / 3.0 - drift)
+        area_vector = 0.5 * (xb - xa).cross(xc - xa)
+        area = area_vector.norm()
+        speed = u.norm()
+        intact = True
+        if ti.static(tearing):
+            for e in ti.static(range(3)):
+                s = wind.triangle_edge_spring[t][e]
+                if s >= 0 and state.spring_alive[s] == 0:
+                    intact = False
+        f = ti.Vector([0.0, 0.0, 0.0])
+        if intact and area > 0 and speed > 0:
+            n = area_vector / area
+            flow = u / speed
+            cos = n.dot(flow)
+            q = 0.5 * wind.wind.air_density * speed * speed * area
+            drag = wind.wind.drag_coefficient * ti.abs(cos) + wind.wind.friction_coefficient
+            f = q * (drag * flow + wind.wind.lift_coefficient * cos * (n - cos * flow))
+        wind.triangle_force[t] = f / 3.0
+    for i in range(model.particle_count):
+        f = ti.Vector([0.0, 0.0, 0.0])
+        for k in range(wind.particle_triangle_start[i], wind.particle_triangle_start[i + 1]):
+            f += wind.triangle_force[wind.adjacency_triangle[k]]
+        state.particle_force[i] += f
+
+
+def accumulate_wind(model, state, wind: WindField, tearing: bool) -> None:
+    """Add every triangle's aerodynamic force (module doc) to particle_force, gathered per
+    particle over its triangles in a fixed order."""
+    _accumulate_wind(model, state, wind, wind.mean, wind.drift, tearing)
