@@ -3,12 +3,13 @@
 Nothing here calls ti.init; call ti_cloth.init(arch=..., precision=...) first.
 """
 from .backend import init
+from .bodies import hair, soft_body, string, tet_block
 from .colliders import Box, Capsule, Collider, Plane, Sphere
 from .errors import SimulationDiverged
 from .forces import ForceSettings
 from .integrators import INTEGRATORS, PBD, ExplicitEuler, Integrator, SymplecticEuler, Verlet
 from .material import PRESETS, Material, SpringKind, SpringParams
-from .mesh import Mesh, grid_mesh, load_mesh, save_mesh
+from .mesh import Mesh, grid_mesh, load_mesh, save_mesh, tet_grid_mesh
 from .model import Model
 from .simulation import Handle, Simulation
 from .stability import stable_dt
@@ -19,7 +20,7 @@ from .topology import Cloth
 from .wind import Wind
 
 __all__ = [
-    "init", "Box", "Capsule", "Collider", "Plane", "Sphere", "SimulationDiverged", "ForceSettings", "INTEGRATORS", "Integrator", "ExplicitEuler",
+    "init", "hair", "soft_body", "string", "tet_block", "tet_grid_mesh", "Box", "Capsule", "Collider", "Plane", "Sphere", "SimulationDiverged", "ForceSettings", "INTEGRATORS", "Integrator", "ExplicitEuler",
     "SymplecticEuler", "Verlet", "PBD", "PRESETS", "Material", "SpringKind", "SpringParams",
     "Mesh", "grid_mesh", "load_mesh", "save_mesh", "Model", "Handle", "Simulation", "stable_dt",
     "State", "StrainLimit", "Tearing", "Cloth", "Wind",

@@ -22,21 +22,26 @@ class Mesh:
         the mesh describes particles without a surface (strings, explicit spring networks).
     grid_shape: (rows, cols) when the vertices form a regular grid laid out row-major
         (vertex = row * cols + col); grid meshes get the spring pattern of Stuyck fig. 4.2.
+    tetrahedra: vertex indices, shape (tet_count, 4), of a volume mesh (Stuyck 4.6.2); its
+        surface is then given as `triangles` (see surface_triangles). Empty for surfaces.
     """
 
-    def __init__(self, vertices, triangles, grid_shape: tuple[int, int] | None = None):
+    def __init__(self, vertices, triangles, grid_shape: tuple[int, int] | None = None,
+                 tetrahedra=()):
         self.vertices = as_array("vertices", vertices, np.float64, (None, 3))
         self.triangles = as_array("triangles", triangles, np.int64, (None, 3))
+        self.tetrahedra = as_array("tetrahedra", tetrahedra, np.int64, (None, 4))
         n = len(self.vertices)
         require(n > 0, "vertices", n, "at least 1 vertex (the mesh is empty)")
-        if len(self.triangles):
-            bad = np.flatnonzero((self.triangles < 0).any(axis=1) | (self.triangles >= n).any(axis=1))
-            require(len(bad) == 0, "triangles", self.triangles[bad[:1]].tolist(),
-                    f"vertex indices in [0, {n - 1}] (triangle {bad[:1].tolist()})")
-            t = self.triangles
-            repeated = np.flatnonzero((t[:, 0] == t[:, 1]) | (t[:, 1] == t[:, 2]) | (t[:, 0] == t[:, 2]))
-            require(len(repeated) == 0, f"triangles[{repeated[:1].tolist()}]",
-                    t[repeated[:1]].tolist(), "three distinct vertices per triangle")
+        for name, cells in (("triangles", self.triangles), ("tetrahedra", self.tetrahedra)):
+            if len(cells):
+                bad = np.flatnonzero((cells < 0).any(axis=1) | (cells >= n).any(axis=1))
+                require(len(bad) == 0, f"{name}[{bad[:1].tolist()}]", cells[bad[:1]].tolist(),
+                        f"vertex indices in [0, {n - 1}]")
+                ordered = np.sort(cells, axis=1)
+                repeated = np.flatnonzero((ordered[:, 1:] == ordered[:, :-1]).any(axis=1))
+                require(len(repeated) == 0, f"{name}[{repeated[:1].tolist()}]",
+                        cells[repeated[:1]].tolist(), f"{cells.shape[1]} distinct vertices per cell")
         if grid_shape is not None:
             rows, cols = grid_shape
             require(rows * cols == n, "grid_shape", grid_shape, f"rows * cols == vertex_count ({n})")
@@ -68,9 +73,60 @@ class Mesh:
         p = self.vertices[self.triangles]
         return 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
 
+    def tetrahedron_volumes(self) -> np.ndarray:
+        """Signed rest volume of each tetrahedron [m^3] (positive when (b-a, c-a, d-a) is
+        right-handed), shape (tet_count,)."""
+        return signed_volumes(self.vertices, self.tetrahedra)
+
     def __repr__(self) -> str:
         grid = f", grid_shape={self.grid_shape}" if self.grid_shape else ""
-        return f"Mesh(vertex_count={self.vertex_count}, triangle_count={self.triangle_count}{grid})"
+        tets = f", tet_count={len(self.tetrahedra)}" if len(self.tetrahedra) else ""
+        return f"Mesh(vertex_count={self.vertex_count}, triangle_count={self.triangle_count}{grid}{tets})"
+
+
+def signed_volumes(vertices: np.ndarray, tetrahedra: np.ndarray) -> np.ndarray:
+    """Signed volume [m^3] of each tetrahedron (a, b, c, d): (b-a) . ((c-a) x (d-a)) / 6."""
+    p = vertices[tetrahedra]
+    edges = p[:, 1:] - p[:, :1]
+    return np.einsum("ij,ij->i", edges[:, 0], np.cross(edges[:, 1], edges[:, 2])) / 6.0
+
+
+def surface_triangles(vertices: np.ndarray, tetrahedra: np.ndarray) -> np.ndarray:
+    """The faces used by exactly one tetrahedron, wound so their normals point outwards."""
+    faces = tetrahedra[:, [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]]].reshape(-1, 3)
+    opposite = tetrahedra.ravel()
+    _, first, counts = np.unique(np.sort(faces, axis=1), axis=0, return_index=True,
+                                 return_counts=True)
+    outer = np.sort(first[counts == 1])
+    faces, inner = faces[outer], vertices[opposite[outer]]
+    p = vertices[faces]
+    normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    flip = np.einsum("ij,ij->i", normal, inner - p[:, 0]) > 0
+    faces[flip] = faces[flip][:, [0, 2, 1]]
+    return faces
+
+
+def tet_grid_mesh(cells=(4, 4, 4), size=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0)) -> Mesh:
+    """A box of cells[0] x cells[1] x cells[2] cubes [m], each cut into the six tetrahedra
+    around its diagonal from the lowest to the highest corner (Kuhn's subdivision: faces of
+    neighbouring cubes are cut the same way, so the tetrahedra fit together). The triangles
+    are the outer surface. Vertex (i, j, k) has index (i * (ny + 1) + j) * (nz + 1) + k."""
+    cells = as_array("cells", cells, np.int64, (3,))
+    require(bool(np.all(cells >= 1)), "cells", cells.tolist(), "three ints >= 1")
+    size = as_array("size", size, np.float64, (3,))
+    require(bool(np.all(size > 0)), "size", size.tolist(), "three lengths > 0 m")
+    origin = as_array("origin", origin, np.float64, (3,))
+    nx, ny, nz = (int(c) for c in cells)
+    axes = [np.linspace(0.0, s, c + 1) for s, c in zip(size, cells)]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3) + origin
+    index = np.arange(len(grid)).reshape(nx + 1, ny + 1, nz + 1)
+    corners = np.stack([index[i:i + nx, j:j + ny, k:k + nz].ravel()
+                        for i in (0, 1) for j in (0, 1) for k in (0, 1)], axis=1)  # corner = 4i+2j+k
+    paths = [(4, 6), (4, 5), (2, 6), (2, 3), (1, 5), (1, 3)]   # monotone paths from corner 0 to 7
+    tets = np.concatenate([corners[:, [0, a, b, 7]] for a, b in paths])
+    negative = signed_volumes(grid, tets) < 0
+    tets[negative] = tets[negative][:, [0, 2, 1, 3]]
+    return Mesh(grid, surface_triangles(grid, tets), tetrahedra=tets)
 
 
 def triangle_edges(triangles: np.ndarray) -> np.ndarray:
@@ -112,13 +168,21 @@ def grid_mesh(rows: int, cols: int, size: tuple[float, float] = (1.0, 1.0), plan
 
 
 def load_mesh(path) -> Mesh:
-    """Read a surface mesh (OBJ, PLY, STL, ... anything meshio reads); quads are split in two."""
+    """Read a mesh (OBJ, PLY, STL, VTK, MSH, ... anything meshio reads); quads are split in
+    two. A volume mesh's tetrahedra are kept, with its outer surface as the triangles."""
     import meshio
 
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"mesh file not found: {path}")
     data = meshio.read(path)
+    tetrahedra = [block.data for block in data.cells if block.type == "tetra"]
+    if tetrahedra:
+        points = np.asarray(data.points, np.float64)
+        tets = np.concatenate(tetrahedra)
+        negative = signed_volumes(points, tets) < 0
+        tets[negative] = tets[negative][:, [0, 2, 1, 3]]
+        return Mesh(points, surface_triangles(points, tets), tetrahedra=tets)
     triangles = []
     for block in data.cells:
         if block.type == "triangle":
@@ -127,7 +191,7 @@ def load_mesh(path) -> Mesh:
             quads = block.data
             triangles += [quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]
     if not triangles:
-        raise ValueError(f"{path}: no triangle or quad faces found (cell types: "
+        raise ValueError(f"{path}: no triangle, quad or tetra cells found (cell types: "
                          f"{[b.type for b in data.cells]})")
     return Mesh(data.points, np.concatenate(triangles))
 
