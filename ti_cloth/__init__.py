@@ -11,6 +11,7 @@ from .integrators import INTEGRATORS, PBD, ExplicitEuler, Integrator, Symplectic
 from .material import PRESETS, Material, SpringKind, SpringParams
 from .mesh import Mesh, grid_mesh, load_mesh, save_mesh, tet_grid_mesh
 from .model import Model
+from .paths import Keyframes, Oscillation
 from .simulation import Handle, Simulation
 from .stability import stable_dt
 from .state import State
@@ -20,8 +21,9 @@ from .topology import Cloth
 from .wind import Wind
 
 __all__ = [
-    "init", "hair", "soft_body", "string", "tet_block", "tet_grid_mesh", "Box", "Capsule", "Collider", "Plane", "Sphere", "SimulationDiverged", "ForceSettings", "INTEGRATORS", "Integrator", "ExplicitEuler",
-    "SymplecticEuler", "Verlet", "PBD", "PRESETS", "Material", "SpringKind", "SpringParams",
-    "Mesh", "grid_mesh", "load_mesh", "save_mesh", "Model", "Handle", "Simulation", "stable_dt",
-    "State", "StrainLimit", "Tearing", "Cloth", "Wind",
+    "init", "Box", "Capsule", "Collider", "Plane", "Sphere", "SimulationDiverged", "ForceSettings",
+    "INTEGRATORS", "Integrator", "ExplicitEuler", "SymplecticEuler", "Verlet", "PBD", "PRESETS",
+    "Material", "SpringKind", "SpringParams", "Mesh", "grid_mesh", "tet_grid_mesh", "load_mesh",
+    "save_mesh", "Model", "Keyframes", "Oscillation", "Handle", "Simulation", "stable_dt", "State",
+    "StrainLimit", "Tearing", "Cloth", "Wind", "string", "hair", "soft_body", "tet_block",
 ]
