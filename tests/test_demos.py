@@ -8,6 +8,13 @@ import numpy as np
 import pytest
 
 DEMOS = sorted((Path(__file__).parents[1] / "demos").glob("*.py"))
+EXPECTED = {"hanging_cloth", "curtain_hem", "flag_in_wind", "tearing", "verlet_pbd_cloth",
+            "string_wall", "hair", "soft_block"}
+
+
+def test_every_system_of_the_source_texts_has_a_demo_with_a_scene_file():
+    assert {d.stem for d in DEMOS} == EXPECTED
+    assert all(d.with_suffix(".toml").is_file() for d in DEMOS)
 
 
 @pytest.mark.parametrize("script", DEMOS, ids=[d.stem for d in DEMOS])
@@ -15,7 +22,7 @@ def test_demo_writes_frames(script, tmp_path):
     spec = importlib.util.spec_from_file_location(script.stem, script)
     demo = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(demo)
-    frames = demo.main(["--test", "--out-dir", str(tmp_path)])
+    frames = demo.main(["--test", "--no-progress", "--out-dir", str(tmp_path)])
     images = [iio.imread(f).astype(float) for f in frames]
     assert len(images) >= 2
     for image in images:
@@ -23,3 +30,4 @@ def test_demo_writes_frames(script, tmp_path):
     for a, b in zip(images, images[1:]):
         assert np.abs(a - b).mean() > 0.01, "frames identical"
     assert not list(tmp_path.glob(".*tmp*"))
+    assert list(tmp_path.glob("*.gif"))

@@ -27,3 +27,14 @@ __all__ = [
     "save_mesh", "Model", "Keyframes", "Oscillation", "Handle", "Simulation", "stable_dt", "State",
     "StrainLimit", "Tearing", "Cloth", "Wind", "string", "hair", "soft_body", "tet_block",
 ]
+
+
+def __getattr__(name):
+    """load_scene and run_scene pull in the renderer, so they are imported only when used."""
+    if name == "load_scene":
+        from .scene import load_scene
+        return load_scene
+    if name == "run_scene":
+        from .runner import run_scene
+        return run_scene
+    raise AttributeError(f"module 'ti_cloth' has no attribute {name!r}")

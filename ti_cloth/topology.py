@@ -140,6 +140,7 @@ class Cloth:
       spring_damping     (S,) [kg/s]
       spring_kind        (S,) SpringKind values
       triangle_edge_spring (T, 3): spring along edge (t0,t1), (t1,t2), (t2,t0), or -1
+      body_offsets       particle ranges of the bodies joined by `combine` ((0, N) for one)
 
     pinned: particle indices or an (N,) bool mask. springs: explicit springs (see module doc).
     particle_mass_override: {index: kg} applied last. particle_mass: (N,) masses [kg] that
@@ -192,9 +193,53 @@ class Cloth:
         self.spring_stiffness = np.array([p.k for p in params])[kind]
         self.spring_damping = np.array([p.kd for p in params])[kind]
         self.triangle_edge_spring = _edge_springs(mesh.triangles, pairs, n)
+        self.body_offsets = (0, n)
+        self._freeze()
+
+    def _freeze(self) -> None:
         for name in ("particle_mass", "pinned", "spring_indices", "spring_kind", "spring_rest_length",
                      "spring_stiffness", "spring_damping", "triangle_edge_spring"):
             getattr(self, name).flags.writeable = False
+
+    @classmethod
+    def combine(cls, bodies) -> "Cloth":
+        """One Cloth holding several bodies side by side (one simulation steps them all):
+        particles, springs, triangles and tetrahedra renumbered in order; body b's particles
+        are body_offsets[b]:body_offsets[b + 1]. All must use the same damping model."""
+        bodies = list(bodies)
+        require(len(bodies) > 0 and all(isinstance(b, Cloth) for b in bodies), "bodies", bodies,
+                "a non-empty list of Cloth objects")
+        damping = {b.damping for b in bodies}
+        require(len(damping) == 1, "bodies damping models", sorted(damping),
+                "one damping model for every body")
+        particle_offsets = np.cumsum([0] + [b.particle_count for b in bodies])
+        spring_offsets = np.cumsum([0] + [b.spring_count for b in bodies])
+
+        def joined(name, shift=None):
+            parts = [getattr(b, name) for b in bodies]
+            if shift is not None:
+                parts = [np.where(p >= 0, p + o, p) for p, o in zip(parts, shift)]
+            return np.concatenate(parts)
+
+        def mesh_cells(name):
+            return np.concatenate([getattr(b.mesh, name) + o for b, o in zip(bodies, particle_offsets)])
+
+        body = cls.__new__(cls)
+        body.mesh = Mesh(joined("particle_position"), mesh_cells("triangles"),
+                         tetrahedra=mesh_cells("tetrahedra"))
+        body.material = bodies[0].material
+        body.particle_position = body.mesh.vertices
+        body.particle_mass = joined("particle_mass")
+        body.pinned = joined("pinned")
+        body.spring_indices = joined("spring_indices", particle_offsets)
+        body.spring_kind = joined("spring_kind")
+        body.spring_rest_length = joined("spring_rest_length")
+        body.spring_stiffness = joined("spring_stiffness")
+        body.spring_damping = joined("spring_damping")
+        body.triangle_edge_spring = joined("triangle_edge_spring", spring_offsets)
+        body.body_offsets = tuple(int(o) for o in particle_offsets)
+        body._freeze()
+        return body
 
     @classmethod
     def from_particles(cls, positions, particle_mass, springs, material: Material | None = None,

@@ -296,19 +296,24 @@ class Renderer:
 
     def draw_simulation(self, sim, style: SurfaceStyle = SurfaceStyle()) -> None:
         """The body of a Simulation at its current time: its triangles (torn ones dropped),
-        or, for bodies without triangles, its stretch springs as lines; plus particles."""
+        and the stretch springs of particles on no triangle (strings, hair) as lines; plus
+        particles."""
         self._require_frame()
         cloth, x = sim.cloth, sim.positions()
         alive = sim.spring_alive()
-        if len(cloth.mesh.triangles):
+        triangles = cloth.mesh.triangles
+        if len(triangles):
             strain = (vertex_strain(x, cloth.spring_indices, cloth.spring_rest_length, alive)
                       if style.strain else None)
-            self.draw_mesh(x, cloth.mesh.triangles, rest_positions=cloth.particle_position,
+            self.draw_mesh(x, triangles, rest_positions=cloth.particle_position,
                            hidden=torn_triangles(cloth.triangle_edge_spring, ~alive),
                            strain=strain, style=style)
-        else:
-            keep = alive & (cloth.spring_kind == SpringKind.STRETCH)
-            self.draw_lines(x, cloth.spring_indices[keep], width=style.line_width, colour=style.front)
+        on_surface = np.zeros(cloth.particle_count, bool)
+        on_surface[triangles.ravel()] = True
+        i, j = cloth.spring_indices.T
+        lines = alive & (cloth.spring_kind == SpringKind.STRETCH) & ~on_surface[i] & ~on_surface[j]
+        if lines.any():
+            self.draw_lines(x, cloth.spring_indices[lines], width=style.line_width, colour=style.front)
         if style.particles > 0:
             colours = np.where(sim.model.pinned[:, None], style.pin_colour, style.particle_colour)
             self.draw_points(x, radius=style.particles, colour=colours)

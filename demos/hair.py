@@ -1,0 +1,17 @@
+"""Hair strands swinging from a moving head: runs demos/hair.toml.
+
+    python demos/hair.py            # renders/hair/frame_00000.png ... + hair.gif
+    python demos/hair.py --test     # tiny and fast
+"""
+
+from pathlib import Path
+
+from ti_cloth.cli import demo_main
+
+
+def main(argv=None):
+    return demo_main(Path(__file__).with_suffix(".toml"), argv, __doc__.splitlines()[0])
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,103 @@
+"""The ti-cloth command: run, info, strict arguments, Ctrl-C and divergence."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from ti_cloth import cli
+from ti_cloth.simulation import Simulation
+
+SCENE = """
+[scene]
+name = "tiny"
+[simulation]
+fps = 30
+duration = 1.0
+[[bodies]]
+type = "grid"
+rows = 5
+cols = 5
+pinned = ["top_left", "top_right"]
+[output]
+width = 96
+height = 64
+supersample = 1
+"""
+
+
+@pytest.fixture
+def scene(tmp_path):
+    path = tmp_path / "tiny.toml"
+    path.write_text(SCENE)
+    return path
+
+
+def frames_in(folder):
+    return sorted(Path(folder).glob("frame_*.png"))
+
+
+def test_run_writes_the_requested_frames_and_a_gif(scene, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert cli.main(["run", str(scene), "--out", str(out), "--frames", "3", "--no-progress"]) == 0
+    assert len(frames_in(out)) == 3 and (out / "tiny.gif").is_file()
+    assert "3 frames of 'tiny'" in capsys.readouterr().out
+
+
+def test_bad_scene_exits_2_naming_the_key(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(SCENE.replace("rows = 5", "rows = 5\nrowz = 5"))
+    assert cli.main(["run", str(bad), "--no-progress"]) == 2
+    assert "bodies[0].rowz is not a known key" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv", [["run"], ["run", "x.toml", "--frames", "0"], ["run", "x.toml", "--bogus"],
+                                  ["run", "x.toml", "--arch", "tpu"], ["frobnicate"]])
+def test_arguments_are_parsed_strictly(argv):
+    with pytest.raises(SystemExit) as err:
+        cli.main(argv)
+    assert err.value.code == 2
+
+
+def test_ctrl_c_keeps_every_finished_frame_and_says_how_many(scene, tmp_path, capsys, monkeypatch):
+    calls = {"n": 0}
+    original = Simulation.step
+
+    def interrupted_step(self, n=1):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise KeyboardInterrupt
+        original(self, n)
+
+    monkeypatch.setattr(Simulation, "step", interrupted_step)
+    out = tmp_path / "out"
+    assert cli.main(["run", str(scene), "--out", str(out), "--no-progress"]) == 130
+    assert len(frames_in(out)) == 3
+    assert not list(out.glob(".*"))                        # no half-written temp files
+    assert "interrupted: 3 frames" in capsys.readouterr().err
+
+
+def test_a_diverging_scene_exits_1_naming_the_step_and_a_stable_dt(scene, tmp_path, capsys):
+    stiff = tmp_path / "stiff.toml"
+    stiff.write_text(SCENE.replace("duration = 1.0", "duration = 1.0\nsubsteps = 1"))
+    assert cli.main(["run", str(stiff), "--out", str(tmp_path / "o"), "--no-progress"]) == 1
+    err = capsys.readouterr().err
+    assert "diverged at step" in err and "stable dt" in err
+
+
+def test_info_prints_versions_arch_and_threads(capsys):
+    assert cli.main(["info"]) == 0
+    out = capsys.readouterr().out
+    for word in ("ti_cloth", "taichi", "numpy", "arch", "threads"):
+        assert word in out
+
+
+def test_the_console_script_is_installed(scene, tmp_path):
+    script = Path(sys.executable).with_name("ti-cloth")
+    assert script.is_file(), "pip install the package to get the ti-cloth command"
+    out = tmp_path / "cli"
+    result = subprocess.run([str(script), "run", str(scene), "--out", str(out), "--frames", "2",
+                             "--no-progress"], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert len(frames_in(out)) == 2

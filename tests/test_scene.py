@@ -1,0 +1,174 @@
+"""Scene files: every key checked by name, scenes build the simulation the API would, and only
+what a scene lists is compiled."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import ti_cloth as tc
+from ti_cloth import wind as wind_module
+from ti_cloth.colliders import resolve_collisions
+from ti_cloth.constraints import relax_springs
+from ti_cloth.scene import load_scene
+from ti_cloth.scene_file import SceneError
+from conftest import report
+
+DEMOS = Path(__file__).parents[1] / "demos"
+
+GRID = """
+[simulation]
+fps = 50
+substeps = 20
+duration = 0.1
+
+[forces]
+drag = 0.3
+
+[[bodies]]
+type = "grid"
+rows = 6
+cols = 5
+size = [0.5, 0.4]
+plane = "xy"
+pinned = ["top_left", "top_right", 3]
+material = { preset = "cotton", hem_mass = 0.001, stretch = { k = 900.0, kd = 0.2 } }
+"""
+
+
+def write(tmp_path, text, name="scene.toml"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_a_grid_scene_builds_the_same_simulation_as_the_api(tmp_path, f64):
+    scene = load_scene(write(tmp_path, GRID))
+    sim = scene.build()
+    material = tc.Material.preset("cotton", hem_mass=0.001, stretch=tc.SpringParams(900.0, 0.2))
+    cloth = tc.Cloth(tc.grid_mesh(6, 5, size=(0.5, 0.4)), material, pinned=[25, 29, 3])
+    api = tc.Simulation(cloth, dt=1 / 50 / 20, drag=0.3)
+    sim.step(40)
+    api.step(40)
+    report("max position difference scene vs API [m]", np.abs(sim.positions() - api.positions()).max(), 0.0)
+    np.testing.assert_array_equal(sim.positions(), api.positions())
+    assert scene.frames == 5 and scene.resolved_substeps() == 20
+
+
+def test_every_demo_scene_loads(tmp_path):
+    scenes = sorted(DEMOS.glob("*.toml"))
+    assert len(scenes) == 8
+    for path in scenes:
+        scene = load_scene(path)
+        assert scene.cloth.particle_count > 1 and scene.frames >= 60, path.name
+
+
+def test_auto_substeps_keep_dt_under_half_the_stable_step(tmp_path):
+    scene = load_scene(write(tmp_path, GRID.replace("substeps = 20", 'substeps = "auto"')))
+    n = scene.resolved_substeps()
+    dt = scene.frame_dt / n
+    stable = tc.stable_dt(scene.cloth, "symplectic_euler", 0.3)
+    report("auto dt, stable dt [s]", (dt, stable), "dt <= stable / 2, and one fewer substep is not")
+    assert dt <= 0.5 * stable and scene.frame_dt / (n - 1) > min(0.5 * stable, 1 / 240)
+
+
+@pytest.mark.parametrize("change, message", [
+    (("[forces]", "[forces]\ngravty = [0, -9.81, 0]"), r"forces\.gravty is not a known key .*allowed here: .*gravity"),
+    (("rows = 6", "rows = 6\nrowz = 4"), r"bodies\[0\]\.rowz is not a known key"),
+    (("stretch = { k = 900.0, kd = 0.2 }", "stretch = { k = 900.0, kdd = 0.2 }"),
+     r"bodies\[0\]\.material\.stretch\.kdd is not a known key"),
+    (("rows = 6", 'rows = "6"'), r"bodies\[0\]\.rows must be an integer >= 2, got '6'"),
+    (("rows = 6", "rows = 1"), r"bodies\[0\]\.rows must be an integer >= 2, got 1"),
+    (("fps = 50", "fps = 0"), r"simulation\.fps must be a number > 0.0 frames/s, got 0"),
+    (("substeps = 20", "substeps = 0"), r"simulation\.substeps must be \"auto\" or an integer >= 1"),
+    (('type = "grid"', 'type = "blanket"'), r"bodies\[0\]\.type must be one of \['grid'"),
+    (('"top_left"', '"top_middle"'), r"bodies\[0\]\.pinned must be particle indices in \[0, 29\] or one of"),
+    (("pinned = [", "pinned = [30, "), r"bodies\[0\]\.pinned must be particle indices in \[0, 29\]"),
+    (("size = [0.5, 0.4]", "size = [0.5, -0.4]"), r"bodies\[0\]: size must be two lengths > 0 m"),
+    (('preset = "cotton"', 'preset = "tweed"'), r"bodies\[0\]\.material\.preset must be one of"),
+    (("drag = 0.3", "drag = -1"), r"forces\.drag must be a number >= 0.0 1/s, got -1"),
+    (("[forces]", '[forces]\nwind = { velocity = [1, 0] }'), r"forces\.wind\.velocity must be a list of 3 numbers"),
+    (("fps = 50", 'fps = 50\nintegrator = "rk5"'), r"simulation\.integrator\.name must be one of"),
+    (("fps = 50", 'fps = 50\nintegrator = { name = "pbd", iterations = 0 }'),
+     r"simulation\.integrator: PBD\.iterations must be an int >= 1, got 0"),
+    (("fps = 50", 'fps = 50\nintegrator = { name = "pbd", iteration = 3 }'),
+     r"simulation\.integrator\.iteration is not a known key .*allowed here: damping, iterations, name"),
+])
+def test_scene_errors_name_the_key_the_value_and_what_is_allowed(tmp_path, change, message):
+    old, new = change
+    assert old in GRID
+    path = write(tmp_path, GRID.replace(old, new, 1))
+    with pytest.raises(SceneError, match=message) as err:
+        load_scene(path)
+    assert str(path) in str(err.value)
+    print(err.value)
+
+
+def test_scene_file_problems_outside_the_keys(tmp_path):
+    with pytest.raises(FileNotFoundError, match="missing.toml"):
+        load_scene(tmp_path / "missing.toml")
+    with pytest.raises(SceneError, match="not valid TOML"):
+        load_scene(write(tmp_path, "[simulation\nfps = 3"))
+    with pytest.raises(SceneError, match=r"at least one \[\[bodies\]\]"):
+        load_scene(write(tmp_path, "[simulation]\nfps = 30\n"))
+    with pytest.raises(SceneError, match=r"bodies\[0\]\.handles\[0\]\.path is required"):
+        load_scene(write(tmp_path, GRID + '[[bodies.handles]]\nparticles = ["top_left"]\n'))
+
+
+def test_a_scene_compiles_only_what_it_lists(tmp_path, f64):
+    kernels = (wind_module._accumulate_wind, resolve_collisions, relax_springs)
+    for kernel in kernels:
+        kernel._primal.compiled_kernels.clear()
+    scene = load_scene(write(tmp_path, GRID))
+    sim = scene.build()
+    sim.step(5)
+    assert sim.wind is None and sim.colliders is None and sim.strain_limiter is None
+    assert not any(k._primal.compiled_kernels for k in kernels)
+    full = GRID.replace("[forces]", '[forces]\nwind = { velocity = [2.0, 0.0, 1.0] }').replace(
+        "duration = 0.1", "duration = 0.1\nstrain_limit = { max_strain = 0.1 }")
+    full += '[[colliders]]\ntype = "sphere"\ncentre = [0.25, -0.5, 0.0]\nradius = 0.2\n'
+    load_scene(write(tmp_path, full)).build().step(5)
+    assert all(k._primal.compiled_kernels for k in kernels)
+
+
+def test_bodies_of_a_scene_move_as_they_would_alone(tmp_path, f64):
+    """Two bodies in one scene are joined into one Cloth; each moves exactly as it does alone
+    (forces are gathered per particle, in the same order)."""
+    text = GRID + """
+[[bodies]]
+type = "string"
+n = 7
+length = 0.6
+start = [1.0, 0.0, 0.0]
+mass = 0.02
+"""
+    both = load_scene(write(tmp_path, text)).build()
+    alone = load_scene(write(tmp_path, GRID, "alone.toml")).build()
+    both.step(50)
+    alone.step(50)
+    offsets = both.cloth.body_offsets
+    assert offsets == (0, 30, 37)
+    np.testing.assert_array_equal(both.positions()[:30], alone.positions())
+    string = tc.Simulation(tc.string(7, 0.6, mass=0.02, start=(1, 0, 0)), dt=both.dt, drag=0.3)
+    string.step(50)
+    np.testing.assert_array_equal(both.positions()[30:], string.positions())
+
+
+def test_handles_and_colliders_with_paths_from_a_scene(tmp_path, f64):
+    text = GRID + """
+[[bodies.handles]]
+particles = ["bottom_left"]
+path = { type = "keyframes", times = [0.0, 0.1], values = [[0, 0, 0], [0.0, -0.1, 0.05]] }
+
+[[colliders]]
+type = "box"
+lo = [-1.0, -3.0, -1.0]
+hi = [1.0, -2.0, 1.0]
+path = { type = "oscillation", amplitude = [0, 0.5, 0], frequency = 2.0 }
+"""
+    scene = load_scene(write(tmp_path, text))
+    sim = scene.build()
+    sim.step(100)
+    np.testing.assert_allclose(sim.positions()[0], scene.cloth.particle_position[0] + [0, -0.1, 0.05],
+                               atol=1e-12)
+    assert isinstance(scene.colliders[0], tc.Box) and scene.colliders[0].path is not None

@@ -1,0 +1,126 @@
+"""The `ti-cloth` command (run, info) and the shared entry point of the demo scripts."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import sys
+from pathlib import Path
+
+ARCH_CHOICES = ["cpu", "gpu", "cuda", "vulkan"]
+TEST_FRAMES, TEST_SIZE = 4, (160, 96)
+
+
+def _positive(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text}")
+    return value
+
+
+def _run_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--frames", type=_positive, help="frames to write (default: duration x fps)")
+    parser.add_argument("--arch", choices=ARCH_CHOICES, default="cpu",
+                        help="Taichi backend (gpu: the first GPU backend found, else CPU)")
+    parser.add_argument("--precision", choices=["f32", "f64"],
+                        help="float precision (default: the scene's, else f32)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progress=True,
+        test=False, mp4=None) -> tuple[int, list[Path]]:
+    """Load, initialise, run and report; returns (exit code, frame paths)."""
+    from . import backend
+    from .runner import run_scene
+    from .scene import load_scene
+    from .scene_file import SceneError
+
+    try:
+        scene = load_scene(scene_path)
+    except (SceneError, FileNotFoundError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2, []
+    if test:
+        frames = min(frames or TEST_FRAMES, TEST_FRAMES)
+        scene.output.width, scene.output.height = TEST_SIZE
+        scene.output.supersample = 1
+    if mp4 is not None:
+        scene.output.mp4 = mp4
+    backend.init(arch=arch, precision=precision or scene.precision)
+    result = run_scene(scene, folder=out, frames=frames, progress=progress)
+    folder = result.frames[0].parent if result.frames else (out or scene.output.folder)
+    summary = (f"{len(result.frames)} frames of '{scene.name}' in {result.wall_seconds:.1f} s "
+               f"({result.steps} steps, dt = {scene.frame_dt / scene.resolved_substeps():.3g} s) -> "
+               f"{folder}/ {' '.join(p.name for p in result.outputs)}")
+    if result.interrupted:
+        print(f"interrupted: {summary}", file=sys.stderr)
+        return 130, result.frames
+    if result.diverged is not None:
+        print(f"error: {result.diverged}\n{summary}", file=sys.stderr)
+        return 1, result.frames
+    print(summary)
+    return 0, result.frames
+
+
+def info() -> int:
+    """Print versions, the architecture Taichi starts on and the CPU thread count."""
+    from importlib.metadata import version
+
+    import numpy
+    import taichi as ti
+
+    from . import backend
+
+    backend.init(arch="cpu")
+    core = ti._lib.core
+    built_with = [name for name in ("cuda", "vulkan") if getattr(core, f"with_{name}", lambda: False)()]
+    print(f"ti_cloth {version('ti_cloth')}\n"
+          f"python   {platform.python_version()} ({platform.platform()})\n"
+          f"taichi   {'.'.join(map(str, ti.__version__))}\n"
+          f"numpy    {numpy.__version__}\n"
+          f"arch     {ti.lang.impl.current_cfg().arch.name} (GPU backends available: "
+          f"{', '.join(built_with) or 'none'})\n"
+          f"threads  {os.cpu_count()}")
+    return 0
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="ti-cloth", description="Mass-spring cloth, strings, "
+                                     "hair and soft bodies in Taichi, rendered headlessly.")
+    commands = parser.add_subparsers(dest="command", required=True)
+    run_parser = commands.add_parser("run", help="simulate a scene file and write its frames")
+    run_parser.add_argument("scene", type=Path, help="scene file (TOML)")
+    run_parser.add_argument("--out", type=Path, help="output folder (default: the scene's)")
+    _run_arguments(run_parser)
+    commands.add_parser("info", help="versions, architecture and threads")
+    args = parser.parse_args(argv)
+    if args.command == "info":
+        return info()
+    code, _ = run(args.scene, out=args.out, frames=args.frames, arch=args.arch,
+                  precision=args.precision, progress=not args.no_progress)
+    return code
+
+
+def demo_main(scene_path, argv=None, description: str | None = None) -> list[Path]:
+    """Entry point of a demo script: run its scene file with the demo flags; returns the frame
+    paths (exits with the run's code when it fails)."""
+    scene_path = Path(scene_path)
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--out-dir", type=Path, default=Path("renders") / scene_path.stem,
+                        help=f"output folder (default renders/{scene_path.stem})")
+    parser.add_argument("--test", action="store_true",
+                        help=f"tiny and fast: {TEST_FRAMES} frames at {TEST_SIZE[0]}x{TEST_SIZE[1]}")
+    parser.add_argument("--mp4", action="store_true", help="also write an MP4 (needs imageio-ffmpeg)")
+    _run_arguments(parser)
+    args = parser.parse_args(argv)
+    code, frames = run(scene_path, out=args.out_dir, frames=args.frames, arch=args.arch,
+                       precision=args.precision, progress=not args.no_progress, test=args.test,
+                       mp4=args.mp4 or None)
+    if code:
+        raise SystemExit(code)
+    return frames
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

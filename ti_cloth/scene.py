@@ -1,0 +1,386 @@
+"""Scene files: a TOML description of bodies, forces, colliders, integrator, camera and output,
+read strictly (scene_file.Table) into a Scene that builds a Simulation. Only what a scene lists
+is built, so only that is compiled. The keys, units and defaults are listed in the README's
+"Scene files" section; the demos in demos/*.toml are examples.
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import bodies as body_builders
+from .colliders import Box, Capsule, Plane, Sphere
+from .integrators import INTEGRATORS
+from .material import PRESETS, Material, SpringParams
+from .mesh import PLANES, Mesh, grid_mesh, load_mesh
+from .paths import INTERPOLATIONS, Keyframes, Oscillation
+from .render.camera import Camera
+from .render.renderer import SurfaceStyle
+from .scene_file import SceneError, Table, load_toml
+from .simulation import Handle, Simulation
+from .stability import stable_dt
+from .strain_limit import StrainLimit
+from .topology import Cloth
+from .wind import Wind
+
+BODY_TYPES = ("grid", "mesh", "string", "hair", "tet_block")
+COLLIDER_TYPES = {"plane": Plane, "sphere": Sphere, "box": Box, "capsule": Capsule}
+PRECISIONS = ("f32", "f64")
+VIEWS = ("3d", "2d")
+# "auto" substeps: dt at most half the predicted stable step, and at most this [s].
+AUTO_MAX_DT = 1.0 / 240.0
+
+
+@dataclass
+class Output:
+    """Where and how frames are written."""
+
+    folder: Path
+    gif: bool = True
+    mp4: bool = False
+    width: int = 640
+    height: int = 360
+    supersample: int = 2
+    gif_width: int = 480
+    view: str = "3d"
+    ground: float | None = None
+    style: SurfaceStyle = field(default_factory=SurfaceStyle)
+
+
+@dataclass
+class Scene:
+    """A scene file, read and checked; `build()` makes its Simulation (after ti_cloth.init)."""
+
+    name: str
+    source: Path
+    description: str
+    cloth: Cloth
+    integrator: object
+    fps: float
+    frames: int
+    substeps: int | str
+    precision: str
+    gravity: tuple
+    drag: float
+    wind: Wind | None
+    tearing: float | None
+    strain_limit: StrainLimit | None
+    handles: list
+    colliders: list
+    camera: Camera | None
+    camera_direction: tuple | None
+    output: Output
+
+    @property
+    def frame_dt(self) -> float:
+        return 1.0 / self.fps
+
+    def resolved_substeps(self) -> int:
+        """Steps per frame; "auto": the fewest with dt <= min(stable_dt / 2, AUTO_MAX_DT)."""
+        if self.substeps != "auto":
+            return self.substeps
+        stable = stable_dt(self.cloth, self.integrator, self.drag)
+        if stable == 0:
+            raise SceneError(f"{self.source}: no stable step exists for {self.integrator.name} "
+                             "with these springs (undamped springs make explicit Euler unstable at "
+                             "any step); add spring damping or choose another integrator")
+        dt = min(0.5 * stable, AUTO_MAX_DT)
+        return max(1, math.ceil(self.frame_dt / dt - 1e-9))
+
+    def build(self) -> Simulation:
+        """The Simulation of this scene (call ti_cloth.init first)."""
+        return Simulation(self.cloth, integrator=self.integrator,
+                          dt=self.frame_dt / self.resolved_substeps(), gravity=self.gravity,
+                          drag=self.drag, wind=self.wind, tearing=self.tearing,
+                          handles=self.handles, colliders=self.colliders,
+                          strain_limit=self.strain_limit)
+
+
+def load_scene(path) -> Scene:
+    """Read a scene file; raises SceneError naming the key, the value and what is allowed."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"scene file not found: {path}")
+    root = Table(load_toml(path), "", str(path))
+    meta = root.table("scene") or Table({}, "scene", str(path))
+    name = meta.string("name", path.stem)
+    description = meta.string("description", "")
+    meta.finish()
+
+    sim = root.table("simulation") or Table({}, "simulation", str(path))
+    integrator = _integrator(sim)
+    fps = sim.number("fps", 30.0, 0.0, strict=True, unit="frames/s")
+    frames = round(sim.number("duration", 3.0, 0.0, strict=True, unit="s") * fps)
+    substeps = sim.value("substeps", "auto")
+    if substeps != "auto" and (isinstance(substeps, bool) or not isinstance(substeps, int) or substeps < 1):
+        sim._bad("substeps", substeps, '"auto" or an integer >= 1')
+    precision = sim.string("precision", "f32", PRECISIONS)
+    tearing = sim.number("tearing", 0.0, 0.0, strict=True) if sim.has("tearing") else None
+    limit = sim.table("strain_limit")
+    strain_limit = None
+    if limit is not None:
+        strain_limit = limit.build(StrainLimit, max_strain=limit.number("max_strain", 0.1),
+                                   passes=limit.integer("passes", 4, 1),
+                                   kinds=tuple(limit.value("kinds", ["stretch", "shear"])))
+        limit.finish()
+    sim.finish()
+
+    forces = root.table("forces") or Table({}, "forces", str(path))
+    gravity = forces.vector("gravity", (0.0, -9.81, 0.0), unit="m/s^2")
+    drag = forces.number("drag", 0.0, 0.0, unit="1/s")
+    wind_table = forces.table("wind")
+    wind = _wind(wind_table) if wind_table is not None else None
+    forces.finish()
+
+    body_tables = root.tables("bodies")
+    if not body_tables:
+        root.fail("bodies: a scene needs at least one [[bodies]] table")
+    built, handles, offset = [], [], 0
+    for table in body_tables:
+        cloth, body_handles = _body(table, path.parent, offset)
+        built.append(cloth)
+        handles += body_handles
+        offset += cloth.particle_count
+    cloth = built[0] if len(built) == 1 else root.build(Cloth.combine, built)
+    colliders = [_collider(t) for t in root.tables("colliders")]
+
+    camera_table = root.table("camera")
+    camera, direction = _camera(camera_table) if camera_table is not None else (None, None)
+    output = _output(root.table("output") or Table({}, "output", str(path)), name, colliders)
+    root.finish()
+    return Scene(name=name, source=path, description=description, cloth=cloth,
+                 integrator=integrator, fps=fps, frames=max(frames, 1), substeps=substeps,
+                 precision=precision, gravity=gravity, drag=drag, wind=wind, tearing=tearing,
+                 strain_limit=strain_limit, handles=handles, colliders=colliders, camera=camera,
+                 camera_direction=direction, output=output)
+
+
+def _integrator(sim: Table):
+    spec = sim.value("integrator", "symplectic_euler")
+    if isinstance(spec, str):
+        spec = {"name": spec}
+    table = Table(spec, sim.path("integrator"), sim.source)
+    name = table.string("name", choices=sorted(INTEGRATORS))
+    accepted = inspect.signature(INTEGRATORS[name]).parameters
+    options = {k: table.value(k) for k in list(table.data) if k in accepted}
+    table.finish(also=accepted)
+    return table.build(INTEGRATORS[name], **options)
+
+
+def _springs(table: Table | None, default: SpringParams | None) -> SpringParams | None:
+    if table is None:
+        return default
+    params = table.build(SpringParams, k=table.number("k", unit="N/m"),
+                         kd=table.number("kd", 0.0, unit="kg/s"))
+    table.finish()
+    return params
+
+
+def _material(owner: Table) -> Material:
+    value = owner.value("material", None)
+    if value is None:
+        return Material()
+    if isinstance(value, str):
+        if value not in PRESETS:
+            owner._bad("material", value, f"a table or one of the presets {sorted(PRESETS)}")
+        return Material.preset(value)
+    table = Table(value, owner.path("material"), owner.source)
+    preset = table.string("preset", None, sorted(PRESETS)) if table.has("preset") else None
+    base = Material.preset(preset) if preset else Material()
+    fields = {}
+    for key in ("density", "hem_mass"):
+        if table.has(key):
+            fields[key] = table.number(key, unit="kg/m^2" if key == "density" else "kg")
+    for key in ("stretch", "shear", "bend"):
+        if table.has(key):
+            fields[key] = _springs(table.table(key), None)
+    if table.has("damping"):
+        fields["damping"] = table.string("damping", choices=("axial", "relative"))
+    table.finish()
+    return table.build(lambda: Material(**{**base.__dict__, **fields}))
+
+
+def _grid_names(rows: int, cols: int) -> dict[str, list[int]]:
+    """Named particle sets of a grid (left = column 0, bottom = row 0)."""
+    return {
+        "bottom_left": [0], "bottom_right": [cols - 1], "top_left": [(rows - 1) * cols],
+        "top_right": [rows * cols - 1], "bottom": list(range(cols)),
+        "top": list(range((rows - 1) * cols, rows * cols)), "left": list(range(0, rows * cols, cols)),
+        "right": list(range(cols - 1, rows * cols, cols)),
+    }
+
+
+def _indices(table: Table, key: str, count: int, named: dict | None = None) -> list[int]:
+    value = table.value(key, [])
+    items = value if isinstance(value, list) else [value]
+    result = []
+    for item in items:
+        if isinstance(item, str) and named and item in named:
+            result += named[item]
+        elif isinstance(item, int) and not isinstance(item, bool) and 0 <= item < count:
+            result.append(item)
+        else:
+            names = f" or one of {list(named)}" if named else ""
+            table._bad(key, item, f"particle indices in [0, {count - 1}]{names}")
+    return sorted(set(result))
+
+
+def _body(table: Table, folder: Path, offset: int) -> tuple[Cloth, list[Handle]]:
+    """One [[bodies]] table -> (Cloth, its handles with particle indices shifted by `offset`)."""
+    kind = table.string("type", choices=BODY_TYPES)
+    if kind == "grid":
+        rows, cols = table.integer("rows", 16, 2), table.integer("cols", 16, 2)
+        mesh = table.build(grid_mesh, rows, cols, size=table.vector("size", (1.0, 1.0), 2, "m"),
+                           plane=table.string("plane", "xy", sorted(PLANES)),
+                           origin=table.vector("origin", (0.0, 0.0, 0.0), unit="m"))
+        names = _grid_names(rows, cols)
+        pinned = _indices(table, "pinned", mesh.vertex_count, names)
+        cloth = table.build(Cloth, mesh, _material(table), pinned=pinned)
+    elif kind == "mesh":
+        mesh = table.build(load_mesh, folder / table.string("path"))
+        scale = table.number("scale", 1.0, 0.0, strict=True)
+        translate = np.asarray(table.vector("translate", (0.0, 0.0, 0.0), unit="m"))
+        mesh = Mesh(mesh.vertices * scale + translate, mesh.triangles)
+        names = {}
+        cloth = table.build(Cloth, mesh, _material(table),
+                            pinned=_indices(table, "pinned", mesh.vertex_count))
+    elif kind == "string":
+        n = table.integer("n", 20, 2)
+        names = {"start": [0], "end": [n - 1]}
+        cloth = table.build(
+            body_builders.string, n, table.number("length", 1.0, unit="m"),
+            mass=table.number("mass", 0.1, unit="kg"),
+            stretch=_springs(table.table("stretch"), SpringParams(500.0, 0.1)),
+            bend=_springs(table.table("bend"), None),
+            start=table.vector("start", (0.0, 0.0, 0.0), unit="m"),
+            direction=table.vector("direction", (1.0, 0.0, 0.0)),
+            fixed=table.string("fixed", "start", body_builders.STRING_ENDS))
+    elif kind == "hair":
+        cloth = table.build(
+            body_builders.hair, table.integer("strands", 64, 1), table.integer("segments", 12, 1),
+            table.number("length", 0.3, unit="m"), anchor=table.vector("anchor", (0.0, 0.0, 0.0), unit="m"),
+            radius=table.number("radius", 0.1, unit="m"), mass=table.number("mass", 1e-3, unit="kg"),
+            stretch=_springs(table.table("stretch"), SpringParams(50.0, 0.02)),
+            bend=_springs(table.table("bend"), SpringParams(5.0, 0.005)))
+        names = {"roots": np.flatnonzero(cloth.pinned).tolist()}
+    else:
+        names = {}
+        cloth = table.build(
+            body_builders.tet_block, cells=table.vector("cells", (4, 4, 4), unit="cubes"),
+            size=table.vector("size", (0.4, 0.4, 0.4), unit="m"),
+            origin=table.vector("origin", (0.0, 0.0, 0.0), unit="m"),
+            density=table.number("density", 1000.0, unit="kg/m^3"),
+            stretch=_springs(table.table("stretch"), SpringParams(2e4, 5.0)))
+    handles = []
+    for h in table.tables("handles"):
+        particles = _indices(h, "particles", cloth.particle_count, names)
+        if not particles:
+            h.fail(f"{h.path('particles')} must list at least one particle")
+        handles.append(h.build(Handle, [p + offset for p in particles], _path(h.table("path", True))))
+        h.finish()
+    table.finish()
+    return cloth, handles
+
+
+def _path(table: Table):
+    kind = table.string("type", choices=("keyframes", "oscillation"))
+    if kind == "keyframes":
+        path = table.build(Keyframes, table.value("times"), table.value("values"),
+                           table.string("interpolation", "linear", INTERPOLATIONS))
+    else:
+        path = table.build(Oscillation, table.vector("amplitude", unit="m"),
+                           table.number("frequency", unit="Hz"), table.number("phase", 0.0),
+                           table.number("start", 0.0, unit="s"))
+    table.finish()
+    return path
+
+
+def _collider(table: Table):
+    kind = table.string("type", choices=sorted(COLLIDER_TYPES))
+    options = dict(thickness=table.number("thickness", 0.0, unit="m"),
+                   static_friction=table.number("static_friction", 0.0))
+    if table.has("kinetic_friction"):
+        options["kinetic_friction"] = table.number("kinetic_friction")
+    if table.has("path"):
+        options["path"] = _path(table.table("path"))
+    shape = {"plane": dict(point=("vector", (0.0, 0.0, 0.0)), normal=("vector", (0.0, 1.0, 0.0))),
+             "sphere": dict(centre=("vector", (0.0, 0.0, 0.0)), radius=("number", 1.0)),
+             "box": dict(lo=("vector", (-0.5, -0.5, -0.5)), hi=("vector", (0.5, 0.5, 0.5))),
+             "capsule": dict(a=("vector", (0.0, 0.0, 0.0)), b=("vector", (1.0, 0.0, 0.0)),
+                             radius=("number", 0.1))}[kind]
+    for key, (getter, default) in shape.items():
+        options[key] = getattr(table, getter)(key, default)
+    collider = table.build(COLLIDER_TYPES[kind], **options)
+    table.finish()
+    return collider
+
+
+def _wind(table: Table) -> Wind:
+    options = {"velocity": table.vector("velocity", (0.0, 0.0, 0.0), unit="m/s")}
+    for key in ("gust", "gust_period", "turbulence", "turbulence_scale", "air_density",
+                "drag_coefficient", "lift_coefficient", "friction_coefficient"):
+        if table.has(key):
+            options[key] = table.number(key)
+    if table.has("seed"):
+        options["seed"] = table.integer("seed")
+    wind = table.build(Wind, **options)
+    table.finish()
+    return wind
+
+
+def _camera(table: Table):
+    """An explicit Camera when `position` is given, else (None, direction) to fit the body."""
+    fov = table.number("fov", 40.0, 0.0, strict=True, unit="degrees")
+    if table.has("position"):
+        camera = table.build(Camera, position=table.vector("position", unit="m"),
+                             target=table.vector("target", (0.0, 0.0, 0.0), unit="m"),
+                             up=table.vector("up", (0.0, 1.0, 0.0)), fov=fov)
+        table.finish()
+        return camera, None
+    direction = table.vector("direction", (1.0, 0.6, 1.4))
+    table.finish()
+    return None, direction
+
+
+def _output(table: Table, name: str, colliders) -> Output:
+    formats = table.value("formats", ["png", "gif"])
+    if not isinstance(formats, list) or not set(formats) <= {"png", "gif", "mp4"} or "png" not in formats:
+        table._bad("formats", formats, 'a list of "png" (always) and any of "gif", "mp4"')
+    ground = table.value("ground", "auto")
+    if ground == "auto":
+        planes = [c for c in colliders if isinstance(c, Plane) and c.normal == (0.0, 1.0, 0.0)]
+        ground = planes[0].point[1] if planes else None
+    elif ground is False:
+        ground = None
+    elif isinstance(ground, bool) or not isinstance(ground, (int, float)):
+        table._bad("ground", ground, '"auto", false or a height [m]')
+    style_table = table.table("style")
+    style = _style(style_table) if style_table is not None else SurfaceStyle()
+    output = Output(folder=Path(table.string("folder", f"renders/{name}")),
+                    gif="gif" in formats, mp4="mp4" in formats,
+                    width=table.integer("width", 640, 16), height=table.integer("height", 360, 16),
+                    supersample=table.integer("supersample", 2, 1),
+                    gif_width=table.integer("gif_width", 480, 16),
+                    view=table.string("view", "3d", VIEWS), ground=ground, style=style)
+    table.finish()
+    return output
+
+
+def _style(table: Table) -> SurfaceStyle:
+    options = {}
+    for key in ("front", "back", "wire_colour", "particle_colour", "pin_colour"):
+        if table.has(key):
+            options[key] = table.vector(key)
+    for key in ("checker", "strain_max", "wireframe", "particles", "line_width", "checker_contrast"):
+        if table.has(key):
+            options[key] = table.number(key, minimum=0.0)
+    if table.has("strain"):
+        options["strain"] = table.boolean("strain")
+    style = table.build(SurfaceStyle, **options)
+    table.finish()
+    return style

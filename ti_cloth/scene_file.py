@@ -1,0 +1,129 @@
+"""Strict reading of nested TOML tables: every key is typed, range-checked and accounted for.
+
+A `Table` wraps one TOML table with its path in the file ("bodies[1].material"); each getter
+checks one key and records it as read; `finish()` rejects the keys nobody read, so a typo is an
+error naming the key, its value and the keys allowed there, never a silently ignored setting.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+MISSING = object()
+
+
+class SceneError(ValueError):
+    """A scene file that cannot be run: names the file, the key, the value and what is allowed."""
+
+
+def load_toml(path) -> dict:
+    """Parse a TOML file (tomllib on Python 3.11+, tomli before)."""
+    try:
+        import tomllib
+    except ModuleNotFoundError:      # Python 3.10
+        import tomli as tomllib
+    with open(path, "rb") as f:
+        try:
+            return tomllib.load(f)
+        except tomllib.TOMLDecodeError as err:
+            raise SceneError(f"{path}: not valid TOML: {err}") from None
+
+
+class Table:
+    """One table of a scene file, read key by key."""
+
+    def __init__(self, data, where: str, source: str):
+        self.where, self.source = where, source
+        if not isinstance(data, dict):
+            self.fail(f"{where} must be a table, got {data!r:.60}")
+        self.data, self.read = data, set()
+
+    def fail(self, message: str):
+        raise SceneError(f"{self.source}: {message}")
+
+    def path(self, key: str) -> str:
+        return f"{self.where}.{key}" if self.where else key
+
+    def has(self, key: str) -> bool:
+        return key in self.data
+
+    def _get(self, key: str, default):
+        self.read.add(key)
+        if key in self.data:
+            return self.data[key]
+        if default is MISSING:
+            self.fail(f"{self.path(key)} is required")
+        return default
+
+    def _bad(self, key: str, value, allowed: str):
+        self.fail(f"{self.path(key)} must be {allowed}, got {value!r:.80}")
+
+    def number(self, key: str, default=MISSING, minimum: float | None = None, *,
+               strict: bool = False, unit: str = "") -> float:
+        value = self._get(key, default)
+        bound = "" if minimum is None else f" {'>' if strict else '>='} {minimum}"
+        allowed = f"a number{bound}{' ' + unit if unit else ''}"
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            self._bad(key, value, allowed)
+        if minimum is not None and (value <= minimum if strict else value < minimum):
+            self._bad(key, value, allowed)
+        return float(value)
+
+    def integer(self, key: str, default=MISSING, minimum: int | None = None) -> int:
+        value = self._get(key, default)
+        if isinstance(value, bool) or not isinstance(value, int) or (minimum is not None and value < minimum):
+            self._bad(key, value, "an integer" + ("" if minimum is None else f" >= {minimum}"))
+        return value
+
+    def string(self, key: str, default=MISSING, choices=None) -> str:
+        value = self._get(key, default)
+        if not isinstance(value, str) or (choices is not None and value not in choices):
+            self._bad(key, value, "a string" if choices is None else f"one of {list(choices)}")
+        return value
+
+    def boolean(self, key: str, default=MISSING) -> bool:
+        value = self._get(key, default)
+        if not isinstance(value, bool):
+            self._bad(key, value, "true or false")
+        return value
+
+    def vector(self, key: str, default=MISSING, length: int = 3, unit: str = "") -> tuple:
+        value = self._get(key, default)
+        ok = (isinstance(value, (list, tuple)) and len(value) == length
+              and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                      for v in value))
+        if not ok:
+            self._bad(key, value, f"a list of {length} numbers{' [' + unit + ']' if unit else ''}")
+        return tuple(float(v) for v in value)
+
+    def value(self, key: str, default=MISSING) -> Any:
+        """The raw value, for keys whose type depends on the value (checked by the caller)."""
+        return self._get(key, default)
+
+    def table(self, key: str, required: bool = False) -> Table | None:
+        value = self._get(key, MISSING if required else None)
+        return None if value is None else Table(value, self.path(key), self.source)
+
+    def tables(self, key: str) -> list[Table]:
+        value = self._get(key, [])
+        if not isinstance(value, list):
+            self._bad(key, value, "an array of tables ([[" + self.path(key) + "]])")
+        return [Table(v, f"{self.path(key)}[{i}]", self.source) for i, v in enumerate(value)]
+
+    def finish(self, also=()) -> None:
+        """Reject every key that no getter asked for; `also`: further keys allowed here (for
+        the message) that this file did not use."""
+        unknown = [k for k in self.data if k not in self.read]
+        if unknown:
+            key = unknown[0]
+            allowed = ", ".join(sorted(self.read | set(also))) or "none"
+            self.fail(f"{self.path(key)} is not a known key (value {self.data[key]!r:.60}); "
+                      f"allowed here: {allowed}")
+
+    def build(self, make, *args, **kwargs):
+        """Call a constructor, reporting its ValueError under this table's path."""
+        try:
+            return make(*args, **kwargs)
+        except (ValueError, TypeError) as err:
+            self.fail(f"{self.where}: {err}")
