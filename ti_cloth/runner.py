@@ -40,8 +40,8 @@ def _frame_painter(scene, sim):
     if out.view == "2d":
         x = scene.cloth.particle_position @ np.asarray(FRONT).T
         lo, hi = x.min(axis=0), x.max(axis=0)
-        pad = 0.15 * max(float(np.max(hi - lo)), 1e-3)
-        view = SpringView((lo - pad, hi + pad), FRONT, res=(out.width, out.height))
+        reach = max(float(np.max(hi - lo)), 1e-3)   # a pinned body can swing this far
+        view = SpringView((lo - reach, hi + reach), FRONT, res=(out.width, out.height))
         cloth = scene.cloth
         return lambda: view.render(sim.positions(), cloth.spring_indices, cloth.spring_kind,
                                    sim.model.pinned, sim.spring_alive())
