@@ -183,3 +183,28 @@ def test_the_readme_scene_reference_is_a_valid_scene(tmp_path, f64):
     assert scene.name == "flag" and scene.wind is not None and len(scene.handles) == 1
     assert scene.strain_limit is not None and scene.tearing == 0.3
     scene.build().step(2)
+
+
+def test_a_mesh_body_from_a_file_next_to_the_scene(tmp_path, f64):
+    tc.save_mesh(tmp_path / "sheet.obj", tc.grid_mesh(4, 3, size=(0.3, 0.2)))
+    text = """
+[simulation]
+dt = 7e-4
+fps = 25
+[[bodies]]
+type = "mesh"
+path = "sheet.obj"
+scale = 2.0
+translate = [0.0, 1.0, 0.0]
+pinned = [0, 2]
+material = "denim"
+"""
+    scene = load_scene(write(tmp_path, text))
+    x = scene.cloth.particle_position
+    np.testing.assert_allclose(x.max(axis=0) - x.min(axis=0), [0.6, 0.4, 0.0], atol=1e-12)
+    assert x[:, 1].min() == pytest.approx(1.0)
+    assert scene.cloth.pinned.sum() == 2 and scene.cloth.material == tc.Material.preset("denim")
+    n = scene.resolved_substeps()
+    assert n == 58 and scene.frame_dt / n <= 7e-4 < scene.frame_dt / (n - 1)
+    with pytest.raises(SceneError, match="either dt or substeps"):
+        load_scene(write(tmp_path, text.replace("dt = 7e-4", "dt = 7e-4\nsubsteps = 3")))

@@ -119,6 +119,10 @@ def load_scene(path) -> Scene:
     substeps = sim.value("substeps", "auto")
     if substeps != "auto" and (isinstance(substeps, bool) or not isinstance(substeps, int) or substeps < 1):
         sim._bad("substeps", substeps, '"auto" or an integer >= 1')
+    if sim.has("dt"):
+        if sim.has("substeps"):
+            sim.fail("simulation: give either dt or substeps, not both")
+        substeps = max(1, math.ceil(1.0 / fps / sim.number("dt", minimum=0.0, strict=True, unit="s") - 1e-9))
     precision = sim.string("precision", "f32", PRECISIONS)
     tearing = sim.number("tearing", 0.0, 0.0, strict=True) if sim.has("tearing") else None
     limit = sim.table("strain_limit")
