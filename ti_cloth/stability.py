@@ -8,6 +8,9 @@ import numpy as np
 
 from .integrators import make_integrator
 
+RK4_IMAGINARY = 2.0 * math.sqrt(2.0)   # |1 + z + z^2/2 + z^3/6 + z^4/24| <= 1 on z = iy, |y| <= this
+RK4_RADIUS = 2.61                      # a left half-disc of this radius lies in RK4's region (min 2.6156)
+
 
 def stiffest_mode(cloth, drag: float = 0.0, pinned=None) -> tuple[np.ndarray, np.ndarray]:
     """Per-particle Gershgorin bounds (w^2 [1/s^2], damping rate g [1/s]) of the linearised
@@ -35,8 +38,10 @@ def stable_dt(cloth, integrator="symplectic_euler", drag: float = 0.0, pinned=No
     explicit Euler h < g / w^2, tightened for an overdamped mode (g > 2w) to the smaller root
     (g - sqrt(g^2 - 4 w^2)) / w^2 so the update does not overshoot (g / w^2 is the midpoint of
     the two roots, so one expression covers both cases); symplectic Euler and Verlet
-    h < (sqrt(g^2 + 4 w^2) - g) / w^2 (= 2 / w undamped); position-based integrators have no limit. The Gershgorin bound
-    overestimates w, so the prediction errs on the safe side.
+    h < (sqrt(g^2 + 4 w^2) - g) / w^2 (= 2 / w undamped); rk4 h |lambda| within its stability
+    region: 2 sqrt(2) / w undamped (its reach up the imaginary axis), else RK4_RADIUS / |lambda|
+    with |lambda| the mode's largest eigenvalue modulus; position-based integrators have no
+    limit. The Gershgorin bound overestimates w, so the prediction errs on the safe side.
     """
     integrator = make_integrator(integrator)
     if integrator.position_based:
@@ -48,4 +53,8 @@ def stable_dt(cloth, integrator="symplectic_euler", drag: float = 0.0, pinned=No
     w2, g = omega2[stiff], gamma[stiff]
     if integrator.name == "explicit_euler":
         return float(np.min((g - np.sqrt(np.maximum(g * g - 4.0 * w2, 0.0))) / w2))
+    if integrator.name == "rk4":
+        largest = np.maximum(np.sqrt(w2), 0.5 * g + np.sqrt(np.maximum(0.25 * g * g - w2, 0.0)))
+        reach = np.where(g > 0, RK4_RADIUS, RK4_IMAGINARY)
+        return float(np.min(reach / largest))
     return float(np.min((np.sqrt(g * g + 4.0 * w2) - g) / w2))

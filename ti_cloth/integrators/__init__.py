@@ -5,11 +5,12 @@ from __future__ import annotations
 from .base import Integrator
 from .explicit_euler import ExplicitEuler
 from .pbd import PBD
+from .rk4 import RK4
 from .symplectic_euler import SymplecticEuler
 from .verlet import Verlet
 
 INTEGRATORS: dict[str, type[Integrator]] = {
-    cls.name: cls for cls in (ExplicitEuler, SymplecticEuler, Verlet, PBD)
+    cls.name: cls for cls in (ExplicitEuler, SymplecticEuler, Verlet, PBD, RK4)
 }
 
 
@@ -23,5 +24,5 @@ def make_integrator(spec) -> Integrator:
     return INTEGRATORS[spec]()
 
 
-__all__ = ["Integrator", "ExplicitEuler", "SymplecticEuler", "Verlet", "PBD", "INTEGRATORS",
+__all__ = ["Integrator", "ExplicitEuler", "SymplecticEuler", "Verlet", "PBD", "RK4", "INTEGRATORS",
            "make_integrator"]
