@@ -134,7 +134,8 @@ def test_scene_without_colliders_compiles_no_collision_kernel(f64):
     sim.step(3)
     assert not colliders_module.resolve_collisions._primal.compiled_kernels
     assert not copy_positions._primal.compiled_kernels
-    tc.Simulation(particle(1.0), dt=1e-3, colliders=[tc.Plane()]).step(1)
+    grounded = tc.Simulation(particle(1.0), dt=1e-3, colliders=[tc.Plane()])
+    grounded.step(1)
     assert colliders_module.resolve_collisions._primal.compiled_kernels
 
 

@@ -127,7 +127,8 @@ def test_a_scene_compiles_only_what_it_lists(tmp_path, f64):
     full = GRID.replace("[forces]", '[forces]\nwind = { velocity = [2.0, 0.0, 1.0] }').replace(
         "duration = 0.1", "duration = 0.1\nstrain_limit = { max_strain = 0.1 }")
     full += '[[colliders]]\ntype = "sphere"\ncentre = [0.25, -0.5, 0.0]\nradius = 0.2\n'
-    load_scene(write(tmp_path, full)).build().step(5)
+    sim = load_scene(write(tmp_path, full)).build()
+    sim.step(5)
     assert all(k._primal.compiled_kernels for k in kernels)
 
 

@@ -169,8 +169,9 @@ def test_scene_without_wind_compiles_no_wind_kernel(f64):
     wind_module._accumulate_wind._primal.compiled_kernels.clear()
     tc.Simulation(tc.Cloth(tc.grid_mesh(4, 4), tc.Material(), pinned=[0]), dt=1e-4).step(3)
     assert not wind_module._accumulate_wind._primal.compiled_kernels
-    tc.Simulation(tc.Cloth(tc.grid_mesh(4, 4), tc.Material(), pinned=[0]), dt=1e-4,
-                  wind=tc.Wind(velocity=(1, 0, 0))).step(1)
+    windy = tc.Simulation(tc.Cloth(tc.grid_mesh(4, 4), tc.Material(), pinned=[0]), dt=1e-4,
+                          wind=tc.Wind(velocity=(1, 0, 0)))
+    windy.step(1)
     assert wind_module._accumulate_wind._primal.compiled_kernels
 
 

@@ -8,6 +8,7 @@ Calling `init` again resets Taichi: fields and simulations created before become
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,6 +29,7 @@ class BackendConfig:
 
 
 _config: BackendConfig | None = None
+_generation = 0   # bumped by every init: trees of an earlier runtime must not be destroyed
 
 
 def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None,
@@ -51,6 +53,8 @@ def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None,
     if threads is not None:
         options["cpu_max_num_threads"] = threads
     ti.init(**options)
+    global _generation
+    _generation += 1
     _config = BackendConfig(arch=arch, precision=precision, threads=threads)
     return _config
 
@@ -70,3 +74,53 @@ def real():
 def numpy_real():
     """The numpy float type matching `real()`."""
     return NUMPY_PRECISIONS[config().precision]
+
+
+class FieldGroup:
+    """The Taichi fields of one object, allocated together in one SNode tree that is freed
+    after the object is garbage-collected.
+
+    Without it Taichi gives every batch of fields created after a kernel has run a tree of its
+    own and never frees it; a process runs out of trees (512) after a few dozen simulations.
+    Freeing a tree makes Taichi drop every compiled kernel, so dead trees are freed in batches
+    of DEAD_TREE_BATCH, when a new group is allocated, not one by one as objects die.
+    Create every field through `scalar` / `vector`, then call `finalize(owner)` before use.
+    """
+
+    def __init__(self):
+        self._builder = ti.FieldsBuilder()
+
+    def scalar(self, dtype, shape):
+        """A scalar field of `shape` (an int, or () for a single value)."""
+        return self._place(ti.field(dtype), shape)
+
+    def vector(self, n: int, dtype, shape):
+        """A field of n-vectors of `shape` (an int)."""
+        return self._place(ti.Vector.field(n, dtype), shape)
+
+    def _place(self, field, shape):
+        if shape == ():
+            self._builder.place(field)
+        else:
+            self._builder.dense(ti.i, shape).place(field)
+        return field
+
+    def finalize(self, owner) -> None:
+        """Allocate the fields; their tree is freed some time after `owner` is collected."""
+        if len(_dead_trees) >= DEAD_TREE_BATCH:
+            free_dead_trees()
+        tree = self._builder.finalize()
+        finalizer = weakref.finalize(owner, _dead_trees.append, (tree, _generation))
+        finalizer.atexit = False
+
+
+DEAD_TREE_BATCH = 192
+_dead_trees: list = []
+
+
+def free_dead_trees() -> None:
+    """Free the trees of collected objects now (those of an earlier runtime are already gone)."""
+    dead, _dead_trees[:] = list(_dead_trees), []
+    for tree, generation in dead:
+        if generation == _generation:
+            tree.destroy()

@@ -41,16 +41,20 @@ class Model:
         inv_mass = np.where(self.pinned, 0.0, 1.0 / np.where(cloth.particle_mass > 0,
                                                               cloth.particle_mass, 1.0))
 
-        self.particle_mass = _upload(ti.field(real, shape=n), cloth.particle_mass)
-        self.particle_inv_mass = _upload(ti.field(real, shape=n), inv_mass)
-        self.particle_rest_position = _upload(ti.Vector.field(3, real, shape=n),
-                                              cloth.particle_position)
+        fields = backend.FieldGroup()
         s1 = max(s, 1)
-        self.spring_indices = _upload(ti.Vector.field(2, ti.i32, shape=s1), cloth.spring_indices)
-        self.spring_rest_length = _upload(ti.field(real, shape=s1), cloth.spring_rest_length)
-        self.spring_stiffness = _upload(ti.field(real, shape=s1), cloth.spring_stiffness)
-        self.spring_damping = _upload(ti.field(real, shape=s1), cloth.spring_damping)
-        self.spring_kind = _upload(ti.field(ti.i32, shape=s1), cloth.spring_kind)
+        self.particle_mass = fields.scalar(real, n)
+        self.particle_inv_mass = fields.scalar(real, n)
+        self.particle_rest_position = fields.vector(3, real, n)
+        self.spring_indices = fields.vector(2, ti.i32, s1)
+        self.spring_rest_length = fields.scalar(real, s1)
+        self.spring_stiffness = fields.scalar(real, s1)
+        self.spring_damping = fields.scalar(real, s1)
+        self.spring_kind = fields.scalar(ti.i32, s1)
+        self.particle_spring_start = fields.scalar(ti.i32, n + 1)
+        self.adjacency_spring = fields.scalar(ti.i32, max(2 * s, 1))
+        self.adjacency_other = fields.scalar(ti.i32, max(2 * s, 1))
+        fields.finalize(self)
 
         ends = cloth.spring_indices
         owner = np.concatenate([ends[:, 0], ends[:, 1]])
@@ -58,9 +62,18 @@ class Model:
         spring = np.concatenate([np.arange(s), np.arange(s)])
         order = np.lexsort((other, owner))
         start = np.concatenate([[0], np.cumsum(np.bincount(owner, minlength=n))])
-        self.particle_spring_start = _upload(ti.field(ti.i32, shape=n + 1), start)
-        self.adjacency_spring = _upload(ti.field(ti.i32, shape=max(2 * s, 1)), spring[order])
-        self.adjacency_other = _upload(ti.field(ti.i32, shape=max(2 * s, 1)), other[order])
+        for field, values in ((self.particle_mass, cloth.particle_mass),
+                              (self.particle_inv_mass, inv_mass),
+                              (self.particle_rest_position, cloth.particle_position),
+                              (self.spring_indices, cloth.spring_indices),
+                              (self.spring_rest_length, cloth.spring_rest_length),
+                              (self.spring_stiffness, cloth.spring_stiffness),
+                              (self.spring_damping, cloth.spring_damping),
+                              (self.spring_kind, cloth.spring_kind),
+                              (self.particle_spring_start, start),
+                              (self.adjacency_spring, spring[order]),
+                              (self.adjacency_other, other[order])):
+            _upload(field, values)
         self._colouring = None
 
     def state(self) -> State:
@@ -75,8 +88,10 @@ class Model:
         a particle; built on first use (only position-based integrators need it)."""
         if self._colouring is None:
             order, offsets = color_springs(self.cloth.spring_indices, self.particle_count)
-            field = _upload(ti.field(ti.i32, shape=max(self.spring_count, 1)), order)
-            self._colouring = (field, tuple(int(o) for o in offsets))
+            fields = backend.FieldGroup()
+            field = fields.scalar(ti.i32, max(self.spring_count, 1))
+            fields.finalize(self)
+            self._colouring = (_upload(field, order), tuple(int(o) for o in offsets))
         return self._colouring
 
 

@@ -30,15 +30,17 @@ class State:
 
     def __init__(self, particle_count: int, spring_count: int):
         real = backend.real()
-        self.particle_position = ti.Vector.field(3, real, shape=particle_count)
-        self.particle_velocity = ti.Vector.field(3, real, shape=particle_count)
-        self.particle_prev_position = ti.Vector.field(3, real, shape=particle_count)
-        self.particle_force = ti.Vector.field(3, real, shape=particle_count)
+        fields = backend.FieldGroup()
+        self.particle_position = fields.vector(3, real, particle_count)
+        self.particle_velocity = fields.vector(3, real, particle_count)
+        self.particle_prev_position = fields.vector(3, real, particle_count)
+        self.particle_force = fields.vector(3, real, particle_count)
         # Taichi fields cannot have length 0; kernels loop over model.spring_count instead.
-        self.spring_alive = ti.field(ti.i8, shape=max(spring_count, 1))
-        self.spring_torn_step = ti.field(ti.i32, shape=max(spring_count, 1))
-        self.first_bad_step = ti.field(ti.i32, shape=())
-        self.position_limit = ti.field(real, shape=())
+        self.spring_alive = fields.scalar(ti.i8, max(spring_count, 1))
+        self.spring_torn_step = fields.scalar(ti.i32, max(spring_count, 1))
+        self.first_bad_step = fields.scalar(ti.i32, ())
+        self.position_limit = fields.scalar(real, ())
+        fields.finalize(self)
         self.spring_alive.fill(1)
         self.spring_torn_step.fill(-1)
         self.first_bad_step[None] = NO_BAD_STEP

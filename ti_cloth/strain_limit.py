@@ -45,7 +45,9 @@ class StrainLimiter:
 
     def __init__(self, limit: StrainLimit, particle_count: int):
         self.limit = limit
-        self.before = ti.Vector.field(3, backend.real(), shape=particle_count)
+        fields = backend.FieldGroup()
+        self.before = fields.vector(3, backend.real(), particle_count)
+        fields.finalize(self)
 
     def apply(self, model, state, dt: float, tearing: bool) -> None:
         order, offsets = model.spring_colouring()

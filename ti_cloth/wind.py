@@ -99,27 +99,28 @@ class WindField:
         self.wind = wind
         real, np_real = backend.real(), backend.numpy_real()
         self.triangle_count = len(triangles)
-        self.triangle = ti.Vector.field(3, ti.i32, shape=self.triangle_count)
-        self.triangle.from_numpy(triangles.astype(np.int32))
-        self.triangle_edge_spring = ti.Vector.field(3, ti.i32, shape=self.triangle_count)
-        self.triangle_edge_spring.from_numpy(cloth.triangle_edge_spring.astype(np.int32))
-        self.triangle_force = ti.Vector.field(3, real, shape=self.triangle_count)
+        fields = backend.FieldGroup()
+        self.triangle = fields.vector(3, ti.i32, self.triangle_count)
+        self.triangle_edge_spring = fields.vector(3, ti.i32, self.triangle_count)
+        self.triangle_force = fields.vector(3, real, self.triangle_count)
+        self.particle_triangle_start = fields.scalar(ti.i32, cloth.particle_count + 1)
+        self.adjacency_triangle = fields.scalar(ti.i32, 3 * self.triangle_count)
+        self.mode_wave = fields.vector(3, real, TURBULENCE_MODES)
+        self.mode_direction = fields.vector(3, real, TURBULENCE_MODES)
+        self.mode_phase = fields.scalar(real, TURBULENCE_MODES)
+        fields.finalize(self)
 
         corner_of = triangles.ravel()
         order = np.argsort(corner_of, kind="stable")
         start = np.concatenate([[0], np.cumsum(np.bincount(corner_of, minlength=cloth.particle_count))])
-        self.particle_triangle_start = ti.field(ti.i32, shape=cloth.particle_count + 1)
-        self.particle_triangle_start.from_numpy(start.astype(np.int32))
-        self.adjacency_triangle = ti.field(ti.i32, shape=len(corner_of))
-        self.adjacency_triangle.from_numpy((order // 3).astype(np.int32))
-
         wave, direction, phase = wind.turbulence_modes()
-        self.mode_wave = ti.Vector.field(3, real, shape=TURBULENCE_MODES)
-        self.mode_direction = ti.Vector.field(3, real, shape=TURBULENCE_MODES)
-        self.mode_phase = ti.field(real, shape=TURBULENCE_MODES)
-        self.mode_wave.from_numpy(wave.astype(np_real))
-        self.mode_direction.from_numpy(direction.astype(np_real))
-        self.mode_phase.from_numpy(phase.astype(np_real))
+        for field, values in ((self.triangle, triangles), (self.particle_triangle_start, start),
+                              (self.triangle_edge_spring, cloth.triangle_edge_spring),
+                              (self.adjacency_triangle, order // 3)):
+            field.from_numpy(values.astype(np.int32))
+        for field, values in ((self.mode_wave, wave), (self.mode_direction, direction),
+                              (self.mode_phase, phase)):
+            field.from_numpy(values.astype(np_real))
         self.mean = ti.math.vec3(0.0)
         self.drift = ti.math.vec3(0.0)
         self.update(0.0)

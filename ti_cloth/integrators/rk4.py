@@ -20,10 +20,12 @@ class _Stages:
 
     def __init__(self, particle_count: int):
         real = backend.real()
-        self.x0 = ti.Vector.field(3, real, shape=particle_count)
-        self.v0 = ti.Vector.field(3, real, shape=particle_count)
-        self.sum_x = ti.Vector.field(3, real, shape=particle_count)
-        self.sum_v = ti.Vector.field(3, real, shape=particle_count)
+        fields = backend.FieldGroup()
+        self.x0 = fields.vector(3, real, particle_count)
+        self.v0 = fields.vector(3, real, particle_count)
+        self.sum_x = fields.vector(3, real, particle_count)
+        self.sum_v = fields.vector(3, real, particle_count)
+        fields.finalize(self)
 
 
 @ti.kernel
