@@ -125,5 +125,5 @@ class Table:
         """Call a constructor, reporting its ValueError under this table's path."""
         try:
             return make(*args, **kwargs)
-        except (ValueError, TypeError) as err:
+        except ValueError as err:
             self.fail(f"{self.where}: {err}")
