@@ -51,7 +51,7 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
     result = run_scene(scene, folder=out, frames=frames, progress=progress)
     folder = result.frames[0].parent if result.frames else (out or scene.output.folder)
     summary = (f"{len(result.frames)} frames of '{scene.name}' in {result.wall_seconds:.1f} s "
-               f"({result.steps} steps, dt = {scene.frame_dt / scene.resolved_substeps():.3g} s) -> "
+               f"({result.steps} steps, dt = {result.dt:.3g} s) -> "
                f"{folder}/ {' '.join(p.name for p in result.outputs)}")
     if result.interrupted:
         print(f"interrupted: {summary}", file=sys.stderr)

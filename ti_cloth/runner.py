@@ -25,6 +25,7 @@ class RunResult:
     frames: list[Path]
     outputs: list[Path]
     steps: int
+    dt: float
     wall_seconds: float
     interrupted: bool = False
     diverged: SimulationDiverged | None = None
@@ -66,7 +67,7 @@ def run_scene(scene, *, folder=None, frames: int | None = None, progress: bool =
     from tqdm import tqdm
 
     sim = scene.build()
-    substeps = scene.resolved_substeps()
+    substeps = round(scene.frame_dt / sim.dt)
     frames = scene.frames if frames is None else frames
     out = scene.output
     sequence = FrameSequence(folder or out.folder, fps=scene.fps, gif=out.gif, mp4=out.mp4, name=scene.name,
@@ -90,6 +91,6 @@ def run_scene(scene, *, folder=None, frames: int | None = None, progress: bool =
     finally:
         bar.close()
     outputs = sequence.close()
-    return RunResult(frames=sequence.paths, outputs=outputs, steps=sim.step_count,
+    return RunResult(frames=sequence.paths, outputs=outputs, steps=sim.step_count, dt=sim.dt,
                      wall_seconds=time.perf_counter() - start, interrupted=interrupted,
                      diverged=diverged)
