@@ -7,7 +7,8 @@ from .bodies import hair, soft_body, string, tet_block
 from .colliders import Box, Capsule, Collider, Plane, Sphere
 from .errors import SimulationDiverged
 from .forces import ForceSettings
-from .integrators import INTEGRATORS, PBD, RK4, ExplicitEuler, Integrator, SymplecticEuler, Verlet
+from .integrators import (INTEGRATORS, PBD, RK4, XPBD, ExplicitEuler, ImplicitEuler, Integrator,
+                          SymplecticEuler, Verlet)
 from .material import PRESETS, Material, SpringKind, SpringParams
 from .mesh import Mesh, grid_mesh, load_mesh, save_mesh, tet_grid_mesh
 from .model import Model
@@ -22,7 +23,8 @@ from .wind import Wind
 
 __all__ = [
     "init", "Box", "Capsule", "Collider", "Plane", "Sphere", "SimulationDiverged", "ForceSettings",
-    "INTEGRATORS", "Integrator", "ExplicitEuler", "SymplecticEuler", "Verlet", "PBD", "RK4", "PRESETS",
+    "INTEGRATORS", "Integrator", "ExplicitEuler", "SymplecticEuler", "Verlet", "PBD", "XPBD",
+    "ImplicitEuler", "RK4", "PRESETS",
     "Material", "SpringKind", "SpringParams", "Mesh", "grid_mesh", "tet_grid_mesh", "load_mesh",
     "save_mesh", "Model", "Keyframes", "Oscillation", "Handle", "Simulation", "stable_dt", "State",
     "StrainLimit", "Tearing", "Cloth", "Wind", "string", "hair", "soft_body", "tet_block",

@@ -40,11 +40,11 @@ def stable_dt(cloth, integrator="symplectic_euler", drag: float = 0.0, pinned=No
     the two roots, so one expression covers both cases); symplectic Euler and Verlet
     h < (sqrt(g^2 + 4 w^2) - g) / w^2 (= 2 / w undamped); rk4 h |lambda| within its stability
     region: 2 sqrt(2) / w undamped (its reach up the imaginary axis), else RK4_RADIUS / |lambda|
-    with |lambda| the mode's largest eigenvalue modulus; position-based integrators have no
-    limit. The Gershgorin bound overestimates w, so the prediction errs on the safe side.
+    with |lambda| the mode's largest eigenvalue modulus; position-based integrators and
+    implicit Euler have no limit. The Gershgorin bound overestimates w, so the prediction errs on the safe side.
     """
     integrator = make_integrator(integrator)
-    if integrator.position_based:
+    if not integrator.step_limited:
         return math.inf
     omega2, gamma = stiffest_mode(cloth, drag, pinned)
     stiff = omega2 > 0

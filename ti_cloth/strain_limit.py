@@ -9,7 +9,7 @@ import taichi as ti
 
 from . import backend
 from ._validate import finite_number, require
-from .constraints import relax_springs
+from .constraints import relax_springs, sweep
 from .material import SpringKind
 from .state import copy_positions
 
@@ -50,11 +50,10 @@ class StrainLimiter:
         fields.finalize(self)
 
     def apply(self, model, state, dt: float, tearing: bool) -> None:
-        order, offsets = model.spring_colouring()
         copy_positions(state, self.before)
-        for _ in range(self.limit.passes):   # the lecture's relaxation, for stretched springs only
-            relax_springs(model, state, order, offsets, self.limit.kind_mask(), tearing,
-                          self.limit.max_strain, True)
+        # the lecture's relaxation, for stretched springs only
+        sweep(relax_springs, model, state, self.limit.passes, self.limit.kind_mask(), tearing,
+              self.limit.max_strain, True)
         _follow_velocity(state, self, dt)
 
 

@@ -4,13 +4,15 @@ from __future__ import annotations
 
 from .base import Integrator
 from .explicit_euler import ExplicitEuler
+from .implicit_euler import ImplicitEuler
 from .pbd import PBD
 from .rk4 import RK4
 from .symplectic_euler import SymplecticEuler
 from .verlet import Verlet
+from .xpbd import XPBD
 
 INTEGRATORS: dict[str, type[Integrator]] = {
-    cls.name: cls for cls in (ExplicitEuler, SymplecticEuler, Verlet, PBD, RK4)
+    cls.name: cls for cls in (ExplicitEuler, SymplecticEuler, Verlet, PBD, XPBD, ImplicitEuler, RK4)
 }
 
 
@@ -24,5 +26,5 @@ def make_integrator(spec) -> Integrator:
     return INTEGRATORS[spec]()
 
 
-__all__ = ["Integrator", "ExplicitEuler", "SymplecticEuler", "Verlet", "PBD", "RK4", "INTEGRATORS",
-           "make_integrator"]
+__all__ = ["Integrator", "ExplicitEuler", "SymplecticEuler", "Verlet", "PBD", "XPBD", "ImplicitEuler",
+           "RK4", "INTEGRATORS", "make_integrator"]

@@ -15,7 +15,8 @@ class Integrator:
 
     name: ClassVar[str]
     order: ClassVar[int]           # global order of accuracy in positions, smooth conservative forces
-    position_based: ClassVar[bool] = False  # True: springs are constraints, k and kd unused
+    position_based: ClassVar[bool] = False  # True: springs are constraints projected on positions
+    step_limited: ClassVar[bool] = True     # False: stable at any step (stable_dt is inf)
 
     def step(self, model, state, dt: float, forces, step: int) -> None:
         raise NotImplementedError

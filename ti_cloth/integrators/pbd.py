@@ -4,7 +4,7 @@
 import taichi as ti
 
 from .._validate import finite_number, require
-from ..constraints import relax_springs
+from ..constraints import relax_springs, sweep
 from ..forces import compute_forces
 from ..material import SpringKind
 from ..state import store_particle
@@ -39,6 +39,7 @@ class PBD(Integrator):
     name = "pbd"
     order = 1
     position_based = True
+    step_limited = False
 
     def __init__(self, *, iterations: int = 2, damping: float = 0.0, stiffness=None):
         require(isinstance(iterations, int) and not isinstance(iterations, bool) and iterations >= 1,
@@ -62,8 +63,6 @@ class PBD(Integrator):
         verlet_advance(model, state, dt, self.damping, not state.prev_valid, step)
         state.prev_valid = True
         if model.spring_count:
-            order, offsets = model.spring_colouring()
             stiffness = ti.math.vec3(*(self.stiffness[k.name.lower()] for k in SpringKind))
-            for _ in range(self.iterations):
-                relax_springs(model, state, order, offsets, stiffness, forces.tearing, 0.0, False)
+            sweep(relax_springs, model, state, self.iterations, stiffness, forces.tearing, 0.0, False)
         _update_velocity(model, state, dt, step)
