@@ -1,7 +1,6 @@
 """implicit_euler (Baraff-Witkin, CG) and xpbd (compliance 1/k): against a dense solve of the
 same linear system, the exact energy decay of backward Euler, and the Hookean statics."""
 
-import math
 
 import numpy as np
 import pytest

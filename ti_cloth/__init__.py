@@ -14,7 +14,7 @@ from .mesh import Mesh, grid_mesh, load_mesh, save_mesh, tet_grid_mesh
 from .model import Model
 from .paths import Keyframes, Oscillation
 from .simulation import Handle, Simulation
-from .stability import stable_dt
+from .stability import AUTO_MAX_DT, auto_dt, auto_substeps, stable_dt
 from .state import State
 from .strain_limit import StrainLimit
 from .tearing import Tearing
@@ -24,10 +24,10 @@ from .wind import Wind
 __all__ = [
     "init", "Box", "Capsule", "Collider", "Plane", "Sphere", "SimulationDiverged", "ForceSettings",
     "INTEGRATORS", "Integrator", "ExplicitEuler", "SymplecticEuler", "Verlet", "PBD", "XPBD",
-    "ImplicitEuler", "RK4", "PRESETS",
-    "Material", "SpringKind", "SpringParams", "Mesh", "grid_mesh", "tet_grid_mesh", "load_mesh",
-    "save_mesh", "Model", "Keyframes", "Oscillation", "Handle", "Simulation", "stable_dt", "State",
-    "StrainLimit", "Tearing", "Cloth", "Wind", "string", "hair", "soft_body", "tet_block",
+    "ImplicitEuler", "RK4", "PRESETS", "Material", "SpringKind", "SpringParams", "Mesh", "grid_mesh",
+    "tet_grid_mesh", "load_mesh", "save_mesh", "Model", "Keyframes", "Oscillation", "Handle",
+    "Simulation", "stable_dt", "auto_dt", "auto_substeps", "AUTO_MAX_DT", "State", "StrainLimit",
+    "Tearing", "Cloth", "Wind", "string", "hair", "soft_body", "tet_block",
 ]
 
 

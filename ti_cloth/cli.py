@@ -1,4 +1,4 @@
-"""The `ti-cloth` command (run, info) and the shared entry point of the demo scripts."""
+"""The `ti-cloth` command (run, study, info) and the shared entry point of the demo scripts."""
 
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ import argparse
 import os
 import platform
 import sys
+import time
 from pathlib import Path
 
 ARCH_CHOICES = ["cpu", "gpu", "cuda", "vulkan"]
@@ -63,6 +64,34 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
     return 0, result.frames
 
 
+def study(scene_path, *, out=None, integrators=None, dts=None, precisions=("f64", "f32"),
+          iterations=None, duration=None, arch="cpu", plot=True, progress=True) -> int:
+    """Run the speed/accuracy study of a scene and write study.csv, study.md, study.png."""
+    from . import study as study_module
+    from .scene import load_scene
+    from .scene_file import SceneError
+
+    try:
+        scene = load_scene(scene_path)
+    except (SceneError, FileNotFoundError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    options = {"integrators": integrators, "dts": dts, "iterations": iterations}
+    options = {k: v for k, v in options.items() if v is not None}
+    start = time.perf_counter()
+    try:
+        result = study_module.run_study(scene, precisions=tuple(precisions), duration=duration,
+                                        arch=arch, progress=progress, **options)
+        written = result.write(out or Path("renders") / f"study_{scene.name}", plot=plot)
+    except (ValueError, RuntimeError, ImportError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    print(result.markdown())
+    print(f"{len(result.runs)} runs in {time.perf_counter() - start:.0f} s -> "
+          f"{' '.join(str(p) for p in written)}")
+    return 0
+
+
 def info() -> int:
     """Print versions, the architecture Taichi starts on and the CPU thread count."""
     from importlib.metadata import version
@@ -93,10 +122,32 @@ def main(argv=None) -> int:
     run_parser.add_argument("scene", type=Path, help="scene file (TOML)")
     run_parser.add_argument("--out", type=Path, help="output folder (default: the scene's)")
     _run_arguments(run_parser)
+    study_parser = commands.add_parser("study", help="speed/accuracy study: integrator x dt "
+                                       "against an rk4/f64 reference -> CSV, table, plot")
+    study_parser.add_argument("scene", type=Path, help="scene file (TOML)")
+    study_parser.add_argument("--out", type=Path, help="output folder (default renders/study_<name>)")
+    study_parser.add_argument("--integrators", nargs="+", metavar="NAME",
+                              help="integrators to sweep (default: all)")
+    study_parser.add_argument("--dt", nargs="+", type=float, dest="dts", metavar="DT",
+                              help="steps [s], each frame_dt / an integer (default: frame_dt / 2^k "
+                                   "down to a quarter of the smallest stable step)")
+    study_parser.add_argument("--precisions", nargs="+", choices=["f32", "f64"], default=["f64", "f32"])
+    study_parser.add_argument("--iterations", nargs="+", type=_positive, metavar="N",
+                              help="pbd/xpbd passes per step to sweep (default 4 16)")
+    study_parser.add_argument("--duration", type=float, help="simulated seconds (default: the scene's)")
+    study_parser.add_argument("--arch", choices=ARCH_CHOICES, default="cpu")
+    study_parser.add_argument("--no-plot", action="store_true", help="skip study.png (no matplotlib)")
+    study_parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     commands.add_parser("info", help="versions, architecture and threads")
     args = parser.parse_args(argv)
     if args.command == "info":
         return info()
+    if args.command == "study":
+        if args.duration is not None and not args.duration > 0:
+            parser.error(f"--duration must be > 0, got {args.duration}")
+        return study(args.scene, out=args.out, integrators=args.integrators, dts=args.dts,
+                     precisions=args.precisions, iterations=args.iterations, duration=args.duration,
+                     arch=args.arch, plot=not args.no_plot, progress=not args.no_progress)
     code, _ = run(args.scene, out=args.out, frames=args.frames, arch=args.arch,
                   precision=args.precision, progress=not args.no_progress)
     return code

@@ -79,8 +79,7 @@ class Model:
     def state(self) -> State:
         """A fresh State at the rest configuration, at rest, with every spring intact."""
         state = State(self.particle_count, self.spring_count)
-        state.particle_position.copy_from(self.particle_rest_position)
-        state.particle_prev_position.copy_from(self.particle_rest_position)
+        state.reset(self.particle_rest_position)
         return state
 
     def spring_colouring(self):

@@ -23,7 +23,7 @@ from .render.camera import Camera
 from .render.renderer import SurfaceStyle
 from .scene_file import SceneError, Table, load_toml
 from .simulation import Handle, Simulation
-from .stability import stable_dt
+from .stability import auto_substeps
 from .strain_limit import StrainLimit
 from .topology import Cloth
 from .wind import Wind
@@ -32,8 +32,6 @@ BODY_TYPES = ("grid", "mesh", "string", "hair", "tet_block")
 COLLIDER_TYPES = {"plane": Plane, "sphere": Sphere, "box": Box, "capsule": Capsule}
 PRECISIONS = ("f32", "f64")
 VIEWS = ("3d", "2d")
-# "auto" substeps: dt at most half the predicted stable step, and at most this [s].
-AUTO_MAX_DT = 1.0 / 240.0
 
 
 @dataclass
@@ -81,21 +79,20 @@ class Scene:
         return 1.0 / self.fps
 
     def resolved_substeps(self) -> int:
-        """Steps per frame; "auto": the fewest with dt <= min(stable_dt / 2, AUTO_MAX_DT)."""
+        """Steps per frame; "auto": stability.auto_substeps (dt <= min(stable_dt / 2, 1/240 s))."""
         if self.substeps != "auto":
             return self.substeps
-        stable = stable_dt(self.cloth, self.integrator, self.drag)
-        if stable == 0:
-            raise SceneError(f"{self.source}: no stable step exists for {self.integrator.name} "
-                             "with these springs (undamped springs make explicit Euler unstable at "
-                             "any step); add spring damping or choose another integrator")
-        dt = min(0.5 * stable, AUTO_MAX_DT)
-        return max(1, math.ceil(self.frame_dt / dt - 1e-9))
+        try:
+            return auto_substeps(self.cloth, self.integrator, self.frame_dt, self.drag)
+        except ValueError as err:
+            raise SceneError(f"{self.source}: {err}") from None
 
-    def build(self) -> Simulation:
-        """The Simulation of this scene (call ti_cloth.init first)."""
-        return Simulation(self.cloth, integrator=self.integrator,
-                          dt=self.frame_dt / self.resolved_substeps(), gravity=self.gravity,
+    def build(self, integrator=None, dt: float | None = None) -> Simulation:
+        """The Simulation of this scene (call ti_cloth.init first); `integrator` and `dt`
+        replace the scene's (the speed/accuracy study sweeps them)."""
+        integrator = self.integrator if integrator is None else integrator
+        dt = self.frame_dt / self.resolved_substeps() if dt is None else dt
+        return Simulation(self.cloth, integrator=integrator, dt=dt, gravity=self.gravity,
                           drag=self.drag, wind=self.wind, tearing=self.tearing,
                           handles=self.handles, colliders=self.colliders,
                           strain_limit=self.strain_limit)

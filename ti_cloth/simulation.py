@@ -15,7 +15,7 @@ from .errors import SimulationDiverged
 from .forces import ForceSettings, energies
 from .integrators import make_integrator
 from .model import Model
-from .stability import stable_dt
+from .stability import auto_dt, stable_dt
 from .strain_limit import StrainLimit, StrainLimiter
 from .state import NO_BAD_STEP, copy_positions
 from .tearing import Tearing, torn_triangles
@@ -59,7 +59,8 @@ class Simulation:
     """Advance a Cloth in time with one integrator and fixed step dt.
 
     cloth: the body. integrator: a name from ti_cloth.INTEGRATORS or an Integrator instance.
-    dt: step [s], > 0. gravity: [m/s^2], any vector. drag: uniform air drag [1/s], >= 0.
+    dt: step [s], > 0, or "auto": half the predicted stable step, at most 1/240 s
+        (stability.auto_dt; ValueError if no stable step exists). gravity: [m/s^2], any vector. drag: uniform air drag [1/s], >= 0.
     tearing: None (off: the tear kernel is never compiled nor launched), a tear strain
         (float) or a Tearing.
     handles: scripted particles (Handle); their particles are pinned.
@@ -79,9 +80,14 @@ class Simulation:
         require(isinstance(cloth, Cloth), "cloth", cloth, "a ti_cloth.Cloth")
         self.cloth = cloth
         self.integrator = make_integrator(integrator)
-        self.dt = finite_number("dt", dt, 0.0, strict=True, unit="s")
         gravity = as_array("gravity", gravity, np.float64, (3,))
         drag = finite_number("drag", drag, 0.0, unit="1/s")
+        if isinstance(dt, str) and dt == "auto":
+            pinned = cloth.pinned.copy()
+            for h in handles:
+                pinned[np.asarray(h.particles)] = True
+            dt = auto_dt(cloth, self.integrator, drag, pinned)
+        self.dt = finite_number("dt", dt, 0.0, strict=True, unit="s")
         if tearing is not None and not isinstance(tearing, Tearing):
             tearing = Tearing(stretch=tearing)
         self.tearing = tearing
@@ -111,6 +117,21 @@ class Simulation:
         self.colliders = ColliderSet(colliders, cloth.particle_count) if colliders else None
         self.step_count = 0
         self._diverged: SimulationDiverged | None = None
+        if self.handles:
+            self._apply_handles(0.0)
+            self.state.particle_velocity.fill(0)
+
+    def restart(self, dt: float | None = None) -> None:
+        """Back to time 0: rest positions, at rest, every spring intact, handles and colliders
+        at their start, the divergence flag cleared; `dt` [s] replaces the step if given.
+        The compiled kernels are kept, so a sweep over dt compiles once."""
+        if dt is not None:
+            self.dt = finite_number("dt", dt, 0.0, strict=True, unit="s")
+        self.state.reset(self.model.particle_rest_position)
+        self.step_count = 0
+        self._diverged = None
+        if self.colliders is not None:
+            self.colliders.place(0.0)
         if self.handles:
             self._apply_handles(0.0)
             self.state.particle_velocity.fill(0)

@@ -41,10 +41,17 @@ class State:
         self.first_bad_step = fields.scalar(ti.i32, ())
         self.position_limit = fields.scalar(real, ())
         fields.finalize(self)
+        self.position_limit[None] = 1e6
+        self.prev_valid = False
+
+    def reset(self, rest_position) -> None:
+        """Positions (and history) = rest_position, at rest, every spring intact, no bad step."""
+        self.particle_position.copy_from(rest_position)
+        self.particle_prev_position.copy_from(rest_position)
+        self.particle_velocity.fill(0)
         self.spring_alive.fill(1)
         self.spring_torn_step.fill(-1)
         self.first_bad_step[None] = NO_BAD_STEP
-        self.position_limit[None] = 1e6
         self.prev_valid = False
 
 

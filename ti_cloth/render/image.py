@@ -30,7 +30,7 @@ def frame_path(folder, index: int) -> Path:
 
 
 @contextmanager
-def _atomic(path: Path):
+def atomic_path(path: Path):
     """Yield a hidden temporary name beside `path` (same extension: writers pick the format
     from it); rename it to `path` when the block succeeds, delete it when it fails."""
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -46,7 +46,7 @@ def write_png(path, image: np.ndarray) -> Path:
     """Write an (H, W, 3) uint8 image under a temporary name, then rename: an interrupted run
     never leaves a half-written frame."""
     path = Path(path)
-    with _atomic(path) as tmp:
+    with atomic_path(path) as tmp:
         iio.imwrite(tmp, image)
     return path
 
@@ -72,7 +72,7 @@ def write_gif(frames, path, fps: float = 30.0, width: int | None = None) -> Path
             "a positive int or None")
     images = list(_images(frames, width))
     require(len(images) > 0, "frames", frames, "at least one frame")
-    with _atomic(path) as tmp:
+    with atomic_path(path) as tmp:
         iio.imwrite(tmp, np.stack(images), duration=1000.0 / fps, loop=0)
     return path
 
@@ -88,7 +88,7 @@ def write_mp4(frames, path, fps: float = 30.0, quality: float = 8.0) -> Path:
     fps = finite_number("fps", fps, 0.0, strict=True, unit="frames/s")
     quality = finite_number("quality", quality, 0.0)
     require(quality <= 10, "quality", quality, "a number in [0, 10]")
-    with _atomic(path) as tmp:
+    with atomic_path(path) as tmp:
         count = 0
         with iio2.get_writer(tmp, format="FFMPEG", mode="I", fps=fps, codec="libx264",
                              quality=quality, pixelformat="yuv420p", macro_block_size=2) as writer:

@@ -1,0 +1,355 @@
+"""The speed/accuracy study: how much error each integrator and step buy, at what cost, and
+where each one blows up, for one scene.
+
+    reference = reference_trajectory(scene)          # rk4, f64, converged by halving dt
+    result = run_study(scene)                        # integrator x dt (x precision, x iterations)
+    result.write("renders/study_cloth")              # study.csv, study.md, study.png
+
+Every run starts the scene from rest and samples positions at each frame time; errors are
+against the reference at the same times, as a fraction of the cloth size (the diagonal of its
+rest bounding box). Cost is wall time per simulated second of the stepping alone (kernels are
+compiled before timing; one Simulation per integrator and precision is restarted for each dt).
+Precisions are run one after the other because switching re-initialises Taichi.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import backend
+from .errors import SimulationDiverged
+from .integrators import INTEGRATORS, make_integrator
+from .stability import stable_dt
+
+REFERENCE_TOLERANCE = 1e-9     # halving the reference step changes positions by less than this x size
+MAX_REFERENCE_HALVINGS = 8
+DEFAULT_INTEGRATORS = ("explicit_euler", "symplectic_euler", "verlet", "rk4", "implicit_euler",
+                       "pbd", "xpbd")
+DEFAULT_ITERATIONS = (4, 16)   # pbd / xpbd passes per step
+ITERATED = ("pbd", "xpbd")
+GUARD_SIZES = 100.0            # a run is diverged once a coordinate leaves 100 cloth sizes,
+ENERGY_BLOWUP = 1.0            # or its energy is off the reference's by more than the energy scale
+
+
+@dataclass(frozen=True)
+class Reference:
+    """Positions (samples, N, 3) [m] and total energies [J] at `times` [s], computed with rk4 in
+    f64 at step `dt`; `change` is the largest position change (fraction of `size`) of the last
+    halving."""
+
+    times: np.ndarray
+    positions: np.ndarray
+    energies: np.ndarray
+    dt: float
+    change: float
+    size: float
+    energy_scale: float
+
+
+@dataclass(frozen=True)
+class Run:
+    """One integrator at one dt, precision and iteration count, with its metrics.
+
+    max_error / rms_error: particle position error against the reference, max and RMS over all
+    particles and sample times, as a fraction of the cloth size; energy_drift: largest
+    |E - E_ref| at the sample times as a fraction of the energy scale (total weight x cloth
+    size, or the reference's largest kinetic + spring energy without gravity); max_strain:
+    largest spring strain (|l - L| / L) at the sample times; cost: wall seconds per simulated
+    second. diverged: the divergence guard tripped (NaN, inf, a coordinate beyond GUARD_SIZES
+    cloth sizes; metrics NaN) or the energy left the reference's by more than ENERGY_BLOWUP
+    energy scales (more than gravity can do across the whole cloth: an explicit integrator
+    blowing up more slowly; metrics kept); diverged_step: the step where that was seen (-1: none).
+    """
+
+    integrator: str
+    precision: str
+    iterations: int | None
+    dt: float
+    steps: int
+    wall_seconds: float
+    cost: float
+    diverged: bool
+    diverged_step: int
+    max_error: float
+    rms_error: float
+    energy_drift: float
+    max_strain: float
+    predicted_stable_dt: float
+
+    @property
+    def label(self) -> str:
+        name = self.integrator if self.iterations is None else f"{self.integrator}({self.iterations})"
+        return f"{name} {self.precision}"
+
+
+def cloth_size(cloth) -> float:
+    """Diagonal of the rest bounding box [m]."""
+    x = cloth.particle_position
+    return float(np.linalg.norm(x.max(axis=0) - x.min(axis=0)))
+
+
+def sample_times(scene, duration: float | None = None) -> np.ndarray:
+    """Every frame time of the scene (or of `duration` seconds at its fps)."""
+    frames = scene.frames if duration is None else max(1, round(duration * scene.fps))
+    return scene.frame_dt * np.arange(1, frames + 1)
+
+
+def _trajectory(sim, times: np.ndarray, steps_per_frame: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """Positions and energies at the sample times, and the wall time spent stepping."""
+    positions, energies, wall = [], [], 0.0
+    frame_steps = np.rint(times / times[0]).astype(int) * steps_per_frame
+    done = 0
+    for target in frame_steps:
+        start = time.perf_counter()
+        sim.step(int(target - done))
+        positions.append(sim.positions())   # also waits for the device: part of the cost
+        wall += time.perf_counter() - start
+        energies.append(sim.energy()["total"])
+        done = target
+    return np.array(positions), np.array(energies), wall
+
+
+def reference_trajectory(scene, duration: float | None = None, arch: str = "cpu",
+                         tolerance: float = REFERENCE_TOLERANCE) -> Reference:
+    """rk4 in f64 from the largest frame_dt / 2^k below half its stable step, halved until the
+    positions at every sample change by less than tolerance x cloth size (at most
+    MAX_REFERENCE_HALVINGS halvings; then RuntimeError names the change reached)."""
+    backend.init(arch=arch, precision="f64")
+    times = sample_times(scene, duration)
+    size = cloth_size(scene.cloth)
+    limit = 0.5 * stable_dt(scene.cloth, "rk4", scene.drag)
+    substeps = 2 ** max(0, math.ceil(math.log2(scene.frame_dt / limit))) if math.isfinite(limit) else 1
+    sim = scene.build(integrator="rk4", dt=scene.frame_dt / substeps)
+    previous, _, _ = _trajectory(sim, times, substeps)
+    for _ in range(MAX_REFERENCE_HALVINGS):
+        substeps *= 2
+        sim.restart(scene.frame_dt / substeps)
+        positions, energies, _ = _trajectory(sim, times, substeps)
+        change = float(np.abs(positions - previous).max()) / size
+        if change < tolerance:
+            return Reference(times, positions, energies, sim.dt, change, size,
+                             _energy_scale(scene, energies, size))
+        previous = positions
+    raise RuntimeError(f"reference: halving rk4's step to {sim.dt:.3g} s still changes positions by "
+                       f"{change:.3g} of the cloth size (asked: < {tolerance:g})")
+
+
+def _energy_scale(scene, reference_energies: np.ndarray, size: float) -> float:
+    weight = float(scene.cloth.particle_mass.sum() * np.linalg.norm(scene.gravity))
+    if weight > 0:
+        return weight * size
+    return max(float(np.abs(reference_energies - reference_energies[0]).max()), 1e-300)
+
+
+def _max_strain(cloth, positions: np.ndarray) -> float:
+    i, j = cloth.spring_indices.T
+    rest = cloth.spring_rest_length
+    keep = rest > 0
+    if not keep.any():
+        return 0.0
+    lengths = np.linalg.norm(positions[:, i] - positions[:, j], axis=2)
+    return float(np.abs(lengths[:, keep] / rest[keep] - 1.0).max())
+
+
+def default_dts(scene, integrators) -> list[float]:
+    """frame_dt / 2^k from one step per frame down to the first step at or below a quarter of
+    the smallest predicted stable step of the step-limited integrators (at least 6 steps)."""
+    limits = [stable_dt(scene.cloth, name, scene.drag) for name in integrators]
+    limits = [s for s in limits if 0 < s < math.inf]
+    smallest = 0.25 * min(limits) if limits else scene.frame_dt / 32
+    count = max(6, math.ceil(math.log2(scene.frame_dt / smallest)) + 1)
+    return [scene.frame_dt / 2 ** k for k in range(count)]
+
+
+@dataclass
+class StudyResult:
+    """The reference and every run; write() produces the CSV, the markdown table and the plot."""
+
+    scene_name: str
+    reference: Reference
+    runs: list[Run] = field(default_factory=list)
+
+    def largest_stable_dt(self) -> dict[str, float]:
+        """Per configuration (label): the largest dt of the sweep such that it and every
+        smaller dt ran without diverging (0 if the smallest diverged)."""
+        result = {}
+        for label in dict.fromkeys(r.label for r in self.runs):
+            ok = 0.0
+            for run in sorted((r for r in self.runs if r.label == label), key=lambda r: r.dt):
+                if run.diverged:
+                    break
+                ok = run.dt
+            result[label] = ok
+        return result
+
+    def csv_text(self) -> str:
+        out = io.StringIO()
+        names = list(asdict(self.runs[0])) if self.runs else []
+        writer = csv.DictWriter(out, fieldnames=names, lineterminator="\n")
+        writer.writeheader()
+        for run in self.runs:
+            writer.writerow(asdict(run))
+        return out.getvalue()
+
+    def markdown(self) -> str:
+        """Pareto-optimal runs first (no other run is both cheaper and more accurate), then the
+        largest stable step of each configuration."""
+        ref = self.reference
+        lines = [f"Scene `{self.scene_name}`: error against rk4/f64 at dt = {ref.dt:.3g} s "
+                 f"(halving changed positions by {ref.change:.1e} of the {ref.size:.3g} m cloth), "
+                 f"{len(ref.times)} samples over {ref.times[-1]:.3g} s.", "",
+                 "| integrator | precision | dt [s] | max error | RMS error | energy drift | "
+                 "max strain | cost [s/s] | Pareto |",
+                 "|---|---|---|---|---|---|---|---|---|"]
+        front = {id(r) for r in pareto_front(self.runs)}
+        for run in sorted(self.runs, key=lambda r: (r.label, -r.dt)):
+            name = run.integrator if run.iterations is None else f"{run.integrator} ({run.iterations} it)"
+            if run.diverged:
+                metrics = f"diverged at step {run.diverged_step} | | | | {run.cost:.3g} |"
+            else:
+                metrics = (f"{run.max_error:.2e} | {run.rms_error:.2e} | {run.energy_drift:.2e} | "
+                           f"{run.max_strain:.3f} | {run.cost:.3g} |")
+            lines.append(f"| {name} | {run.precision} | {run.dt:.3g} | {metrics} "
+                         f"{'yes' if id(run) in front else ''} |")
+        lines += ["", "| configuration | largest stable dt in the sweep [s] | predicted [s] |", "|---|---|---|"]
+        predicted = {r.label: r.predicted_stable_dt for r in self.runs}
+        for label, dt in self.largest_stable_dt().items():
+            lines.append(f"| {label} | {dt:.3g} | {predicted[label]:.3g} |")
+        return "\n".join(lines) + "\n"
+
+    def plot(self, path) -> Path:
+        """Log-log max error against cost, one line per configuration, the Pareto front
+        outlined (needs matplotlib: pip install "ti_cloth[study]")."""
+        try:
+            import matplotlib
+        except ImportError as err:
+            raise ImportError('the study plot needs matplotlib: pip install "ti_cloth[study]" '
+                              "(or pip install matplotlib)") from err
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        from .render.image import atomic_path
+
+        fig, ax = plt.subplots(figsize=(8, 5.5), dpi=100)
+        for label in dict.fromkeys(r.label for r in self.runs):
+            runs = sorted((r for r in self.runs if r.label == label and not r.diverged), key=lambda r: r.cost)
+            if runs:
+                ax.plot([r.cost for r in runs], [max(r.max_error, 1e-16) for r in runs], marker="o",
+                        ms=4, lw=1, label=label, ls="--" if "f32" in label else "-")
+        front = sorted(pareto_front(self.runs), key=lambda r: r.cost)
+        if front:
+            ax.plot([r.cost for r in front], [max(r.max_error, 1e-16) for r in front], "k-", lw=3,
+                    alpha=0.25, label="Pareto front")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("cost: wall seconds per simulated second")
+        ax.set_ylabel("max position error / cloth size")
+        ax.set_title(f"{self.scene_name}: error against cost (diverged runs left out)")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7, ncol=2)
+        fig.tight_layout()
+        path = Path(path)
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp)
+        plt.close(fig)
+        return path
+
+    def write(self, folder, plot: bool = True) -> list[Path]:
+        """study.csv, study.md and (plot) study.png in `folder`, each written atomically."""
+        from .render.image import atomic_path
+
+        folder = Path(folder)
+        written = []
+        for name, text in (("study.csv", self.csv_text()), ("study.md", self.markdown())):
+            with atomic_path(folder / name) as tmp:
+                tmp.write_text(text)
+            written.append(folder / name)
+        if plot:
+            written.append(self.plot(folder / "study.png"))
+        return written
+
+
+def pareto_front(runs) -> list[Run]:
+    """Runs that did not diverge and that no other such run beats in both cost and max error."""
+    ok = [r for r in runs if not r.diverged]
+    return [r for r in ok if not any(o.cost <= r.cost and o.max_error <= r.max_error
+                                     and (o.cost < r.cost or o.max_error < r.max_error) for o in ok)]
+
+
+def _configurations(integrators, iterations):
+    for name in integrators:
+        if name not in INTEGRATORS:
+            raise ValueError(f"integrators: {name!r} is not one of {sorted(INTEGRATORS)}")
+        if name in ITERATED:
+            for count in iterations:
+                yield name, count, INTEGRATORS[name](iterations=count)
+        else:
+            yield name, None, make_integrator(name)
+
+
+def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("f64", "f32"),
+              iterations=DEFAULT_ITERATIONS, duration: float | None = None, arch: str = "cpu",
+              reference: Reference | None = None, progress: bool = True) -> StudyResult:
+    """Sweep integrator x dt x precision (x iterations for pbd/xpbd) on `scene` (a Scene from
+    load_scene). dts: steps [s], each frame_dt / an integer (default: default_dts). duration:
+    simulated seconds (default the scene's). Leaves Taichi initialised with the last precision.
+    """
+    from tqdm import tqdm
+
+    for p in precisions:
+        if p not in backend.PRECISIONS:
+            raise ValueError(f"precisions: {p!r} is not one of {sorted(backend.PRECISIONS)}")
+    integrators = tuple(integrators)
+    dts = sorted(default_dts(scene, integrators) if dts is None else dts, reverse=True)
+    substeps = []
+    for dt in dts:
+        ratio = scene.frame_dt / dt
+        if not (dt > 0 and abs(ratio - round(ratio)) < 1e-6 * ratio):
+            raise ValueError(f"dts: {dt!r} does not divide the frame step {scene.frame_dt:.6g} s; "
+                             "use frame_dt / n for integers n")
+        substeps.append(round(ratio))
+    if reference is None:
+        reference = reference_trajectory(scene, duration, arch)
+    result = StudyResult(scene.name, reference)
+    configurations = list(_configurations(integrators, iterations))
+    bar = tqdm(total=len(precisions) * len(configurations) * len(dts), unit="run",
+               disable=not progress, dynamic_ncols=True)
+    for precision in precisions:
+        backend.init(arch=arch, precision=precision)
+        for name, count, integrator in configurations:
+            sim = scene.build(integrator=integrator, dt=dts[-1])
+            sim.state.position_limit[None] = GUARD_SIZES * reference.size + np.abs(
+                scene.cloth.particle_position).max()
+            sim.step(1)     # compile outside the timing
+            predicted = sim.stable_dt()
+            for dt, n in zip(dts, substeps):
+                bar.set_description(f"{name} {precision} dt={dt:.2g}")
+                sim.restart(dt)
+                result.runs.append(_measure(scene, sim, reference, name, precision, count, n, predicted))
+                bar.update()
+    bar.close()
+    return result
+
+
+def _measure(scene, sim, reference, name, precision, iterations, substeps, predicted) -> Run:
+    nan = float("nan")
+    try:
+        positions, energies, wall = _trajectory(sim, reference.times, substeps)
+    except SimulationDiverged as err:
+        return Run(name, precision, iterations, sim.dt, sim.step_count, nan, nan, True, err.step,
+                   nan, nan, nan, nan, predicted)
+    error = np.linalg.norm(positions - reference.positions, axis=2) / reference.size
+    energy_error = np.abs(energies - reference.energies) / reference.energy_scale
+    blown = np.flatnonzero(energy_error > ENERGY_BLOWUP)
+    diverged_step = int(round(reference.times[blown[0]] / sim.dt)) if len(blown) else -1
+    simulated = reference.times[-1]
+    return Run(name, precision, iterations, sim.dt, sim.step_count, wall, wall / simulated,
+               len(blown) > 0, diverged_step, float(error.max()), float(np.sqrt(np.mean(error ** 2))),
+               float(energy_error.max()), _max_strain(scene.cloth, positions), predicted)
