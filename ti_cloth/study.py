@@ -159,11 +159,11 @@ def _max_strain(cloth, positions: np.ndarray) -> float:
 
 
 def default_dts(scene, integrators) -> list[float]:
-    """frame_dt / 2^k from one step per frame down to the first step at or below a quarter of
-    the smallest predicted stable step of the step-limited integrators (at least 6 steps)."""
+    """frame_dt / 2^k from one step per frame down to the first step at or below half the
+    smallest predicted stable step of the step-limited integrators (at least 6 steps)."""
     limits = [stable_dt(scene.cloth, name, scene.drag) for name in integrators]
     limits = [s for s in limits if 0 < s < math.inf]
-    smallest = 0.25 * min(limits) if limits else scene.frame_dt / 32
+    smallest = 0.5 * min(limits) if limits else scene.frame_dt / 32
     count = max(6, math.ceil(math.log2(scene.frame_dt / smallest)) + 1)
     return [scene.frame_dt / 2 ** k for k in range(count)]
 
@@ -225,8 +225,9 @@ class StudyResult:
         return "\n".join(lines) + "\n"
 
     def plot(self, path) -> Path:
-        """Log-log max error against cost, one line per configuration, the Pareto front
-        outlined (needs matplotlib: pip install "ti_cloth[study]")."""
+        """Log-log max error against cost, one line per configuration (colour: integrator;
+        dashed: f32; squares: the most pbd/xpbd iterations), the Pareto front outlined (needs
+        matplotlib: pip install "ti_cloth[study]")."""
         try:
             import matplotlib
         except ImportError as err:
@@ -238,11 +239,16 @@ class StudyResult:
         from .render.image import atomic_path
 
         fig, ax = plt.subplots(figsize=(8, 5.5), dpi=100)
+        colours = {name: f"C{i}" for i, name in enumerate(dict.fromkeys(r.integrator for r in self.runs))}
+        counts = {name: sorted({r.iterations or 0 for r in self.runs if r.integrator == name}) for name in colours}
         for label in dict.fromkeys(r.label for r in self.runs):
             runs = sorted((r for r in self.runs if r.label == label and not r.diverged), key=lambda r: r.cost)
             if runs:
-                ax.plot([r.cost for r in runs], [max(r.max_error, 1e-16) for r in runs], marker="o",
-                        ms=4, lw=1, label=label, ls="--" if "f32" in label else "-")
+                first = runs[0]
+                most = len(counts[first.integrator]) > 1 and first.iterations == counts[first.integrator][-1]
+                ax.plot([r.cost for r in runs], [max(r.max_error, 1e-16) for r in runs], label=label,
+                        color=colours[first.integrator], ls="--" if first.precision == "f32" else "-",
+                        marker="s" if most else "o", ms=4, lw=1)
         front = sorted(pareto_front(self.runs), key=lambda r: r.cost)
         if front:
             ax.plot([r.cost for r in front], [max(r.max_error, 1e-16) for r in front], "k-", lw=3,
