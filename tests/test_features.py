@@ -1,0 +1,68 @@
+"""Model only what a scene requires: optional features are compile-time switches, so a scene
+that does not use one never compiles nor launches its kernels (benchmarks/feature_cost.py
+measures what that saves)."""
+
+import numpy as np
+import pytest
+
+import ti_cloth as tc
+from ti_cloth import constraints, simulation, strain_limit, tearing, wind
+from ti_cloth.colliders import resolve_collisions
+from ti_cloth.integrators import implicit_euler, rk4, xpbd
+from ti_cloth.state import copy_positions
+
+OPTIONAL = {
+    "wind": wind._accumulate_wind, "collisions": resolve_collisions,
+    "collision snapshot": copy_positions, "relaxation": constraints.relax_springs,
+    "strain-limit velocity": strain_limit._follow_velocity, "tearing": tearing.tear_springs,
+    "handles": simulation._move_handles, "xpbd": constraints.xpbd_springs,
+    "xpbd prediction": xpbd._predict, "implicit solve": implicit_euler._linearise,
+    "rk4 stages": rk4._stage,
+}
+
+
+def minimal_cloth(n=8):
+    """Gravity and stretch springs only."""
+    full = tc.Cloth(tc.grid_mesh(n, n, plane="xz"), tc.Material())
+    stretch = full.spring_indices[full.spring_kind == tc.SpringKind.STRETCH]
+    return tc.Cloth(tc.grid_mesh(n, n, plane="xz"), tc.Material(), pinned=[0, n - 1],
+                    springs={tc.SpringKind.STRETCH: stretch})
+
+
+def full_simulation(integrator, n=8):
+    cloth = tc.Cloth(tc.grid_mesh(n, n, plane="xz"), tc.Material(), pinned=[0, n - 1])
+    return tc.Simulation(
+        cloth, integrator=integrator, dt=1e-4, drag=0.2, tearing=0.5,
+        wind=tc.Wind(velocity=(1.0, 0.0, 0.5), turbulence=0.5),
+        handles=[tc.Handle([n * n - 1], tc.Oscillation(amplitude=(0.0, 0.05, 0.0), frequency=1.0))],
+        colliders=[tc.Sphere(centre=(0.5, -0.3, 0.5), radius=0.2)], strain_limit=tc.StrainLimit(0.1))
+
+
+@pytest.fixture
+def fresh_kernels():
+    for kernel in OPTIONAL.values():
+        kernel._primal.compiled_kernels.clear()
+
+
+def compiled():
+    return {name for name, kernel in OPTIONAL.items() if kernel._primal.compiled_kernels}
+
+
+def test_minimal_scene_compiles_no_optional_kernel(f64, fresh_kernels):
+    cloth = minimal_cloth()
+    assert set(cloth.spring_kind) == {tc.SpringKind.STRETCH}
+    sim = tc.Simulation(cloth, integrator="symplectic_euler", dt=1e-4)
+    sim.step(20)
+    assert np.abs(sim.positions() - cloth.particle_position).max() > 1e-5, "it ran"
+    assert compiled() == set()
+
+
+@pytest.mark.parametrize("integrator, own", [("symplectic_euler", set()), ("rk4", {"rk4 stages"}),
+                                            ("implicit_euler", {"implicit solve"}),
+                                            ("xpbd", {"xpbd", "xpbd prediction"})])
+def test_each_feature_compiles_its_kernels_only_when_used(f64, fresh_kernels, integrator, own):
+    sim = full_simulation(integrator)
+    sim.step(5)
+    features = {"wind", "collisions", "collision snapshot", "relaxation", "strain-limit velocity",
+                "tearing", "handles"}
+    assert compiled() == features | own
