@@ -72,6 +72,15 @@ def _damping_times(kd, n, d, relative: ti.template()):
 
 
 @ti.func
+def _total(ws: ti.template()):
+    """Sum of the per-block partial sums, in block order (deterministic)."""
+    total = ti.Vector([0.0, 0.0])
+    for block in range(ws.block_count):
+        total += ws.partial[block]
+    return total
+
+
+@ti.func
 def _block_range(block, count):
     return block * BLOCK, ti.min((block + 1) * BLOCK, count)
 
@@ -133,9 +142,7 @@ def _linearise(model: ti.template(), state: ti.template(), ws: ti.template(), dt
             bb += b.dot(b)
         ws.partial[block] = ti.Vector([rz, bb])
     for _ in range(1):
-        total = ti.Vector([0.0, 0.0])
-        for block in range(ws.block_count):
-            total += ws.partial[block]
+        total = _total(ws)
         ws.scalar[RZ] = total[0]
         ws.scalar[RR] = total[1]
         ws.scalar[BB] = total[1]
@@ -165,12 +172,9 @@ def _apply(model: ti.template(), state: ti.template(), ws: ti.template(), dt: fl
             ap *= free
             ws.ap[i] = ap
             pap += pi.dot(ap)
-        ws.partial[block][0] = pap
+        ws.partial[block] = ti.Vector([pap, 0.0])
     for _ in range(1):
-        total = 0.0
-        for block in range(ws.block_count):
-            total += ws.partial[block][0]
-        ws.scalar[PAP] = total
+        ws.scalar[PAP] = _total(ws)[0]
 
 
 @ti.kernel
@@ -191,9 +195,7 @@ def _iterate(model: ti.template(), ws: ti.template()):
             rr += r.dot(r)
         ws.partial[block] = ti.Vector([rz, rr])
     for _ in range(1):
-        total = ti.Vector([0.0, 0.0])
-        for block in range(ws.block_count):
-            total += ws.partial[block]
+        total = _total(ws)
         ws.scalar[BETA] = total[0] / ws.scalar[RZ]
         ws.scalar[RZ] = total[0]
         ws.scalar[RR] = total[1]

@@ -13,7 +13,8 @@ from .verlet import verlet_advance
 
 
 @ti.kernel
-def _update_velocity(model: ti.template(), state: ti.template(), dt: float, step: ti.i32):
+def update_velocity(model: ti.template(), state: ti.template(), dt: float, step: ti.i32):
+    """v_{n+1} = (x_{n+1} - x_n) / h, with x_n in particle_prev_position."""
     for i in range(model.particle_count):
         x = state.particle_position[i]
         store_particle(state, i, x, (x - state.particle_prev_position[i]) / dt, step)
@@ -65,4 +66,4 @@ class PBD(Integrator):
         if model.spring_count:
             stiffness = ti.math.vec3(*(self.stiffness[k.name.lower()] for k in SpringKind))
             sweep(relax_springs, model, state, self.iterations, stiffness, forces.tearing, 0.0, False)
-        _update_velocity(model, state, dt, step)
+        update_velocity(model, state, dt, step)

@@ -8,8 +8,8 @@ from .. import backend
 from .._validate import require
 from ..constraints import sweep, xpbd_springs
 from ..forces import compute_forces
-from ..state import store_particle
 from .base import Integrator
+from .pbd import update_velocity
 
 
 @ti.kernel
@@ -20,13 +20,6 @@ def _predict(model: ti.template(), state: ti.template(), dt: float):
         v = state.particle_velocity[i] + dt * model.particle_inv_mass[i] * state.particle_force[i]
         state.particle_prev_position[i] = x
         state.particle_position[i] = x + dt * v
-
-
-@ti.kernel
-def _update_velocity(model: ti.template(), state: ti.template(), dt: float, step: ti.i32):
-    for i in range(model.particle_count):
-        x = state.particle_position[i]
-        store_particle(state, i, x, (x - state.particle_prev_position[i]) / dt, step)
 
 
 class XPBD(Integrator):
@@ -67,5 +60,5 @@ class XPBD(Integrator):
                 fields.finalize(state)
             multiplier.fill(0)
             sweep(xpbd_springs, model, state, self.iterations, multiplier, dt, forces.tearing)
-        _update_velocity(model, state, dt, step)
+        update_velocity(model, state, dt, step)
         state.prev_valid = False
