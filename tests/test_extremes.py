@@ -118,7 +118,7 @@ def test_ten_minutes_undamped_energy_stays_bounded(f64, integrator):
     energy scale, and no sample leaves the start by more than h w_max of it. The step is a
     fifth of the stable one: at h w = 1 (half of it) the 6:1 resonance of these maps (h w =
     2 sin(pi/6)) pumps the chain's nonlinear coupling and the energy did drift (measured)."""
-    cloth = tc.string(6, 1.0, mass=0.1, stretch=tc.SpringParams(20.0), direction=(1, 0, 0))
+    cloth = tc.string(4, 1.0, mass=0.1, stretch=tc.SpringParams(10.0), direction=(1, 0, 0))
     dt = 0.2 * tc.stable_dt(cloth, integrator)
     w_max = 2 / tc.stable_dt(cloth, "symplectic_euler")
     sim = tc.Simulation(cloth, integrator=integrator, dt=dt)

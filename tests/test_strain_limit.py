@@ -27,7 +27,7 @@ def max_strain(cloth, x, kinds=(tc.SpringKind.STRETCH, tc.SpringKind.SHEAR)):
 
 
 def run(cloth, limit, seconds, every_step=False):
-    dt = 0.5 * tc.stable_dt(cloth, "symplectic_euler")
+    dt = 0.3 * tc.stable_dt(cloth, "symplectic_euler")
     sim = tc.Simulation(cloth, dt=dt, drag=0.5, strain_limit=limit)
     worst = 0.0
     for _ in range(int(seconds / dt)):
