@@ -67,7 +67,7 @@ def main(argv=None):
         cg_time = median_time(lambda: (sim.step(1), sim.positions()), args.repeats)
         iterations = integrator.last_iterations
         model, state = sim.model, sim.state
-        ws = integrator._workspaces[id(state)]
+        ws = integrator.buffers(state, None)   # made by the steps above
         dofs = 3 * cloth.particle_count
         builder_size = 36 * cloth.spring_count + dofs   # 2 x 9 entries per spring end, + the diagonal
         solver = ti.linalg.SparseSolver(dtype=real, solver_type="LLT")

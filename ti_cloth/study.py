@@ -324,12 +324,12 @@ def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("
     if reference is None:
         reference = reference_trajectory(scene, duration, arch)
     result = StudyResult(scene.name, reference)
-    configurations = list(_configurations(integrators, iterations))
-    bar = tqdm(total=len(precisions) * len(configurations) * len(dts), unit="run",
-               disable=not progress, dynamic_ncols=True)
+    runs_per_precision = len(list(_configurations(integrators, iterations))) * len(dts)
+    bar = tqdm(total=len(precisions) * runs_per_precision, unit="run", disable=not progress,
+               dynamic_ncols=True)
     for precision in precisions:
         backend.init(arch=arch, precision=precision)
-        for name, count, integrator in configurations:
+        for name, count, integrator in _configurations(integrators, iterations):
             sim = scene.build(integrator=integrator, dt=dts[-1])
             sim.state.position_limit[None] = GUARD_SIZES * reference.size + np.abs(
                 scene.cloth.particle_position).max()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import weakref
 from typing import ClassVar
 
 
@@ -20,6 +21,15 @@ class Integrator:
 
     def step(self, model, state, dt: float, forces, step: int) -> None:
         raise NotImplementedError
+
+    def buffers(self, state, make):
+        """This integrator's working storage for `state`, made by make() on first use and
+        dropped with the State (keyed weakly, so a later State never inherits the buffers of a
+        collected one, nor of a runtime that init() has replaced)."""
+        store = self.__dict__.setdefault("_buffers", weakref.WeakKeyDictionary())
+        if state not in store:
+            store[state] = make()
+        return store[state]
 
     def options(self) -> dict:
         """Constructor options, for reports and repr."""

@@ -233,15 +233,12 @@ class ImplicitEuler(Integrator):
         self.max_iterations = max_iterations
         self.last_iterations = 0
         self.last_residual = 0.0
-        self._workspaces: dict[int, _Workspace] = {}
 
     def options(self):
         return {"tolerance": self.tolerance, "max_iterations": self.max_iterations}
 
     def step(self, model, state, dt, forces, step):
-        ws = self._workspaces.get(id(state))
-        if ws is None:
-            ws = self._workspaces[id(state)] = _Workspace(model.particle_count, model.spring_count)
+        ws = self.buffers(state, lambda: _Workspace(model.particle_count, model.spring_count))
         compute_forces(model, state, forces)
         _linearise(model, state, ws, dt, forces.drag, forces.tearing)
         iterations = 0

@@ -64,13 +64,8 @@ class RK4(Integrator):
     name = "rk4"
     order = 4
 
-    def __init__(self):
-        self._stages: dict[int, _Stages] = {}
-
     def step(self, model, state, dt, forces, step):
-        stages = self._stages.get(id(state))
-        if stages is None:
-            stages = self._stages[id(state)] = _Stages(model.particle_count)
+        stages = self.buffers(state, lambda: _Stages(model.particle_count))
         for s in range(4):
             compute_forces(model, state, forces)    # f at stage s (x0 and v0 for s = 0)
             _stage(model, state, stages, dt, s, step)

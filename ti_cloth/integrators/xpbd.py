@@ -22,6 +22,15 @@ def _predict(model: ti.template(), state: ti.template(), dt: float):
         state.particle_position[i] = x + dt * v
 
 
+class _Multipliers:
+    """One Lagrange multiplier per spring [N s^2], reset every step."""
+
+    def __init__(self, spring_count: int):
+        fields = backend.FieldGroup()
+        self.value = fields.scalar(backend.real(), spring_count)
+        fields.finalize(self)
+
+
 class XPBD(Integrator):
     """XPBD: predict under external forces (gravity, drag, wind), then `iterations`
     Gauss-Seidel passes over the springs in colour order, each updating the spring's Lagrange
@@ -44,7 +53,6 @@ class XPBD(Integrator):
         require(isinstance(iterations, int) and not isinstance(iterations, bool) and iterations >= 1,
                 "XPBD.iterations", iterations, "an int >= 1")
         self.iterations = iterations
-        self._multipliers: dict[int, object] = {}
 
     def options(self):
         return {"iterations": self.iterations}
@@ -53,11 +61,7 @@ class XPBD(Integrator):
         compute_forces(model, state, forces, springs=False)   # external forces only
         _predict(model, state, dt)
         if model.spring_count:
-            multiplier = self._multipliers.get(id(state))
-            if multiplier is None:
-                fields = backend.FieldGroup()
-                multiplier = self._multipliers[id(state)] = fields.scalar(backend.real(), model.spring_count)
-                fields.finalize(state)
+            multiplier = self.buffers(state, lambda: _Multipliers(model.spring_count)).value
             multiplier.fill(0)
             sweep(xpbd_springs, model, state, self.iterations, multiplier, dt, forces.tearing)
         update_velocity(model, state, dt, step)
