@@ -82,7 +82,7 @@ def test_cloth_drapes_over_a_sphere_and_stays(f64):
     sphere = tc.Sphere(centre=(0.0, 0.0, 0.0), radius=radius, thickness=thickness,
                        static_friction=0.4)
     cloth = tc.Cloth(mesh, material)
-    sim = tc.Simulation(cloth, dt=0.4 * tc.stable_dt(cloth, "symplectic_euler"), drag=1.0,
+    sim = tc.Simulation(cloth, dt=0.25 * tc.stable_dt(cloth, "symplectic_euler"), drag=1.0,
                         colliders=[sphere])
     steps = int(round(0.05 / sim.dt))
     closest = np.inf
