@@ -130,7 +130,7 @@ def main(argv=None) -> int:
                               help="integrators to sweep (default: all)")
     study_parser.add_argument("--dt", nargs="+", type=float, dest="dts", metavar="DT",
                               help="steps [s], each frame_dt / an integer (default: frame_dt / 2^k "
-                                   "down to a quarter of the smallest stable step)")
+                                   "down to half the smallest stable step)")
     study_parser.add_argument("--precisions", nargs="+", choices=["f32", "f64"], default=["f64", "f32"])
     study_parser.add_argument("--iterations", nargs="+", type=_positive, metavar="N",
                               help="pbd/xpbd passes per step to sweep (default 4 16)")

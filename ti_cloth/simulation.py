@@ -60,7 +60,8 @@ class Simulation:
 
     cloth: the body. integrator: a name from ti_cloth.INTEGRATORS or an Integrator instance.
     dt: step [s], > 0, or "auto": half the predicted stable step, at most 1/240 s
-        (stability.auto_dt; ValueError if no stable step exists). gravity: [m/s^2], any vector. drag: uniform air drag [1/s], >= 0.
+        (stability.auto_dt; ValueError if no stable step exists).
+    gravity: [m/s^2], any vector. drag: uniform air drag [1/s], >= 0.
     tearing: None (off: the tear kernel is never compiled nor launched), a tear strain
         (float) or a Tearing.
     handles: scripted particles (Handle); their particles are pinned.
@@ -80,14 +81,10 @@ class Simulation:
         require(isinstance(cloth, Cloth), "cloth", cloth, "a ti_cloth.Cloth")
         self.cloth = cloth
         self.integrator = make_integrator(integrator)
+        auto = isinstance(dt, str) and dt == "auto"
+        self.dt = None if auto else finite_number("dt", dt, 0.0, strict=True, unit="s")
         gravity = as_array("gravity", gravity, np.float64, (3,))
         drag = finite_number("drag", drag, 0.0, unit="1/s")
-        if isinstance(dt, str) and dt == "auto":
-            pinned = cloth.pinned.copy()
-            for h in handles:
-                pinned[np.asarray(h.particles)] = True
-            dt = auto_dt(cloth, self.integrator, drag, pinned)
-        self.dt = finite_number("dt", dt, 0.0, strict=True, unit="s")
         if tearing is not None and not isinstance(tearing, Tearing):
             tearing = Tearing(stretch=tearing)
         self.tearing = tearing
@@ -106,6 +103,8 @@ class Simulation:
             self._handle_index = np.concatenate([h.particles for h in self.handles]).astype(np.int32)
             pinned[self._handle_index] = True
         self.model = Model(cloth, pinned=pinned)
+        if auto:
+            self.dt = auto_dt(cloth, self.integrator, drag, pinned)
         self.state = self.model.state()
         self.state.position_limit[None] = finite_number("position_limit", position_limit, 0.0,
                                                         strict=True, unit="m")
@@ -117,9 +116,7 @@ class Simulation:
         self.colliders = ColliderSet(colliders, cloth.particle_count) if colliders else None
         self.step_count = 0
         self._diverged: SimulationDiverged | None = None
-        if self.handles:
-            self._apply_handles(0.0)
-            self.state.particle_velocity.fill(0)
+        self._place_handles_at_start()
 
     def restart(self, dt: float | None = None) -> None:
         """Back to time 0: rest positions, at rest, every spring intact, handles and colliders
@@ -132,6 +129,9 @@ class Simulation:
         self._diverged = None
         if self.colliders is not None:
             self.colliders.place(0.0)
+        self._place_handles_at_start()
+
+    def _place_handles_at_start(self) -> None:
         if self.handles:
             self._apply_handles(0.0)
             self.state.particle_velocity.fill(0)
