@@ -1,9 +1,15 @@
-"""Forces as Taichi kernels (gravity, Hookean springs, spring damping, air drag) and the
+"""Forces as Taichi functions (gravity, Hookean springs, spring damping, air drag) and the
 energies they derive from, evaluated on the host in float64.
 
-Every particle gathers the forces of its own springs in a fixed order (Model adjacency), so
-accumulation is deterministic and needs no float atomics. The spring force on i is computed
-from i's side; j's loop computes the exact negation, so Newton's third law holds to rounding.
+Each spring's force is computed once per evaluation, from its first end's side, into
+State.spring_force (a loop over springs); every particle then gathers + or - the forces of its
+own springs in a fixed order (Model adjacency: second-end springs first, then first-end ones).
+No float atomics, so a run is deterministic; each spring's formula is evaluated once, not once
+per end; Newton's third law holds exactly.
+
+The pieces are ti.funcs, so an integrator can put a whole step (springs, gather, update) in one
+kernel: its loops run in parallel when that kernel is launched once per step, and serially when
+stepping.py runs many steps in one launch.
 """
 
 
@@ -16,9 +22,11 @@ from .material import SpringKind
 from .wind import accumulate_wind
 
 
+@ti.data_oriented
 @dataclass(frozen=True)
 class ForceSettings:
-    """External loads and switches of one simulation.
+    """External loads and switches of one simulation, compile-time constants of its kernels
+    (passed as a template argument, compiled per instance).
 
     gravity: acceleration [m/s^2], any direction.
     drag: uniform air drag [1/s]: f_i = -drag * m_i * v_i (mass-proportional, so the same
@@ -31,6 +39,14 @@ class ForceSettings:
     drag: float = 0.0
     tearing: bool = False
     wind: object = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "gravity", tuple(float(g) for g in self.gravity))
+        object.__setattr__(self, "drag", float(self.drag))
+
+    @property
+    def has_wind(self) -> bool:
+        return self.wind is not None
 
 
 @ti.func
@@ -56,40 +72,57 @@ def spring_force(xi, xj, vi, vj, rest, k, kd, relative: ti.template()):
     return f
 
 
-@ti.kernel
-def accumulate_forces(model: ti.template(), state: ti.template(), gravity: ti.math.vec3,
-                      drag: float, has_drag: ti.template(), springs: ti.template(),
-                      tearing: ti.template()):
-    """particle_force = m g (Stuyck eq. 4.3) - drag m v + sum of spring forces (eq. 4.5, 4.7).
+@ti.func
+def evaluate_springs(model: ti.template(), state: ti.template(), tearing: ti.template()):
+    """spring_force[s] = force of spring s on its first end (eq. 4.5, 4.7); 0 once torn."""
+    for s in range(model.spring_count):
+        i, j = model.spring_indices[s][0], model.spring_indices[s][1]
+        f = ti.Vector([0.0, 0.0, 0.0])
+        alive = True
+        if ti.static(tearing):
+            alive = state.spring_alive[s] != 0
+        if alive:
+            f = spring_force(state.particle_position[i], state.particle_position[j],
+                             state.particle_velocity[i], state.particle_velocity[j],
+                             model.spring_rest_length[s], model.spring_stiffness[s],
+                             model.spring_damping[s], model.relative_damping)
+        state.spring_force[s] = f
 
-    Compile-time switches: has_drag, springs (False for position-based prediction), tearing.
-    """
+
+@ti.func
+def particle_force(model: ti.template(), state: ti.template(), forces: ti.template(), i,
+                   springs: ti.template()):
+    """Total force on particle i: m g (Stuyck eq. 4.3) - drag m v + its springs' forces, as
+    evaluate_springs left them (springs=False: external loads only) + the wind's share."""
+    f = model.particle_mass[i] * ti.Vector(forces.gravity)
+    if ti.static(forces.drag > 0):
+        f -= forces.drag * model.particle_mass[i] * state.particle_velocity[i]
+    if ti.static(springs):
+        split = model.particle_spring_split[i]
+        for a in range(model.particle_spring_start[i], split):
+            f -= state.spring_force[model.adjacency_spring[a]]
+        for a in range(split, model.particle_spring_start[i + 1]):
+            f += state.spring_force[model.adjacency_spring[a]]
+    if ti.static(forces.has_wind):
+        f += forces.wind.particle_force[i]
+    return f
+
+
+@ti.kernel
+def accumulate_forces(model: ti.template(), state: ti.template(), forces: ti.template(),
+                      springs: ti.template()):
+    """particle_force = particle_force(i) for every particle, springs evaluated first."""
+    if ti.static(springs):
+        evaluate_springs(model, state, forces.tearing)
     for i in range(model.particle_count):
-        xi = state.particle_position[i]
-        vi = state.particle_velocity[i]
-        f = model.particle_mass[i] * gravity
-        if ti.static(has_drag):
-            f -= drag * model.particle_mass[i] * vi
-        if ti.static(springs):
-            for a in range(model.particle_spring_start[i], model.particle_spring_start[i + 1]):
-                s = model.adjacency_spring[a]
-                j = model.adjacency_other[a]
-                alive = True
-                if ti.static(tearing):
-                    alive = state.spring_alive[s] != 0
-                if alive:
-                    f += spring_force(xi, state.particle_position[j], vi, state.particle_velocity[j],
-                                      model.spring_rest_length[s], model.spring_stiffness[s],
-                                      model.spring_damping[s], model.relative_damping)
-        state.particle_force[i] = f
+        state.particle_force[i] = particle_force(model, state, forces, i, springs)
 
 
 def compute_forces(model, state, forces: ForceSettings, springs: bool = True) -> None:
-    """Launch accumulate_forces with the scene's switches, then the wind kernel if any."""
-    accumulate_forces(model, state, ti.math.vec3(*forces.gravity), forces.drag, forces.drag > 0,
-                      springs and model.spring_count > 0, forces.tearing)
+    """particle_force at the current state: the wind's kernel if any, then springs and gather."""
     if forces.wind is not None:
         accumulate_wind(model, state, forces.wind, forces.tearing)
+    accumulate_forces(model, state, forces, springs and model.spring_count > 0)
 
 
 def energies(cloth, positions: np.ndarray, velocities: np.ndarray, gravity,

@@ -26,6 +26,8 @@ class Model:
                           adjacency_spring[start[i]:start[i + 1]], their other ends adjacency_other;
                           forces are gathered per particle in this fixed order (deterministic,
                           no float atomics)
+    particle_spring_split i is the second end of its springs in [start[i], split[i]) and the
+                          first end in [split[i], start[i + 1]), so a gather knows each sign
 
     Python attributes read at compile time (fixed for the model's life):
     particle_count, spring_count, relative_damping.
@@ -52,6 +54,7 @@ class Model:
         self.spring_damping = fields.scalar(real, s1)
         self.spring_kind = fields.scalar(ti.i32, s1)
         self.particle_spring_start = fields.scalar(ti.i32, n + 1)
+        self.particle_spring_split = fields.scalar(ti.i32, n)
         self.adjacency_spring = fields.scalar(ti.i32, max(2 * s, 1))
         self.adjacency_other = fields.scalar(ti.i32, max(2 * s, 1))
         fields.finalize(self)
@@ -60,8 +63,10 @@ class Model:
         owner = np.concatenate([ends[:, 0], ends[:, 1]])
         other = np.concatenate([ends[:, 1], ends[:, 0]])
         spring = np.concatenate([np.arange(s), np.arange(s)])
-        order = np.lexsort((other, owner))
+        first_end = np.repeat([1, 0], s)
+        order = np.lexsort((other, first_end, owner))
         start = np.concatenate([[0], np.cumsum(np.bincount(owner, minlength=n))])
+        split = start[:-1] + np.bincount(ends[:, 1], minlength=n)
         for field, values in ((self.particle_mass, cloth.particle_mass),
                               (self.particle_inv_mass, inv_mass),
                               (self.particle_rest_position, cloth.particle_position),
@@ -71,6 +76,7 @@ class Model:
                               (self.spring_damping, cloth.spring_damping),
                               (self.spring_kind, cloth.spring_kind),
                               (self.particle_spring_start, start),
+                              (self.particle_spring_split, split),
                               (self.adjacency_spring, spring[order]),
                               (self.adjacency_other, other[order])):
             _upload(field, values)

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from . import backend
+from . import backend, stepping
 from . import tearing as tearing_module
 from ._validate import as_array, finite_number, require
 from .colliders import ColliderSet, resolve_collisions
@@ -117,6 +117,10 @@ class Simulation:
         self.step_count = 0
         self._diverged: SimulationDiverged | None = None
         self._place_handles_at_start()
+        # Many steps per launch when nothing but tearing acts between steps (stepping.py).
+        self._many_per_launch = (self.integrator.fused and stepping.serial_is_faster(self.model)
+                                 and self.wind is None and not self.handles
+                                 and self.colliders is None and self.strain_limiter is None)
 
     def restart(self, dt: float | None = None) -> None:
         """Back to time 0: rest positions, at rest, every spring intact, handles and colliders
@@ -147,6 +151,11 @@ class Simulation:
         require(isinstance(n, (int, np.integer)) and n >= 0, "n", n, "an int >= 0")
         if self._diverged is not None:
             raise self._diverged
+        if self._many_per_launch and n > 1:
+            self.step_count += stepping.step_many(
+                self.integrator, self.model, self.state, self.forces, self.dt, self.step_count, n,
+                self.tearing.stretch if self.tearing is not None else 0.0)
+            n = 0
         for _ in range(n):
             if self.colliders is not None:
                 copy_positions(self.state, self.colliders.step_start)

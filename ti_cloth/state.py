@@ -19,6 +19,8 @@ class State:
     particle_velocity       velocities [m/s], shape (particle_count,)
     particle_prev_position  positions one step earlier [m] (Verlet and PBD history)
     particle_force          total force of the last evaluation [N]
+    spring_force            force of each spring on its first end at the last evaluation [N]
+                            (its second end feels the negation)
     spring_alive            1 while a spring exists, 0 once torn (Stuyck 4.5); lives here, not
                             in the Model, so the Model stays immutable and state() starts whole
     spring_torn_step        step index at which each spring tore, -1 if intact
@@ -36,6 +38,7 @@ class State:
         self.particle_prev_position = fields.vector(3, real, particle_count)
         self.particle_force = fields.vector(3, real, particle_count)
         # Taichi fields cannot have length 0; kernels loop over model.spring_count instead.
+        self.spring_force = fields.vector(3, real, max(spring_count, 1))
         self.spring_alive = fields.scalar(ti.i8, max(spring_count, 1))
         self.spring_torn_step = fields.scalar(ti.i32, max(spring_count, 1))
         self.first_bad_step = fields.scalar(ti.i32, ())

@@ -27,6 +27,12 @@ class Tearing:
 @ti.kernel
 def tear_springs(model: ti.template(), state: ti.template(), stretch: float, step: ti.i32):
     """Remove every intact spring longer than (1 + stretch) x rest; record the step it tore."""
+    tear_overstretched(model, state, stretch, step)
+
+
+@ti.func
+def tear_overstretched(model: ti.template(), state: ti.template(), stretch, step):
+    """tear_springs' loop, for kernels that run whole steps (stepping.advance_many)."""
     for s in range(model.spring_count):
         rest = model.spring_rest_length[s]
         if state.spring_alive[s] != 0 and rest > 0:

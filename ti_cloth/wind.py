@@ -103,6 +103,7 @@ class WindField:
         self.triangle = fields.vector(3, ti.i32, self.triangle_count)
         self.triangle_edge_spring = fields.vector(3, ti.i32, self.triangle_count)
         self.triangle_force = fields.vector(3, real, self.triangle_count)
+        self.particle_force = fields.vector(3, real, cloth.particle_count)
         self.particle_triangle_start = fields.scalar(ti.i32, cloth.particle_count + 1)
         self.adjacency_triangle = fields.scalar(ti.i32, 3 * self.triangle_count)
         self.mode_wave = fields.vector(3, real, TURBULENCE_MODES)
@@ -173,10 +174,11 @@ def _accumulate_wind(model: ti.template(), state: ti.template(), wind: ti.templa
         f = ti.Vector([0.0, 0.0, 0.0])
         for k in range(wind.particle_triangle_start[i], wind.particle_triangle_start[i + 1]):
             f += wind.triangle_force[wind.adjacency_triangle[k]]
-        state.particle_force[i] += f
+        wind.particle_force[i] = f
 
 
 def accumulate_wind(model, state, wind: WindField, tearing: bool) -> None:
-    """Add every triangle's aerodynamic force (module doc) to particle_force, gathered per
-    particle over its triangles in a fixed order."""
+    """wind.particle_force = every triangle's aerodynamic force (module doc) at the current
+    state, gathered per particle over its triangles in a fixed order (forces.particle_force
+    adds it)."""
     _accumulate_wind(model, state, wind, wind.mean, wind.drift, tearing)

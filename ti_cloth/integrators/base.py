@@ -5,22 +5,35 @@ from __future__ import annotations
 import weakref
 from typing import ClassVar
 
+import taichi as ti
 
+from .. import stepping
+
+
+@ti.data_oriented
 class Integrator:
     """Advances a State by one step of dt [s] on a fixed Model.
 
     step(model, state, dt, forces, step) reads like a list of physical concerns; `step` is the
     global step index, recorded by the divergence guard. Options are keyword-only arguments of
-    the constructor, validated there.
+    the constructor, validated there (they are compile-time constants of the kernels).
+
+    A fused integrator writes its whole step as one ti.func, advance(model, state, forces, dt,
+    step, start) (start: 1 when the state has no history yet), and inherits a step() that
+    launches it once; stepping.py can then also run many steps in one launch.
     """
 
     name: ClassVar[str]
     order: ClassVar[int]           # global order of accuracy in positions, smooth conservative forces
     position_based: ClassVar[bool] = False  # True: springs are constraints projected on positions
     step_limited: ClassVar[bool] = True     # False: stable at any step (stable_dt is inf)
+    fused: ClassVar[bool] = False           # True: advance() is the whole step
+    records_history: ClassVar[bool] = False  # True: a step leaves x_n in particle_prev_position
 
     def step(self, model, state, dt: float, forces, step: int) -> None:
-        raise NotImplementedError
+        if not self.fused:
+            raise NotImplementedError
+        stepping.step_once(self, model, state, forces, dt, step)
 
     def buffers(self, state, make):
         """This integrator's working storage for `state`, made by make() on first use and

@@ -3,18 +3,9 @@
 
 import taichi as ti
 
-from ..forces import compute_forces
+from ..forces import evaluate_springs, particle_force
 from ..state import store_particle
 from .base import Integrator
-
-
-@ti.kernel
-def _advance(model: ti.template(), state: ti.template(), dt: float, step: ti.i32):
-    for i in range(model.particle_count):
-        x = state.particle_position[i]
-        v = state.particle_velocity[i]
-        dv = dt * model.particle_inv_mass[i] * state.particle_force[i]  # eq. 4.8: h M^-1 f(x_n, v_n)
-        store_particle(state, i, x + dt * v, v + dv, step)              # eq. 4.9, dx = h v_n
 
 
 class ExplicitEuler(Integrator):
@@ -27,7 +18,16 @@ class ExplicitEuler(Integrator):
 
     name = "explicit_euler"
     order = 1
+    fused = True
 
-    def step(self, model, state, dt, forces, step):
-        compute_forces(model, state, forces)   # gravity, springs, damping, drag at (x_n, v_n)
-        _advance(model, state, dt, step)       # both updates from the old state
+    @ti.func
+    def advance(self, model: ti.template(), state: ti.template(), forces: ti.template(), dt, step,
+                start):
+        evaluate_springs(model, state, forces.tearing)        # spring forces at (x_n, v_n)
+        for i in range(model.particle_count):
+            f = particle_force(model, state, forces, i, True)
+            state.particle_force[i] = f
+            x = state.particle_position[i]
+            v = state.particle_velocity[i]
+            dv = dt * model.particle_inv_mass[i] * f           # eq. 4.8: h M^-1 f(x_n, v_n)
+            store_particle(state, i, x + dt * v, v + dv, step)  # eq. 4.9, dx = h v_n

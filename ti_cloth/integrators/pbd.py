@@ -9,7 +9,7 @@ from ..forces import compute_forces
 from ..material import SpringKind
 from ..state import store_particle
 from .base import Integrator
-from .verlet import verlet_advance
+from .verlet import verlet_update
 
 
 @ti.kernel
@@ -18,6 +18,15 @@ def update_velocity(model: ti.template(), state: ti.template(), dt: float, step:
     for i in range(model.particle_count):
         x = state.particle_position[i]
         store_particle(state, i, x, (x - state.particle_prev_position[i]) / dt, step)
+
+
+@ti.kernel
+def _predict(model: ti.template(), state: ti.template(), dt: float, damping: float, start: ti.i32,
+             step: ti.i32):
+    """Verlet prediction under the external forces in particle_force."""
+    for i in range(model.particle_count):
+        verlet_update(state, i, model.particle_inv_mass[i] * state.particle_force[i], dt, damping,
+                      start, step)
 
 
 class PBD(Integrator):
@@ -61,7 +70,7 @@ class PBD(Integrator):
 
     def step(self, model, state, dt, forces, step):
         compute_forces(model, state, forces, springs=False)   # external forces only
-        verlet_advance(model, state, dt, self.damping, not state.prev_valid, step)
+        _predict(model, state, dt, self.damping, not state.prev_valid, step)
         state.prev_valid = True
         if model.spring_count:
             stiffness = ti.math.vec3(*(self.stiffness[k.name.lower()] for k in SpringKind))

@@ -3,16 +3,9 @@
 
 import taichi as ti
 
-from ..forces import compute_forces
+from ..forces import evaluate_springs, particle_force
 from ..state import store_particle
 from .base import Integrator
-
-
-@ti.kernel
-def _advance(model: ti.template(), state: ti.template(), dt: float, step: ti.i32):
-    for i in range(model.particle_count):
-        v = state.particle_velocity[i] + dt * model.particle_inv_mass[i] * state.particle_force[i]
-        store_particle(state, i, state.particle_position[i] + dt * v, v, step)
 
 
 class SymplecticEuler(Integrator):
@@ -25,7 +18,14 @@ class SymplecticEuler(Integrator):
 
     name = "symplectic_euler"
     order = 1
+    fused = True
 
-    def step(self, model, state, dt, forces, step):
-        compute_forces(model, state, forces)   # gravity, springs, damping, drag at (x_n, v_n)
-        _advance(model, state, dt, step)       # velocity first, then position with the new velocity
+    @ti.func
+    def advance(self, model: ti.template(), state: ti.template(), forces: ti.template(), dt, step,
+                start):
+        evaluate_springs(model, state, forces.tearing)   # spring forces at (x_n, v_n)
+        for i in range(model.particle_count):             # velocity first, then position with it
+            f = particle_force(model, state, forces, i, True)
+            state.particle_force[i] = f
+            v = state.particle_velocity[i] + dt * model.particle_inv_mass[i] * f
+            store_particle(state, i, state.particle_position[i] + dt * v, v, step)

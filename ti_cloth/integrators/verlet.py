@@ -4,27 +4,22 @@
 import taichi as ti
 
 from .._validate import finite_number, require
-from ..forces import compute_forces
+from ..forces import evaluate_springs, particle_force
 from ..state import store_particle
 from .base import Integrator
 
 
-@ti.kernel
-def verlet_advance(model: ti.template(), state: ti.template(), dt: float, damping: float,
-                   start: ti.i32, step: ti.i32):
-    """x_{n+1} = x_n + (1 - d)(x_n - x_{n-1}) + h^2 M^-1 f  (lecture: 2 -> 1.99, 1 -> 0.99 at d = 0.01).
-
-    On the first step (no history) x_1 = x_0 + (1 - d) h v_0 + h^2/2 M^-1 f, the second-order
-    start. Velocity is the backward difference (x_{n+1} - x_n) / h.
-    """
-    for i in range(model.particle_count):
-        x = state.particle_position[i]
-        a = model.particle_inv_mass[i] * state.particle_force[i]
-        x_new = x + (1.0 - damping) * (x - state.particle_prev_position[i]) + dt * dt * a
-        if start:
-            x_new = x + (1.0 - damping) * dt * state.particle_velocity[i] + 0.5 * dt * dt * a
-        state.particle_prev_position[i] = x
-        store_particle(state, i, x_new, (x_new - x) / dt, step)
+@ti.func
+def verlet_update(state: ti.template(), i, a, dt, damping, start, step):
+    """Move particle i by x_{n+1} = x_n + (1 - d)(x_n - x_{n-1}) + h^2 a (lecture: 2 -> 1.99,
+    1 -> 0.99 at d = 0.01), or with no history (start) by the second-order first step
+    x_1 = x_0 + (1 - d) h v_0 + h^2/2 a; keep x_n as history; v = (x_{n+1} - x_n) / h."""
+    x = state.particle_position[i]
+    x_new = x + (1.0 - damping) * (x - state.particle_prev_position[i]) + dt * dt * a
+    if start:
+        x_new = x + (1.0 - damping) * dt * state.particle_velocity[i] + 0.5 * dt * dt * a
+    state.particle_prev_position[i] = x
+    store_particle(state, i, x_new, (x_new - x) / dt, step)
 
 
 class Verlet(Integrator):
@@ -39,6 +34,8 @@ class Verlet(Integrator):
 
     name = "verlet"
     order = 2
+    fused = True
+    records_history = True
 
     def __init__(self, *, damping: float = 0.0):
         self.damping = finite_number("Verlet.damping", damping, 0.0)
@@ -47,7 +44,11 @@ class Verlet(Integrator):
     def options(self):
         return {"damping": self.damping}
 
-    def step(self, model, state, dt, forces, step):
-        compute_forces(model, state, forces)   # forces at x_n with velocity (x_n - x_{n-1}) / h
-        verlet_advance(model, state, dt, self.damping, not state.prev_valid, step)
-        state.prev_valid = True
+    @ti.func
+    def advance(self, model: ti.template(), state: ti.template(), forces: ti.template(), dt, step,
+                start):
+        evaluate_springs(model, state, forces.tearing)   # forces at x_n, velocity (x_n - x_{n-1}) / h
+        for i in range(model.particle_count):
+            f = particle_force(model, state, forces, i, True)
+            state.particle_force[i] = f
+            verlet_update(state, i, model.particle_inv_mass[i] * f, dt, self.damping, start, step)
