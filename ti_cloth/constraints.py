@@ -6,21 +6,14 @@ deterministic. Two launch plans give the same bits: `parallel` runs each colour 
 loop and launches one kernel per pass; `serial` runs every pass of every colour in one serial
 task of one launch. A parallel loop costs ~30 us to start on a CPU (measured, 2 cores), so a
 17-colour grid pays ~0.5 ms per pass before any work: on the CPU, serial wins below
-SERIAL_SPRING_LIMIT springs (XPBD, 10 passes: 6.4x faster at 1.4k springs, 1.8x at 24k;
+stepping.SERIAL_SPRING_LIMIT springs (XPBD, 10 passes: 6.4x faster at 1.4k springs, 1.8x at 24k;
 1.4x slower at 97k).
 """
 
 
 import taichi as ti
 
-from . import backend
-
-SERIAL_SPRING_LIMIT = 50_000   # serial faster at 24k springs, parallel at 97k (measured)
-
-
-def serial_sweeps(model) -> bool:
-    """Whether this model's passes run serially in one launch (CPU and few springs)."""
-    return backend.config().arch == "cpu" and model.spring_count <= SERIAL_SPRING_LIMIT
+from .stepping import serial_is_faster
 
 
 @ti.func
@@ -127,7 +120,7 @@ def sweep(kernel, model, state, passes: int, *args) -> None:
     """Run `passes` passes of relax_springs or xpbd_springs on the model's launch plan; args
     are the kernel's arguments after `offsets` and before `passes`."""
     order, offsets = model.spring_colouring()
-    if serial_sweeps(model):
+    if serial_is_faster(model):
         kernel(model, state, order, offsets, *args, passes, True)
     else:
         for _ in range(passes):
