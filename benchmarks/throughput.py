@@ -48,15 +48,21 @@ def scene(n: int) -> tuple[tc.Cloth, np.ndarray]:
 
 
 def median_rate(step, sync, seconds: float, repeats: int) -> float:
-    """Median steps/s of `repeats` runs, each of enough steps to last about `seconds`."""
-    start = time.perf_counter()
+    """Median steps/s of `repeats` runs, each of enough steps to last about `seconds`, after a
+    warm-up that compiles every launch plan (one step, then several)."""
     step(1)
+    step(2)
     sync()
-    steps = max(2, int(seconds / max(time.perf_counter() - start, 1e-6)))
-    step(steps)   # warm caches and the launch plan
-    sync()
-    elapsed = time.perf_counter() - start
-    steps = max(2, int(seconds * (steps + 1) / elapsed))
+    steps = 2
+    while True:
+        start = time.perf_counter()
+        step(steps)
+        sync()
+        elapsed = time.perf_counter() - start
+        if elapsed >= seconds / 4 or steps >= 1 << 20:
+            break
+        steps *= 4
+    steps = max(2, int(steps * seconds / elapsed))
     rates = []
     for _ in range(repeats):
         start = time.perf_counter()
