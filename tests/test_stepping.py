@@ -1,15 +1,17 @@
-"""Launch plans (stepping.py): many serial steps per launch, one parallel launch per step and the
-two-phase spring force (evaluate once, gather with signs) must all give the same bits, and the
-divergence guard must name the same step whichever plan ran."""
+"""Launch plans (stepping.py): one parallel launch per step, many steps per launch on one worker
+and many steps per launch shared by a team of CPU workers, with the two-phase spring force
+(evaluate once, gather with signs), must all give the same bits, and the divergence guard must
+name the same step whichever plan ran."""
 
 import importlib.util
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 import ti_cloth as tc
-from ti_cloth import stepping
+from ti_cloth import backend, stepping
 from ti_cloth.forces import ForceSettings, compute_forces
 from ti_cloth.model import Model
 
@@ -22,78 +24,101 @@ def sheet(n=6, damping="axial"):
     return cloth, centre + 1.3 * (cloth.particle_position - centre)   # start stretched: it moves
 
 
+PLANS = ["launch per step", "one worker", "team"]
+
+
+@pytest.fixture
+def threads(f64):
+    """At least two Taichi CPU threads, so a team of two can run (on a one-core machine too)."""
+    if backend.cpu_threads() < 2:
+        tc.init(arch="cpu", precision="f64", threads=2)
+
+
+def run(sim, plan, steps, monkeypatch, per_launch=100):
+    """`steps` steps in the given plan; many-steps plans launch per_launch steps at a time."""
+    if plan == "launch per step":
+        for _ in range(steps):
+            sim.step(1)
+        return
+    monkeypatch.setattr(stepping, "TEAM_MIN_SPRING_STEPS", 0 if plan == "team" else 1 << 62)
+    sim._many_steps.steps_per_launch = per_launch
+    sim.step(steps)
+
+
 @pytest.mark.parametrize("integrator", FUSED)
 @pytest.mark.parametrize("tearing", [None, 0.2])
-def test_many_steps_per_launch_equal_one_launch_per_step(f64, integrator, tearing):
+def test_every_launch_plan_takes_the_same_steps(threads, integrator, tearing, monkeypatch):
     cloth, start = sheet()
     runs = []
-    for batched in (True, False):
+    for plan in PLANS:
         sim = tc.Simulation(cloth, integrator=integrator, dt=2e-5, drag=0.3, tearing=tearing)
-        assert sim._many_per_launch
         sim.set_positions(start)
-        if batched:
-            sim.step(2 * stepping.MAX_STEPS_PER_LAUNCH + 7)   # three launches, the last partial
-        else:
-            for _ in range(2 * stepping.MAX_STEPS_PER_LAUNCH + 7):
-                sim.step(1)                                   # one parallel launch each
+        run(sim, plan, 2 * 100 + 7, monkeypatch)          # three launches, the last partial
         runs.append((sim.positions(), sim.velocities(), sim.torn_springs(), sim.step_count))
-    (x1, v1, torn1, n1), (x2, v2, torn2, n2) = runs
-    moved = np.abs(x1 - start).max()
-    print(f"{integrator}, tearing {tearing}: moved {moved:.3g} m, torn {len(torn1)} springs, "
-          f"max |dx| between plans {np.abs(x1 - x2).max()}")
-    assert moved > 1e-3 and n1 == n2 and np.array_equal(torn1, torn2)
-    if integrator == "verlet":
-        # Taichi's fast math lets LLVM contract Verlet's three-term update differently in the
-        # two kernels: rounding differences (1e-16 m a step on this 1 m sheet), accumulated over
-        # 519 steps and amplified where springs snap (up to 2e-12 m seen), far below the
-        # millimetres any change of method or step would make.
-        assert np.abs(x1 - x2).max() <= 1e-9
-    else:
-        assert np.array_equal(x1, x2) and np.array_equal(v1, v2)
+    x0, v0, torn0, n0 = runs[0]
+    moved = np.abs(x0 - start).max()
+    for plan, (x, v, torn, n) in zip(PLANS[1:], runs[1:]):
+        print(f"{integrator}, tearing {tearing}, {plan}: moved {moved:.3g} m, torn {len(torn)} "
+              f"springs, max |dx| against a launch per step {np.abs(x - x0).max()}")
+        assert moved > 1e-3 and n == n0 == 207 and np.array_equal(torn, torn0)
+        if integrator == "verlet":
+            # Taichi's fast math lets LLVM contract Verlet's three-term update differently in
+            # different kernels: rounding differences (1e-16 m a step on this 1 m sheet),
+            # accumulated over the steps and amplified where springs snap (up to 2e-12 m
+            # seen), far below the millimetres any change of method or step would make.
+            assert np.abs(x - x0).max() <= 1e-10
+        else:
+            assert np.array_equal(x, x0) and np.array_equal(v, v0)
     if tearing is not None:
-        assert len(torn1) > 0, "the 30 % stretch tears springs at a 20 % tear strain"
+        assert len(torn0) > 0, "the 30 % stretch tears springs at a 20 % tear strain"
 
 
-def test_above_the_serial_limit_every_step_is_one_parallel_launch(f64, monkeypatch):
+def test_a_team_shares_big_launches_and_one_worker_takes_small_ones(threads):
+    cloth, _ = sheet()
+    sim = tc.Simulation(cloth, dt=2e-5)
+    many, model = sim._many_steps, sim.model
+    small = stepping.TEAM_MIN_SPRING_STEPS // model.spring_count
+    assert many.team.workers == backend.cpu_threads() >= 2 and many.solo.workers == 1
+    assert many.team_for(model, small) is many.solo
+    assert many.team_for(model, small + 1) is many.team
+    assert many.steps_per_launch == stepping.MAX_STEPS_PER_LAUNCH
+    big = stepping.SPRING_STEPS_PER_LAUNCH // 10
+    assert stepping.ManySteps(SimpleNamespace(spring_count=big)).steps_per_launch == 10
+
+
+def test_a_team_without_threads_for_every_worker_raises_instead_of_hanging(threads, monkeypatch):
     cloth, start = sheet()
-    serial = tc.Simulation(cloth, dt=2e-5)
-    monkeypatch.setattr(stepping, "SERIAL_SPRING_LIMIT", cloth.spring_count - 1)
-    parallel = tc.Simulation(cloth, dt=2e-5)
-    assert serial._many_per_launch and not parallel._many_per_launch
-    for sim in (serial, parallel):
-        sim.set_positions(start)
-        sim.step(300)
-    assert np.array_equal(serial.positions(), parallel.positions())
+    sim = tc.Simulation(cloth, dt=2e-5)
+    monkeypatch.setattr(stepping, "BARRIER_SPINS", 1 << 16)     # read when the kernel compiles
+    sim._many_steps.team = stepping.Team(backend.cpu_threads() + 1)
+    sim.set_positions(start)
+    with pytest.raises(tc.TeamStalled, match="workers"):
+        run(sim, "team", 50, monkeypatch)
 
 
 def test_features_between_steps_take_one_launch_per_step(f64):
     cloth, _ = sheet()
-    plain = tc.Simulation(cloth, dt=1e-4)
-    assert plain._many_per_launch
+    assert tc.Simulation(cloth, dt=1e-4)._many_steps is not None
     for kwargs in (dict(wind=tc.Wind(velocity=(1.0, 0.0, 0.0))),
                    dict(colliders=[tc.Plane(point=(0.0, -1.0, 0.0), normal=(0.0, 1.0, 0.0))]),
                    dict(strain_limit=tc.StrainLimit(0.1)),
                    dict(handles=[tc.Handle([0], lambda t: (0.0, 0.0, 0.0))])):
-        assert not tc.Simulation(cloth, dt=1e-4, **kwargs)._many_per_launch, kwargs
-    assert not tc.Simulation(cloth, integrator="rk4", dt=1e-4)._many_per_launch
+        assert tc.Simulation(cloth, dt=1e-4, **kwargs)._many_steps is None, kwargs
+    assert tc.Simulation(cloth, integrator="rk4", dt=1e-4)._many_steps is None
 
 
 @pytest.mark.parametrize("integrator", FUSED)
-def test_divergence_names_the_same_step_in_either_plan(f64, integrator):
+def test_divergence_names_the_same_step_in_every_plan(threads, integrator, monkeypatch):
     cloth, start = sheet()
     steps = []
-    for batched in (True, False):
+    for plan in PLANS:
         sim = tc.Simulation(cloth, integrator=integrator, dt=5.0 * sim_stable(cloth, integrator))
         sim.set_positions(start)
         with pytest.raises(tc.SimulationDiverged) as error:
-            if batched:
-                sim.step(5000)
-            else:
-                for _ in range(5000):
-                    sim.step(1)
+            run(sim, plan, 5000, monkeypatch)
         steps.append(error.value.step)
     print(f"{integrator}: first bad step {steps}")
-    assert steps[0] == steps[1] < 5000
+    assert steps[0] == steps[1] == steps[2] < 5000
 
 
 def sim_stable(cloth, integrator):

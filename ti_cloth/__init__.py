@@ -5,7 +5,7 @@ Nothing here calls ti.init; call ti_cloth.init(arch=..., precision=...) first.
 from .backend import init
 from .bodies import hair, soft_body, string, tet_block
 from .colliders import Box, Capsule, Collider, Plane, Sphere
-from .errors import SimulationDiverged
+from .errors import SimulationDiverged, TeamStalled
 from .forces import ForceSettings
 from .integrators import (INTEGRATORS, PBD, RK4, XPBD, ExplicitEuler, ImplicitEuler, Integrator,
                           SymplecticEuler, Verlet)
@@ -22,7 +22,8 @@ from .topology import Cloth
 from .wind import Wind
 
 __all__ = [
-    "init", "Box", "Capsule", "Collider", "Plane", "Sphere", "SimulationDiverged", "ForceSettings",
+    "init", "Box", "Capsule", "Collider", "Plane", "Sphere", "SimulationDiverged", "TeamStalled",
+    "ForceSettings",
     "INTEGRATORS", "Integrator", "ExplicitEuler", "SymplecticEuler", "Verlet", "PBD", "XPBD",
     "ImplicitEuler", "RK4", "PRESETS", "Material", "SpringKind", "SpringParams", "Mesh", "grid_mesh",
     "tet_grid_mesh", "load_mesh", "save_mesh", "Model", "Keyframes", "Oscillation", "Handle",

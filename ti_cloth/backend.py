@@ -66,6 +66,12 @@ def config() -> BackendConfig:
     return _config
 
 
+def cpu_threads() -> int:
+    """How many CPU threads Taichi's thread pool has (the `threads` of init, or all cores)."""
+    config()
+    return int(ti.lang.impl.current_cfg().cpu_max_num_threads)
+
+
 def real():
     """The Taichi float type of the active precision (ti.f32 or ti.f64)."""
     return PRECISIONS[config().precision]

@@ -24,3 +24,9 @@ class SimulationDiverged(RuntimeError):
             advice = f"a stable dt for {integrator} is about {stable_dt:.3g} s or less"
         super().__init__(f"simulation diverged at step {step} (t = {time:.6g} s, dt = {dt:.3g} s): "
                          f"positions or velocities became non-finite or left the guard box; {advice}")
+
+
+class TeamStalled(RuntimeError):
+    """A barrier of a many-steps CPU launch (stepping.Team) waited seconds for a worker that
+    never arrived: the Taichi thread pool did not give every worker a thread of its own. The
+    steps of that launch ran unsynchronised, so the state is not to be trusted."""

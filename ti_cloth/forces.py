@@ -7,9 +7,9 @@ own springs in a fixed order (Model adjacency: second-end springs first, then fi
 No float atomics, so a run is deterministic; each spring's formula is evaluated once, not once
 per end; Newton's third law holds exactly.
 
-The pieces are ti.funcs, so an integrator can put a whole step (springs, gather, update) in one
-kernel: its loops run in parallel when that kernel is launched once per step, and serially when
-stepping.py runs many steps in one launch.
+The pieces are ti.funcs, so stepping.py can put a whole step (springs, gather, update) in one
+kernel: its loops run in parallel when that kernel is launched once per step, and split among
+CPU workers (or run by one) when it runs many steps in one launch.
 """
 
 
@@ -73,9 +73,11 @@ def spring_force(xi, xj, vi, vj, rest, k, kd, relative: ti.template()):
 
 
 @ti.func
-def evaluate_springs(model: ti.template(), state: ti.template(), tearing: ti.template()):
-    """spring_force[s] = force of spring s on its first end (eq. 4.5, 4.7); 0 once torn."""
-    for s in range(model.spring_count):
+def evaluate_springs(model: ti.template(), state: ti.template(), tearing: ti.template(), begin,
+                     end):
+    """spring_force[s] = force of spring s on its first end (eq. 4.5, 4.7), 0 once torn, for
+    springs begin .. end - 1."""
+    for s in range(begin, end):
         i, j = model.spring_indices[s][0], model.spring_indices[s][1]
         f = ti.Vector([0.0, 0.0, 0.0])
         alive = True
@@ -113,7 +115,7 @@ def accumulate_forces(model: ti.template(), state: ti.template(), forces: ti.tem
                       springs: ti.template()):
     """particle_force = particle_force(i) for every particle, springs evaluated first."""
     if ti.static(springs):
-        evaluate_springs(model, state, forces.tearing)
+        evaluate_springs(model, state, forces.tearing, 0, model.spring_count)
     for i in range(model.particle_count):
         state.particle_force[i] = particle_force(model, state, forces, i, springs)
 

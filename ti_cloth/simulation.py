@@ -117,10 +117,12 @@ class Simulation:
         self.step_count = 0
         self._diverged: SimulationDiverged | None = None
         self._place_handles_at_start()
-        # Many steps per launch when nothing but tearing acts between steps (stepping.py).
-        self._many_per_launch = (self.integrator.fused and stepping.serial_is_faster(self.model)
-                                 and self.wind is None and not self.handles
-                                 and self.colliders is None and self.strain_limiter is None)
+        # Many steps per launch on the CPU when nothing but tearing acts between steps.
+        self._many_steps = (stepping.ManySteps(self.model)
+                            if (self.integrator.fused and backend.config().arch == "cpu"
+                                and self.wind is None and not self.handles
+                                and self.colliders is None and self.strain_limiter is None)
+                            else None)
 
     def restart(self, dt: float | None = None) -> None:
         """Back to time 0: rest positions, at rest, every spring intact, handles and colliders
@@ -151,8 +153,8 @@ class Simulation:
         require(isinstance(n, (int, np.integer)) and n >= 0, "n", n, "an int >= 0")
         if self._diverged is not None:
             raise self._diverged
-        if self._many_per_launch and n > 1:
-            self.step_count += stepping.step_many(
+        if self._many_steps is not None and n > 1:
+            self.step_count += self._many_steps.run(
                 self.integrator, self.model, self.state, self.forces, self.dt, self.step_count, n,
                 self.tearing.stretch if self.tearing is not None else 0.0)
             n = 0

@@ -27,13 +27,14 @@ class Tearing:
 @ti.kernel
 def tear_springs(model: ti.template(), state: ti.template(), stretch: float, step: ti.i32):
     """Remove every intact spring longer than (1 + stretch) x rest; record the step it tore."""
-    tear_overstretched(model, state, stretch, step)
+    tear_overstretched(model, state, stretch, step, 0, model.spring_count)
 
 
 @ti.func
-def tear_overstretched(model: ti.template(), state: ti.template(), stretch, step):
-    """tear_springs' loop, for kernels that run whole steps (stepping.advance_many)."""
-    for s in range(model.spring_count):
+def tear_overstretched(model: ti.template(), state: ti.template(), stretch, step, begin, end):
+    """tear_springs' loop over springs begin .. end - 1, for kernels that run whole steps
+    (stepping.py)."""
+    for s in range(begin, end):
         rest = model.spring_rest_length[s]
         if state.spring_alive[s] != 0 and rest > 0:
             i, j = model.spring_indices[s][0], model.spring_indices[s][1]

@@ -18,16 +18,18 @@ class Integrator:
     global step index, recorded by the divergence guard. Options are keyword-only arguments of
     the constructor, validated there (they are compile-time constants of the kernels).
 
-    A fused integrator writes its whole step as one ti.func, advance(model, state, forces, dt,
-    step, start) (start: 1 when the state has no history yet), and inherits a step() that
-    launches it once; stepping.py can then also run many steps in one launch.
+    A fused integrator needs nothing but the force at the start of the step: it defines the
+    ti.func move(model, state, i, f, dt, step, start), which moves particle i given its total
+    force f (start: 1 when the state has no history yet), and inherits a step() from
+    stepping.py, which evaluates the forces and moves every particle in one launch and can
+    also run many steps in one launch.
     """
 
     name: ClassVar[str]
     order: ClassVar[int]           # global order of accuracy in positions, smooth conservative forces
     position_based: ClassVar[bool] = False  # True: springs are constraints projected on positions
     step_limited: ClassVar[bool] = True     # False: stable at any step (stable_dt is inf)
-    fused: ClassVar[bool] = False           # True: advance() is the whole step
+    fused: ClassVar[bool] = False           # True: defines move(), stepping.py runs the step
     records_history: ClassVar[bool] = False  # True: a step leaves x_n in particle_prev_position
 
     def step(self, model, state, dt: float, forces, step: int) -> None:

@@ -3,7 +3,6 @@
 
 import taichi as ti
 
-from ..forces import evaluate_springs, particle_force
 from ..state import store_particle
 from .base import Integrator
 
@@ -21,13 +20,8 @@ class ExplicitEuler(Integrator):
     fused = True
 
     @ti.func
-    def advance(self, model: ti.template(), state: ti.template(), forces: ti.template(), dt, step,
-                start):
-        evaluate_springs(model, state, forces.tearing)        # spring forces at (x_n, v_n)
-        for i in range(model.particle_count):
-            f = particle_force(model, state, forces, i, True)
-            state.particle_force[i] = f
-            x = state.particle_position[i]
-            v = state.particle_velocity[i]
-            dv = dt * model.particle_inv_mass[i] * f           # eq. 4.8: h M^-1 f(x_n, v_n)
-            store_particle(state, i, x + dt * v, v + dv, step)  # eq. 4.9, dx = h v_n
+    def move(self, model: ti.template(), state: ti.template(), i, f, dt, step, start):
+        x = state.particle_position[i]                     # f = f(x_n, v_n)
+        v = state.particle_velocity[i]
+        dv = dt * model.particle_inv_mass[i] * f           # eq. 4.8: h M^-1 f(x_n, v_n)
+        store_particle(state, i, x + dt * v, v + dv, step)  # eq. 4.9, dx = h v_n

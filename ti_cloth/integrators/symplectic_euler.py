@@ -3,7 +3,6 @@
 
 import taichi as ti
 
-from ..forces import evaluate_springs, particle_force
 from ..state import store_particle
 from .base import Integrator
 
@@ -21,11 +20,6 @@ class SymplecticEuler(Integrator):
     fused = True
 
     @ti.func
-    def advance(self, model: ti.template(), state: ti.template(), forces: ti.template(), dt, step,
-                start):
-        evaluate_springs(model, state, forces.tearing)   # spring forces at (x_n, v_n)
-        for i in range(model.particle_count):             # velocity first, then position with it
-            f = particle_force(model, state, forces, i, True)
-            state.particle_force[i] = f
-            v = state.particle_velocity[i] + dt * model.particle_inv_mass[i] * f
-            store_particle(state, i, state.particle_position[i] + dt * v, v, step)
+    def move(self, model: ti.template(), state: ti.template(), i, f, dt, step, start):
+        v = state.particle_velocity[i] + dt * model.particle_inv_mass[i] * f   # f = f(x_n, v_n)
+        store_particle(state, i, state.particle_position[i] + dt * v, v, step)  # with v_{n+1}

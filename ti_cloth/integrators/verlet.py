@@ -4,7 +4,6 @@
 import taichi as ti
 
 from .._validate import finite_number, require
-from ..forces import evaluate_springs, particle_force
 from ..state import store_particle
 from .base import Integrator
 
@@ -45,10 +44,6 @@ class Verlet(Integrator):
         return {"damping": self.damping}
 
     @ti.func
-    def advance(self, model: ti.template(), state: ti.template(), forces: ti.template(), dt, step,
-                start):
-        evaluate_springs(model, state, forces.tearing)   # forces at x_n, velocity (x_n - x_{n-1}) / h
-        for i in range(model.particle_count):
-            f = particle_force(model, state, forces, i, True)
-            state.particle_force[i] = f
-            verlet_update(state, i, model.particle_inv_mass[i] * f, dt, self.damping, start, step)
+    def move(self, model: ti.template(), state: ti.template(), i, f, dt, step, start):
+        # f at x_n and the velocity (x_n - x_{n-1}) / h
+        verlet_update(state, i, model.particle_inv_mass[i] * f, dt, self.damping, start, step)
