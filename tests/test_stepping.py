@@ -90,7 +90,8 @@ def test_a_team_without_threads_for_every_worker_raises_instead_of_hanging(threa
     cloth, start = sheet()
     sim = tc.Simulation(cloth, dt=2e-5)
     monkeypatch.setattr(stepping, "BARRIER_SPINS", 1 << 16)     # read when the kernel compiles
-    sim._many_steps.team = stepping.Team(backend.cpu_threads() + 1)
+    many = sim._many_steps
+    many.team = stepping.Team(backend.cpu_threads() + 1, many.solo.arrived)
     sim.set_positions(start)
     with pytest.raises(tc.TeamStalled, match="workers"):
         run(sim, "team", 50, monkeypatch)

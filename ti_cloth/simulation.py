@@ -117,12 +117,12 @@ class Simulation:
         self.step_count = 0
         self._diverged: SimulationDiverged | None = None
         self._place_handles_at_start()
-        # Many steps per launch on the CPU when nothing but tearing acts between steps.
-        self._many_steps = (stepping.ManySteps(self.model)
-                            if (self.integrator.fused and backend.config().arch == "cpu"
-                                and self.wind is None and not self.handles
-                                and self.colliders is None and self.strain_limiter is None)
-                            else None)
+        # Many steps per launch on the CPU when nothing but tearing acts between steps; made
+        # on the first step(n > 1), so a simulation stepped one at a time allocates nothing.
+        self._many_per_launch = (self.integrator.fused and backend.config().arch == "cpu"
+                                 and self.wind is None and not self.handles
+                                 and self.colliders is None and self.strain_limiter is None)
+        self._many_steps_plan = None
 
     def restart(self, dt: float | None = None) -> None:
         """Back to time 0: rest positions, at rest, every spring intact, handles and colliders
@@ -153,7 +153,7 @@ class Simulation:
         require(isinstance(n, (int, np.integer)) and n >= 0, "n", n, "an int >= 0")
         if self._diverged is not None:
             raise self._diverged
-        if self._many_steps is not None and n > 1:
+        if self._many_per_launch and n > 1:
             self.step_count += self._many_steps.run(
                 self.integrator, self.model, self.state, self.forces, self.dt, self.step_count, n,
                 self.tearing.stretch if self.tearing is not None else 0.0)
@@ -183,6 +183,13 @@ class Simulation:
                 stable_dt(self.cloth, self.integrator, self.forces.drag, self.model.pinned),
                 self.integrator.name)
             raise self._diverged
+
+    @property
+    def _many_steps(self) -> stepping.ManySteps | None:
+        """The plan that runs step(n > 1) in few launches, or None when steps go one by one."""
+        if self._many_per_launch and self._many_steps_plan is None:
+            self._many_steps_plan = stepping.ManySteps(self.model)
+        return self._many_steps_plan
 
     def _apply_handles(self, t: float) -> None:
         targets = []

@@ -54,14 +54,13 @@ class Team:
     a barrier waits for every worker and so each needs a thread of its own; one worker runs
     everything serially and its barriers compile to nothing.
 
-    arrived: barrier arrivals in the current launch (+ STALLED once a barrier gave up).
+    arrived: a scalar i32 field, the barrier arrivals in the current launch (+ STALLED once a
+        barrier gave up); teams that never run at the same time may share one.
     """
 
-    def __init__(self, workers: int):
+    def __init__(self, workers: int, arrived):
         self.workers = workers
-        fields = backend.FieldGroup()
-        self.arrived = fields.scalar(ti.i32, ())
-        fields.finalize(self)
+        self.arrived = arrived
 
     @ti.func
     def meet(self, count):
@@ -161,9 +160,12 @@ class ManySteps:
     def __init__(self, model):
         self.steps_per_launch = max(1, min(MAX_STEPS_PER_LAUNCH,
                                            SPRING_STEPS_PER_LAUNCH // max(model.spring_count, 1)))
+        fields = backend.FieldGroup()
+        arrived = fields.scalar(ti.i32, ())
+        fields.finalize(self)
         threads = backend.cpu_threads()
-        self.solo = Team(1)
-        self.team = Team(threads) if threads > 1 else self.solo
+        self.solo = Team(1, arrived)
+        self.team = Team(threads, arrived) if threads > 1 else self.solo
 
     def team_for(self, model, steps: int) -> Team:
         """The team that runs a launch of `steps` steps."""

@@ -1,0 +1,73 @@
+"""Microseconds per step of symplectic Euler in each CPU launch plan (ti_cloth/stepping.py), by
+cloth size and by how many steps one Simulation.step(n) call asks for.
+
+    launch per step   step(1) n times: one launch, two parallel loops a step
+    one worker        step(n): n steps in one launch, every loop serial
+    team              step(n): n steps in one launch, each Taichi CPU thread owning a slice of
+                      every loop, meeting at barriers
+
+The scene is throughput.py's (N x N sheet, stretch + shear + bend springs, two pinned corners,
+f32). Each cell is the median (and the 90th percentile, which shows the thread pool's slow
+wake-ups) of --repeats calls. Simulation.step picks between "one worker" and "team" by the work
+in a launch (stepping.TEAM_MIN_SPRING_STEPS); this table is what that threshold rests on.
+
+    python benchmarks/launch_plans.py [--sizes 32 64 128 256] [--counts 16 256] [--threads 2]
+"""
+
+import argparse
+import time
+
+import numpy as np
+
+import ti_cloth as tc
+from ti_cloth import stepping
+
+from throughput import scene
+
+PLANS = ("launch per step", "one worker", "team")
+
+
+def per_step_us(sim, plan: str, count: int, repeats: int) -> np.ndarray:
+    """Microseconds per step of `repeats` calls that each advance `count` steps."""
+    stepping.TEAM_MIN_SPRING_STEPS = 0 if plan == "team" else 1 << 62
+    times = []
+    for _ in range(repeats + 1):                      # the first call compiles
+        start = time.perf_counter()
+        if plan == "launch per step":
+            for _ in range(count):
+                sim.step(1)
+        else:
+            sim.step(count)
+        sim.state.first_bad_step[None]               # waits for the launch to finish
+        times.append((time.perf_counter() - start) / count * 1e6)
+    return np.array(times[1:])
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[32, 64, 128, 256])
+    parser.add_argument("--counts", type=int, nargs="+", default=[16, 256])
+    parser.add_argument("--threads", type=int, default=None, help="CPU threads (default: all)")
+    parser.add_argument("--repeats", type=int, default=15)
+    args = parser.parse_args(argv)
+    tc.init(arch="cpu", precision="f32", threads=args.threads)
+    threshold = stepping.TEAM_MIN_SPRING_STEPS
+    print(f"{'N':>5} {'springs':>9} {'steps/call':>10}  "
+          + "  ".join(f"{plan + ' (p50/p90)':>26}" for plan in PLANS) + f"  {'step(n) picks':>13}")
+    for n in args.sizes:
+        cloth, start = scene(n)
+        sim = tc.Simulation(cloth, dt=tc.auto_dt(cloth, "explicit_euler"))
+        sim.set_positions(start)
+        for count in args.counts:
+            cells = []
+            for plan in PLANS:
+                us = per_step_us(sim, plan, count, args.repeats)
+                cells.append(f"{np.median(us):>12.1f} / {np.percentile(us, 90):>11.1f}")
+            stepping.TEAM_MIN_SPRING_STEPS = threshold
+            picked = sim._many_steps.team_for(sim.model, min(count, sim._many_steps.steps_per_launch))
+            print(f"{n:>5} {cloth.spring_count:>9} {count:>10}  " + "  ".join(cells)
+                  + f"  {'team' if picked.workers > 1 else 'one worker':>13}")
+
+
+if __name__ == "__main__":
+    main()
