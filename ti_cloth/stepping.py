@@ -34,7 +34,7 @@ from .wind import accumulate_wind
 SERIAL_SPRING_LIMIT = 50_000   # constraint sweeps: serial faster at 24k springs, parallel at 97k
 MAX_STEPS_PER_LAUNCH = 4096    # bounds one launch (Ctrl-C and the divergence check wait for it)
 SPRING_STEPS_PER_LAUNCH = 25_000_000   # about 0.1 s of one core's work: fewer steps for big cloths
-TEAM_MIN_SPRING_STEPS = 1_000_000   # less work per launch than this runs on one worker
+TEAM_MIN_SPRING_STEPS = 1_000_000   # less work per launch runs on one worker (launch_plans.py)
 TASK_SPACING = 512   # Taichi 1.7's CPU runtime makes each block of 512 indices of a parallel loop
                      # one task: worker w is index w * 512, so each worker is a task of its own
 BARRIER_SPINS = 1 << 28   # polls (seconds) before a barrier gives up on a missing worker
