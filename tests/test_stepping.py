@@ -40,8 +40,11 @@ def run(sim, plan, steps, monkeypatch, per_launch=100):
         for _ in range(steps):
             sim.step(1)
         return
+    many = sim._many_steps
+    if plan == "team":       # two workers, whatever the cores, on the threads of the fixture
+        many.team = stepping.Team(2, many.solo.arrived)
     monkeypatch.setattr(stepping, "TEAM_MIN_SPRING_STEPS", 0 if plan == "team" else 1 << 62)
-    sim._many_steps.steps_per_launch = per_launch
+    many.steps_per_launch = per_launch
     sim.step(steps)
 
 
@@ -78,12 +81,21 @@ def test_a_team_shares_big_launches_and_one_worker_takes_small_ones(threads):
     sim = tc.Simulation(cloth, dt=2e-5)
     many, model = sim._many_steps, sim.model
     small = stepping.TEAM_MIN_SPRING_STEPS // model.spring_count
-    assert many.team.workers == backend.cpu_threads() >= 2 and many.solo.workers == 1
+    assert many.team.workers == min(backend.cpu_threads(), backend.cpu_cores())
+    assert many.solo.workers == 1
     assert many.team_for(model, small) is many.solo
     assert many.team_for(model, small + 1) is many.team
     assert many.steps_per_launch == stepping.MAX_STEPS_PER_LAUNCH
     big = stepping.SPRING_STEPS_PER_LAUNCH // 10
     assert stepping.ManySteps(SimpleNamespace(spring_count=big)).steps_per_launch == 10
+
+
+def test_a_team_has_no_more_workers_than_cores(threads, monkeypatch):
+    """More pool threads than cores (threads= beyond the machine) must not make spinning
+    workers wait for descheduled ones: one worker per core, here one, so no team."""
+    monkeypatch.setattr(backend, "cpu_cores", lambda: 1)
+    many = stepping.ManySteps(SimpleNamespace(spring_count=100))
+    assert backend.cpu_threads() >= 2 and many.team is many.solo
 
 
 def test_a_team_without_threads_for_every_worker_raises_instead_of_hanging(threads, monkeypatch):
@@ -92,9 +104,10 @@ def test_a_team_without_threads_for_every_worker_raises_instead_of_hanging(threa
     monkeypatch.setattr(stepping, "BARRIER_SPINS", 1 << 16)     # read when the kernel compiles
     many = sim._many_steps
     many.team = stepping.Team(backend.cpu_threads() + 1, many.solo.arrived)
+    monkeypatch.setattr(stepping, "TEAM_MIN_SPRING_STEPS", 0)
     sim.set_positions(start)
     with pytest.raises(tc.TeamStalled, match="workers"):
-        run(sim, "team", 50, monkeypatch)
+        sim.step(50)
 
 
 def test_features_between_steps_take_one_launch_per_step(f64):

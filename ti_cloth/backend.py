@@ -8,6 +8,7 @@ Calling `init` again resets Taichi: fields and simulations created before become
 
 from __future__ import annotations
 
+import os
 import weakref
 from dataclasses import dataclass
 
@@ -70,6 +71,13 @@ def cpu_threads() -> int:
     """How many CPU threads Taichi's thread pool has (the `threads` of init, or all cores)."""
     config()
     return int(ti.lang.impl.current_cfg().cpu_max_num_threads)
+
+
+def cpu_cores() -> int:
+    """How many CPU cores this process may run on."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
 
 
 def real():

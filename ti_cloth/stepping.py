@@ -154,7 +154,7 @@ class ManySteps:
 
     steps_per_launch: MAX_STEPS_PER_LAUNCH, or fewer for big cloths (SPRING_STEPS_PER_LAUNCH).
     A launch with less work than TEAM_MIN_SPRING_STEPS runs on one worker, a bigger one on a
-    team of every Taichi CPU thread.
+    team of a worker per Taichi CPU thread (at most one per core).
     """
 
     def __init__(self, model):
@@ -163,9 +163,11 @@ class ManySteps:
         fields = backend.FieldGroup()
         arrived = fields.scalar(ti.i32, ())
         fields.finalize(self)
-        threads = backend.cpu_threads()
+        # A worker per pool thread, but no more than the cores: a worker waiting at a barrier
+        # for one that has no core to run on spins away its time slice.
+        workers = min(backend.cpu_threads(), backend.cpu_cores())
         self.solo = Team(1, arrived)
-        self.team = Team(threads, arrived) if threads > 1 else self.solo
+        self.team = Team(workers, arrived) if workers > 1 else self.solo
 
     def team_for(self, model, steps: int) -> Team:
         """The team that runs a launch of `steps` steps."""

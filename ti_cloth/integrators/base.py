@@ -20,9 +20,9 @@ class Integrator:
 
     A fused integrator needs nothing but the force at the start of the step: it defines the
     ti.func move(model, state, i, f, dt, step, start), which moves particle i given its total
-    force f (start: 1 when the state has no history yet), and inherits a step() from
-    stepping.py, which evaluates the forces and moves every particle in one launch and can
-    also run many steps in one launch.
+    force f (start: 1 when the state has no history yet). It inherits a step() that runs one
+    launch of stepping.py (every spring force, then every particle's gather and move), and
+    Simulation can run many of its steps in one launch.
     """
 
     name: ClassVar[str]
