@@ -28,6 +28,19 @@ def f32():
     use("f32")
 
 
+def stretched_energy_ratios(sim, steps=30):
+    """Pull particle 1 of a spring pair 0.1 m along x, then E_(n+1) / E_n of each of `steps`
+    single steps (the energy map of a linear oscillator)."""
+    x = sim.positions()
+    x[1, 0] += 0.1
+    sim.set_positions(x)
+    energy = [sim.energy()["total"]]
+    for _ in range(steps):
+        sim.step(1)
+        energy.append(sim.energy()["total"])
+    return np.array(energy[1:]) / np.array(energy[:-1])
+
+
 def report(label, got, expected):
     """Print got vs expected so a failure (and -s runs) show both."""
     print(f"{label}: got {got!r}, expected {expected!r}")
