@@ -6,7 +6,7 @@
 
 from pathlib import Path
 
-from ti_cloth.cli import demo_main
+from ti_cloth.app.cli import demo_main
 
 
 def main(argv=None):

@@ -1,21 +1,21 @@
 """Tests run on the CPU. Most run in f64 so tolerances can follow the method, not rounding;
-the `f32` fixture switches precision for the tests that are about f32 itself."""
+the `f32` fixture switches precision for the tests that are about f32 itself. Shared helpers are
+in helpers.py.
 
-import os
-from pathlib import Path
+Where a test of an integrator goes:
+- test_integrators.py: what every integrator must satisfy against a closed form (free fall,
+  oscillator period, statics, energy laws of the explicit ones), parametrised over them;
+- test_implicit_and_xpbd.py: the implicit solves (backward Euler's CG, xpbd's multipliers)
+  against a dense solve and the exact decay of backward Euler;
+- test_convergence.py: observed order of accuracy; test_stability.py: predicted stable steps;
+- test_stepping.py: launch plans and the per-step order (the same bits whichever plan runs);
+- test_simulation.py: what Simulation adds around any integrator (pins, momentum, handles,
+  tearing, divergence, determinism).
+"""
 
-import imageio.v3 as iio
-import numpy as np
 import pytest
 
-import ti_cloth as tc
-from ti_cloth import backend
-from ti_cloth.render import write_png
-
-
-def use(precision: str) -> None:
-    if backend._config is None or backend._config.precision != precision:
-        tc.init(arch="cpu", precision=precision)
+from helpers import use
 
 
 @pytest.fixture
@@ -26,58 +26,3 @@ def f64():
 @pytest.fixture
 def f32():
     use("f32")
-
-
-def stretched_energy_ratios(sim, steps=30):
-    """Pull particle 1 of a spring pair 0.1 m along x, then E_(n+1) / E_n of each of `steps`
-    single steps (the energy map of a linear oscillator)."""
-    x = sim.positions()
-    x[1, 0] += 0.1
-    sim.set_positions(x)
-    energy = [sim.energy()["total"]]
-    for _ in range(steps):
-        sim.step(1)
-        energy.append(sim.energy()["total"])
-    return np.array(energy[1:]) / np.array(energy[:-1])
-
-
-def report(label, got, expected):
-    """Print got vs expected so a failure (and -s runs) show both."""
-    print(f"{label}: got {got!r}, expected {expected!r}")
-
-
-GOLDEN = Path(__file__).parent / "golden"
-GOLDEN_PIXEL_TOLERANCE = 2 / 255     # 8-bit rounding of a shaded colour, either way
-GOLDEN_OUTLIER_FRACTION = 0.005      # pixels allowed beyond it: edge samples that flip
-
-
-def assert_matches_golden(image, name: str, failure_dir: Path) -> None:
-    """Compare an (H, W, 3) uint8 render with tests/golden/<name>.png in float (never uint8
-    subtraction, which wraps around).
-
-    Threshold: renders are deterministic on one machine; another CPU or LLVM version may round
-    a shaded colour to the next 8-bit level (1/255) or flip a sample lying within rounding of a
-    triangle edge (with 2 x 2 supersampling, a quarter of the contrast in one pixel). So every
-    pixel may differ by 2/255 and 0.5 % of the pixels by more; a moved camera, a missing
-    triangle or a wrong colour changes far more. On failure the render and an amplified diff
-    are written to `failure_dir` and named in the message. TI_CLOTH_UPDATE_GOLDEN=1 rewrites
-    the golden instead (review the image before committing it).
-    """
-    path = GOLDEN / f"{name}.png"
-    if os.environ.get("TI_CLOTH_UPDATE_GOLDEN") == "1":
-        write_png(path, image)
-    expected = iio.imread(path).astype(np.float64) / 255
-    got = np.asarray(image).astype(np.float64) / 255
-    assert got.shape == expected.shape, f"{name}: shape {got.shape} != golden {expected.shape}"
-    diff = np.abs(got - expected).max(axis=2)
-    outliers = float(np.mean(diff > GOLDEN_PIXEL_TOLERANCE + 1e-9))
-    report(f"golden {name}: max diff, outlier fraction", (diff.max(), outliers),
-           f"outliers <= {GOLDEN_OUTLIER_FRACTION}")
-    if outliers > GOLDEN_OUTLIER_FRACTION:
-        failure_dir.mkdir(parents=True, exist_ok=True)
-        write_png(failure_dir / f"{name}.actual.png", np.asarray(image))
-        amplified = (np.clip(diff * 4, 0, 1) * 255).astype(np.uint8)
-        diff_path = write_png(failure_dir / f"{name}.diff.png", np.repeat(amplified[..., None], 3, 2))
-        raise AssertionError(f"{name}: {outliers:.2%} of pixels differ by more than "
-                             f"{GOLDEN_PIXEL_TOLERANCE * 255:.0f}/255 from {path} "
-                             f"(max {diff.max() * 255:.0f}/255); diff image: {diff_path}")

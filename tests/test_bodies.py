@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from conftest import report
+from helpers import report
 
 G = 9.81
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from ti_cloth import cli
+from ti_cloth.app import cli
 from ti_cloth.simulation import Simulation
 
 SCENE = """

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from conftest import report
+from helpers import compiled, forget_compiled, report
 from ti_cloth import colliders as colliders_module
 from ti_cloth.state import copy_positions
 
@@ -128,15 +128,14 @@ def test_a_particle_started_inside_is_pushed_to_the_surface(f64, shape, inside, 
 
 
 def test_scene_without_colliders_compiles_no_collision_kernel(f64):
-    for kernel in (colliders_module.resolve_collisions, copy_positions):
-        kernel._primal.compiled_kernels.clear()
+    forget_compiled(colliders_module.resolve_collisions, copy_positions)
     sim = tc.Simulation(tc.Cloth(tc.grid_mesh(4, 4), tc.Material(), pinned=[0]), dt=1e-4)
     sim.step(3)
-    assert not colliders_module.resolve_collisions._primal.compiled_kernels
-    assert not copy_positions._primal.compiled_kernels
+    assert not compiled(colliders_module.resolve_collisions)
+    assert not compiled(copy_positions)
     grounded = tc.Simulation(particle(1.0), dt=1e-3, colliders=[tc.Plane()])
     grounded.step(1)
-    assert colliders_module.resolve_collisions._primal.compiled_kernels
+    assert compiled(colliders_module.resolve_collisions)
 
 
 @pytest.mark.parametrize("make, field", [

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from conftest import report
+from helpers import report
 
 ALL = list(tc.INTEGRATORS)
 

@@ -6,16 +6,17 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from ti_cloth import constraints, simulation, strain_limit, tearing, wind
+from ti_cloth import constraints, handles, strain_limit, tearing, wind
 from ti_cloth.colliders import resolve_collisions
 from ti_cloth.integrators import implicit_euler, rk4, xpbd
 from ti_cloth.state import copy_positions
+from helpers import compiled, forget_compiled
 
 OPTIONAL = {
     "wind": wind._accumulate_wind, "collisions": resolve_collisions,
     "collision snapshot": copy_positions, "relaxation": constraints.relax_springs,
     "strain-limit velocity": strain_limit._follow_velocity, "tearing": tearing.tear_springs,
-    "handles": simulation._move_handles, "xpbd": constraints.xpbd_springs,
+    "handles": handles.move_handles, "xpbd": constraints.xpbd_springs,
     "xpbd prediction": xpbd._predict, "implicit solve": implicit_euler._linearise,
     "rk4 stages": rk4._stage,
 }
@@ -40,12 +41,11 @@ def full_simulation(integrator, n=8):
 
 @pytest.fixture
 def fresh_kernels():
-    for kernel in OPTIONAL.values():
-        kernel._primal.compiled_kernels.clear()
+    forget_compiled(*OPTIONAL.values())
 
 
-def compiled():
-    return {name for name, kernel in OPTIONAL.items() if kernel._primal.compiled_kernels}
+def compiled_features():
+    return {name for name, kernel in OPTIONAL.items() if compiled(kernel)}
 
 
 def test_minimal_scene_compiles_no_optional_kernel(f64, fresh_kernels):
@@ -54,7 +54,7 @@ def test_minimal_scene_compiles_no_optional_kernel(f64, fresh_kernels):
     sim = tc.Simulation(cloth, integrator="symplectic_euler", dt=1e-4)
     sim.step(20)
     assert np.abs(sim.positions() - cloth.particle_position).max() > 1e-5, "it ran"
-    assert compiled() == set()
+    assert compiled_features() == set()
 
 
 @pytest.mark.parametrize("integrator, own", [("symplectic_euler", set()), ("rk4", {"rk4 stages"}),
@@ -65,4 +65,4 @@ def test_each_feature_compiles_its_kernels_only_when_used(f64, fresh_kernels, in
     sim.step(5)
     features = {"wind", "collisions", "collision snapshot", "relaxation", "strain-limit velocity",
                 "tearing", "handles"}
-    assert compiled() == features | own
+    assert compiled_features() == features | own

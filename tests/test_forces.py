@@ -5,7 +5,7 @@ import pytest
 
 import ti_cloth as tc
 from ti_cloth.forces import ForceSettings, compute_forces, energies
-from conftest import report
+from helpers import report
 
 
 def forces_at(cloth, x, v, forces=ForceSettings(gravity=(0.0, 0.0, 0.0))):

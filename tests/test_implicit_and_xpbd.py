@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from conftest import report, stretched_energy_ratios
+from ti_cloth import constraints
+from helpers import report, stretched_energy_ratios
 
 
 def perturbed_cloth(damping):
@@ -167,11 +168,10 @@ def test_xpbd_iterations_validated():
 @pytest.mark.parametrize("integrator", [tc.PBD(iterations=4), tc.XPBD(iterations=4)], ids=["pbd", "xpbd"])
 def test_serial_and_parallel_sweeps_give_the_same_bits(f64, integrator, monkeypatch):
     """Both launch plans visit the springs colour by colour, so they agree exactly."""
-    from ti_cloth import stepping
     cloth = tc.Cloth(tc.grid_mesh(6, 7, plane="xz"), tc.Material(), pinned=[0, 5])
     results = []
     for limit in (10**9, -1):
-        monkeypatch.setattr(stepping, "SERIAL_SPRING_LIMIT", limit)
+        monkeypatch.setattr(constraints, "SERIAL_SPRING_LIMIT", limit)
         sim = tc.Simulation(cloth, integrator=integrator, dt=1 / 120, strain_limit=tc.StrainLimit(0.05))
         sim.step(20)
         results.append(sim.positions())

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from conftest import report, stretched_energy_ratios
+from helpers import report, stretched_energy_ratios
 
 FORCE_BASED = ["explicit_euler", "symplectic_euler", "verlet", "implicit_euler", "rk4"]
 ALL = FORCE_BASED + ["pbd", "xpbd"]

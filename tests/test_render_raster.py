@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from conftest import report
+from helpers import report
 from ti_cloth.render import Background, Camera, Light, Renderer, SurfaceStyle, write_png
 
 RED, GREEN, BLUE = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from conftest import assert_matches_golden, report
+from helpers import assert_matches_golden, report
 from ti_cloth.render import Background, Camera, Light, NullRenderer, Renderer, SurfaceStyle
 
 

@@ -10,9 +10,9 @@ import ti_cloth as tc
 from ti_cloth import wind as wind_module
 from ti_cloth.colliders import resolve_collisions
 from ti_cloth.constraints import relax_springs
-from ti_cloth.scene import load_scene
-from ti_cloth.scene_file import SceneError
-from conftest import report
+from ti_cloth.app.scene import load_scene
+from ti_cloth.app.scene_file import SceneError
+from helpers import compiled, forget_compiled, report
 
 DEMOS = Path(__file__).parents[1] / "demos"
 
@@ -117,19 +117,18 @@ def test_scene_file_problems_outside_the_keys(tmp_path):
 
 def test_a_scene_compiles_only_what_it_lists(tmp_path, f64):
     kernels = (wind_module._accumulate_wind, resolve_collisions, relax_springs)
-    for kernel in kernels:
-        kernel._primal.compiled_kernels.clear()
+    forget_compiled(*kernels)
     scene = load_scene(write(tmp_path, GRID))
     sim = scene.build()
     sim.step(5)
     assert sim.wind is None and sim.colliders is None and sim.strain_limiter is None
-    assert not any(k._primal.compiled_kernels for k in kernels)
+    assert not any(compiled(k) for k in kernels)
     full = GRID.replace("[forces]", '[forces]\nwind = { velocity = [2.0, 0.0, 1.0] }').replace(
         "duration = 0.1", "duration = 0.1\nstrain_limit = { max_strain = 0.1 }")
     full += '[[colliders]]\ntype = "sphere"\ncentre = [0.25, -0.5, 0.0]\nradius = 0.2\n'
     sim = load_scene(write(tmp_path, full)).build()
     sim.step(5)
-    assert all(k._primal.compiled_kernels for k in kernels)
+    assert all(compiled(k) for k in kernels)
 
 
 def test_bodies_of_a_scene_move_as_they_would_alone(tmp_path, f64):

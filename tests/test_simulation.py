@@ -6,7 +6,7 @@ import pytest
 import ti_cloth as tc
 from ti_cloth import backend
 from ti_cloth import tearing as tearing_module
-from conftest import report
+from helpers import compiled, forget_compiled, report
 
 ALL = list(tc.INTEGRATORS)
 
@@ -95,10 +95,11 @@ def test_tearing_removes_exactly_the_overstretched_springs(f64):
     assert np.array_equal(sim.torn_triangles(), np.flatnonzero(torn_edges))
     sim.step(1)   # once torn a spring stays torn; nothing else is over-stretched yet
     assert np.array_equal(sim.torn_springs(), np.flatnonzero(over))
+    assert np.array_equal(sim.spring_torn_step(), np.where(over, 0, -1)), "all tore in step 0"
 
 
 def test_without_tearing_nothing_is_removed_and_the_kernel_never_runs(f64, monkeypatch):
-    compiled = len(tearing_module.tear_springs._primal.compiled_kernels)
+    forget_compiled(tearing_module.tear_springs)
     calls = []
     monkeypatch.setattr(tearing_module, "tear_springs", lambda *a: calls.append(a))
     cloth = hanging_cloth(pinned=())
@@ -109,7 +110,7 @@ def test_without_tearing_nothing_is_removed_and_the_kernel_never_runs(f64, monke
     sim.step(3)
     assert sim.torn_count == 0 and calls == []
     monkeypatch.undo()
-    assert len(tearing_module.tear_springs._primal.compiled_kernels) == compiled
+    assert not compiled(tearing_module.tear_springs)
 
 
 @pytest.mark.parametrize("integrator", ALL)
@@ -140,7 +141,7 @@ def test_unstable_step_raises_divergence_with_step_and_stable_dt(f64):
 @pytest.mark.parametrize("kwargs, field", [
     (dict(dt=0.0), "dt"), (dict(dt=-1e-3), "dt"), (dict(dt=float("nan")), "dt"),
     (dict(integrator="leapfrog"), "integrator"), (dict(gravity=(0, -9.8)), "gravity.shape"),
-    (dict(drag=-1.0), "drag"), (dict(tearing=-0.1), "Tearing.stretch"),
+    (dict(drag=-1.0), "drag"), (dict(tearing=-0.1), "Tearing.strain"),
     (dict(handles=[tc.Handle([99], lambda t: (0, 0, 0))]), "Handle.particles"),
     (dict(position_limit=0.0), "position_limit"),
 ])

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from conftest import report
-from ti_cloth.stability import stiffest_mode
+from helpers import report
+from ti_cloth.modes import stiffest_mode
 
 
 def cloths():

@@ -1,4 +1,4 @@
-"""Launch plans (stepping.py): one parallel launch per step, many steps per launch on one worker
+"""Launch plans (fused.py): one parallel launch per step, many steps per launch on one worker
 and many steps per launch shared by a team of CPU workers, with the two-phase spring force
 (evaluate once, gather with signs), must all give the same bits, and the divergence guard must
 name the same step whichever plan ran."""
@@ -11,9 +11,14 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from ti_cloth import backend, stepping
+from ti_cloth import backend
+from ti_cloth.colliders import ColliderSet
 from ti_cloth.forces import ForceSettings, compute_forces
+from ti_cloth.handles import HandleSet
+from ti_cloth.integrators import Integrator, fused
 from ti_cloth.model import Model
+from ti_cloth.simulation import STEP_ORDER
+from ti_cloth.strain_limit import StrainLimiter
 
 FUSED = ["explicit_euler", "symplectic_euler", "verlet"]
 
@@ -42,8 +47,8 @@ def run(sim, plan, steps, monkeypatch, per_launch=100):
         return
     many = sim._many_steps
     if plan == "team":       # two workers, whatever the cores, on the threads of the fixture
-        many.team = stepping.Team(2, many.solo.arrived)
-    monkeypatch.setattr(stepping, "TEAM_MIN_SPRING_STEPS", 0 if plan == "team" else 1 << 62)
+        many.team = fused.Team(2, many.solo.arrived)
+    monkeypatch.setattr(fused, "TEAM_MIN_SPRING_STEPS", 0 if plan == "team" else 1 << 62)
     many.steps_per_launch = per_launch
     sim.step(steps)
 
@@ -80,31 +85,31 @@ def test_a_team_shares_big_launches_and_one_worker_takes_small_ones(threads):
     cloth, _ = sheet()
     sim = tc.Simulation(cloth, dt=2e-5)
     many, model = sim._many_steps, sim.model
-    small = stepping.TEAM_MIN_SPRING_STEPS // model.spring_count
+    small = fused.TEAM_MIN_SPRING_STEPS // model.spring_count
     assert many.team.workers == min(backend.cpu_threads(), backend.cpu_cores())
     assert many.solo.workers == 1
     assert many.team_for(model, small) is many.solo
     assert many.team_for(model, small + 1) is many.team
-    assert many.steps_per_launch == stepping.MAX_STEPS_PER_LAUNCH
-    big = stepping.SPRING_STEPS_PER_LAUNCH // 10
-    assert stepping.ManySteps(SimpleNamespace(spring_count=big)).steps_per_launch == 10
+    assert many.steps_per_launch == fused.MAX_STEPS_PER_LAUNCH
+    big = fused.SPRING_STEPS_PER_LAUNCH // 10
+    assert fused.ManySteps(SimpleNamespace(spring_count=big)).steps_per_launch == 10
 
 
 def test_a_team_has_no_more_workers_than_cores(threads, monkeypatch):
     """More pool threads than cores (threads= beyond the machine) must not make spinning
     workers wait for descheduled ones: one worker per core, here one, so no team."""
     monkeypatch.setattr(backend, "cpu_cores", lambda: 1)
-    many = stepping.ManySteps(SimpleNamespace(spring_count=100))
+    many = fused.ManySteps(SimpleNamespace(spring_count=100))
     assert backend.cpu_threads() >= 2 and many.team is many.solo
 
 
 def test_a_team_without_threads_for_every_worker_raises_instead_of_hanging(threads, monkeypatch):
     cloth, start = sheet()
     sim = tc.Simulation(cloth, dt=2e-5)
-    monkeypatch.setattr(stepping, "BARRIER_SPINS", 1 << 16)     # read when the kernel compiles
+    monkeypatch.setattr(fused, "BARRIER_SPINS", 1 << 16)     # read when the kernel compiles
     many = sim._many_steps
-    many.team = stepping.Team(backend.cpu_threads() + 1, many.solo.arrived)
-    monkeypatch.setattr(stepping, "TEAM_MIN_SPRING_STEPS", 0)
+    many.team = fused.Team(backend.cpu_threads() + 1, many.solo.arrived)
+    monkeypatch.setattr(fused, "TEAM_MIN_SPRING_STEPS", 0)
     sim.set_positions(start)
     with pytest.raises(tc.TeamStalled, match="workers"):
         sim.step(50)
@@ -119,6 +124,43 @@ def test_features_between_steps_take_one_launch_per_step(f64):
                    dict(handles=[tc.Handle([0], lambda t: (0.0, 0.0, 0.0))])):
         assert tc.Simulation(cloth, dt=1e-4, **kwargs)._many_steps is None, kwargs
     assert tc.Simulation(cloth, integrator="rk4", dt=1e-4)._many_steps is None
+
+
+def record_stages(monkeypatch):
+    """Every stage's launch, by its STEP_ORDER name, in the order they run."""
+    calls = []
+    stages = {"integrator": (Integrator, "step"), "strain_limit": (StrainLimiter, "after_step"),
+              "colliders": (ColliderSet, "after_step"), "handles": (HandleSet, "after_step"),
+              "tearing": (tc.Tearing, "after_step")}
+    for name, (owner, method) in stages.items():
+        def wrapped(*args, _name=name, _original=getattr(owner, method)):
+            calls.append(_name)
+            return _original(*args)
+        monkeypatch.setattr(owner, method, wrapped)
+    return calls
+
+
+@pytest.mark.parametrize("features", [
+    ("strain_limit", "colliders", "handles", "tearing"), ("colliders", "tearing"), ("handles",), ()])
+def test_a_step_runs_its_stages_in_step_order(f64, monkeypatch, features):
+    """One launch per step: the integrator, then exactly the stages the scene has, in
+    STEP_ORDER; the many-steps plan fuses the stages of FUSED_STAGES, which keep that order."""
+    cloth, _ = sheet()
+    options = {"strain_limit": dict(strain_limit=tc.StrainLimit(0.1)),
+               "colliders": dict(colliders=[tc.Plane(point=(0.0, -1.0, 0.0))]),
+               "handles": dict(handles=[tc.Handle([0], lambda t: (0.0, 0.0, 0.0))]),
+               "tearing": dict(tearing=0.5)}
+    kwargs = {k: v for name in features for k, v in options[name].items()}
+    sim = tc.Simulation(cloth, integrator="symplectic_euler", dt=1e-4, **kwargs)
+    calls = record_stages(monkeypatch)
+    for _ in range(3):
+        sim.step(1)
+    expected = tuple(name for name in STEP_ORDER if name == "integrator" or name in features)
+    assert sim.stages == expected
+    assert calls == list(expected) * 3
+    assert fused.FUSED_STAGES == tuple(n for n in STEP_ORDER if n in fused.FUSED_STAGES)
+    assert fused.FUSED_STAGES[0] == "integrator"
+    assert (sim._many_steps is not None) == (set(expected) <= set(fused.FUSED_STAGES))
 
 
 @pytest.mark.parametrize("integrator", FUSED)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from conftest import report
+from helpers import compiled, forget_compiled, report
 from ti_cloth import strain_limit as strain_limit_module
 from ti_cloth.constraints import relax_springs
 from ti_cloth.state import copy_positions
@@ -66,10 +66,9 @@ def test_bend_springs_are_left_alone_unless_listed(f64):
 
 def test_scene_without_strain_limit_compiles_none_of_its_kernels(f64):
     kernels = (relax_springs, copy_positions, strain_limit_module._follow_velocity)
-    for kernel in kernels:
-        kernel._primal.compiled_kernels.clear()
+    forget_compiled(*kernels)
     tc.Simulation(soft_hanging_cloth(), dt=1e-4).step(3)
-    assert not any(k._primal.compiled_kernels for k in kernels)
+    assert not any(compiled(k) for k in kernels)
 
 
 @pytest.mark.parametrize("kwargs, field", [

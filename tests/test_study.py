@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from conftest import report
+from helpers import report
 from ti_cloth import study
-from ti_cloth.cli import main
+from ti_cloth.app.cli import main
 
 FALLING_STRING = """
 [scene]

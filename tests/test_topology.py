@@ -5,7 +5,7 @@ import pytest
 
 import ti_cloth as tc
 from ti_cloth.topology import color_springs, mesh_springs, unique_springs
-from conftest import report
+from helpers import report
 
 K = tc.SpringKind
 

@@ -8,7 +8,7 @@ import ti_cloth as tc
 from ti_cloth import wind as wind_module
 from ti_cloth.forces import ForceSettings, compute_forces
 from ti_cloth.wind import WindField
-from conftest import report
+from helpers import compiled, forget_compiled, report
 
 RHO = 1.2
 
@@ -166,13 +166,13 @@ def test_banner_moves_downwind_more_in_stronger_wind(f32):
 
 
 def test_scene_without_wind_compiles_no_wind_kernel(f64):
-    wind_module._accumulate_wind._primal.compiled_kernels.clear()
+    forget_compiled(wind_module._accumulate_wind)
     tc.Simulation(tc.Cloth(tc.grid_mesh(4, 4), tc.Material(), pinned=[0]), dt=1e-4).step(3)
-    assert not wind_module._accumulate_wind._primal.compiled_kernels
+    assert not compiled(wind_module._accumulate_wind)
     windy = tc.Simulation(tc.Cloth(tc.grid_mesh(4, 4), tc.Material(), pinned=[0]), dt=1e-4,
                           wind=tc.Wind(velocity=(1, 0, 0)))
     windy.step(1)
-    assert wind_module._accumulate_wind._primal.compiled_kernels
+    assert compiled(wind_module._accumulate_wind)
 
 
 @pytest.mark.parametrize("kwargs, field", [

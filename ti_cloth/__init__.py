@@ -13,7 +13,8 @@ from .material import PRESETS, Material, SpringKind, SpringParams
 from .mesh import Mesh, grid_mesh, load_mesh, save_mesh, tet_grid_mesh
 from .model import Model
 from .paths import Keyframes, Oscillation
-from .simulation import Handle, Simulation
+from .handles import Handle
+from .simulation import Simulation
 from .stability import AUTO_MAX_DT, auto_dt, auto_substeps, stable_dt
 from .state import State
 from .strain_limit import StrainLimit
@@ -33,11 +34,15 @@ __all__ = [
 
 
 def __getattr__(name):
-    """load_scene and run_scene pull in the renderer, so they are imported only when used."""
+    """The application layer (ti_cloth.app) pulls in the renderer, so load_scene, run_scene
+    and the study module are imported only when used."""
     if name == "load_scene":
-        from .scene import load_scene
+        from .app.scene import load_scene
         return load_scene
     if name == "run_scene":
-        from .runner import run_scene
+        from .app.runner import run_scene
         return run_scene
+    if name == "study":
+        from .app import study
+        return study
     raise AttributeError(f"module 'ti_cloth' has no attribute {name!r}")

@@ -29,6 +29,19 @@ def finite_number(field: str, value, minimum: float | None = None, *, strict: bo
     return value
 
 
+def integer(field: str, value, minimum: int | None = None, maximum: int | None = None) -> int:
+    """`value` as an int (a Python or numpy integer, never a bool) in [minimum, maximum]."""
+    bounds = [f">= {minimum}" if minimum is not None and maximum is None else "",
+              f"in [{minimum}, {maximum}]" if minimum is not None and maximum is not None else "",
+              f"<= {maximum}" if minimum is None and maximum is not None else ""]
+    allowed = " ".join(["an int"] + [b for b in bounds if b])
+    require(isinstance(value, (int, np.integer)) and not isinstance(value, bool), field, value,
+            allowed)
+    require((minimum is None or value >= minimum) and (maximum is None or value <= maximum),
+            field, value, allowed)
+    return int(value)
+
+
 def as_array(field: str, value, dtype, shape: tuple) -> np.ndarray:
     """`value` as a numpy array of `dtype` whose shape matches `shape` (None = any length);
     float arrays must be finite."""

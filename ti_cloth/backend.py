@@ -80,6 +80,20 @@ def cpu_cores() -> int:
     return os.cpu_count() or 1
 
 
+DTYPES = {np.dtype(np.float32): ti.f32, np.dtype(np.float64): ti.f64, np.dtype(np.int8): ti.i8,
+          np.dtype(np.int32): ti.i32, np.dtype(np.int64): ti.i64}   # numpy -> Taichi, one map
+
+
+def taichi_dtype(dtype):
+    """The Taichi type of a numpy dtype (DTYPES)."""
+    return DTYPES[np.dtype(dtype)]
+
+
+def numpy_dtype(dtype):
+    """The numpy dtype of a Taichi type (DTYPES read backwards)."""
+    return next(np_type for np_type, ti_type in DTYPES.items() if ti_type == dtype)
+
+
 def real():
     """The Taichi float type of the active precision (ti.f32 or ti.f64)."""
     return PRECISIONS[config().precision]

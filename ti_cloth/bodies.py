@@ -7,18 +7,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._validate import as_array, finite_number, require
+from ._validate import as_array, finite_number, integer, require
 from .material import Material, SpringKind, SpringParams
 from .mesh import Mesh, tet_grid_mesh
 from .topology import Cloth, unique_springs
 
 STRING_ENDS = ("start", "both", "none")
-
-
-def _count(name: str, value, minimum: int) -> int:
-    require(isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value >= minimum,
-            name, value, f"an int >= {minimum}")
-    return int(value)
 
 
 def _unit(name: str, value) -> np.ndarray:
@@ -48,7 +42,7 @@ def string(n: int, length: float, *, mass: float = 0.1, stretch=SpringParams(500
     other end free: it simply has one spring, which is what the lecture's p_end = p_end-1 boundary
     approximates), "both" (the string held at both ends) or "none".
     """
-    n = _count("n", n, 2)
+    n = integer("n", n, 2)
     length = finite_number("length", length, 0.0, strict=True, unit="m")
     mass = finite_number("mass", mass, 0.0, strict=True, unit="kg")
     require(fixed in STRING_ENDS, "fixed", fixed, f"one of {STRING_ENDS}")
@@ -86,12 +80,12 @@ def hair(strands, segments: int, length: float, *, anchor=(0.0, 0.0, 0.0), radiu
     twist, so torsion has nothing to act on; ghosts matter for curly rest shapes, which these
     strands do not have. Stretch and bend springs alone give the strand's swing and stiffness.
     """
-    segments = _count("segments", segments, 1)
+    segments = integer("segments", segments, 1)
     length = finite_number("length", length, 0.0, strict=True, unit="m")
     mass = finite_number("mass", mass, 0.0, strict=True, unit="kg")
     anchor = as_array("anchor", anchor, np.float64, (3,))
     if isinstance(strands, (int, np.integer)) and not isinstance(strands, bool):
-        count = _count("strands", strands, 1)
+        count = integer("strands", strands, 1)
         radius = finite_number("radius", radius, 0.0, strict=True, unit="m")
         normals = _upper_hemisphere(count)
         roots = anchor + radius * normals

@@ -13,13 +13,15 @@ tangential displacement g sin(a) dt^2 per step, so it sticks exactly when tan(a)
 """
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import taichi as ti
 
 from . import backend
 from ._validate import as_array, finite_number, require
+from .state import copy_positions
+from .transfer import upload
 
 PLANE, SPHERE, BOX, CAPSULE = 0, 1, 2, 3
 
@@ -54,6 +56,17 @@ class Collider:
         offset = as_array(f"{type(self).__name__}.path({t})", self.path(t), np.float64, (3,))
         return offset
 
+    def placed(self, t: float) -> "Collider":
+        """This shape where its path has it at time t [s], without a path (itself if it has
+        none)."""
+        if self.path is None:
+            return self
+        return self.moved(self.offset(t))
+
+    def moved(self, offset: np.ndarray) -> "Collider":
+        """A copy translated by `offset` [m], without a path."""
+        raise NotImplementedError
+
     def packed(self) -> tuple[int, np.ndarray, np.ndarray, float]:
         """(kind, a, b, radius) as the collision kernel reads them."""
         raise NotImplementedError
@@ -79,6 +92,9 @@ class Plane(Collider):
         require(length > 0, "Plane.normal", self.normal, "a non-zero vector")
         object.__setattr__(self, "normal", tuple(float(v) / length for v in self.normal))
 
+    def moved(self, offset):
+        return replace(self, point=tuple(np.add(self.point, offset)), path=None)
+
     def packed(self):
         return PLANE, np.asarray(self.point), np.asarray(self.normal), 0.0
 
@@ -95,6 +111,9 @@ class Sphere(Collider):
         _vector(self, "centre")
         object.__setattr__(self, "radius", finite_number("Sphere.radius", self.radius, 0.0,
                                                          strict=True, unit="m"))
+
+    def moved(self, offset):
+        return replace(self, centre=tuple(np.add(self.centre, offset)), path=None)
 
     def packed(self):
         return SPHERE, np.asarray(self.centre), np.zeros(3), self.radius
@@ -114,6 +133,10 @@ class Box(Collider):
         require(all(h > l for l, h in zip(self.lo, self.hi)), "Box.hi", self.hi,
                 f"greater than Box.lo {self.lo} on every axis")
 
+    def moved(self, offset):
+        return replace(self, lo=tuple(np.add(self.lo, offset)), hi=tuple(np.add(self.hi, offset)),
+                       path=None)
+
     def packed(self):
         return BOX, np.asarray(self.lo), np.asarray(self.hi), 0.0
 
@@ -132,6 +155,10 @@ class Capsule(Collider):
         _vector(self, "b")
         object.__setattr__(self, "radius", finite_number("Capsule.radius", self.radius, 0.0,
                                                          strict=True, unit="m"))
+
+    def moved(self, offset):
+        return replace(self, a=tuple(np.add(self.a, offset)), b=tuple(np.add(self.b, offset)),
+                       path=None)
 
     def packed(self):
         return CAPSULE, np.asarray(self.a), np.asarray(self.b), self.radius
@@ -195,15 +222,23 @@ class ColliderSet:
         self.step_start = fields.vector(3, real, particle_count)
         fields.finalize(self)
         packed = [c.packed() for c in self.colliders]
-        np_real = backend.numpy_real()
-        self.kind.from_numpy(np.array([p[0] for p in packed], np.int32))
-        self.radius.from_numpy(np.array([p[3] for p in packed], np_real))
-        self.thickness.from_numpy(np.array([c.thickness for c in self.colliders], np_real))
-        self.static_friction.from_numpy(np.array([c.static_friction for c in self.colliders], np_real))
-        self.kinetic_friction.from_numpy(np.array([c.kinetic_friction for c in self.colliders], np_real))
+        upload(((self.kind, [p[0] for p in packed]), (self.radius, [p[3] for p in packed]),
+                (self.thickness, [c.thickness for c in self.colliders]),
+                (self.static_friction, [c.static_friction for c in self.colliders]),
+                (self.kinetic_friction, [c.kinetic_friction for c in self.colliders])))
         self.moving = any(c.path is not None for c in self.colliders)
         self._rest = [(p[1], p[2]) for p in packed]
         self.place(0.0)
+
+    def before_step(self, state, t: float) -> None:
+        """Keep the positions at the step start: the friction response needs the step's motion."""
+        copy_positions(state, self.step_start)
+
+    def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
+        """The collision stage of a step ending at time t (simulation.STEP_ORDER)."""
+        if self.moving:
+            self.place(t, dt)
+        resolve_collisions(model, state, self, dt)
 
     def place(self, t: float, dt: float | None = None) -> None:
         """Put every collider where its path says at time t; velocity from t - dt to t
@@ -215,10 +250,7 @@ class ColliderSet:
             b.append(b0 if isinstance(c, Plane) else b0 + offset)   # a plane's b is its normal
             moving = c.path is not None and dt is not None
             v.append((offset - c.offset(t - dt)) / dt if moving else np.zeros(3))
-        np_real = backend.numpy_real()
-        self.a.from_numpy(np.array(a, np_real))
-        self.b.from_numpy(np.array(b, np_real))
-        self.velocity.from_numpy(np.array(v, np_real))
+        upload(((self.a, a), (self.b, b), (self.velocity, v)))
 
 
 @ti.kernel

@@ -6,21 +6,28 @@ deterministic. Two launch plans give the same bits: `parallel` runs each colour 
 loop and launches one kernel per pass; `serial` runs every pass of every colour in one serial
 task of one launch. A parallel loop costs ~30 us to start on a CPU (measured, 2 cores), so a
 17-colour grid pays ~0.5 ms per pass before any work: on the CPU, serial wins below
-stepping.SERIAL_SPRING_LIMIT springs (XPBD, 10 passes: 6.4x faster at 1.4k springs, 1.8x at 24k;
+SERIAL_SPRING_LIMIT springs (XPBD, 10 passes: 6.4x faster at 1.4k springs, 1.8x at 24k;
 1.4x slower at 97k).
 """
 
 
 import taichi as ti
 
-from .stepping import serial_is_faster
+from . import backend
+
+SERIAL_SPRING_LIMIT = 50_000   # serial sweeps faster at 24k springs, parallel ones at 97k
+
+
+def serial_is_faster(model) -> bool:
+    """Whether this model's sweeps run faster serially in one launch (CPU, few springs)."""
+    return backend.config().arch == "cpu" and model.spring_count <= SERIAL_SPRING_LIMIT
 
 
 @ti.func
-def _relax(model: ti.template(), state: ti.template(), s, stiffness, tearing: ti.template(),
+def _relax(model: ti.template(), state: ti.template(), s, stiffness, tearable: ti.template(),
            max_strain, stretched_only: ti.template()):
     alive = True
-    if ti.static(tearing):
+    if ti.static(tearable):
         alive = state.spring_alive[s] != 0
     p, q = model.spring_indices[s][0], model.spring_indices[s][1]
     wp, wq = model.particle_inv_mass[p], model.particle_inv_mass[q]
@@ -37,10 +44,9 @@ def _relax(model: ti.template(), state: ti.template(), s, stiffness, tearing: ti
 
 
 @ti.kernel
-def relax_springs(model: ti.template(), state: ti.template(), order: ti.template(),
-                  offsets: ti.template(), stiffness: ti.math.vec3, tearing: ti.template(),
-                  max_strain: float, stretched_only: ti.template(), passes: ti.i32,
-                  serial: ti.template()):
+def relax_springs(model: ti.template(), state: ti.template(), colours: ti.template(),
+                  stiffness: ti.math.vec3, tearable: ti.template(), max_strain: float,
+                  stretched_only: ti.template(), passes: ti.i32, serial: ti.template()):
     """Relaxation passes over every spring (lecture, "relaxation"); `passes` of them when
     serial, else one.
 
@@ -55,20 +61,22 @@ def relax_springs(model: ti.template(), state: ti.template(), order: ti.template
     if ti.static(serial):
         for _ in range(1):
             for _pass in range(passes):
-                for c in ti.static(range(len(offsets) - 1)):
-                    for t in range(offsets[c], offsets[c + 1]):
-                        _relax(model, state, order[t], stiffness, tearing, max_strain, stretched_only)
+                for c in range(colours.count):
+                    for t in range(colours.start[c], colours.start[c + 1]):
+                        _relax(model, state, colours.order[t], stiffness, tearable, max_strain,
+                               stretched_only)
     else:
-        for c in ti.static(range(len(offsets) - 1)):
-            for t in range(offsets[c], offsets[c + 1]):
-                _relax(model, state, order[t], stiffness, tearing, max_strain, stretched_only)
+        for c in ti.static(range(colours.count)):
+            for t in range(colours.offsets[c], colours.offsets[c + 1]):
+                _relax(model, state, colours.order[t], stiffness, tearable, max_strain,
+                       stretched_only)
 
 
 @ti.func
 def _xpbd(model: ti.template(), state: ti.template(), s, multiplier: ti.template(), dt,
-          tearing: ti.template()):
+          tearable: ti.template()):
     alive = model.spring_stiffness[s] > 0
-    if ti.static(tearing):
+    if ti.static(tearable):
         alive = alive and state.spring_alive[s] != 0
     p, q = model.spring_indices[s][0], model.spring_indices[s][1]
     wp, wq = model.particle_inv_mass[p], model.particle_inv_mass[q]
@@ -90,9 +98,9 @@ def _xpbd(model: ti.template(), state: ti.template(), s, multiplier: ti.template
 
 
 @ti.kernel
-def xpbd_springs(model: ti.template(), state: ti.template(), order: ti.template(),
-                 offsets: ti.template(), multiplier: ti.template(), dt: float,
-                 tearing: ti.template(), passes: ti.i32, serial: ti.template()):
+def xpbd_springs(model: ti.template(), state: ti.template(), colours: ti.template(),
+                 multiplier: ti.template(), dt: float, tearable: ti.template(), passes: ti.i32,
+                 serial: ti.template()):
     """XPBD passes over every spring (Macklin et al. 2016, eq. 18; damping as Macklin et al.
     2019, "Small steps", with beta = kd); `passes` of them when serial, else one.
 
@@ -107,21 +115,21 @@ def xpbd_springs(model: ti.template(), state: ti.template(), order: ti.template(
     if ti.static(serial):
         for _ in range(1):
             for _pass in range(passes):
-                for c in ti.static(range(len(offsets) - 1)):
-                    for t in range(offsets[c], offsets[c + 1]):
-                        _xpbd(model, state, order[t], multiplier, dt, tearing)
+                for c in range(colours.count):
+                    for t in range(colours.start[c], colours.start[c + 1]):
+                        _xpbd(model, state, colours.order[t], multiplier, dt, tearable)
     else:
-        for c in ti.static(range(len(offsets) - 1)):
-            for t in range(offsets[c], offsets[c + 1]):
-                _xpbd(model, state, order[t], multiplier, dt, tearing)
+        for c in ti.static(range(colours.count)):
+            for t in range(colours.offsets[c], colours.offsets[c + 1]):
+                _xpbd(model, state, colours.order[t], multiplier, dt, tearable)
 
 
 def sweep(kernel, model, state, passes: int, *args) -> None:
     """Run `passes` passes of relax_springs or xpbd_springs on the model's launch plan; args
-    are the kernel's arguments after `offsets` and before `passes`."""
-    order, offsets = model.spring_colouring()
+    are the kernel's arguments after `colours` and before `passes`."""
+    colours = model.spring_colouring()
     if serial_is_faster(model):
-        kernel(model, state, order, offsets, *args, passes, True)
+        kernel(model, state, colours, *args, passes, True)
     else:
         for _ in range(passes):
-            kernel(model, state, order, offsets, *args, 1, False)
+            kernel(model, state, colours, *args, 1, False)

@@ -7,12 +7,13 @@ own springs in a fixed order (Model adjacency: second-end springs first, then fi
 No float atomics, so a run is deterministic; each spring's formula is evaluated once, not once
 per end; Newton's third law holds exactly.
 
-The pieces are ti.funcs, so stepping.py can put a whole step (springs, gather, update) in one
+The pieces are ti.funcs, so integrators/fused.py can put a whole step (springs, gather, update) in one
 kernel: its loops run in parallel when that kernel is launched once per step, and split among
 CPU workers (or run by one) when it runs many steps in one launch.
 """
 
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,13 +32,14 @@ class ForceSettings:
     gravity: acceleration [m/s^2], any direction.
     drag: uniform air drag [1/s]: f_i = -drag * m_i * v_i (mass-proportional, so the same
         deceleration everywhere and independent of resolution). 0 compiles it out.
-    tearing: springs carry an alive flag that force loops must test (compile-time switch).
+    tearable: springs carry an alive flag that force loops must test (compile-time switch; on
+        when the simulation has Tearing).
     wind: a wind.WindField (per-triangle aerodynamics) or None (its kernel is never compiled).
     """
 
     gravity: tuple[float, float, float] = (0.0, -9.81, 0.0)
     drag: float = 0.0
-    tearing: bool = False
+    tearable: bool = False
     wind: object = None
 
     def __post_init__(self):
@@ -47,6 +49,13 @@ class ForceSettings:
     @property
     def has_wind(self) -> bool:
         return self.wind is not None
+
+    @property
+    def tearing(self) -> bool:
+        """Deprecated name of `tearable`."""
+        warnings.warn("ForceSettings.tearing is now ForceSettings.tearable", DeprecationWarning,
+                      stacklevel=2)
+        return self.tearable
 
 
 @ti.func
@@ -73,7 +82,7 @@ def spring_force(xi, xj, vi, vj, rest, k, kd, relative: ti.template()):
 
 
 @ti.func
-def evaluate_springs(model: ti.template(), state: ti.template(), tearing: ti.template(), begin,
+def evaluate_springs(model: ti.template(), state: ti.template(), tearable: ti.template(), begin,
                      end):
     """spring_force[s] = force of spring s on its first end (eq. 4.5, 4.7), 0 once torn, for
     springs begin .. end - 1."""
@@ -81,7 +90,7 @@ def evaluate_springs(model: ti.template(), state: ti.template(), tearing: ti.tem
         i, j = model.spring_indices[s][0], model.spring_indices[s][1]
         f = ti.Vector([0.0, 0.0, 0.0])
         alive = True
-        if ti.static(tearing):
+        if ti.static(tearable):
             alive = state.spring_alive[s] != 0
         if alive:
             f = spring_force(state.particle_position[i], state.particle_position[j],
@@ -92,8 +101,8 @@ def evaluate_springs(model: ti.template(), state: ti.template(), tearing: ti.tem
 
 
 @ti.func
-def particle_force(model: ti.template(), state: ti.template(), forces: ti.template(), i,
-                   springs: ti.template()):
+def gather_force(model: ti.template(), state: ti.template(), forces: ti.template(), i,
+                 springs: ti.template()):
     """Total force on particle i: m g (Stuyck eq. 4.3) - drag m v + its springs' forces, as
     evaluate_springs left them (springs=False: external loads only) + the wind's share."""
     f = model.particle_mass[i] * ti.Vector(forces.gravity)
@@ -106,24 +115,24 @@ def particle_force(model: ti.template(), state: ti.template(), forces: ti.templa
         for a in range(split, model.particle_spring_start[i + 1]):
             f += state.spring_force[model.adjacency_spring[a]]
     if ti.static(forces.has_wind):
-        f += forces.wind.particle_force[i]
+        f += forces.wind.particle_wind_force[i]
     return f
 
 
 @ti.kernel
 def accumulate_forces(model: ti.template(), state: ti.template(), forces: ti.template(),
                       springs: ti.template()):
-    """particle_force = particle_force(i) for every particle, springs evaluated first."""
+    """state.particle_force = gather_force(i) for every particle, springs evaluated first."""
     if ti.static(springs):
-        evaluate_springs(model, state, forces.tearing, 0, model.spring_count)
+        evaluate_springs(model, state, forces.tearable, 0, model.spring_count)
     for i in range(model.particle_count):
-        state.particle_force[i] = particle_force(model, state, forces, i, springs)
+        state.particle_force[i] = gather_force(model, state, forces, i, springs)
 
 
 def compute_forces(model, state, forces: ForceSettings, springs: bool = True) -> None:
     """particle_force at the current state: the wind's kernel if any, then springs and gather."""
     if forces.wind is not None:
-        accumulate_wind(model, state, forces.wind, forces.tearing)
+        accumulate_wind(model, state, forces.wind, forces.tearable)
     accumulate_forces(model, state, forces, springs and model.spring_count > 0)
 
 

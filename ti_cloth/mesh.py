@@ -9,7 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ._validate import as_array, require
+from ._validate import as_array, integer, require
+from .files import atomic_path
 
 PLANES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2), "zx": (2, 0), "yx": (1, 0), "zy": (2, 1)}
 
@@ -135,6 +136,16 @@ def triangle_edges(triangles: np.ndarray) -> np.ndarray:
     return np.sort(e, axis=1)
 
 
+def vertex_triangles(triangles: np.ndarray, vertex_count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each vertex's triangles, as CSR lists in triangle order: vertex v's triangles are
+    triangle[start[v]:start[v + 1]]. Returns (start (vertex_count + 1,), triangle (3 T,)), int64;
+    gathers over them (wind forces, smooth normals) visit triangles in a fixed order."""
+    corners = np.asarray(triangles).ravel()
+    start = np.zeros(vertex_count + 1, np.int64)
+    start[1:] = np.cumsum(np.bincount(corners, minlength=vertex_count))
+    return start, np.argsort(corners, kind="stable") // 3
+
+
 def grid_mesh(rows: int, cols: int, size: tuple[float, float] = (1.0, 1.0), plane: str = "xy",
               origin=(0.0, 0.0, 0.0)) -> Mesh:
     """A regular grid of rows x cols particles, each quad split into two triangles.
@@ -147,8 +158,7 @@ def grid_mesh(rows: int, cols: int, size: tuple[float, float] = (1.0, 1.0), plan
     Vertex (r, c) has index r * cols + c. Every quad is cut along the same diagonal, from
     (r, c) to (r + 1, c + 1), so interior particles all touch six triangles of equal area.
     """
-    for name, value in (("rows", rows), ("cols", cols)):
-        require(isinstance(value, (int, np.integer)) and value >= 2, name, value, "an int >= 2")
+    rows, cols = integer("rows", rows, 2), integer("cols", cols, 2)
     size = as_array("size", size, np.float64, (2,))
     require(bool(np.all(size > 0)), "size", size.tolist(), "two lengths > 0 m")
     require(plane in PLANES, "plane", plane, f"one of {sorted(PLANES)}")
@@ -206,6 +216,5 @@ def save_mesh(path, mesh: Mesh, vertices=None) -> None:
     path = Path(path)
     points = mesh.vertices if vertices is None else as_array("vertices", vertices, np.float64,
                                                              (mesh.vertex_count, 3))
-    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
-    meshio.write_points_cells(tmp, points, [("triangle", mesh.triangles)])
-    tmp.replace(path)
+    with atomic_path(path) as tmp:
+        meshio.write_points_cells(tmp, points, [("triangle", mesh.triangles)])

@@ -7,6 +7,7 @@ import taichi as ti
 
 from . import backend
 from .state import State
+from .transfer import upload
 from .topology import Cloth, color_springs
 
 
@@ -67,41 +68,47 @@ class Model:
         order = np.lexsort((other, first_end, owner))
         start = np.concatenate([[0], np.cumsum(np.bincount(owner, minlength=n))])
         split = start[:-1] + np.bincount(ends[:, 1], minlength=n)
-        for field, values in ((self.particle_mass, cloth.particle_mass),
-                              (self.particle_inv_mass, inv_mass),
-                              (self.particle_rest_position, cloth.particle_position),
-                              (self.spring_indices, cloth.spring_indices),
-                              (self.spring_rest_length, cloth.spring_rest_length),
-                              (self.spring_stiffness, cloth.spring_stiffness),
-                              (self.spring_damping, cloth.spring_damping),
-                              (self.spring_kind, cloth.spring_kind),
-                              (self.particle_spring_start, start),
-                              (self.particle_spring_split, split),
-                              (self.adjacency_spring, spring[order]),
-                              (self.adjacency_other, other[order])):
-            _upload(field, values)
+        upload(((self.particle_mass, cloth.particle_mass),
+                        (self.particle_inv_mass, inv_mass),
+                        (self.particle_rest_position, cloth.particle_position),
+                        (self.spring_indices, cloth.spring_indices),
+                        (self.spring_rest_length, cloth.spring_rest_length),
+                        (self.spring_stiffness, cloth.spring_stiffness),
+                        (self.spring_damping, cloth.spring_damping),
+                        (self.spring_kind, cloth.spring_kind),
+                        (self.particle_spring_start, start),
+                        (self.particle_spring_split, split),
+                        (self.adjacency_spring, spring[order]),
+                        (self.adjacency_other, other[order])))
         self._colouring = None
 
-    def state(self) -> State:
-        """A fresh State at the rest configuration, at rest, with every spring intact."""
-        state = State(self.particle_count, self.spring_count)
+    def state(self, position_limit: float = 1e6) -> State:
+        """A fresh State at the rest configuration, at rest, with every spring intact, whose
+        divergence guard flags any |coordinate| beyond position_limit [m]."""
+        state = State(self.particle_count, self.spring_count, position_limit)
         state.reset(self.particle_rest_position)
         return state
 
-    def spring_colouring(self):
-        """(order field, colour offsets tuple): springs grouped so that no two in a colour share
-        a particle; built on first use (only position-based integrators need it)."""
+    def spring_colouring(self) -> SpringColouring:
+        """The springs grouped so that no two in a colour share a particle; built on first use
+        (only position-based passes need it)."""
         if self._colouring is None:
-            order, offsets = color_springs(self.cloth.spring_indices, self.particle_count)
-            fields = backend.FieldGroup()
-            field = fields.scalar(ti.i32, max(self.spring_count, 1))
-            fields.finalize(self)
-            self._colouring = (_upload(field, order), tuple(int(o) for o in offsets))
+            self._colouring = SpringColouring(*color_springs(self.cloth.spring_indices,
+                                                             self.particle_count))
         return self._colouring
 
 
-def _upload(field, values):
-    """Copy `values` into `field`; a field padded to length 1 (no springs) takes no values."""
-    if len(values):
-        field.from_numpy(np.ascontiguousarray(values, dtype=ti.lang.util.to_numpy_type(field.dtype)))
-    return field
+@ti.data_oriented
+class SpringColouring:
+    """Springs by colour: colour c is springs order[start[c]:start[c + 1]] (fields, read in
+    loops whose bounds are not compile-time constants, so a kernel visiting every colour
+    compiles one copy of its loop body); count: how many colours (a Python int)."""
+
+    def __init__(self, order, offsets):
+        self.count = len(offsets) - 1
+        self.offsets = tuple(int(o) for o in offsets)
+        fields = backend.FieldGroup()
+        self.order = fields.scalar(ti.i32, max(len(order), 1))
+        self.start = fields.scalar(ti.i32, len(offsets))
+        fields.finalize(self)
+        upload(((self.order, order), (self.start, offsets)))

@@ -1,58 +1,37 @@
-"""Simulation: the step loop, scripted handles, the divergence guard and diagnostics."""
+"""Simulation: the step loop, the divergence guard and diagnostics.
+
+One step, in this order (STEP_ORDER), the same in every launch plan:
+
+    integrator (forces, move)  ->  strain limiting  ->  colliders  ->  handles  ->  tearing
+
+Each stage after the integrator is an object with after_step(model, state, t, dt, step_index)
+(t: the time at the step's end), compiled and launched only when the simulation has it; the
+colliders and the wind also have before_step(state, t) (t: the step's start). On the CPU, a
+fused integrator whose stages are all among integrators.fused.FUSED_STAGES runs many steps in
+one launch (tested to give the same bits as a launch per step).
+"""
 
 
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Sequence
 
 import numpy as np
-import taichi as ti
 
-from . import backend, stepping
-from . import tearing as tearing_module
-from ._validate import as_array, finite_number, require
-from .colliders import ColliderSet, resolve_collisions
+from . import backend
+from ._validate import as_array, finite_number, integer, require
+from .colliders import ColliderSet
 from .errors import SimulationDiverged
 from .forces import ForceSettings, energies
-from .integrators import make_integrator
+from .handles import Handle, HandleSet
+from .integrators import fused, make_integrator
 from .model import Model
 from .stability import auto_dt, stable_dt
 from .strain_limit import StrainLimit, StrainLimiter
-from .state import NO_BAD_STEP, copy_positions
+from .state import NO_BAD_STEP
 from .tearing import Tearing, torn_triangles
 from .topology import Cloth
 from .wind import WindField
 
-
-@dataclass(frozen=True)
-class Handle:
-    """Particles moved along a scripted path (the lecture's "click a particle and pull it").
-
-    particles: indices of the particles the handle holds; they become pinned (inverse mass 0).
-    path: t [s] -> displacement [m] from their rest positions, shape (3,) (all move together)
-        or (len(particles), 3).
-    """
-
-    particles: Sequence[int]
-    path: Callable[[float], object]
-
-    def __post_init__(self):
-        object.__setattr__(self, "particles", as_array("Handle.particles", self.particles,
-                                                       np.int64, (None,)))
-        require(len(self.particles) > 0, "Handle.particles", [], "at least one particle index")
-        require(callable(self.path), "Handle.path", self.path, "a callable t -> displacement")
-
-
-@ti.kernel
-def _move_handles(state: ti.template(), index: ti.types.ndarray(), target: ti.types.ndarray(),
-                  dt: float):
-    """Put held particles on their targets; velocity = displacement / dt so springs damp right."""
-    for h in range(index.shape[0]):
-        i = index[h]
-        x_old = state.particle_position[i]
-        x_new = ti.Vector([target[h, 0], target[h, 1], target[h, 2]])
-        state.particle_prev_position[i] = x_old
-        state.particle_position[i] = x_new
-        state.particle_velocity[i] = (x_new - x_old) / dt
+STEP_ORDER = ("integrator", "strain_limit", "colliders", "handles", "tearing")
 
 
 class Simulation:
@@ -70,8 +49,8 @@ class Simulation:
     strain_limit: None (off: never compiled nor launched) or a StrainLimit (Provot 1995).
     position_limit: the divergence guard flags any |coordinate| beyond this [m].
 
-    Each step: the integrator (wind held at its value at the step start), then strain limiting,
-    then collisions (so nothing ends inside a collider), then handles, then tearing.
+    Each step runs the stages of STEP_ORDER (module doc); the wind is held at its value at the
+    step start.
     """
 
     def __init__(self, cloth: Cloth, integrator="symplectic_euler", dt: float = 1e-3,
@@ -86,42 +65,39 @@ class Simulation:
         gravity = as_array("gravity", gravity, np.float64, (3,))
         drag = finite_number("drag", drag, 0.0, unit="1/s")
         if tearing is not None and not isinstance(tearing, Tearing):
-            tearing = Tearing(stretch=tearing)
+            tearing = Tearing(tearing)
         self.tearing = tearing
-        self.handles = tuple(handles)
-        for h in self.handles:
-            require(isinstance(h, Handle), "handles", h, "Handle objects")
-            bad = h.particles[(h.particles < 0) | (h.particles >= cloth.particle_count)]
-            require(len(bad) == 0, "Handle.particles", bad.tolist(),
-                    f"particle indices in [0, {cloth.particle_count - 1}]")
+        handles = tuple(handles)
+        self.handles = HandleSet(handles, cloth.particle_position) if handles else None
         self.wind = WindField(wind, cloth) if wind is not None else None
-        self.forces = ForceSettings(gravity=tuple(gravity), drag=drag, tearing=tearing is not None,
+        self.forces = ForceSettings(gravity=tuple(gravity), drag=drag, tearable=tearing is not None,
                                     wind=self.wind)
-
-        pinned = cloth.pinned.copy()
-        if self.handles:
-            self._handle_index = np.concatenate([h.particles for h in self.handles]).astype(np.int32)
-            pinned[self._handle_index] = True
+        pinned = self.handles.pin(cloth.pinned) if self.handles else cloth.pinned
+        position_limit = finite_number("position_limit", position_limit, 0.0, strict=True, unit="m")
         self.model = Model(cloth, pinned=pinned)
         if auto:
             self.dt = auto_dt(cloth, self.integrator, drag, pinned)
-        self.state = self.model.state()
-        self.state.position_limit[None] = finite_number("position_limit", position_limit, 0.0,
-                                                        strict=True, unit="m")
+        self.state = self.model.state(position_limit)
         require(strain_limit is None or isinstance(strain_limit, StrainLimit), "strain_limit",
                 strain_limit, "None or a StrainLimit")
-        self.strain_limiter = (StrainLimiter(strain_limit, cloth.particle_count)
+        self.strain_limiter = (StrainLimiter(strain_limit, cloth.particle_count, tearing is not None)
                                if strain_limit is not None and cloth.spring_count else None)
         colliders = tuple(colliders)
         self.colliders = ColliderSet(colliders, cloth.particle_count) if colliders else None
+        stages = dict(strain_limit=self.strain_limiter, colliders=self.colliders,
+                      handles=self.handles, tearing=self.tearing)
+        self.stages = ("integrator",) + tuple(name for name in STEP_ORDER[1:]
+                                              if stages[name] is not None)
+        self._after = [stages[name] for name in self.stages[1:]]
+        self._before = [stage for stage in (self.colliders, self.wind) if stage is not None]
         self.step_count = 0
         self._diverged: SimulationDiverged | None = None
         self._place_handles_at_start()
-        # Many steps per launch on the CPU when nothing but tearing acts between steps; made
-        # on the first step(n > 1), so a simulation stepped one at a time allocates nothing.
+        # Many steps per launch on the CPU when every stage is fused; made on the first
+        # step(n > 1), so a simulation stepped one at a time allocates nothing.
         self._many_per_launch = (self.integrator.fused and backend.config().arch == "cpu"
-                                 and self.wind is None and not self.handles
-                                 and self.colliders is None and self.strain_limiter is None)
+                                 and self.wind is None
+                                 and set(self.stages) <= set(fused.FUSED_STAGES))
         self._many_steps_plan = None
 
     def restart(self, dt: float | None = None) -> None:
@@ -139,8 +115,7 @@ class Simulation:
 
     def _place_handles_at_start(self) -> None:
         if self.handles:
-            self._apply_handles(0.0)
-            self.state.particle_velocity.fill(0)
+            self.handles.place_at_start(self.model, self.state, self.dt)
 
     @property
     def time(self) -> float:
@@ -148,34 +123,19 @@ class Simulation:
         return self.step_count * self.dt
 
     def step(self, n: int = 1) -> None:
-        """Advance n steps of dt. Raises SimulationDiverged at the first step whose result is
-        not finite; after that the simulation refuses to continue."""
-        require(isinstance(n, (int, np.integer)) and n >= 0, "n", n, "an int >= 0")
+        """Advance n steps of dt, each the stages of STEP_ORDER. Raises SimulationDiverged at
+        the first step whose result is not finite; after that the simulation refuses to
+        continue."""
+        integer("n", n, 0)
         if self._diverged is not None:
             raise self._diverged
         if self._many_per_launch and n > 1:
             self.step_count += self._many_steps.run(
                 self.integrator, self.model, self.state, self.forces, self.dt, self.step_count, n,
-                self.tearing.stretch if self.tearing is not None else 0.0)
+                self.tearing.strain if self.tearing is not None else 0.0)
             n = 0
         for _ in range(n):
-            if self.colliders is not None:
-                copy_positions(self.state, self.colliders.step_start)
-            if self.wind is not None:
-                self.wind.update(self.time)
-            self.integrator.step(self.model, self.state, self.dt, self.forces, self.step_count)
-            self.step_count += 1
-            if self.strain_limiter is not None:
-                self.strain_limiter.apply(self.model, self.state, self.dt, self.forces.tearing)
-            if self.colliders is not None:
-                if self.colliders.moving:
-                    self.colliders.place(self.time, self.dt)
-                resolve_collisions(self.model, self.state, self.colliders, self.dt)
-            if self.handles:
-                self._apply_handles(self.time)
-            if self.tearing is not None:
-                tearing_module.tear_springs(self.model, self.state, self.tearing.stretch,
-                                            self.step_count - 1)
+            self._step_once()
         bad = int(self.state.first_bad_step[None])
         if bad != NO_BAD_STEP:
             self._diverged = SimulationDiverged(
@@ -184,21 +144,21 @@ class Simulation:
                 self.integrator.name)
             raise self._diverged
 
+    def _step_once(self) -> None:
+        """One step, launch by launch: the stages of STEP_ORDER this simulation has."""
+        for stage in self._before:
+            stage.before_step(self.state, self.time)
+        self.integrator.step(self.model, self.state, self.dt, self.forces, self.step_count)
+        self.step_count += 1
+        for stage in self._after:
+            stage.after_step(self.model, self.state, self.time, self.dt, self.step_count - 1)
+
     @property
-    def _many_steps(self) -> stepping.ManySteps | None:
+    def _many_steps(self) -> fused.ManySteps | None:
         """The plan that runs step(n > 1) in few launches, or None when steps go one by one."""
         if self._many_per_launch and self._many_steps_plan is None:
-            self._many_steps_plan = stepping.ManySteps(self.model)
+            self._many_steps_plan = fused.ManySteps(self.model)
         return self._many_steps_plan
-
-    def _apply_handles(self, t: float) -> None:
-        targets = []
-        for h in self.handles:
-            offset = np.broadcast_to(np.asarray(h.path(t), np.float64), (len(h.particles), 3))
-            targets.append(self.cloth.particle_position[h.particles] + offset)
-        target = np.concatenate(targets)
-        require(bool(np.isfinite(target).all()), f"Handle.path({t})", target, "finite displacements")
-        _move_handles(self.state, self._handle_index, target.astype(backend.numpy_real()), self.dt)
 
     def positions(self) -> np.ndarray:
         """Particle positions [m], (N, 3) float64 copy."""
@@ -233,9 +193,25 @@ class Simulation:
         """How many springs have torn."""
         return len(self.torn_springs())
 
+    def spring_torn_step(self) -> np.ndarray:
+        """(S,) int: the index of the step in which each spring tore, -1 while it is intact
+        (tear statistics: when and in what order the cloth came apart)."""
+        return self.state.spring_torn_step.to_numpy()[: self.cloth.spring_count].astype(np.int64)
+
     def torn_triangles(self) -> np.ndarray:
         """Indices of triangles that lost an edge spring (for a renderer to drop)."""
         return torn_triangles(self.cloth.triangle_edge_spring, ~self.spring_alive())
+
+    def pinned(self) -> np.ndarray:
+        """(N,) bool: particles the integrator does not move (the cloth's pins and every
+        handle's particles)."""
+        return self.model.pinned.copy()
+
+    def collider_shapes(self) -> tuple:
+        """The colliders where their paths have them at the current time (Collider.placed)."""
+        if self.colliders is None:
+            return ()
+        return tuple(c.placed(self.time) for c in self.colliders.colliders)
 
     def energy(self) -> dict[str, float]:
         """{"kinetic", "gravity", "spring", "spring_stretch", "spring_shear", "spring_bend",

@@ -25,12 +25,15 @@ class State:
                             in the Model, so the Model stays immutable and state() starts whole
     spring_torn_step        step index at which each spring tore, -1 if intact
     first_bad_step          smallest step index whose result held a NaN, an inf or a coordinate
-                            beyond the guard limit (NO_BAD_STEP if none)
-    position_limit          largest |coordinate| [m] the guard accepts
+                            beyond position_limit (NO_BAD_STEP if none)
+    position_limit          largest |coordinate| [m] the guard accepts: configuration, set here
+                            once and never changed (it sits with the time-varying fields because
+                            the kernels read it next to them: the step's code, and so its
+                            rounding, stays as it was)
     prev_valid              False until particle_prev_position holds a real previous step
     """
 
-    def __init__(self, particle_count: int, spring_count: int):
+    def __init__(self, particle_count: int, spring_count: int, position_limit: float = 1e6):
         real = backend.real()
         fields = backend.FieldGroup()
         self.particle_position = fields.vector(3, real, particle_count)
@@ -44,18 +47,27 @@ class State:
         self.first_bad_step = fields.scalar(ti.i32, ())
         self.position_limit = fields.scalar(real, ())
         fields.finalize(self)
-        self.position_limit[None] = 1e6
+        self.limit = position_limit
         self.prev_valid = False
 
     def reset(self, rest_position) -> None:
-        """Positions (and history) = rest_position, at rest, every spring intact, no bad step."""
-        self.particle_position.copy_from(rest_position)
-        self.particle_prev_position.copy_from(rest_position)
-        self.particle_velocity.fill(0)
-        self.spring_alive.fill(1)
-        self.spring_torn_step.fill(-1)
-        self.first_bad_step[None] = NO_BAD_STEP
+        """Positions (and history) = rest_position, at rest, every spring intact, no bad step
+        (one launch)."""
+        _reset(self, rest_position, self.limit)
         self.prev_valid = False
+
+
+@ti.kernel
+def _reset(state: ti.template(), rest_position: ti.template(), position_limit: ti.f64):
+    for i in state.particle_position:
+        state.particle_position[i] = rest_position[i]
+        state.particle_prev_position[i] = rest_position[i]
+        state.particle_velocity[i] = ti.Vector([0.0, 0.0, 0.0])
+    for s in state.spring_alive:
+        state.spring_alive[s] = ti.i8(1)
+        state.spring_torn_step[s] = -1
+    state.first_bad_step[None] = NO_BAD_STEP
+    state.position_limit[None] = ti.cast(position_limit, state.position_limit.dtype)
 
 
 @ti.func

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import taichi as ti
 
 from . import backend
-from ._validate import finite_number, require
+from ._validate import finite_number, integer, require
 from .constraints import relax_springs, sweep
 from .material import SpringKind
 from .state import copy_positions
@@ -27,8 +27,7 @@ class StrainLimit:
     def __post_init__(self):
         object.__setattr__(self, "max_strain", finite_number("StrainLimit.max_strain",
                                                              self.max_strain, 0.0, strict=True))
-        require(isinstance(self.passes, int) and not isinstance(self.passes, bool) and self.passes >= 1,
-                "StrainLimit.passes", self.passes, "an int >= 1")
+        object.__setattr__(self, "passes", integer("StrainLimit.passes", self.passes, 1))
         names = {k.name.lower() for k in SpringKind}
         kinds = tuple(self.kinds)
         require(len(kinds) > 0 and set(kinds) <= names, "StrainLimit.kinds", self.kinds,
@@ -41,19 +40,21 @@ class StrainLimit:
 
 @ti.data_oriented
 class StrainLimiter:
-    """Positions before the correction, so velocities can follow it."""
+    """The strain-limiting stage of one simulation (simulation.STEP_ORDER), with the positions
+    before the correction, so velocities can follow it. tearable: springs may be torn."""
 
-    def __init__(self, limit: StrainLimit, particle_count: int):
+    def __init__(self, limit: StrainLimit, particle_count: int, tearable: bool):
         self.limit = limit
+        self.tearable = tearable
         fields = backend.FieldGroup()
         self.before = fields.vector(3, backend.real(), particle_count)
         fields.finalize(self)
 
-    def apply(self, model, state, dt: float, tearing: bool) -> None:
+    def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
         copy_positions(state, self.before)
         # the lecture's relaxation, for stretched springs only
-        sweep(relax_springs, model, state, self.limit.passes, self.limit.kind_mask(), tearing,
-              self.limit.max_strain, True)
+        sweep(relax_springs, model, state, self.limit.passes, self.limit.kind_mask(),
+              self.tearable, self.limit.max_strain, True)
         _follow_velocity(state, self, dt)
 
 

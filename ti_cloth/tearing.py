@@ -1,6 +1,7 @@
 """Tearable cloth (Stuyck 4.5): springs stretched too far are removed."""
 
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -9,36 +10,50 @@ import taichi as ti
 from ._validate import finite_number
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class Tearing:
-    """A spring tears when |x_i - x_j| > (1 + stretch) * rest length (Stuyck 4.5).
+    """A spring tears when |x_i - x_j| > (1 + strain) * rest length (Stuyck 4.5).
 
-    stretch: tear strain, > 0 (0.5 = tears at 150 % of its rest length). Springs of zero rest
-        length have no strain and never tear.
+    strain: tear strain, > 0 (0.5 = tears at 150 % of its rest length). Springs of zero rest
+        length have no strain and never tear. (`stretch=` is its deprecated name.)
     """
 
-    stretch: float = 0.5
+    strain: float = 0.5
 
-    def __post_init__(self):
-        object.__setattr__(self, "stretch", finite_number("Tearing.stretch", self.stretch, 0.0,
-                                                          strict=True))
+    def __init__(self, strain: float = 0.5, *, stretch: float | None = None):
+        if stretch is not None:
+            warnings.warn("Tearing(stretch=) is now Tearing(strain=)", DeprecationWarning,
+                          stacklevel=2)
+            strain = stretch
+        object.__setattr__(self, "strain", finite_number("Tearing.strain", strain, 0.0,
+                                                         strict=True))
+
+    @property
+    def stretch(self) -> float:
+        """Deprecated name of `strain`."""
+        warnings.warn("Tearing.stretch is now Tearing.strain", DeprecationWarning, stacklevel=2)
+        return self.strain
+
+    def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
+        """The tearing stage of a step (simulation.STEP_ORDER)."""
+        tear_springs(model, state, self.strain, step_index)
 
 
 @ti.kernel
-def tear_springs(model: ti.template(), state: ti.template(), stretch: float, step: ti.i32):
-    """Remove every intact spring longer than (1 + stretch) x rest; record the step it tore."""
-    tear_overstretched(model, state, stretch, step, 0, model.spring_count)
+def tear_springs(model: ti.template(), state: ti.template(), strain: float, step: ti.i32):
+    """Remove every intact spring longer than (1 + strain) x rest; record the step it tore."""
+    tear_overstretched(model, state, strain, step, 0, model.spring_count)
 
 
 @ti.func
-def tear_overstretched(model: ti.template(), state: ti.template(), stretch, step, begin, end):
+def tear_overstretched(model: ti.template(), state: ti.template(), strain, step, begin, end):
     """tear_springs' loop over springs begin .. end - 1, for kernels that run whole steps
-    (stepping.py)."""
+    (integrators/fused.py)."""
     for s in range(begin, end):
         rest = model.spring_rest_length[s]
         if state.spring_alive[s] != 0 and rest > 0:
             i, j = model.spring_indices[s][0], model.spring_indices[s][1]
-            if (state.particle_position[i] - state.particle_position[j]).norm() > (1.0 + stretch) * rest:
+            if (state.particle_position[i] - state.particle_position[j]).norm() > (1.0 + strain) * rest:
                 state.spring_alive[s] = ti.i8(0)
                 state.spring_torn_step[s] = step
 

@@ -25,7 +25,9 @@ import numpy as np
 import taichi as ti
 
 from . import backend
-from ._validate import as_array, finite_number, require
+from ._validate import as_array, finite_number, integer, require
+from .mesh import vertex_triangles
+from .transfer import upload
 
 TURBULENCE_MODES = 8
 
@@ -68,8 +70,7 @@ class Wind:
                                    ("friction_coefficient", False, "")):
             object.__setattr__(self, name, finite_number(f"Wind.{name}", getattr(self, name), 0.0,
                                                          strict=strict, unit=unit))
-        require(isinstance(self.seed, (int, np.integer)) and not isinstance(self.seed, bool),
-                "Wind.seed", self.seed, "an int")
+        object.__setattr__(self, "seed", integer("Wind.seed", self.seed))
 
     def mean_velocity(self, t: float) -> np.ndarray:
         """The spatially uniform part of the wind [m/s] at time t."""
@@ -97,13 +98,13 @@ class WindField:
         require(len(triangles) > 0, "wind", wind,
                 "used only with a body that has triangles (strings and hair: use drag=)")
         self.wind = wind
-        real, np_real = backend.real(), backend.numpy_real()
+        real = backend.real()
         self.triangle_count = len(triangles)
         fields = backend.FieldGroup()
         self.triangle = fields.vector(3, ti.i32, self.triangle_count)
         self.triangle_edge_spring = fields.vector(3, ti.i32, self.triangle_count)
         self.triangle_force = fields.vector(3, real, self.triangle_count)
-        self.particle_force = fields.vector(3, real, cloth.particle_count)
+        self.particle_wind_force = fields.vector(3, real, cloth.particle_count)
         self.particle_triangle_start = fields.scalar(ti.i32, cloth.particle_count + 1)
         self.adjacency_triangle = fields.scalar(ti.i32, 3 * self.triangle_count)
         self.mode_wave = fields.vector(3, real, TURBULENCE_MODES)
@@ -111,23 +112,22 @@ class WindField:
         self.mode_phase = fields.scalar(real, TURBULENCE_MODES)
         fields.finalize(self)
 
-        corner_of = triangles.ravel()
-        order = np.argsort(corner_of, kind="stable")
-        start = np.concatenate([[0], np.cumsum(np.bincount(corner_of, minlength=cloth.particle_count))])
+        start, adjacent = vertex_triangles(triangles, cloth.particle_count)
         wave, direction, phase = wind.turbulence_modes()
-        for field, values in ((self.triangle, triangles), (self.particle_triangle_start, start),
-                              (self.triangle_edge_spring, cloth.triangle_edge_spring),
-                              (self.adjacency_triangle, order // 3)):
-            field.from_numpy(values.astype(np.int32))
-        for field, values in ((self.mode_wave, wave), (self.mode_direction, direction),
-                              (self.mode_phase, phase)):
-            field.from_numpy(values.astype(np_real))
+        upload(((self.triangle, triangles), (self.particle_triangle_start, start),
+                (self.triangle_edge_spring, cloth.triangle_edge_spring),
+                (self.adjacency_triangle, adjacent), (self.mode_wave, wave),
+                (self.mode_direction, direction), (self.mode_phase, phase)))
         self.mean = ti.math.vec3(0.0)
         self.drift = ti.math.vec3(0.0)
         self.update(0.0)
 
-    def update(self, t: float) -> None:
+    def before_step(self, state, t: float) -> None:
         """Set the wind for the step that starts at time t (held fixed during the step)."""
+        self.update(t)
+
+    def update(self, t: float) -> None:
+        """Set the wind of time t."""
         self.mean = ti.math.vec3(*self.wind.mean_velocity(t))
         self.drift = ti.math.vec3(*(np.asarray(self.wind.velocity) * t))
 
@@ -142,7 +142,7 @@ class WindField:
 
 @ti.kernel
 def _accumulate_wind(model: ti.template(), state: ti.template(), wind: ti.template(),
-                     mean: ti.math.vec3, drift: ti.math.vec3, tearing: ti.template()):
+                     mean: ti.math.vec3, drift: ti.math.vec3, tearable: ti.template()):
     """The WindField is a template argument, so its frozen Wind's coefficients are
     compile-time constants; only the per-step mean wind and drift are passed."""
     for t in range(wind.triangle_count):
@@ -156,7 +156,7 @@ def _accumulate_wind(model: ti.template(), state: ti.template(), wind: ti.templa
         area = area_vector.norm()
         speed = u.norm()
         intact = True
-        if ti.static(tearing):
+        if ti.static(tearable):
             for e in ti.static(range(3)):
                 s = wind.triangle_edge_spring[t][e]
                 if s >= 0 and state.spring_alive[s] == 0:
@@ -174,11 +174,11 @@ def _accumulate_wind(model: ti.template(), state: ti.template(), wind: ti.templa
         f = ti.Vector([0.0, 0.0, 0.0])
         for k in range(wind.particle_triangle_start[i], wind.particle_triangle_start[i + 1]):
             f += wind.triangle_force[wind.adjacency_triangle[k]]
-        wind.particle_force[i] = f
+        wind.particle_wind_force[i] = f
 
 
-def accumulate_wind(model, state, wind: WindField, tearing: bool) -> None:
-    """wind.particle_force = every triangle's aerodynamic force (module doc) at the current
-    state, gathered per particle over its triangles in a fixed order (forces.particle_force
+def accumulate_wind(model, state, wind: WindField, tearable: bool) -> None:
+    """wind.particle_wind_force = every triangle's aerodynamic force (module doc) at the current
+    state, gathered per particle over its triangles in a fixed order (forces.gather_force
     adds it)."""
-    _accumulate_wind(model, state, wind, wind.mean, wind.drift, tearing)
+    _accumulate_wind(model, state, wind, wind.mean, wind.drift, tearable)

@@ -1,27 +1,31 @@
-"""What every integrator offers: a name, its order of accuracy and one verb, step()."""
+"""What every integrator offers: a name, its order of accuracy, its stability rule and one verb,
+step()."""
 
 from __future__ import annotations
 
+import math
 import weakref
 from typing import ClassVar
 
 import taichi as ti
 
-from .. import stepping
+from ..modes import stiffest_mode
+from . import fused
 
 
 @ti.data_oriented
 class Integrator:
     """Advances a State by one step of dt [s] on a fixed Model.
 
-    step(model, state, dt, forces, step) reads like a list of physical concerns; `step` is the
-    global step index, recorded by the divergence guard. Options are keyword-only arguments of
-    the constructor, validated there (they are compile-time constants of the kernels).
+    step(model, state, dt, forces, step_index) reads like a list of physical concerns;
+    `step_index` is the global index of the step, recorded by the divergence guard. Options are
+    keyword-only arguments of the constructor, validated there (they are compile-time constants
+    of the kernels). stable_step() is the integrator's own stability rule.
 
     A fused integrator needs nothing but the force at the start of the step: it defines the
     ti.func move(model, state, i, f, dt, step, start), which moves particle i given its total
     force f (start: 1 when the state has no history yet). It inherits a step() that runs one
-    launch of stepping.py (every spring force, then every particle's gather and move), and
+    launch of fused.py (every spring force, then every particle's gather and move), and
     Simulation can run many of its steps in one launch.
     """
 
@@ -29,13 +33,27 @@ class Integrator:
     order: ClassVar[int]           # global order of accuracy in positions, smooth conservative forces
     position_based: ClassVar[bool] = False  # True: springs are constraints projected on positions
     step_limited: ClassVar[bool] = True     # False: stable at any step (stable_dt is inf)
-    fused: ClassVar[bool] = False           # True: defines move(), stepping.py runs the step
+    fused: ClassVar[bool] = False           # True: defines move(), fused.py runs the step
     records_history: ClassVar[bool] = False  # True: a step leaves x_n in particle_prev_position
 
-    def step(self, model, state, dt: float, forces, step: int) -> None:
+    def step(self, model, state, dt: float, forces, step_index: int) -> None:
         if not self.fused:
             raise NotImplementedError
-        stepping.step_once(self, model, state, forces, dt, step)
+        fused.step_once(self, model, state, forces, dt, step_index)
+
+    def stable_step(self, cloth, drag: float, pinned) -> float:
+        """Largest stable step [s] predicted for `cloth` with uniform drag [1/s] and `pinned`
+        (N,) bool: inf when this integrator has no limit. A step-limited integrator applies
+        its mode_stable_step to the stiffest mode of the springs (modes.stiffest_mode)."""
+        if not self.step_limited:
+            return math.inf
+        w2, g = stiffest_mode(cloth, drag, pinned)
+        return math.inf if w2 <= 0 else self.mode_stable_step(w2, g)
+
+    def mode_stable_step(self, w2: float, g: float) -> float:
+        """Largest stable step [s] on one mode of angular frequency^2 w2 [1/s^2] and damping
+        rate g [1/s], from the linear analysis of this integrator's update matrix."""
+        raise NotImplementedError
 
     def buffers(self, state, make):
         """This integrator's working storage for `state`, made by make() on first use and

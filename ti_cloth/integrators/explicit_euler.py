@@ -1,8 +1,12 @@
 """Explicit (forward) Euler, Stuyck eq. 4.8-4.9."""
 
 
+import math
+
+import numpy as np
 import taichi as ti
 
+from ..modes import row_bounds
 from ..state import store_particle
 from .base import Integrator
 
@@ -25,3 +29,15 @@ class ExplicitEuler(Integrator):
         v = state.particle_velocity[i]
         dv = dt * model.particle_inv_mass[i] * f           # eq. 4.8: h M^-1 f(x_n, v_n)
         store_particle(state, i, x + dt * v, v + dv, step)  # eq. 4.9, dx = h v_n
+
+    def stable_step(self, cloth, drag, pinned):
+        """h < g / w^2 per mode (the smaller root (g - sqrt(g^2 - 4 w^2)) / w^2 when
+        overdamped). The worst mode is the least damped relative to its stiffness, not the
+        stiffest, so this takes the smallest ratio over the per-particle Gershgorin bounds
+        (modes.row_bounds; conservative); 0 when some stiff particle has no damping."""
+        omega2, gamma = row_bounds(cloth, drag, pinned)
+        stiff = omega2 > 0
+        if not stiff.any():
+            return math.inf
+        w2, g = omega2[stiff], gamma[stiff]
+        return float(np.min((g - np.sqrt(np.maximum(g * g - 4.0 * w2, 0.0))) / w2))

@@ -24,7 +24,7 @@ import math
 import taichi as ti
 
 from .. import backend
-from .._validate import finite_number, require
+from .._validate import finite_number, integer, require
 from ..forces import compute_forces
 from ..state import store_particle
 from .base import Integrator
@@ -87,7 +87,7 @@ def _block_range(block, count):
 
 @ti.kernel
 def _linearise(model: ti.template(), state: ti.template(), ws: ti.template(), dt: float,
-               drag: float, tearing: ti.template()):
+               drag: float, tearable: ti.template()):
     """Springs: direction and clamped lateral factor at x_n. Particles: right-hand side
     b = h (f_n + h K v_n), the 3x3 diagonal of A (preconditioner) and the CG start dv = 0,
     r = b, p = z = r / diagonal, with r . z, r . r and b . b."""
@@ -102,7 +102,7 @@ def _linearise(model: ti.template(), state: ti.template(), ws: ti.template(), dt
             c = ti.max(1.0 - model.spring_rest_length[s] / length, 0.0)
         elif model.spring_rest_length[s] == 0:
             c = 1.0    # a zero-length spring is linear: -df/dx = k I
-        if ti.static(tearing):
+        if ti.static(tearable):
             if state.spring_alive[s] == 0:
                 c, n = 0.0, ti.Vector([0.0, 0.0, 0.0])
         ws.spring_normal[s] = n
@@ -125,7 +125,7 @@ def _linearise(model: ti.template(), state: ti.template(), ws: ti.template(), dt
                 damp = kd * n2
                 if ti.static(model.relative_damping):
                     damp = kd * ti.Vector([1.0, 1.0, 1.0])
-                if ti.static(tearing):
+                if ti.static(tearable):
                     if state.spring_alive[s] == 0:
                         damp = ti.Vector([0.0, 0.0, 0.0])
                 diagonal += dt * dt * k * (n2 + c * (1.0 - n2)) + dt * damp
@@ -150,7 +150,7 @@ def _linearise(model: ti.template(), state: ti.template(), ws: ti.template(), dt
 
 @ti.kernel
 def _apply(model: ti.template(), state: ti.template(), ws: ti.template(), dt: float, drag: float,
-           tearing: ti.template()):
+           tearable: ti.template()):
     """ap = A p (rows of pinned particles 0) and p . ap."""
     for block in range(ws.block_count):
         begin, end = _block_range(block, model.particle_count)
@@ -164,7 +164,7 @@ def _apply(model: ti.template(), state: ti.template(), ws: ti.template(), dt: fl
                 d = pi - ws.p[model.adjacency_other[a]]
                 n = ws.spring_normal[s]
                 alive = True
-                if ti.static(tearing):
+                if ti.static(tearable):
                     alive = state.spring_alive[s] != 0
                 if alive:
                     ap += dt * dt * _stiffness_times(model.spring_stiffness[s], n, ws.spring_lateral[s], d)
@@ -228,27 +228,25 @@ class ImplicitEuler(Integrator):
     def __init__(self, *, tolerance: float = 1e-5, max_iterations: int = 200):
         self.tolerance = finite_number("ImplicitEuler.tolerance", tolerance, 0.0, strict=True)
         require(self.tolerance < 1.0, "ImplicitEuler.tolerance", tolerance, "a number in (0, 1)")
-        require(isinstance(max_iterations, int) and not isinstance(max_iterations, bool)
-                and max_iterations >= 1, "ImplicitEuler.max_iterations", max_iterations, "an int >= 1")
-        self.max_iterations = max_iterations
+        self.max_iterations = integer("ImplicitEuler.max_iterations", max_iterations, 1)
         self.last_iterations = 0
         self.last_residual = 0.0
 
     def options(self):
         return {"tolerance": self.tolerance, "max_iterations": self.max_iterations}
 
-    def step(self, model, state, dt, forces, step):
+    def step(self, model, state, dt, forces, step_index):
         ws = self.buffers(state, lambda: _Workspace(model.particle_count, model.spring_count))
         compute_forces(model, state, forces)
-        _linearise(model, state, ws, dt, forces.drag, forces.tearing)
+        _linearise(model, state, ws, dt, forces.drag, forces.tearable)
         iterations = 0
         goal = self.tolerance ** 2 * ws.scalar[BB]   # b = 0 (no load on a free particle): dv = 0
         while ws.scalar[RR] > goal and iterations < self.max_iterations:
-            _apply(model, state, ws, dt, forces.drag, forces.tearing)
+            _apply(model, state, ws, dt, forces.drag, forces.tearable)
             _iterate(model, ws)
             iterations += 1
         bb = ws.scalar[BB]
         self.last_iterations = iterations
         self.last_residual = math.sqrt(ws.scalar[RR] / bb) if bb > 0 else 0.0
-        _advance(model, state, ws, dt, step)
+        _advance(model, state, ws, dt, step_index)
         state.prev_valid = False

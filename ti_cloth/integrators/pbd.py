@@ -3,7 +3,7 @@
 
 import taichi as ti
 
-from .._validate import finite_number, require
+from .._validate import finite_number, integer, require
 from ..constraints import relax_springs, sweep
 from ..forces import compute_forces
 from ..material import SpringKind
@@ -52,9 +52,7 @@ class PBD(Integrator):
     step_limited = False
 
     def __init__(self, *, iterations: int = 2, damping: float = 0.0, stiffness=None):
-        require(isinstance(iterations, int) and not isinstance(iterations, bool) and iterations >= 1,
-                "PBD.iterations", iterations, "an int >= 1")
-        self.iterations = iterations
+        self.iterations = integer("PBD.iterations", iterations, 1)
         self.damping = finite_number("PBD.damping", damping, 0.0)
         require(self.damping < 1.0, "PBD.damping", damping, "a number in [0, 1)")
         stiffness = dict(stiffness or {})
@@ -68,11 +66,11 @@ class PBD(Integrator):
     def options(self):
         return {"iterations": self.iterations, "damping": self.damping, "stiffness": self.stiffness}
 
-    def step(self, model, state, dt, forces, step):
+    def step(self, model, state, dt, forces, step_index):
         compute_forces(model, state, forces, springs=False)   # external forces only
-        _predict(model, state, dt, self.damping, not state.prev_valid, step)
+        _predict(model, state, dt, self.damping, not state.prev_valid, step_index)
         state.prev_valid = True
         if model.spring_count:
             stiffness = ti.math.vec3(*(self.stiffness[k.name.lower()] for k in SpringKind))
-            sweep(relax_springs, model, state, self.iterations, stiffness, forces.tearing, 0.0, False)
-        update_velocity(model, state, dt, step)
+            sweep(relax_springs, model, state, self.iterations, stiffness, forces.tearable, 0.0, False)
+        update_velocity(model, state, dt, step_index)

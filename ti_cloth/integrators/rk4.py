@@ -1,6 +1,8 @@
 """Classical fourth-order Runge-Kutta on the first-order system x' = v, v' = M^-1 f(x, v)."""
 
 
+import math
+
 import taichi as ti
 
 from .. import backend
@@ -12,6 +14,8 @@ from .base import Integrator
 # evaluated at y0 + NEXT[s] h k_s.
 WEIGHTS = (1.0, 2.0, 2.0, 1.0)
 NEXT = (0.5, 0.5, 1.0)
+RK4_IMAGINARY = 2.0 * math.sqrt(2.0)   # |1 + z + z^2/2 + z^3/6 + z^4/24| <= 1 on z = iy, |y| <= this
+RK4_RADIUS = 2.61                      # a left half-disc of this radius lies in RK4's region (min 2.6156)
 
 
 @ti.data_oriented
@@ -64,9 +68,16 @@ class RK4(Integrator):
     name = "rk4"
     order = 4
 
-    def step(self, model, state, dt, forces, step):
+    def step(self, model, state, dt, forces, step_index):
         stages = self.buffers(state, lambda: _Stages(model.particle_count))
         for s in range(4):
             compute_forces(model, state, forces)    # f at stage s (x0 and v0 for s = 0)
-            _stage(model, state, stages, dt, s, step)
+            _stage(model, state, stages, dt, s, step_index)
         state.prev_valid = False
+
+    def mode_stable_step(self, w2, g):
+        """h |lambda| within the stability region: 2 sqrt(2) / w undamped (the region's reach up
+        the imaginary axis), else RK4_RADIUS / |lambda|, |lambda| the mode's largest eigenvalue
+        modulus."""
+        largest = max(math.sqrt(w2), 0.5 * g + math.sqrt(max(0.25 * g * g - w2, 0.0)))
+        return (RK4_RADIUS if g > 0 else RK4_IMAGINARY) / largest

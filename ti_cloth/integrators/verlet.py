@@ -6,6 +6,7 @@ import taichi as ti
 from .._validate import finite_number, require
 from ..state import store_particle
 from .base import Integrator
+from .symplectic_euler import leapfrog_stable_step
 
 
 @ti.func
@@ -47,3 +48,6 @@ class Verlet(Integrator):
     def move(self, model: ti.template(), state: ti.template(), i, f, dt, step, start):
         # f at x_n and the velocity (x_n - x_{n-1}) / h
         verlet_update(state, i, model.particle_inv_mass[i] * f, dt, self.damping, start, step)
+
+    def mode_stable_step(self, w2, g):
+        return leapfrog_stable_step(w2, g)

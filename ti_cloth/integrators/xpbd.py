@@ -5,7 +5,7 @@ constraints with compliance 1 / k, so the cloth has its material stiffness in N/
 import taichi as ti
 
 from .. import backend
-from .._validate import require
+from .._validate import integer
 from ..constraints import sweep, xpbd_springs
 from ..forces import compute_forces
 from .base import Integrator
@@ -50,19 +50,17 @@ class XPBD(Integrator):
     step_limited = False
 
     def __init__(self, *, iterations: int = 10):
-        require(isinstance(iterations, int) and not isinstance(iterations, bool) and iterations >= 1,
-                "XPBD.iterations", iterations, "an int >= 1")
-        self.iterations = iterations
+        self.iterations = integer("XPBD.iterations", iterations, 1)
 
     def options(self):
         return {"iterations": self.iterations}
 
-    def step(self, model, state, dt, forces, step):
+    def step(self, model, state, dt, forces, step_index):
         compute_forces(model, state, forces, springs=False)   # external forces only
         _predict(model, state, dt)
         if model.spring_count:
             multiplier = self.buffers(state, lambda: _Multipliers(model.spring_count)).value
             multiplier.fill(0)
-            sweep(xpbd_springs, model, state, self.iterations, multiplier, dt, forces.tearing)
-        update_velocity(model, state, dt, step)
+            sweep(xpbd_springs, model, state, self.iterations, multiplier, dt, forces.tearable)
+        update_velocity(model, state, dt, step_index)
         state.prev_valid = False

@@ -5,13 +5,13 @@ into an animated GIF or an MP4 (the latter through the optional imageio-ffmpeg).
 from __future__ import annotations
 
 import importlib.util
-from contextlib import contextmanager
 from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
 
 from .._validate import finite_number, require
+from ..files import atomic_path
 
 MP4_HINT = "pip install 'ti_cloth[video]' (or: pip install imageio-ffmpeg)"
 
@@ -27,19 +27,6 @@ def from_taichi(image: np.ndarray) -> np.ndarray:
 def frame_path(folder, index: int) -> Path:
     """folder/frame_00000.png, ..."""
     return Path(folder) / f"frame_{index:05d}.png"
-
-
-@contextmanager
-def atomic_path(path: Path):
-    """Yield a hidden temporary name beside `path` (same extension: writers pick the format
-    from it); rename it to `path` when the block succeeds, delete it when it fails."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
-    try:
-        yield tmp
-        tmp.replace(path)
-    finally:
-        tmp.unlink(missing_ok=True)
 
 
 def write_png(path, image: np.ndarray) -> Path:

@@ -18,10 +18,11 @@ from dataclasses import dataclass, fields
 import numpy as np
 import taichi as ti
 
-from .._validate import as_array, finite_number, require
-from ..colliders import Box, Capsule, Plane, Sphere
+from .._validate import as_array, finite_number, integer, require
+from ..backend import taichi_dtype
+from ..colliders import BOX, CAPSULE, SPHERE, Box, Capsule, Plane, Sphere
 from ..material import SpringKind
-from ..tearing import torn_triangles
+from ..mesh import vertex_triangles
 from . import raster, shapes
 from .camera import Camera
 from .image import from_taichi
@@ -123,21 +124,17 @@ class _Topology:
         if len(t):
             require(t.min() >= 0 and t.max() < vertex_count, "triangles",
                     (int(t.min()), int(t.max())), f"vertex indices in [0, {vertex_count - 1}]")
-        corner_vertex = t.ravel()
-        order = np.argsort(corner_vertex, kind="stable")
-        start = np.zeros(vertex_count + 1, np.int32)
-        start[1:] = np.cumsum(np.bincount(corner_vertex, minlength=vertex_count))
+        start, adjacent = vertex_triangles(t, vertex_count)
         self.vertex_count, self.triangle_count = vertex_count, len(t)
         self.triangles = _device(t.astype(np.int32) if len(t) else np.zeros((1, 3), np.int32))
-        self.vertex_start = _device(start)
-        self.vertex_triangles = _device((order // 3).astype(np.int32) if len(t)
+        self.vertex_start = _device(start.astype(np.int32))
+        self.vertex_triangles = _device(adjacent.astype(np.int32) if len(t)
                                         else np.zeros(1, np.int32))
 
 
 def _device(array: np.ndarray):
     """A Taichi ndarray holding a copy of `array`."""
-    dtype = {np.float32: ti.f32, np.int32: ti.i32}[array.dtype.type]
-    nd = ti.ndarray(dtype, array.shape)
+    nd = ti.ndarray(taichi_dtype(array.dtype), array.shape)
     nd.from_numpy(np.ascontiguousarray(array))
     return nd
 
@@ -151,8 +148,7 @@ class Renderer:
                  supersample: int = 2, light: Light = Light(), background: Background = Background()):
         for name, value, top in (("width", width, 16384), ("height", height, 16384),
                                  ("supersample", supersample, 8)):
-            require(isinstance(value, (int, np.integer)) and 1 <= value <= top, name, value,
-                    f"an int in [1, {top}]")
+            integer(name, value, 1, top)
         require(camera is None or isinstance(camera, Camera), "camera", camera, "a Camera or None")
         require(isinstance(light, Light), "light", light, "a Light")
         require(isinstance(background, Background), "background", background, "a Background")
@@ -306,8 +302,7 @@ class Renderer:
             strain = (vertex_strain(x, cloth.spring_indices, cloth.spring_rest_length, alive)
                       if style.strain else None)
             self.draw_mesh(x, triangles, rest_positions=cloth.particle_position,
-                           hidden=torn_triangles(cloth.triangle_edge_spring, ~alive),
-                           strain=strain, style=style)
+                           hidden=sim.torn_triangles(), strain=strain, style=style)
         on_surface = np.zeros(cloth.particle_count, bool)
         on_surface[triangles.ravel()] = True
         i, j = cloth.spring_indices.T
@@ -315,7 +310,7 @@ class Renderer:
         if lines.any():
             self.draw_lines(x, cloth.spring_indices[lines], width=style.line_width, colour=style.front)
         if style.particles > 0:
-            colours = np.where(sim.model.pinned[:, None], style.pin_colour, style.particle_colour)
+            colours = np.where(sim.pinned()[:, None], style.pin_colour, style.particle_colour)
             self.draw_points(x, radius=style.particles, colour=colours)
 
     # -- ground and colliders ---------------------------------------------------------------
@@ -323,16 +318,15 @@ class Renderer:
     def draw_colliders(self, sim) -> None:
         """Every collider of a Simulation where its path has it at the simulation's time."""
         self._require_frame()
-        for c in sim.colliders.colliders if sim.colliders is not None else ():
-            offset = c.offset(sim.time)
+        for c in sim.collider_shapes():
             if isinstance(c, Plane):
-                self.draw_plane(np.add(c.point, offset), c.normal)
+                self.draw_plane(c.point, c.normal)
             elif isinstance(c, Sphere):
-                self.draw_sphere(np.add(c.centre, offset), c.radius)
+                self.draw_sphere(c.centre, c.radius)
             elif isinstance(c, Box):
-                self.draw_box(np.add(c.lo, offset), np.add(c.hi, offset))
+                self.draw_box(c.lo, c.hi)
             elif isinstance(c, Capsule):
-                self.draw_capsule(np.add(c.a, offset), np.add(c.b, offset), c.radius)
+                self.draw_capsule(c.a, c.b, c.radius)
 
     def draw_plane(self, point=(0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0), *,
                    colour=(0.86, 0.87, 0.89), checker: float = 0.25, contrast: float = 0.12,
@@ -358,7 +352,7 @@ class Renderer:
         """A sphere of `radius` [m] at `centre` [m]."""
         self._require_frame()
         centre = as_array("centre", centre, np.float64, (3,))
-        self._draw_solid(shapes.SPHERE, centre, centre,
+        self._draw_solid(SPHERE, centre, centre,
                          finite_number("radius", radius, 0.0, strict=True, unit="m"), colour)
 
     def draw_box(self, lo, hi, *, colour=COLLIDER_COLOUR) -> None:
@@ -366,16 +360,16 @@ class Renderer:
         self._require_frame()
         lo, hi = as_array("lo", lo, np.float64, (3,)), as_array("hi", hi, np.float64, (3,))
         require(bool((hi > lo).all()), "hi", tuple(hi), f"greater than lo {tuple(lo)} on every axis")
-        self._draw_solid(shapes.BOX, lo, hi, 0.0, colour)
+        self._draw_solid(BOX, lo, hi, 0.0, colour)
 
     def draw_capsule(self, a, b, radius: float, *, colour=COLLIDER_COLOUR) -> None:
         """The capsule around segment a-b [m] with `radius` [m]."""
         self._require_frame()
-        self._draw_solid(shapes.CAPSULE, as_array("a", a, np.float64, (3,)),
+        self._draw_solid(CAPSULE, as_array("a", a, np.float64, (3,)),
                          as_array("b", b, np.float64, (3,)),
                          finite_number("radius", radius, 0.0, strict=True, unit="m"), colour)
 
-    def _draw_solid(self, shape: str, a, b, radius: float, colour) -> None:
+    def _draw_solid(self, shape: int, a, b, radius: float, colour) -> None:
         shapes.raster_solid(self._samples_ready(), self._cam, shape, a, b, radius,
                             _colour("colour", colour), self.light.direction, self.light.ambient)
 
@@ -398,8 +392,7 @@ class Renderer:
 
     def _upload(self, name: str, array: np.ndarray):
         array = np.ascontiguousarray(array)
-        dtype = {np.float32: ti.f32, np.int32: ti.i32}[array.dtype.type]
-        nd = self._buffer(name, array.shape, dtype)
+        nd = self._buffer(name, array.shape, taichi_dtype(array.dtype))
         nd.from_numpy(array)
         return nd
 

@@ -5,6 +5,7 @@ Each sample belongs to one thread here, so a plain minimum replaces the atomic o
 
 import taichi as ti
 
+from ..colliders import BOX, SPHERE
 from .raster import EMPTY, camera_basis, lambert, ndarray_f32_1, pack, samples_type
 
 MISS = -1.0
@@ -127,15 +128,12 @@ def raster_plane(samples: samples_type, cam: ndarray_f32_1, point: ti.math.vec3,
             samples[x, y] = ti.min(samples[x, y], key)
 
 
-SPHERE, BOX, CAPSULE = "sphere", "box", "capsule"
-
-
 @ti.kernel
 def raster_solid(samples: samples_type, cam: ndarray_f32_1, shape: ti.template(),
                  a: ti.math.vec3, b: ti.math.vec3, radius: float, colour: ti.math.vec3,
                  light: ti.math.vec3, ambient: float):
     """A sphere (centre a, radius), a box (corners a, b) or a capsule (segment a-b, radius);
-    `shape` picks the ray test at compile time."""
+    `shape` (colliders.SPHERE, BOX or CAPSULE) picks the ray test at compile time."""
     for x, y in samples:
         o, d, depth_per_t = unit_camera_ray(cam, x, y)
         t, n = MISS, ti.Vector([0.0, 0.0, 0.0])

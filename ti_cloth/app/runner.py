@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import SimulationDiverged
-from .render import Camera, FrameSequence, Renderer
-from .render.springs2d import FRONT, SpringView
+from ..errors import SimulationDiverged
+from ..render import Camera, FrameSequence, Renderer
+from ..render.springs2d import FRONT, SpringView
 
 
 @dataclass
@@ -35,9 +35,8 @@ class RunResult:
         return not self.interrupted and self.diverged is None
 
 
-def _frame_painter(scene, sim):
-    """A function () -> (H, W, 3) uint8 image of the simulation now, per the scene's output."""
-    out = scene.output
+def _frame_painter(scene, sim, out):
+    """A function () -> (H, W, 3) uint8 image of the simulation now, per the output settings."""
     if out.view == "2d":
         x = scene.cloth.particle_position @ np.asarray(FRONT).T
         lo, hi = x.min(axis=0), x.max(axis=0)
@@ -45,9 +44,9 @@ def _frame_painter(scene, sim):
         view = SpringView((lo - reach, hi + reach), FRONT, res=(out.width, out.height))
         cloth = scene.cloth
         return lambda: view.render(sim.positions(), cloth.spring_indices, cloth.spring_kind,
-                                   sim.model.pinned, sim.spring_alive())
-    camera = scene.camera or Camera.fit(scene.cloth, direction=scene.camera_direction or (1.0, 0.6, 1.4),
-                                        aspect=out.width / out.height)
+                                   sim.pinned(), sim.spring_alive())
+    camera = scene.camera or Camera.fit(scene.cloth, aspect=out.width / out.height,
+                                        **scene.camera_fit)
     renderer = Renderer(out.width, out.height, camera, supersample=out.supersample)
 
     def paint():
@@ -60,19 +59,21 @@ def _frame_painter(scene, sim):
     return paint
 
 
-def run_scene(scene, *, folder=None, frames: int | None = None, progress: bool = True) -> RunResult:
+def run_scene(scene, *, folder=None, frames: int | None = None, progress: bool = True,
+              output=None) -> RunResult:
     """Simulate and render `frames` frames (default: the scene's duration x fps) into `folder`
-    (default: the scene's output folder). Call ti_cloth.init first. Returns a RunResult; a
-    KeyboardInterrupt or a SimulationDiverged ends the run early with every finished frame kept."""
+    (default: the output's folder). output: an app.scene.Output replacing the scene's (size,
+    formats, style). Call ti_cloth.init first. Returns a RunResult; a KeyboardInterrupt or a
+    SimulationDiverged ends the run early with every finished frame kept."""
     from tqdm import tqdm
 
-    sim = scene.build()
-    substeps = round(scene.frame_dt / sim.dt)
+    substeps = scene.resolved_substeps()
+    sim = scene.build(dt=scene.frame_dt / substeps)
     frames = scene.frames if frames is None else frames
-    out = scene.output
+    out = scene.output if output is None else output
     sequence = FrameSequence(folder or out.folder, fps=scene.fps, gif=out.gif, mp4=out.mp4, name=scene.name,
                              gif_width=min(out.gif_width, out.width))
-    paint = _frame_painter(scene, sim)
+    paint = _frame_painter(scene, sim, out)
     start = time.perf_counter()
     interrupted, diverged = False, None
     bar = tqdm(total=frames, unit="frame", disable=not progress, dynamic_ncols=True)

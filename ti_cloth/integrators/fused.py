@@ -1,5 +1,7 @@
 """Launch plans for the fused integrators (those that define `Integrator.move`). A step is: every
 spring's force, evaluated once (forces.py); then every particle's gathered force, and its move.
+Of the stages Simulation runs after the integrator (simulation.STEP_ORDER), the many-steps plan
+fuses only tearing (FUSED_STAGES): a simulation with any other stage steps one launch at a time.
 
 One step per launch (`advance_one`): the two loops run in parallel. GPUs take this plan, and so
 does a CPU run when something acts between steps (wind, colliders, handles, strain limiting).
@@ -24,14 +26,14 @@ different kernels, and exact IEEE math would cost 40 % at 32 x 32.
 
 import taichi as ti
 
-from . import backend
-from .errors import TeamStalled
-from .forces import evaluate_springs, particle_force
-from .state import NO_BAD_STEP
-from .tearing import tear_overstretched
-from .wind import accumulate_wind
+from .. import backend
+from ..errors import TeamStalled
+from ..forces import evaluate_springs, gather_force
+from ..state import NO_BAD_STEP
+from ..tearing import tear_overstretched
+from ..wind import accumulate_wind
 
-SERIAL_SPRING_LIMIT = 50_000   # constraint sweeps: serial faster at 24k springs, parallel at 97k
+FUSED_STAGES = ("integrator", "tearing")   # what one step of advance_many runs, in this order
 MAX_STEPS_PER_LAUNCH = 4096    # bounds one launch (Ctrl-C and the divergence check wait for it)
 SPRING_STEPS_PER_LAUNCH = 25_000_000   # about 0.1 s of one core's work: fewer steps for big cloths
 TEAM_MIN_SPRING_STEPS = 1_000_000   # less work per launch runs on one worker (launch_plans.py)
@@ -39,12 +41,6 @@ TASK_SPACING = 512   # Taichi 1.7's CPU runtime makes each block of 512 indices 
                      # one task: worker w is index w * 512, so each worker is a task of its own
 BARRIER_SPINS = 1 << 28   # polls (seconds) before a barrier gives up on a missing worker
 STALLED = 1 << 29         # added to the barrier count by a worker that gave up
-
-
-def serial_is_faster(model) -> bool:
-    """Whether this model's constraint sweeps run faster serially in one launch (CPU, few
-    springs)."""
-    return backend.config().arch == "cpu" and model.spring_count <= SERIAL_SPRING_LIMIT
 
 
 @ti.data_oriented
@@ -91,7 +87,7 @@ def move_particles(integrator: ti.template(), model: ti.template(), state: ti.te
     """Gather the total force of particles begin .. end - 1 (springs already evaluated), keep
     it in particle_force, and move them."""
     for i in range(begin, end):
-        f = particle_force(model, state, forces, i, True)
+        f = gather_force(model, state, forces, i, True)
         state.particle_force[i] = f
         integrator.move(model, state, i, f, dt, step, start)
 
@@ -100,7 +96,7 @@ def move_particles(integrator: ti.template(), model: ti.template(), state: ti.te
 def advance_one(integrator: ti.template(), model: ti.template(), state: ti.template(),
                 forces: ti.template(), dt: float, step: ti.i32, start: ti.i32):
     """One step, its loops in parallel. start: 1 if the state has no history yet."""
-    evaluate_springs(model, state, forces.tearing, 0, model.spring_count)
+    evaluate_springs(model, state, forces.tearable, 0, model.spring_count)
     move_particles(integrator, model, state, forces, dt, step, start, 0, model.particle_count)
 
 
@@ -108,17 +104,17 @@ def advance_one(integrator: ti.template(), model: ti.template(), state: ti.templ
 def run_steps(integrator: ti.template(), model: ti.template(), state: ti.template(),
               forces: ti.template(), team: ti.template(), worker, dt, first, count, start,
               tear_stretch):
-    """Worker `worker`'s share of steps first .. first + count - 1, each followed by tearing
-    when it is on (Simulation.step's order when nothing else acts between steps)."""
+    """Worker `worker`'s share of steps first .. first + count - 1: each step is the
+    FUSED_STAGES of simulation.STEP_ORDER, the integrator and then tearing when it is on."""
     s_begin, s_end = team.share(model.spring_count, worker)
     p_begin, p_end = team.share(model.particle_count, worker)
     for k in range(count):
-        evaluate_springs(model, state, forces.tearing, s_begin, s_end)
+        evaluate_springs(model, state, forces.tearable, s_begin, s_end)
         team.meet(2 * k + 1)                  # every spring force of this step is written
         move_particles(integrator, model, state, forces, dt, first + k,
                        ti.i32(start != 0 and k == 0), p_begin, p_end)
         team.meet(2 * k + 2)                  # every particle has moved
-        if ti.static(forces.tearing):
+        if ti.static(forces.tearable):
             tear_overstretched(model, state, tear_stretch, first + k, s_begin, s_end)
 
 
@@ -140,11 +136,11 @@ def advance_many(integrator: ti.template(), model: ti.template(), state: ti.temp
                           first, count, start, tear_stretch)
 
 
-def step_once(integrator, model, state, forces, dt: float, step: int) -> None:
+def step_once(integrator, model, state, forces, dt: float, step_index: int) -> None:
     """One step of a fused integrator: the wind's kernel if any, then one parallel launch."""
     if forces.wind is not None:
-        accumulate_wind(model, state, forces.wind, forces.tearing)
-    advance_one(integrator, model, state, forces, dt, step, not state.prev_valid)
+        accumulate_wind(model, state, forces.wind, forces.tearable)
+    advance_one(integrator, model, state, forces, dt, step_index, not state.prev_valid)
     state.prev_valid = integrator.records_history
 
 
@@ -175,7 +171,7 @@ class ManySteps:
 
     def run(self, integrator, model, state, forces, dt: float, first: int, count: int,
             tear_stretch: float) -> int:
-        """Up to `count` steps, each followed by tearing when forces.tearing; stops after the
+        """Up to `count` steps, each followed by tearing when forces.tearable; stops after the
         launch in which a step diverged. Returns how many steps ran. Raises TeamStalled if a
         barrier gave up on a worker (the state is then unusable)."""
         done = 0

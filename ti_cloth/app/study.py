@@ -23,17 +23,17 @@ from pathlib import Path
 
 import numpy as np
 
-from . import backend
-from .errors import SimulationDiverged
-from .integrators import INTEGRATORS, make_integrator
-from .stability import stable_dt
+from .. import backend
+from ..errors import SimulationDiverged
+from ..files import atomic_path
+from ..integrators import INTEGRATORS, make_integrator
+from ..stability import stable_dt
 
 REFERENCE_TOLERANCE = 1e-9     # halving the reference step changes positions by less than this x size
 MAX_REFERENCE_HALVINGS = 8
 DEFAULT_INTEGRATORS = ("explicit_euler", "symplectic_euler", "verlet", "rk4", "implicit_euler",
                        "pbd", "xpbd")
-DEFAULT_ITERATIONS = (4, 16)   # pbd / xpbd passes per step
-ITERATED = ("pbd", "xpbd")
+DEFAULT_ITERATIONS = (4, 16)   # passes per step of the position-based integrators
 GUARD_SIZES = 100.0            # a run is diverged once a coordinate leaves 100 cloth sizes,
 ENERGY_BLOWUP = 1.0            # or its energy is off the reference's by more than the energy scale
 
@@ -236,8 +236,6 @@ class StudyResult:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
-        from .render.image import atomic_path
-
         fig, ax = plt.subplots(figsize=(8, 5.5), dpi=100)
         colours = {name: f"C{i}" for i, name in enumerate(dict.fromkeys(r.integrator for r in self.runs))}
         counts = {name: sorted({r.iterations or 0 for r in self.runs if r.integrator == name}) for name in colours}
@@ -269,8 +267,6 @@ class StudyResult:
 
     def write(self, folder, plot: bool = True) -> list[Path]:
         """study.csv, study.md and (plot) study.png in `folder`, each written atomically."""
-        from .render.image import atomic_path
-
         folder = Path(folder)
         written = []
         for name, text in (("study.csv", self.csv_text()), ("study.md", self.markdown())):
@@ -293,7 +289,7 @@ def _configurations(integrators, iterations):
     for name in integrators:
         if name not in INTEGRATORS:
             raise ValueError(f"integrators: {name!r} is not one of {sorted(INTEGRATORS)}")
-        if name in ITERATED:
+        if INTEGRATORS[name].position_based:
             for count in iterations:
                 yield name, count, INTEGRATORS[name](iterations=count)
         else:
@@ -330,9 +326,8 @@ def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("
     for precision in precisions:
         backend.init(arch=arch, precision=precision)
         for name, count, integrator in _configurations(integrators, iterations):
-            sim = scene.build(integrator=integrator, dt=dts[-1])
-            sim.state.position_limit[None] = GUARD_SIZES * reference.size + np.abs(
-                scene.cloth.particle_position).max()
+            sim = scene.build(integrator=integrator, dt=dts[-1], position_limit=GUARD_SIZES
+                              * reference.size + np.abs(scene.cloth.particle_position).max())
             sim.step(1)     # compile outside the timing
             predicted = sim.stable_dt()
             for dt, n in zip(dts, substeps):

@@ -8,29 +8,30 @@ from __future__ import annotations
 
 import inspect
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
 
-from . import bodies as body_builders
-from .colliders import Box, Capsule, Plane, Sphere
-from .integrators import INTEGRATORS
-from .material import PRESETS, Material, SpringParams
-from .mesh import PLANES, Mesh, grid_mesh, load_mesh
-from .paths import INTERPOLATIONS, Keyframes, Oscillation
-from .render.camera import Camera
-from .render.renderer import SurfaceStyle
+from .. import backend
+from .. import bodies as body_builders
+from ..colliders import Box, Capsule, Collider, Plane, Sphere
+from ..handles import Handle
+from ..integrators import INTEGRATORS
+from ..material import DAMPING_MODELS, PRESETS, Material, SpringParams
+from ..mesh import PLANES, Mesh, grid_mesh, load_mesh
+from ..paths import INTERPOLATIONS, Keyframes, Oscillation
+from ..render.camera import Camera
+from ..render.renderer import SurfaceStyle
+from ..simulation import Simulation
+from ..stability import auto_substeps
+from ..strain_limit import StrainLimit
+from ..topology import Cloth
+from ..wind import Wind
 from .scene_file import SceneError, Table, load_toml
-from .simulation import Handle, Simulation
-from .stability import auto_substeps
-from .strain_limit import StrainLimit
-from .topology import Cloth
-from .wind import Wind
 
 BODY_TYPES = ("grid", "mesh", "string", "hair", "tet_block")
 COLLIDER_TYPES = {"plane": Plane, "sphere": Sphere, "box": Box, "capsule": Capsule}
-PRECISIONS = ("f32", "f64")
 VIEWS = ("3d", "2d")
 
 
@@ -71,7 +72,7 @@ class Scene:
     handles: list
     colliders: list
     camera: Camera | None
-    camera_direction: tuple | None
+    camera_fit: dict
     output: Output
 
     @property
@@ -87,15 +88,16 @@ class Scene:
         except ValueError as err:
             raise SceneError(f"{self.source}: {err}") from None
 
-    def build(self, integrator=None, dt: float | None = None) -> Simulation:
+    def build(self, integrator=None, dt: float | None = None, **options) -> Simulation:
         """The Simulation of this scene (call ti_cloth.init first); `integrator` and `dt`
-        replace the scene's (the speed/accuracy study sweeps them)."""
+        replace the scene's (the speed/accuracy study sweeps them); options: further
+        Simulation arguments (position_limit)."""
         integrator = self.integrator if integrator is None else integrator
         dt = self.frame_dt / self.resolved_substeps() if dt is None else dt
         return Simulation(self.cloth, integrator=integrator, dt=dt, gravity=self.gravity,
                           drag=self.drag, wind=self.wind, tearing=self.tearing,
                           handles=self.handles, colliders=self.colliders,
-                          strain_limit=self.strain_limit)
+                          strain_limit=self.strain_limit, **options)
 
 
 def load_scene(path) -> Scene:
@@ -120,7 +122,7 @@ def load_scene(path) -> Scene:
         if sim.has("substeps"):
             sim.fail("simulation: give either dt or substeps, not both")
         substeps = max(1, math.ceil(1.0 / fps / sim.number("dt", minimum=0.0, strict=True, unit="s") - 1e-9))
-    precision = sim.string("precision", "f32", PRECISIONS)
+    precision = sim.string("precision", "f32", sorted(backend.PRECISIONS))
     tearing = sim.number("tearing", 0.0, 0.0, strict=True) if sim.has("tearing") else None
     limit = sim.table("strain_limit")
     strain_limit = None
@@ -151,14 +153,14 @@ def load_scene(path) -> Scene:
     colliders = [_collider(t) for t in root.tables("colliders")]
 
     camera_table = root.table("camera")
-    camera, direction = _camera(camera_table) if camera_table is not None else (None, None)
+    camera, camera_fit = _camera(camera_table) if camera_table is not None else (None, {})
     output = _output(root.table("output") or Table({}, "output", str(path)), name, colliders)
     root.finish()
     return Scene(name=name, source=path, description=description, cloth=cloth,
                  integrator=integrator, fps=fps, frames=max(frames, 1), substeps=substeps,
                  precision=precision, gravity=gravity, drag=drag, wind=wind, tearing=tearing,
                  strain_limit=strain_limit, handles=handles, colliders=colliders, camera=camera,
-                 camera_direction=direction, output=output)
+                 camera_fit=camera_fit, output=output)
 
 
 def _integrator(sim: Table):
@@ -182,6 +184,12 @@ def _springs(table: Table | None, default: SpringParams | None) -> SpringParams 
     return params
 
 
+def _spring_options(table: Table, options: dict, *keys: str) -> None:
+    """Spring constants tables ({ k, kd }) among `keys`, into options (absent: the builder's)."""
+    for key in keys:
+        table.optional(options, key, lambda k: _springs(table.table(k), None))
+
+
 def _material(owner: Table) -> Material:
     value = owner.value("material", None)
     if value is None:
@@ -193,17 +201,17 @@ def _material(owner: Table) -> Material:
     table = Table(value, owner.path("material"), owner.source)
     preset = table.string("preset", None, sorted(PRESETS)) if table.has("preset") else None
     base = Material.preset(preset) if preset else Material()
-    fields = {}
+    changes = {}
     for key in ("density", "hem_mass"):
         if table.has(key):
-            fields[key] = table.number(key, unit="kg/m^2" if key == "density" else "kg")
+            changes[key] = table.number(key, unit="kg/m^2" if key == "density" else "kg")
     for key in ("stretch", "shear", "bend"):
         if table.has(key):
-            fields[key] = _springs(table.table(key), None)
+            changes[key] = _springs(table.table(key), None)
     if table.has("damping"):
-        fields["damping"] = table.string("damping", choices=("axial", "relative"))
+        changes["damping"] = table.string("damping", choices=DAMPING_MODELS)
     table.finish()
-    return table.build(lambda: Material(**{**base.__dict__, **fields}))
+    return table.build(lambda: Material(**{**base.__dict__, **changes}))
 
 
 def _grid_names(rows: int, cols: int) -> dict[str, list[int]]:
@@ -234,11 +242,13 @@ def _indices(table: Table, key: str, count: int, named: dict | None = None) -> l
 def _body(table: Table, folder: Path, offset: int) -> tuple[Cloth, list[Handle]]:
     """One [[bodies]] table -> (Cloth, its handles with particle indices shifted by `offset`)."""
     kind = table.string("type", choices=BODY_TYPES)
+    options = {}
     if kind == "grid":
         rows, cols = table.integer("rows", 16, 2), table.integer("cols", 16, 2)
-        mesh = table.build(grid_mesh, rows, cols, size=table.vector("size", (1.0, 1.0), 2, "m"),
-                           plane=table.string("plane", "xy", sorted(PLANES)),
-                           origin=table.vector("origin", (0.0, 0.0, 0.0), unit="m"))
+        table.optional(options, "size", "vector", length=2, unit="m")
+        table.optional(options, "plane", "string", choices=sorted(PLANES))
+        table.optional(options, "origin", "vector", unit="m")
+        mesh = table.build(grid_mesh, rows, cols, **options)
         names = _grid_names(rows, cols)
         pinned = _indices(table, "pinned", mesh.vertex_count, names)
         cloth = table.build(Cloth, mesh, _material(table), pinned=pinned)
@@ -253,30 +263,30 @@ def _body(table: Table, folder: Path, offset: int) -> tuple[Cloth, list[Handle]]
     elif kind == "string":
         n = table.integer("n", 20, 2)
         names = {"start": [0], "end": [n - 1]}
-        cloth = table.build(
-            body_builders.string, n, table.number("length", 1.0, unit="m"),
-            mass=table.number("mass", 0.1, unit="kg"),
-            stretch=_springs(table.table("stretch"), SpringParams(500.0, 0.1)),
-            bend=_springs(table.table("bend"), None),
-            start=table.vector("start", (0.0, 0.0, 0.0), unit="m"),
-            direction=table.vector("direction", (1.0, 0.0, 0.0)),
-            fixed=table.string("fixed", "start", body_builders.STRING_ENDS))
+        length = table.number("length", 1.0, unit="m")
+        table.optional(options, "mass", unit="kg")
+        _spring_options(table, options, "stretch", "bend")
+        table.optional(options, "start", "vector", unit="m")
+        table.optional(options, "direction", "vector")
+        table.optional(options, "fixed", "string", choices=body_builders.STRING_ENDS)
+        cloth = table.build(body_builders.string, n, length, **options)
     elif kind == "hair":
-        cloth = table.build(
-            body_builders.hair, table.integer("strands", 64, 1), table.integer("segments", 12, 1),
-            table.number("length", 0.3, unit="m"), anchor=table.vector("anchor", (0.0, 0.0, 0.0), unit="m"),
-            radius=table.number("radius", 0.1, unit="m"), mass=table.number("mass", 1e-3, unit="kg"),
-            stretch=_springs(table.table("stretch"), SpringParams(50.0, 0.02)),
-            bend=_springs(table.table("bend"), SpringParams(5.0, 0.005)))
+        strands, segments = table.integer("strands", 64, 1), table.integer("segments", 12, 1)
+        length = table.number("length", 0.3, unit="m")
+        table.optional(options, "anchor", "vector", unit="m")
+        table.optional(options, "radius", unit="m")
+        table.optional(options, "mass", unit="kg")
+        _spring_options(table, options, "stretch", "bend")
+        cloth = table.build(body_builders.hair, strands, segments, length, **options)
         names = {"roots": np.flatnonzero(cloth.pinned).tolist()}
     else:
         names = {}
-        cloth = table.build(
-            body_builders.tet_block, cells=table.vector("cells", (4, 4, 4), unit="cubes"),
-            size=table.vector("size", (0.4, 0.4, 0.4), unit="m"),
-            origin=table.vector("origin", (0.0, 0.0, 0.0), unit="m"),
-            density=table.number("density", 1000.0, unit="kg/m^3"),
-            stretch=_springs(table.table("stretch"), SpringParams(2e4, 5.0)))
+        table.optional(options, "cells", "vector", unit="cubes")
+        table.optional(options, "size", "vector", unit="m")
+        table.optional(options, "origin", "vector", unit="m")
+        table.optional(options, "density", unit="kg/m^3")
+        _spring_options(table, options, "stretch")
+        cloth = table.build(body_builders.tet_block, **options)
     handles = []
     for h in table.tables("handles"):
         particles = _indices(h, "particles", cloth.particle_count, names)
@@ -303,20 +313,17 @@ def _path(table: Table):
 
 def _collider(table: Table):
     kind = table.string("type", choices=sorted(COLLIDER_TYPES))
-    options = dict(thickness=table.number("thickness", 0.0, unit="m"),
-                   static_friction=table.number("static_friction", 0.0))
-    if table.has("kinetic_friction"):
-        options["kinetic_friction"] = table.number("kinetic_friction")
-    if table.has("path"):
-        options["path"] = _path(table.table("path"))
-    shape = {"plane": dict(point=("vector", (0.0, 0.0, 0.0)), normal=("vector", (0.0, 1.0, 0.0))),
-             "sphere": dict(centre=("vector", (0.0, 0.0, 0.0)), radius=("number", 1.0)),
-             "box": dict(lo=("vector", (-0.5, -0.5, -0.5)), hi=("vector", (0.5, 0.5, 0.5))),
-             "capsule": dict(a=("vector", (0.0, 0.0, 0.0)), b=("vector", (1.0, 0.0, 0.0)),
-                             radius=("number", 0.1))}[kind]
-    for key, (getter, default) in shape.items():
-        options[key] = getattr(table, getter)(key, default)
-    collider = table.build(COLLIDER_TYPES[kind], **options)
+    options = {}
+    table.optional(options, "thickness", unit="m")
+    table.optional(options, "static_friction")
+    table.optional(options, "kinetic_friction")
+    table.optional(options, "path", lambda k: _path(table.table(k)))
+    shape = COLLIDER_TYPES[kind]
+    common = {f.name for f in fields(Collider)}
+    for f in fields(shape):
+        if f.name not in common:
+            table.optional(options, f.name, "vector" if isinstance(f.default, tuple) else "number")
+    collider = table.build(shape, **options)
     table.finish()
     return collider
 
@@ -335,17 +342,20 @@ def _wind(table: Table) -> Wind:
 
 
 def _camera(table: Table):
-    """An explicit Camera when `position` is given, else (None, direction) to fit the body."""
-    fov = table.number("fov", 40.0, 0.0, strict=True, unit="degrees")
+    """(an explicit Camera, {}) when `position` is given, else (None, the Camera.fit options:
+    direction, up, fov) to fit the body."""
+    options = {}
+    table.optional(options, "up", "vector")
+    table.optional(options, "fov", minimum=0.0, strict=True, unit="degrees")
     if table.has("position"):
-        camera = table.build(Camera, position=table.vector("position", unit="m"),
-                             target=table.vector("target", (0.0, 0.0, 0.0), unit="m"),
-                             up=table.vector("up", (0.0, 1.0, 0.0)), fov=fov)
+        options["position"] = table.vector("position", unit="m")
+        table.optional(options, "target", "vector", unit="m")
+        camera = table.build(Camera, **options)
         table.finish()
-        return camera, None
-    direction = table.vector("direction", (1.0, 0.6, 1.4))
+        return camera, {}
+    table.optional(options, "direction", "vector")
     table.finish()
-    return None, direction
+    return None, options
 
 
 def _output(table: Table, name: str, colliders) -> Output:
@@ -360,14 +370,13 @@ def _output(table: Table, name: str, colliders) -> Output:
         ground = None
     elif isinstance(ground, bool) or not isinstance(ground, (int, float)):
         table._bad("ground", ground, '"auto", false or a height [m]')
-    style_table = table.table("style")
-    style = _style(style_table) if style_table is not None else SurfaceStyle()
+    options = {}
+    table.optional(options, "style", lambda k: _style(table.table(k)))
+    for key, minimum in (("width", 16), ("height", 16), ("supersample", 1), ("gif_width", 16)):
+        table.optional(options, key, "integer", minimum=minimum)
+    table.optional(options, "view", "string", choices=VIEWS)
     output = Output(folder=Path(table.string("folder", f"renders/{name}")),
-                    gif="gif" in formats, mp4="mp4" in formats,
-                    width=table.integer("width", 640, 16), height=table.integer("height", 360, 16),
-                    supersample=table.integer("supersample", 2, 1),
-                    gif_width=table.integer("gif_width", 480, 16),
-                    view=table.string("view", "3d", VIEWS), ground=ground, style=style)
+                    gif="gif" in formats, mp4="mp4" in formats, ground=ground, **options)
     table.finish()
     return output
 

@@ -7,9 +7,11 @@ import os
 import platform
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
-ARCH_CHOICES = ["cpu", "gpu", "cuda", "vulkan"]
+from .. import backend
+
 TEST_FRAMES, TEST_SIZE = 4, (160, 96)
 
 
@@ -22,9 +24,9 @@ def _positive(text: str) -> int:
 
 def _run_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--frames", type=_positive, help="frames to write (default: duration x fps)")
-    parser.add_argument("--arch", choices=ARCH_CHOICES, default="cpu",
+    parser.add_argument("--arch", choices=sorted(backend.ARCHS), default="cpu",
                         help="Taichi backend (gpu: the first GPU backend found, else CPU)")
-    parser.add_argument("--precision", choices=["f32", "f64"],
+    parser.add_argument("--precision", choices=sorted(backend.PRECISIONS),
                         help="float precision (default: the scene's, else f32)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -32,7 +34,6 @@ def _run_arguments(parser: argparse.ArgumentParser) -> None:
 def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progress=True,
         test=False, mp4=None) -> tuple[int, list[Path]]:
     """Load, initialise, run and report; returns (exit code, frame paths)."""
-    from . import backend
     from .runner import run_scene
     from .scene import load_scene
     from .scene_file import SceneError
@@ -42,14 +43,14 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
     except (SceneError, FileNotFoundError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2, []
+    output = scene.output
     if test:
         frames = min(frames or TEST_FRAMES, TEST_FRAMES)
-        scene.output.width, scene.output.height = TEST_SIZE
-        scene.output.supersample = 1
+        output = replace(output, width=TEST_SIZE[0], height=TEST_SIZE[1], supersample=1)
     if mp4 is not None:
-        scene.output.mp4 = mp4
+        output = replace(output, mp4=mp4)
     backend.init(arch=arch, precision=precision or scene.precision)
-    result = run_scene(scene, folder=out, frames=frames, progress=progress)
+    result = run_scene(scene, folder=out, frames=frames, progress=progress, output=output)
     folder = result.frames[0].parent if result.frames else (out or scene.output.folder)
     summary = (f"{len(result.frames)} frames of '{scene.name}' in {result.wall_seconds:.1f} s "
                f"({result.steps} steps, dt = {result.dt:.3g} s) -> "
@@ -99,8 +100,6 @@ def info() -> int:
     import numpy
     import taichi as ti
 
-    from . import backend
-
     backend.init(arch="cpu")
     core = ti._lib.core
     built_with = [name for name in ("cuda", "vulkan") if getattr(core, f"with_{name}", lambda: False)()]
@@ -131,11 +130,12 @@ def main(argv=None) -> int:
     study_parser.add_argument("--dt", nargs="+", type=float, dest="dts", metavar="DT",
                               help="steps [s], each frame_dt / an integer (default: frame_dt / 2^k "
                                    "down to half the smallest stable step)")
-    study_parser.add_argument("--precisions", nargs="+", choices=["f32", "f64"], default=["f64", "f32"])
+    study_parser.add_argument("--precisions", nargs="+", choices=sorted(backend.PRECISIONS),
+                              default=["f64", "f32"])
     study_parser.add_argument("--iterations", nargs="+", type=_positive, metavar="N",
                               help="pbd/xpbd passes per step to sweep (default 4 16)")
     study_parser.add_argument("--duration", type=float, help="simulated seconds (default: the scene's)")
-    study_parser.add_argument("--arch", choices=ARCH_CHOICES, default="cpu")
+    study_parser.add_argument("--arch", choices=sorted(backend.ARCHS), default="cpu")
     study_parser.add_argument("--no-plot", action="store_true", help="skip study.png (no matplotlib)")
     study_parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     commands.add_parser("info", help="versions, architecture and threads")

@@ -37,7 +37,7 @@ class Table:
         self.where, self.source = where, source
         if not isinstance(data, dict):
             self.fail(f"{where} must be a table, got {data!r:.60}")
-        self.data, self.read = data, set()
+        self.data, self.read, self.known = data, set(), set()
 
     def fail(self, message: str):
         raise SceneError(f"{self.source}: {message}")
@@ -101,6 +101,16 @@ class Table:
         """The raw value, for keys whose type depends on the value (checked by the caller)."""
         return self._get(key, default)
 
+    def optional(self, options: dict, key: str, getter="number", **kwargs) -> None:
+        """options[key] = the value read by getter (the name of a getter here: "number",
+        "integer", "string", "vector", ...; or a function of the key) if the table has `key`;
+        else nothing, so the constructor the options go to applies its own default (defaults
+        live in one place). The key is allowed either way."""
+        self.known.add(key)
+        if key in self.data:
+            read = getattr(self, getter) if isinstance(getter, str) else getter
+            options[key] = read(key, **kwargs)
+
     def table(self, key: str, required: bool = False) -> Table | None:
         value = self._get(key, MISSING if required else None)
         return None if value is None else Table(value, self.path(key), self.source)
@@ -117,7 +127,7 @@ class Table:
         unknown = [k for k in self.data if k not in self.read]
         if unknown:
             key = unknown[0]
-            allowed = ", ".join(sorted(self.read | set(also))) or "none"
+            allowed = ", ".join(sorted(self.read | self.known | set(also))) or "none"
             self.fail(f"{self.path(key)} is not a known key (value {self.data[key]!r:.60}); "
                       f"allowed here: {allowed}")
 

@@ -1,0 +1,22 @@
+"""Writing files atomically: every file ti_cloth writes (frames, meshes, study tables and plots)
+goes to a temporary name beside its target and is renamed when complete, so an interrupted run
+never leaves half a file."""
+
+from __future__ import annotations
+
+from contextlib import contextmanager
+from pathlib import Path
+
+
+@contextmanager
+def atomic_path(path):
+    """Yield a hidden temporary name beside `path` (same extension: writers pick the format
+    from it); rename it to `path` when the block succeeds, delete it when it fails."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
+    try:
+        yield tmp
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
