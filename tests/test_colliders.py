@@ -110,6 +110,24 @@ def test_particle_rides_a_moving_platform(f64):
     report("position after 1 s", sim.positions()[0].tolist(), [0.3, 0.5, 0.0])
     assert np.allclose(sim.positions()[0], [0.3, 0.5, 0.0], atol=2e-5)
     assert np.allclose(sim.velocities()[0], [0.3, 0.5, 0.0], atol=1e-6)
+    # what a renderer draws: the box where its path has it now, at its size
+    placed, = sim.collider_shapes()
+    report("box drawn at t = 1 s (lo, hi)", (placed.lo, placed.hi), "moved by (0.3, 0.5, 0)")
+    np.testing.assert_allclose(placed.lo, np.add(box.lo, box.path(sim.time)), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(placed.hi, np.add(box.hi, box.path(sim.time)), rtol=0, atol=1e-15)
+    assert placed.path is None and placed.static_friction == box.static_friction
+
+
+def test_colliders_are_placed_by_their_paths():
+    still = tc.Plane(point=(0.0, -1.0, 0.0))
+    assert still.placed(2.0) is still
+    moving = [tc.Sphere(centre=(1, 2, 3), radius=0.5, path=lambda t: (t, 0, 0)),
+              tc.Capsule(a=(0, 0, 0), b=(1, 0, 0), radius=0.1, path=lambda t: (0, t, 0)),
+              tc.Plane(point=(0, 0, 0), normal=(0, 0, 1), path=lambda t: (0, 0, 2 * t))]
+    sphere, capsule, plane = (c.placed(0.5) for c in moving)
+    assert sphere.centre == (1.5, 2.0, 3.0) and sphere.radius == 0.5
+    assert capsule.a == (0.0, 0.5, 0.0) and capsule.b == (1.0, 0.5, 0.0)
+    assert plane.point == (0.0, 0.0, 1.0) and plane.normal == (0.0, 0.0, 1.0)
 
 
 @pytest.mark.parametrize("shape, inside, surface", [

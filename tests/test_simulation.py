@@ -68,7 +68,9 @@ def test_handle_moves_its_particle_along_the_path(f64):
     cloth = hanging_cloth(pinned=(56,))
     path = lambda t: (0.0, 0.0, 0.2 * np.sin(3 * t))
     sim = tc.Simulation(cloth, integrator="symplectic_euler", dt=2e-4, handles=[tc.Handle([63], path)])
-    assert sim.model.pinned[63]
+    expected = np.zeros(64, bool)
+    expected[[56, 63]] = True
+    assert np.array_equal(sim.pinned(), expected), "pins and held particles"
     for _ in range(5):
         sim.step(100)
         np.testing.assert_allclose(sim.positions()[63], cloth.particle_position[63] + path(sim.time),
@@ -96,6 +98,16 @@ def test_tearing_removes_exactly_the_overstretched_springs(f64):
     sim.step(1)   # once torn a spring stays torn; nothing else is over-stretched yet
     assert np.array_equal(sim.torn_springs(), np.flatnonzero(over))
     assert np.array_equal(sim.spring_torn_step(), np.where(over, 0, -1)), "all tore in step 0"
+
+
+def test_renamed_options_keep_working_with_a_deprecation_warning():
+    with pytest.warns(DeprecationWarning, match="Tearing.strain"):
+        old = tc.Tearing(stretch=0.3)
+    assert old == tc.Tearing(0.3) == tc.Tearing(strain=0.3)
+    with pytest.warns(DeprecationWarning, match="Tearing.strain"):
+        assert old.stretch == 0.3
+    with pytest.warns(DeprecationWarning, match="tearable"):
+        assert tc.ForceSettings(tearable=True).tearing is True
 
 
 def test_without_tearing_nothing_is_removed_and_the_kernel_never_runs(f64, monkeypatch):

@@ -2,6 +2,8 @@
 
 Nothing here calls ti.init; call ti_cloth.init(arch=..., precision=...) first.
 """
+import importlib
+
 from .backend import init
 from .bodies import hair, soft_body, string, tet_block
 from .colliders import Box, Capsule, Collider, Plane, Sphere
@@ -33,16 +35,19 @@ __all__ = [
 ]
 
 
+APP_MODULES = ("scene", "scene_file", "runner", "study", "cli")   # were ti_cloth.<name>
+
+
 def __getattr__(name):
     """The application layer (ti_cloth.app) pulls in the renderer, so load_scene, run_scene
-    and the study module are imported only when used."""
+    and its modules (ti_cloth.study, ...; they lived here before ti_cloth.app) are imported
+    only when used."""
     if name == "load_scene":
         from .app.scene import load_scene
         return load_scene
     if name == "run_scene":
         from .app.runner import run_scene
         return run_scene
-    if name == "study":
-        from .app import study
-        return study
+    if name in APP_MODULES:
+        return importlib.import_module(f".app.{name}", __name__)
     raise AttributeError(f"module 'ti_cloth' has no attribute {name!r}")

@@ -94,6 +94,23 @@ def numpy_dtype(dtype):
     return next(np_type for np_type, ti_type in DTYPES.items() if ti_type == dtype)
 
 
+def kernel_argument(cls):
+    """Class decorator: instances may be passed to kernels as ti.template() arguments, whose
+    fields and Python attributes the kernels read (attributes at compile time).
+
+    It sets the marker Taichi checks (`_data_oriented`), as ti.data_oriented does, without
+    ti.data_oriented's __getattribute__ hook: the hook binds @ti.kernel methods (these
+    classes define none; TypeError if one does) and runs on every attribute access, which cost
+    about a third of the Python time of each launch of a kernel taking a Model, a State and
+    the ForceSettings (175 us of 500 us, rk4 steps of a spring pair, 2-core CPU).
+    """
+    kernels = [name for name, value in vars(cls).items() if hasattr(value, "_is_wrapped_kernel")]
+    if kernels:
+        raise TypeError(f"{cls.__name__} defines @ti.kernel methods {kernels}: use ti.data_oriented")
+    cls._data_oriented = True
+    return cls
+
+
 def real():
     """The Taichi float type of the active precision (ti.f32 or ti.f64)."""
     return PRECISIONS[config().precision]

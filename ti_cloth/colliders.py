@@ -198,7 +198,7 @@ def signed_distance(kind, a, b, radius, x):
     return d, n
 
 
-@ti.data_oriented
+@backend.kernel_argument
 class ColliderSet:
     """The colliders of one simulation as Taichi fields (one row per collider), and the
     particle positions at the start of the current step (`step_start`) the response needs."""

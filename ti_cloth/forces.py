@@ -19,11 +19,12 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
+from . import backend
 from .material import SpringKind
 from .wind import accumulate_wind
 
 
-@ti.data_oriented
+@backend.kernel_argument
 @dataclass(frozen=True)
 class ForceSettings:
     """External loads and switches of one simulation, compile-time constants of its kernels

@@ -11,7 +11,7 @@ from .transfer import upload
 from .topology import Cloth, color_springs
 
 
-@ti.data_oriented
+@backend.kernel_argument
 class Model:
     """Masses, springs and per-particle spring adjacency, uploaded once and never changed.
 
@@ -98,7 +98,7 @@ class Model:
         return self._colouring
 
 
-@ti.data_oriented
+@backend.kernel_argument
 class SpringColouring:
     """Springs by colour: colour c is springs order[start[c]:start[c + 1]] (fields, read in
     loops whose bounds are not compile-time constants, so a kernel visiting every colour

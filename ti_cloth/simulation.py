@@ -72,7 +72,7 @@ class Simulation:
         self.wind = WindField(wind, cloth) if wind is not None else None
         self.forces = ForceSettings(gravity=tuple(gravity), drag=drag, tearable=tearing is not None,
                                     wind=self.wind)
-        pinned = self.handles.pin(cloth.pinned) if self.handles else cloth.pinned
+        pinned = self.handles.pin(cloth.pinned) if self.handles is not None else cloth.pinned
         position_limit = finite_number("position_limit", position_limit, 0.0, strict=True, unit="m")
         self.model = Model(cloth, pinned=pinned)
         if auto:
@@ -114,7 +114,7 @@ class Simulation:
         self._place_handles_at_start()
 
     def _place_handles_at_start(self) -> None:
-        if self.handles:
+        if self.handles is not None:
             self.handles.place_at_start(self.model, self.state, self.dt)
 
     @property

@@ -11,7 +11,7 @@ GUARD_LIMIT = 1e30
 NO_BAD_STEP = 2**31 - 1
 
 
-@ti.data_oriented
+@backend.kernel_argument
 class State:
     """Per-particle and per-spring quantities that change every step.
 

@@ -29,6 +29,8 @@ class StrainLimit:
                                                              self.max_strain, 0.0, strict=True))
         object.__setattr__(self, "passes", integer("StrainLimit.passes", self.passes, 1))
         names = {k.name.lower() for k in SpringKind}
+        require(isinstance(self.kinds, (list, tuple)), "StrainLimit.kinds", self.kinds,
+                f"a list of spring kinds from {sorted(names)}")
         kinds = tuple(self.kinds)
         require(len(kinds) > 0 and set(kinds) <= names, "StrainLimit.kinds", self.kinds,
                 f"a non-empty subset of {sorted(names)}")
@@ -38,7 +40,7 @@ class StrainLimit:
         return ti.math.vec3(*(float(k.name.lower() in self.kinds) for k in SpringKind))
 
 
-@ti.data_oriented
+@backend.kernel_argument
 class StrainLimiter:
     """The strain-limiting stage of one simulation (simulation.STEP_ORDER), with the positions
     before the correction, so velocities can follow it. tearable: springs may be torn."""

@@ -8,14 +8,14 @@ from .backend import numpy_dtype
 
 def upload(pairs) -> None:
     """Copy numpy arrays into Taichi fields in one launch: one compiled kernel for the whole
-    set, where field.from_numpy compiles a kernel per field (about 0.1 s each on a 2-core CPU,
-    most of the cost of building a small Model before this).
+    set, with one loop per row count, where field.from_numpy compiles a kernel per field
+    (about 0.1 s each on a 2-core CPU, most of the cost of building a small Model).
 
     pairs: (field, values); values has the field's shape, or fewer rows (the rest keep their
     values: the padding of a field that cannot have length 0). Values are rounded to the
     field's type in numpy, then carried exactly, so the result is that of field.from_numpy.
     """
-    targets, layout, chunks, offset = [], [], [], 0
+    targets, groups, chunks, offset = [], {}, [], 0
     for field, values in pairs:
         values = np.asarray(values)
         if len(values) == 0:
@@ -23,22 +23,26 @@ def upload(pairs) -> None:
         width = values.shape[1] if values.ndim == 2 else 0
         typed = np.ascontiguousarray(values, dtype=numpy_dtype(field.dtype))
         chunks.append(typed.astype(np.float64).ravel())   # exact for f32, f64, i8 and i32
+        groups.setdefault(len(values), []).append((len(targets), offset, width, field.dtype))
         targets.append(field)
-        layout.append((offset, len(values), width, field.dtype))
         offset += typed.size
     if targets:
-        _copy_in(tuple(targets), np.concatenate(chunks), tuple(layout))
+        layout = tuple((rows, tuple(members)) for rows, members in groups.items())
+        _copy_in(tuple(targets), np.concatenate(chunks), layout)
 
 
 @ti.kernel
 def _copy_in(targets: ti.template(), data: ti.types.ndarray(), layout: ti.template()):
-    """targets[k][i] = data[offset + i] (scalar fields) or targets[k][i][c] =
-    data[offset + i * width + c] (vector fields), layout[k] = (offset, rows, width, dtype)."""
-    for k in ti.static(range(len(layout))):
-        offset, rows, width, dtype = ti.static(layout[k])
+    """For each group (rows, members) of layout, one loop over the rows: for each member
+    (k, offset, width, dtype), targets[k][i] = data[offset + i] (a scalar field) or
+    targets[k][i][c] = data[offset + i * width + c] (a vector field)."""
+    for g in ti.static(range(len(layout))):
+        rows, members = ti.static(layout[g])
         for i in range(rows):
-            if ti.static(width == 0):
-                targets[k][i] = ti.cast(data[offset + i], dtype)
-            else:
-                for c in ti.static(range(width)):
-                    targets[k][i][c] = ti.cast(data[offset + i * width + c], dtype)
+            for m in ti.static(range(len(members))):
+                k, offset, width, dtype = ti.static(members[m])
+                if ti.static(width == 0):
+                    targets[k][i] = ti.cast(data[offset + i], dtype)
+                else:
+                    for c in ti.static(range(width)):
+                        targets[k][i][c] = ti.cast(data[offset + i * width + c], dtype)

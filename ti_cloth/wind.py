@@ -87,7 +87,7 @@ class Wind:
         return wave * (2 * np.pi / self.turbulence_scale), direction, phase
 
 
-@ti.data_oriented
+@backend.kernel_argument
 class WindField:
     """A Wind bound to one body: its triangles, the particle -> triangle adjacency used to
     gather the triangle forces deterministically, the turbulence modes and per-step values."""

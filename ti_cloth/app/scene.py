@@ -122,20 +122,23 @@ def load_scene(path) -> Scene:
         if sim.has("substeps"):
             sim.fail("simulation: give either dt or substeps, not both")
         substeps = max(1, math.ceil(1.0 / fps / sim.number("dt", minimum=0.0, strict=True, unit="s") - 1e-9))
-    precision = sim.string("precision", "f32", sorted(backend.PRECISIONS))
+    precision = sim.string("precision", _default(backend.init, "precision"),
+                           sorted(backend.PRECISIONS))
     tearing = sim.number("tearing", 0.0, 0.0, strict=True) if sim.has("tearing") else None
     limit = sim.table("strain_limit")
     strain_limit = None
     if limit is not None:
-        strain_limit = limit.build(StrainLimit, max_strain=limit.number("max_strain", 0.1),
-                                   passes=limit.integer("passes", 4, 1),
-                                   kinds=tuple(limit.value("kinds", ["stretch", "shear"])))
+        options = {}
+        limit.optional(options, "max_strain")
+        limit.optional(options, "passes", "integer", minimum=1)
+        limit.optional(options, "kinds", "value")
+        strain_limit = limit.build(StrainLimit, **options)
         limit.finish()
     sim.finish()
 
     forces = root.table("forces") or Table({}, "forces", str(path))
-    gravity = forces.vector("gravity", (0.0, -9.81, 0.0), unit="m/s^2")
-    drag = forces.number("drag", 0.0, 0.0, unit="1/s")
+    gravity = forces.vector("gravity", _default(Simulation, "gravity"), unit="m/s^2")
+    drag = forces.number("drag", _default(Simulation, "drag"), 0.0, unit="1/s")
     wind_table = forces.table("wind")
     wind = _wind(wind_table) if wind_table is not None else None
     forces.finish()
@@ -163,8 +166,13 @@ def load_scene(path) -> Scene:
                  camera_fit=camera_fit, output=output)
 
 
+def _default(constructor, name: str):
+    """The default of a constructor's argument: the scene reader repeats none of them."""
+    return inspect.signature(constructor).parameters[name].default
+
+
 def _integrator(sim: Table):
-    spec = sim.value("integrator", "symplectic_euler")
+    spec = sim.value("integrator", _default(Simulation, "integrator"))
     if isinstance(spec, str):
         spec = {"name": spec}
     table = Table(spec, sim.path("integrator"), sim.source)

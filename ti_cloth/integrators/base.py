@@ -7,13 +7,13 @@ import math
 import weakref
 from typing import ClassVar
 
-import taichi as ti
 
+from .. import backend
 from ..modes import stiffest_mode
 from . import fused
 
 
-@ti.data_oriented
+@backend.kernel_argument
 class Integrator:
     """Advances a State by one step of dt [s] on a fixed Model.
 

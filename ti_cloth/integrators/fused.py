@@ -43,7 +43,7 @@ BARRIER_SPINS = 1 << 28   # polls (seconds) before a barrier gives up on a missi
 STALLED = 1 << 29         # added to the barrier count by a worker that gave up
 
 
-@ti.data_oriented
+@backend.kernel_argument
 class Team:
     """`workers` CPU workers that share the steps of one launch: each owns a fixed slice of
     every loop, and they meet at barriers. workers must not exceed Taichi's CPU threads, since

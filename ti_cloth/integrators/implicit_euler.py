@@ -33,7 +33,7 @@ BLOCK = 64                      # particles per partial sum of a dot product
 PAP, RZ, RR, BB, BETA = range(5)  # slots of the workspace's scalar field
 
 
-@ti.data_oriented
+@backend.kernel_argument
 class _Workspace:
     """CG vectors, per-spring linearisation and the partial sums of one State's solve."""
 

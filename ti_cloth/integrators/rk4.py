@@ -18,7 +18,7 @@ RK4_IMAGINARY = 2.0 * math.sqrt(2.0)   # |1 + z + z^2/2 + z^3/6 + z^4/24| <= 1 o
 RK4_RADIUS = 2.61                      # a left half-disc of this radius lies in RK4's region (min 2.6156)
 
 
-@ti.data_oriented
+@backend.kernel_argument
 class _Stages:
     """Start-of-step state and the running weighted sum of the stage derivatives."""
 
