@@ -18,6 +18,12 @@ import pytest
 from helpers import use
 
 
+def pytest_collection_modifyitems(items):
+    """Tests marked slow first (in their order), so that with one worker per core (xdist)
+    the longest ones do not start last and leave a core idle at the end."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+
+
 @pytest.fixture
 def f64():
     use("f64")

@@ -109,15 +109,16 @@ def test_hair_roots_lie_on_the_head_and_strands_point_outwards():
     np.testing.assert_allclose(body.particle_mass.reshape(40, 7).sum(axis=1), 2e-3)
 
 
+@pytest.mark.slow
 def test_hair_follows_a_moving_head_and_the_tips_lag(f64):
     """Roots moved by a Handle follow the head exactly; a strand's tip trails behind, and
     once the head stops the strands hang straight down again below their roots."""
     body = tc.hair([[0.0, 1.0, 0.0]], 8, 0.4, directions=[[0.0, -1.0, 0.0]], mass=1e-3,
                    stretch=tc.SpringParams(20.0, 0.01), bend=tc.SpringParams(0.5, 0.001))
     path = lambda t: (0.5 * min(t, 0.5), 0.0, 0.0)          # 1 m/s for 0.5 s, then still
-    sim = tc.Simulation(body, dt=2e-4, drag=4.0,
+    sim = tc.Simulation(body, dt=5e-4, drag=4.0,       # a quarter of the stable step
                         handles=[tc.Handle(np.flatnonzero(body.pinned), path)])
-    sim.step(1250)                                         # t = 0.25 s, head moving
+    sim.step(500)                                          # t = 0.25 s, head moving
     x = sim.positions()
     report("root x, tip x while moving [m]", (x[0, 0], x[-1, 0]), "0.125, behind it")
     assert abs(x[0, 0] - 0.125) < 1e-12

@@ -74,6 +74,7 @@ def test_cloth_slides_down_a_slope_above_tan_mu_as_coulomb_says(f64):
     assert abs(slid - expected) < 0.02 * expected
 
 
+@pytest.mark.slow
 def test_cloth_drapes_over_a_sphere_and_stays(f64):
     n, radius, thickness = 12, 0.3, 0.01
     mesh = tc.grid_mesh(n, n, size=(1.0, 1.0), plane="xz", origin=(-0.5, 0.35, -0.5))

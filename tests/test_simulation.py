@@ -190,6 +190,7 @@ def test_energy_reports_each_spring_kind(f64):
     assert e["kinetic"] == 0.0
 
 
+@pytest.mark.slow
 def test_simulations_free_their_taichi_fields_when_dropped(f64):
     """Each Model/State/feature allocates its fields in one SNode tree, freed (in batches)
     after the object is collected: creating simulation after simulation must not use up

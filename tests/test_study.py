@@ -89,6 +89,7 @@ def test_symplectic_error_on_free_fall_is_g_h_t_over_2(tmp_path):
         assert run.max_strain < 1e-9 and not run.diverged and run.cost > 0
 
 
+@pytest.mark.slow
 def test_study_orders_stability_and_outputs(tmp_path):
     scene = scene_file(tmp_path, SWINGING_STRING)
     stable = tc.stable_dt(scene.cloth, "explicit_euler", scene.drag)
