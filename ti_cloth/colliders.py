@@ -222,13 +222,18 @@ class ColliderSet:
         self.step_start = fields.vector(3, real, particle_count)
         fields.finalize(self)
         packed = [c.packed() for c in self.colliders]
+        self.moving = any(c.path is not None for c in self.colliders)
+        self._rest = [(p[1], p[2]) for p in packed]
         upload(((self.kind, [p[0] for p in packed]), (self.radius, [p[3] for p in packed]),
                 (self.thickness, [c.thickness for c in self.colliders]),
                 (self.static_friction, [c.static_friction for c in self.colliders]),
-                (self.kinetic_friction, [c.kinetic_friction for c in self.colliders])))
-        self.moving = any(c.path is not None for c in self.colliders)
-        self._rest = [(p[1], p[2]) for p in packed]
-        self.place(0.0)
+                (self.kinetic_friction, [c.kinetic_friction for c in self.colliders]))
+               + self._placement(0.0, None))
+
+    def place(self, t: float, dt: float | None = None) -> None:
+        """Put every collider where its path says at time t; velocity from t - dt to t
+        (zero when dt is None: at the start)."""
+        upload(self._placement(t, dt))
 
     def before_step(self, state, t: float) -> None:
         """Keep the positions at the step start: the friction response needs the step's motion."""
@@ -240,9 +245,8 @@ class ColliderSet:
             self.place(t, dt)
         resolve_collisions(model, state, self, dt)
 
-    def place(self, t: float, dt: float | None = None) -> None:
-        """Put every collider where its path says at time t; velocity from t - dt to t
-        (zero when dt is None: at the start)."""
+    def _placement(self, t: float, dt: float | None) -> tuple:
+        """(field, values) of the colliders' a, b and velocity at time t (place())."""
         a, b, v = [], [], []
         for c, (a0, b0) in zip(self.colliders, self._rest):
             offset = c.offset(t)
@@ -250,7 +254,7 @@ class ColliderSet:
             b.append(b0 if isinstance(c, Plane) else b0 + offset)   # a plane's b is its normal
             moving = c.path is not None and dt is not None
             v.append((offset - c.offset(t - dt)) / dt if moving else np.zeros(3))
-        upload(((self.a, a), (self.b, b), (self.velocity, v)))
+        return (self.a, a), (self.b, b), (self.velocity, v)
 
 
 @ti.kernel

@@ -109,7 +109,7 @@ class Simulation:
         self.state.reset(self.model.particle_rest_position)
         self.step_count = 0
         self._diverged = None
-        if self.colliders is not None:
+        if self.colliders is not None and self.colliders.moving:
             self.colliders.place(0.0)
         self._place_handles_at_start()
 
