@@ -27,22 +27,23 @@ def upload(pairs) -> None:
         targets.append(field)
         offset += typed.size
     if targets:
-        layout = tuple((rows, tuple(members)) for rows, members in groups.items())
+        layout = tuple((rows, tuple(members)) for rows, members in sorted(groups.items(), reverse=True))
         _copy_in(tuple(targets), np.concatenate(chunks), layout)
 
 
 @ti.kernel
 def _copy_in(targets: ti.template(), data: ti.types.ndarray(), layout: ti.template()):
-    """For each group (rows, members) of layout, one loop over the rows: for each member
-    (k, offset, width, dtype), targets[k][i] = data[offset + i] (a scalar field) or
-    targets[k][i][c] = data[offset + i * width + c] (a vector field)."""
-    for g in ti.static(range(len(layout))):
-        rows, members = ti.static(layout[g])
-        for i in range(rows):
-            for m in ti.static(range(len(members))):
-                k, offset, width, dtype = ti.static(members[m])
-                if ti.static(width == 0):
-                    targets[k][i] = ti.cast(data[offset + i], dtype)
-                else:
-                    for c in ti.static(range(width)):
-                        targets[k][i][c] = ti.cast(data[offset + i * width + c], dtype)
+    """One loop over the most rows (layout[0], the longest group, first); in it, for each group (rows, members) of layout that has
+    row i, for each member (k, offset, width, dtype): targets[k][i] = data[offset + i] (a
+    scalar field) or targets[k][i][c] = data[offset + i * width + c] (a vector field)."""
+    for i in range(ti.static(layout[0][0])):
+        for g in ti.static(range(len(layout))):
+            rows, members = ti.static(layout[g])
+            if i < rows:
+                for m in ti.static(range(len(members))):
+                    k, offset, width, dtype = ti.static(members[m])
+                    if ti.static(width == 0):
+                        targets[k][i] = ti.cast(data[offset + i], dtype)
+                    else:
+                        for c in ti.static(range(width)):
+                            targets[k][i][c] = ti.cast(data[offset + i * width + c], dtype)
