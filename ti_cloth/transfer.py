@@ -7,9 +7,9 @@ from .backend import numpy_dtype
 
 
 def upload(pairs) -> None:
-    """Copy numpy arrays into Taichi fields in one launch: one compiled kernel for the whole
-    set, with one loop per row count, where field.from_numpy compiles a kernel per field
-    (about 0.1 s each on a 2-core CPU, most of the cost of building a small Model).
+    """Copy numpy arrays into Taichi fields in one launch: one compiled kernel with one loop
+    for the whole set, where field.from_numpy compiles a kernel per field (about 0.1 s each on
+    a 2-core CPU, most of the cost of building a small Model).
 
     pairs: (field, values); values has the field's shape, or fewer rows (the rest keep their
     values: the padding of a field that cannot have length 0). Values are rounded to the
@@ -27,7 +27,8 @@ def upload(pairs) -> None:
         targets.append(field)
         offset += typed.size
     if targets:
-        layout = tuple((rows, tuple(members)) for rows, members in sorted(groups.items(), reverse=True))
+        longest_first = sorted(groups.items(), reverse=True)
+        layout = tuple((rows, tuple(members)) for rows, members in longest_first)
         _copy_in(tuple(targets), np.concatenate(chunks), layout)
 
 
