@@ -7,9 +7,9 @@ own springs in a fixed order (Model adjacency: second-end springs first, then fi
 No float atomics, so a run is deterministic; each spring's formula is evaluated once, not once
 per end; Newton's third law holds exactly.
 
-The pieces are ti.funcs, so integrators/fused.py can put a whole step (springs, gather, update) in one
-kernel: its loops run in parallel when that kernel is launched once per step, and split among
-CPU workers (or run by one) when it runs many steps in one launch.
+The pieces are ti.funcs, so integrators/fused.py can put a whole step (springs, gather, update)
+in one kernel: its loops run in parallel when that kernel is launched once per step, and split
+among CPU workers (or run by one) when it runs many steps in one launch.
 """
 
 
