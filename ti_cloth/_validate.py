@@ -66,3 +66,18 @@ def as_array(field: str, value, dtype, shape: tuple) -> np.ndarray:
 
 def _shape_text(shape: tuple) -> str:
     return "(" + ", ".join("N" if s is None else str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"
+
+
+def in_range(field: str, value, allowed) -> float:
+    """`value` as a float in the limits.Range `allowed`: 'must be a finite number in [a, b]'."""
+    text = f"a finite number {allowed.text()}"
+    require(isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool),
+            field, value, text)
+    value = float(value)
+    require(math.isfinite(value) and allowed.low <= value <= allowed.high, field, value, text)
+    return value
+
+
+def count(field: str, value, allowed) -> int:
+    """`value` as an int in the limits.Range `allowed`."""
+    return integer(field, value, allowed.low, allowed.high)

@@ -3,7 +3,8 @@
 `init` is the only place ti_cloth calls ``ti.init``; importing the package never does.
 Every Taichi field ti_cloth allocates uses the precision chosen here, and Taichi's
 ``default_fp`` is set to match so float literals inside kernels have the same type.
-Calling `init` again resets Taichi: fields and simulations created before become invalid.
+Calling `init` again resets Taichi: fields and simulations created before become invalid
+(a Simulation then raises errors.StaleSimulation instead of touching freed memory).
 """
 
 from __future__ import annotations
@@ -14,6 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import taichi as ti
+
+from . import limits
+from ._validate import count
 
 ARCHS = {"cpu": "cpu", "cuda": "cuda", "vulkan": "vulkan", "gpu": "gpu"}
 PRECISIONS = {"f32": ti.f32, "f64": ti.f64}
@@ -47,8 +51,8 @@ def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None,
         raise ValueError(f"arch must be one of {sorted(ARCHS)}, got {arch!r}")
     if precision not in PRECISIONS:
         raise ValueError(f"precision must be one of {sorted(PRECISIONS)}, got {precision!r}")
-    if threads is not None and (not isinstance(threads, int) or threads < 1):
-        raise ValueError(f"threads must be a positive int or None, got {threads!r}")
+    if threads is not None:
+        count("threads", threads, limits.THREADS)
     options = dict(arch=getattr(ti, ARCHS[arch]), default_fp=PRECISIONS[precision],
                    default_ip=ti.i32, random_seed=0, debug=debug, log_level=ti.WARN)
     if threads is not None:
@@ -58,6 +62,12 @@ def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None,
     _generation += 1
     _config = BackendConfig(arch=arch, precision=precision, threads=threads)
     return _config
+
+
+def generation() -> int:
+    """How many times `init` has run: objects holding fields remember it, since an `init`
+    after theirs freed those fields."""
+    return _generation
 
 
 def config() -> BackendConfig:

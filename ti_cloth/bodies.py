@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._validate import as_array, finite_number, integer, require
+from . import limits
+from ._validate import as_array, count, in_range, require
 from .material import Material, SpringKind, SpringParams
 from .mesh import Mesh, tet_grid_mesh
 from .topology import Cloth, unique_springs
@@ -42,9 +43,10 @@ def string(n: int, length: float, *, mass: float = 0.1, stretch=SpringParams(500
     other end free: it simply has one spring, which is what the lecture's p_end = p_end-1 boundary
     approximates), "both" (the string held at both ends) or "none".
     """
-    n = integer("n", n, 2)
-    length = finite_number("length", length, 0.0, strict=True, unit="m")
-    mass = finite_number("mass", mass, 0.0, strict=True, unit="kg")
+    n = count("n", n, limits.CHAIN)
+    limits.check_memory("n", n, n, 2 * n)
+    length = in_range("length", length, limits.LENGTH)
+    mass = in_range("mass", mass, limits.MASS)
     require(fixed in STRING_ENDS, "fixed", fixed, f"one of {STRING_ENDS}")
     start = as_array("start", start, np.float64, (3,))
     positions = start + np.linspace(0.0, length, n)[:, None] * _unit("direction", direction)
@@ -80,14 +82,16 @@ def hair(strands, segments: int, length: float, *, anchor=(0.0, 0.0, 0.0), radiu
     twist, so torsion has nothing to act on; ghosts matter for curly rest shapes, which these
     strands do not have. Stretch and bend springs alone give the strand's swing and stiffness.
     """
-    segments = integer("segments", segments, 1)
-    length = finite_number("length", length, 0.0, strict=True, unit="m")
-    mass = finite_number("mass", mass, 0.0, strict=True, unit="kg")
+    segments = count("segments", segments, limits.SEGMENTS)
+    length = in_range("length", length, limits.LENGTH)
+    mass = in_range("mass", mass, limits.MASS)
     anchor = as_array("anchor", anchor, np.float64, (3,))
     if isinstance(strands, (int, np.integer)) and not isinstance(strands, bool):
-        count = integer("strands", strands, 1)
-        radius = finite_number("radius", radius, 0.0, strict=True, unit="m")
-        normals = _upper_hemisphere(count)
+        strand_count = count("strands", strands, limits.STRANDS)
+        limits.check_memory("strands", strands, strand_count * (segments + 1),
+                            2 * strand_count * segments)
+        radius = in_range("radius", radius, limits.LENGTH)
+        normals = _upper_hemisphere(strand_count)
         roots = anchor + radius * normals
     else:
         roots = as_array("strands", strands, np.float64, (None, 3))
@@ -130,7 +134,7 @@ def soft_body(mesh: Mesh, density: float = 1000.0, stretch=SpringParams(2e4, 5.0
     """
     require(isinstance(mesh, Mesh) and len(mesh.tetrahedra) > 0, "mesh", mesh,
             "a Mesh with tetrahedra (tet_grid_mesh or a volume mesh file)")
-    density = finite_number("density", density, 0.0, strict=True, unit="kg/m^3")
+    density = in_range("density", density, limits.DENSITY)
     volume = np.abs(mesh.tetrahedron_volumes())
     longest = np.max(np.linalg.norm(mesh.vertices[mesh.tetrahedra][:, :, None]
                                     - mesh.vertices[mesh.tetrahedra][:, None], axis=3), axis=(1, 2))

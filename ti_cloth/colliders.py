@@ -18,8 +18,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 import taichi as ti
 
-from . import backend
-from ._validate import as_array, finite_number, require
+from . import backend, limits
+from ._validate import as_array, finite_number, in_range, require
 from .state import copy_positions
 from .transfer import upload
 
@@ -41,6 +41,8 @@ class Collider:
         name = type(self).__name__
         object.__setattr__(self, "thickness", finite_number(f"{name}.thickness", self.thickness,
                                                             0.0, unit="m"))
+        require(self.thickness <= limits.LENGTH.high, f"{name}.thickness", self.thickness,
+                f"in [0, {limits.LENGTH.high:g}] m")
         static = finite_number(f"{name}.static_friction", self.static_friction, 0.0)
         kinetic = static if self.kinetic_friction is None else finite_number(
             f"{name}.kinetic_friction", self.kinetic_friction, 0.0)
@@ -73,7 +75,10 @@ class Collider:
 
 
 def _vector(owner: Collider, name: str) -> None:
-    value = as_array(f"{type(owner).__name__}.{name}", getattr(owner, name), np.float64, (3,))
+    field = f"{type(owner).__name__}.{name}"
+    value = as_array(field, getattr(owner, name), np.float64, (3,))
+    for axis in range(3):
+        in_range(f"{field}[{axis}]", value[axis], limits.COORDINATE)
     object.__setattr__(owner, name, tuple(float(v) for v in value))
 
 
@@ -109,8 +114,8 @@ class Sphere(Collider):
     def __post_init__(self):
         super().__post_init__()
         _vector(self, "centre")
-        object.__setattr__(self, "radius", finite_number("Sphere.radius", self.radius, 0.0,
-                                                         strict=True, unit="m"))
+        object.__setattr__(self, "radius", in_range("Sphere.radius", self.radius,
+                                                    limits.LENGTH))
 
     def moved(self, offset):
         return replace(self, centre=tuple(np.add(self.centre, offset)), path=None)
@@ -153,8 +158,8 @@ class Capsule(Collider):
         super().__post_init__()
         _vector(self, "a")
         _vector(self, "b")
-        object.__setattr__(self, "radius", finite_number("Capsule.radius", self.radius, 0.0,
-                                                         strict=True, unit="m"))
+        object.__setattr__(self, "radius", in_range("Capsule.radius", self.radius,
+                                                    limits.LENGTH))
 
     def moved(self, offset):
         return replace(self, a=tuple(np.add(self.a, offset)), b=tuple(np.add(self.b, offset)),

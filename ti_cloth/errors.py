@@ -26,6 +26,15 @@ class SimulationDiverged(RuntimeError):
                          f"positions or velocities became non-finite or left the guard box; {advice}")
 
 
+class StaleSimulation(RuntimeError):
+    """A Simulation used after ti_cloth.init was called again: that init reset Taichi and
+    freed the simulation's fields."""
+
+    def __init__(self):
+        super().__init__("this Simulation was built before ti_cloth.init was called again; that "
+                         "init reset Taichi and freed its fields: build the Simulation again")
+
+
 class TeamStalled(RuntimeError):
     """A barrier of a many-steps CPU launch (stepping.Team) waited seconds for a worker that
     never arrived: the Taichi thread pool did not give every worker a thread of its own. The

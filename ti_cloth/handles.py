@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from . import backend
+from . import backend, limits
 from ._validate import as_array, require
 
 
@@ -51,6 +51,8 @@ class HandleSet:
     """
 
     def __init__(self, handles: Sequence[Handle], rest_position: np.ndarray):
+        require(isinstance(handles, (list, tuple)), "handles", handles,
+                "a list of Handle objects (handles=[Handle(...)])")
         self.handles = tuple(handles)
         count = len(rest_position)
         for h in self.handles:
@@ -71,10 +73,14 @@ class HandleSet:
         """Where the held particles belong at time t [m], shape (len(index), 3)."""
         targets = []
         for h in self.handles:
-            offset = np.broadcast_to(np.asarray(h.path(t), np.float64), (len(h.particles), 3))
+            offset = np.asarray(h.path(t))
+            shape = (3,) if offset.shape == (3,) else (len(h.particles), 3)
+            offset = as_array(f"Handle.path({t})", offset, np.float64, shape)
             targets.append(self.rest_position[h.particles] + offset)
         target = np.concatenate(targets)
-        require(bool(np.isfinite(target).all()), f"Handle.path({t})", target, "finite displacements")
+        far = np.abs(target).max()
+        require(far <= limits.COORDINATE.high, f"Handle.path({t})", far,
+                f"displacements keeping particles at coordinates {limits.COORDINATE.text()}")
         return target
 
     def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:

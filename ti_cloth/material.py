@@ -5,7 +5,8 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass, field
 
-from ._validate import finite_number, require
+from . import limits
+from ._validate import finite_number, in_range, require
 
 
 class SpringKind(enum.IntEnum):
@@ -31,8 +32,8 @@ class SpringParams:
     kd: float = 0.0
 
     def __post_init__(self):
-        object.__setattr__(self, "k", finite_number("SpringParams.k", self.k, 0.0, unit="N/m"))
-        object.__setattr__(self, "kd", finite_number("SpringParams.kd", self.kd, 0.0, unit="kg/s"))
+        object.__setattr__(self, "k", in_range("SpringParams.k", self.k, limits.STIFFNESS))
+        object.__setattr__(self, "kd", in_range("SpringParams.kd", self.kd, limits.DAMPING))
 
 
 @dataclass(frozen=True)
@@ -54,15 +55,16 @@ class Material:
     hem_mass: float = 0.0
 
     def __post_init__(self):
-        object.__setattr__(self, "density", finite_number("Material.density", self.density, 0.0,
-                                                          strict=True, unit="kg/m^2"))
+        object.__setattr__(self, "density", in_range("Material.density", self.density,
+                                                     limits.DENSITY))
         for name in ("stretch", "shear", "bend"):
             value = getattr(self, name)
             require(isinstance(value, SpringParams), f"Material.{name}", value, "a SpringParams")
         require(self.damping in DAMPING_MODELS, "Material.damping", self.damping,
                 f"one of {DAMPING_MODELS}")
-        object.__setattr__(self, "hem_mass", finite_number("Material.hem_mass", self.hem_mass, 0.0,
-                                                           unit="kg"))
+        hem_mass = finite_number("Material.hem_mass", self.hem_mass, 0.0, unit="kg")
+        object.__setattr__(self, "hem_mass", hem_mass and in_range("Material.hem_mass", hem_mass,
+                                                                   limits.MASS))
 
     def springs(self, kind: SpringKind) -> SpringParams:
         """The constants of one spring family."""

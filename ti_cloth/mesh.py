@@ -9,7 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ._validate import as_array, integer, require
+from . import limits
+from ._validate import as_array, count, in_range, require
 from .files import atomic_path
 
 PLANES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2), "zx": (2, 0), "yx": (1, 0), "zy": (2, 1)}
@@ -34,6 +35,10 @@ class Mesh:
         self.tetrahedra = as_array("tetrahedra", tetrahedra, np.int64, (None, 4))
         n = len(self.vertices)
         require(n > 0, "vertices", n, "at least 1 vertex (the mesh is empty)")
+        far = np.argwhere(np.abs(self.vertices) > limits.COORDINATE.high)
+        require(len(far) == 0, f"vertices[{', '.join(map(str, far[0])) if len(far) else ''}]",
+                self.vertices[tuple(far[0])] if len(far) else None,
+                f"a coordinate {limits.COORDINATE.text()}")
         for name, cells in (("triangles", self.triangles), ("tetrahedra", self.tetrahedra)):
             if len(cells):
                 bad = np.flatnonzero((cells < 0).any(axis=1) | (cells >= n).any(axis=1))
@@ -113,9 +118,13 @@ def tet_grid_mesh(cells=(4, 4, 4), size=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0))
     neighbouring cubes are cut the same way, so the tetrahedra fit together). The triangles
     are the outer surface. Vertex (i, j, k) has index (i * (ny + 1) + j) * (nz + 1) + k."""
     cells = as_array("cells", cells, np.int64, (3,))
-    require(bool(np.all(cells >= 1)), "cells", cells.tolist(), "three ints >= 1")
+    for axis in range(3):
+        count(f"cells[{axis}]", int(cells[axis]), limits.CELLS)
+    vertices = int(np.prod(cells + 1))
+    limits.check_memory("cells", cells.tolist(), vertices, 7 * vertices)   # 7 edges per vertex
     size = as_array("size", size, np.float64, (3,))
-    require(bool(np.all(size > 0)), "size", size.tolist(), "three lengths > 0 m")
+    for axis in range(3):
+        in_range(f"size[{axis}]", size[axis], limits.LENGTH)
     origin = as_array("origin", origin, np.float64, (3,))
     nx, ny, nz = (int(c) for c in cells)
     axes = [np.linspace(0.0, s, c + 1) for s, c in zip(size, cells)]
@@ -158,9 +167,11 @@ def grid_mesh(rows: int, cols: int, size: tuple[float, float] = (1.0, 1.0), plan
     Vertex (r, c) has index r * cols + c. Every quad is cut along the same diagonal, from
     (r, c) to (r + 1, c + 1), so interior particles all touch six triangles of equal area.
     """
-    rows, cols = integer("rows", rows, 2), integer("cols", cols, 2)
+    rows, cols = count("rows", rows, limits.GRID_SIDE), count("cols", cols, limits.GRID_SIDE)
+    limits.check_memory("rows x cols", f"{rows} x {cols}", rows * cols, 6 * rows * cols)
     size = as_array("size", size, np.float64, (2,))
-    require(bool(np.all(size > 0)), "size", size.tolist(), "two lengths > 0 m")
+    for axis in range(2):
+        in_range(f"size[{axis}]", size[axis], limits.LENGTH)
     require(plane in PLANES, "plane", plane, f"one of {sorted(PLANES)}")
     origin = as_array("origin", origin, np.float64, (3,))
 
@@ -179,13 +190,18 @@ def grid_mesh(rows: int, cols: int, size: tuple[float, float] = (1.0, 1.0), plan
 
 def load_mesh(path) -> Mesh:
     """Read a mesh (OBJ, PLY, STL, VTK, MSH, ... anything meshio reads); quads are split in
-    two. A volume mesh's tetrahedra are kept, with its outer surface as the triangles."""
+    two. A volume mesh's tetrahedra are kept, with its outer surface as the triangles.
+    Raises FileNotFoundError, or ValueError for a file that holds no usable mesh."""
     import meshio
 
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"mesh file not found: {path}")
-    data = meshio.read(path)
+    try:
+        data = meshio.read(path)
+    except Exception as err:   # meshio raises ReadError, but its parsers also KeyError, IndexError...
+        raise ValueError(f"{path}: not a mesh meshio can read ({type(err).__name__}: "
+                         f"{str(err)[:200]})") from None
     tetrahedra = [block.data for block in data.cells if block.type == "tetra"]
     if tetrahedra:
         points = np.asarray(data.points, np.float64)

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import limits
 from ._validate import as_array, finite_number, require
 
 INTERPOLATIONS = ("linear", "smooth")
@@ -35,6 +36,7 @@ class Keyframes:
         times = as_array("Keyframes.times", self.times, np.float64, (None,))
         values = as_array("Keyframes.values", self.values, np.float64, (len(times), 3))
         require(len(times) >= 1, "Keyframes.times", times.tolist(), "at least one key")
+        _within_reach("Keyframes.values", values)
         require(bool(np.all(np.diff(times) > 0)), "Keyframes.times", times.tolist(),
                 "strictly increasing times [s]")
         require(self.interpolation in INTERPOLATIONS, "Keyframes.interpolation",
@@ -78,6 +80,7 @@ class Oscillation:
 
     def __post_init__(self):
         amplitude = as_array("Oscillation.amplitude", self.amplitude, np.float64, (3,))
+        _within_reach("Oscillation.amplitude", amplitude)
         object.__setattr__(self, "amplitude", tuple(float(a) for a in amplitude))
         object.__setattr__(self, "frequency", finite_number("Oscillation.frequency", self.frequency,
                                                             0.0, strict=True, unit="Hz"))
@@ -89,3 +92,10 @@ class Oscillation:
             return np.zeros(3)
         angle = 2 * np.pi * self.frequency * (t - self.start) + self.phase
         return np.asarray(self.amplitude) * np.sin(angle)
+
+
+def _within_reach(field: str, values: np.ndarray) -> None:
+    """Displacements no larger than the coordinate range (limits.COORDINATE)."""
+    far = np.argwhere(np.abs(values) > limits.COORDINATE.high)
+    require(len(far) == 0, f"{field}{list(far[0]) if len(far) else ''}",
+            values[tuple(far[0])] if len(far) else None, f"{limits.COORDINATE.text()}")

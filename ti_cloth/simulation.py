@@ -16,10 +16,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from . import backend
-from ._validate import as_array, finite_number, integer, require
+from . import backend, limits
+from ._validate import as_array, in_range, integer, require
 from .colliders import ColliderSet
-from .errors import SimulationDiverged
+from .errors import SimulationDiverged, StaleSimulation
 from .forces import ForceSettings, energies
 from .handles import Handle, HandleSet
 from .integrators import fused, make_integrator
@@ -58,12 +58,15 @@ class Simulation:
                  handles: Sequence[Handle] = (), colliders=(), strain_limit=None,
                  position_limit: float = 1e6):
         require(isinstance(cloth, Cloth), "cloth", cloth, "a ti_cloth.Cloth")
+        self._runtime = backend.generation()
         self.cloth = cloth
         self.integrator = make_integrator(integrator)
         auto = isinstance(dt, str) and dt == "auto"
-        self.dt = None if auto else finite_number("dt", dt, 0.0, strict=True, unit="s")
+        self.dt = None if auto else in_range("dt", dt, limits.DT)
         gravity = as_array("gravity", gravity, np.float64, (3,))
-        drag = finite_number("drag", drag, 0.0, unit="1/s")
+        for axis in range(3):
+            in_range(f"gravity[{axis}]", gravity[axis], limits.ACCELERATION)
+        drag = in_range("drag", drag, limits.DRAG)
         if tearing is not None and not isinstance(tearing, Tearing):
             tearing = Tearing(tearing)
         self.tearing = tearing
@@ -73,7 +76,7 @@ class Simulation:
         self.forces = ForceSettings(gravity=tuple(gravity), drag=drag, tearable=tearing is not None,
                                     wind=self.wind)
         pinned = self.handles.pin(cloth.pinned) if self.handles is not None else cloth.pinned
-        position_limit = finite_number("position_limit", position_limit, 0.0, strict=True, unit="m")
+        position_limit = in_range("position_limit", position_limit, limits.GUARD)
         self.model = Model(cloth, pinned=pinned)
         if auto:
             self.dt = auto_dt(cloth, self.integrator, drag, pinned)
@@ -104,8 +107,9 @@ class Simulation:
         """Back to time 0: rest positions, at rest, every spring intact, handles and colliders
         at their start, the divergence flag cleared; `dt` [s] replaces the step if given.
         The compiled kernels are kept, so a sweep over dt compiles once."""
+        self._check_runtime()
         if dt is not None:
-            self.dt = finite_number("dt", dt, 0.0, strict=True, unit="s")
+            self.dt = in_range("dt", dt, limits.DT)
         self.state.reset(self.model.particle_rest_position)
         self.step_count = 0
         self._diverged = None
@@ -126,7 +130,8 @@ class Simulation:
         """Advance n steps of dt, each the stages of STEP_ORDER. Raises SimulationDiverged at
         the first step whose result is not finite; after that the simulation refuses to
         continue."""
-        integer("n", n, 0)
+        self._check_runtime()
+        integer("n", n, 0, limits.STEPS.high - self.step_count)
         if self._diverged is not None:
             raise self._diverged
         if self._many_per_launch and n > 1:
@@ -143,6 +148,11 @@ class Simulation:
                 stable_dt(self.cloth, self.integrator, self.forces.drag, self.model.pinned),
                 self.integrator.name)
             raise self._diverged
+
+    def _check_runtime(self) -> None:
+        """Raise StaleSimulation if ti_cloth.init ran again after this simulation was built."""
+        if self._runtime != backend.generation():
+            raise StaleSimulation()
 
     def _step_once(self) -> None:
         """One step, launch by launch: the stages of STEP_ORDER this simulation has."""
@@ -162,26 +172,31 @@ class Simulation:
 
     def positions(self) -> np.ndarray:
         """Particle positions [m], (N, 3) float64 copy."""
+        self._check_runtime()
         return self.state.particle_position.to_numpy().astype(np.float64)
 
     def velocities(self) -> np.ndarray:
         """Particle velocities [m/s], (N, 3) float64 copy."""
+        self._check_runtime()
         return self.state.particle_velocity.to_numpy().astype(np.float64)
 
     def set_positions(self, positions) -> None:
         """Overwrite positions [m] (N, 3); Verlet-type history restarts from the velocities."""
+        self._check_runtime()
         x = as_array("positions", positions, np.float64, (self.cloth.particle_count, 3))
         self.state.particle_position.from_numpy(x.astype(backend.numpy_real()))
         self.state.prev_valid = False
 
     def set_velocities(self, velocities) -> None:
         """Overwrite velocities [m/s] (N, 3); Verlet-type history restarts from them."""
+        self._check_runtime()
         v = as_array("velocities", velocities, np.float64, (self.cloth.particle_count, 3))
         self.state.particle_velocity.from_numpy(v.astype(backend.numpy_real()))
         self.state.prev_valid = False
 
     def spring_alive(self) -> np.ndarray:
         """(S,) bool: springs not torn."""
+        self._check_runtime()
         return self.state.spring_alive.to_numpy()[: self.cloth.spring_count].astype(bool)
 
     def torn_springs(self) -> np.ndarray:
@@ -196,6 +211,7 @@ class Simulation:
     def spring_torn_step(self) -> np.ndarray:
         """(S,) int: the index of the step in which each spring tore, -1 while it is intact
         (tear statistics: when and in what order the cloth came apart)."""
+        self._check_runtime()
         return self.state.spring_torn_step.to_numpy()[: self.cloth.spring_count].astype(np.int64)
 
     def torn_triangles(self) -> np.ndarray:

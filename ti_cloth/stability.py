@@ -7,6 +7,8 @@ import math
 
 import numpy as np
 
+from . import limits
+from ._validate import in_range
 from .integrators import make_integrator
 
 AUTO_MAX_DT = 1.0 / 240.0     # "auto" steps: at most half the predicted stable step and at most this [s]
@@ -17,6 +19,7 @@ def stable_dt(cloth, integrator="symplectic_euler", drag: float = 0.0, pinned=No
     with uniform drag [1/s] and `pinned` (default the cloth's pins): inf when it has no limit,
     0 when no stable step exists (explicit Euler on undamped springs). Each integrator's
     docstring states its rule."""
+    drag = in_range("drag", drag, limits.DRAG)
     pinned = cloth.pinned if pinned is None else np.asarray(pinned, bool)
     return make_integrator(integrator).stable_step(cloth, drag, pinned)
 
@@ -33,4 +36,5 @@ def auto_dt(cloth, integrator="symplectic_euler", drag: float = 0.0, pinned=None
 
 def auto_substeps(cloth, integrator, frame_dt: float, drag: float = 0.0, pinned=None) -> int:
     """Steps per frame of substeps="auto": the fewest with dt = frame_dt / substeps <= auto_dt."""
+    frame_dt = in_range("frame_dt", frame_dt, limits.DT)
     return max(1, math.ceil(frame_dt / auto_dt(cloth, integrator, drag, pinned) - 1e-9))

@@ -7,8 +7,8 @@ from dataclasses import dataclass
 
 import taichi as ti
 
-from . import backend
-from ._validate import finite_number, integer, require
+from . import backend, limits
+from ._validate import count, finite_number, require
 from .constraints import relax_springs, sweep
 from .material import SpringKind
 from .state import copy_positions
@@ -27,12 +27,12 @@ class StrainLimit:
     def __post_init__(self):
         object.__setattr__(self, "max_strain", finite_number("StrainLimit.max_strain",
                                                              self.max_strain, 0.0, strict=True))
-        object.__setattr__(self, "passes", integer("StrainLimit.passes", self.passes, 1))
+        object.__setattr__(self, "passes", count("StrainLimit.passes", self.passes, limits.ITERATIONS))
         names = {k.name.lower() for k in SpringKind}
         require(isinstance(self.kinds, (list, tuple)), "StrainLimit.kinds", self.kinds,
                 f"a list of spring kinds from {sorted(names)}")
         kinds = tuple(self.kinds)
-        require(len(kinds) > 0 and set(kinds) <= names, "StrainLimit.kinds", self.kinds,
+        require(len(kinds) > 0 and all(isinstance(k, str) for k in kinds) and set(kinds) <= names, "StrainLimit.kinds", self.kinds,
                 f"a non-empty subset of {sorted(names)}")
         object.__setattr__(self, "kinds", kinds)
 

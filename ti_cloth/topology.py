@@ -271,6 +271,9 @@ class Cloth:
 
 def _pin_mask(pinned, n: int) -> np.ndarray:
     pinned = np.asarray(pinned)
+    require(pinned.size == 0 or pinned.dtype == bool or np.issubdtype(pinned.dtype, np.integer),
+            "pinned", pinned if pinned.size < 8 else f"array of {pinned.dtype}",
+            "particle indices (ints) or an (N,) bool mask")
     if pinned.dtype == bool:
         require(pinned.shape == (n,), "pinned.shape", pinned.shape, f"({n},) for a boolean mask")
         return pinned.copy()

@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from . import backend
-from ._validate import as_array, finite_number, integer, require
+from . import backend, limits
+from ._validate import as_array, finite_number, in_range, integer, require
 from .mesh import vertex_triangles
 from .transfer import upload
 
@@ -62,6 +62,8 @@ class Wind:
 
     def __post_init__(self):
         velocity = as_array("Wind.velocity", self.velocity, np.float64, (3,))
+        for axis in range(3):
+            in_range(f"Wind.velocity[{axis}]", velocity[axis], limits.SPEED_COMPONENT)
         object.__setattr__(self, "velocity", tuple(float(v) for v in velocity))
         for name, strict, unit in (("gust", False, ""), ("gust_period", True, "s"),
                                    ("turbulence", False, "m/s"), ("turbulence_scale", True, "m"),
@@ -70,7 +72,7 @@ class Wind:
                                    ("friction_coefficient", False, "")):
             object.__setattr__(self, name, finite_number(f"Wind.{name}", getattr(self, name), 0.0,
                                                          strict=strict, unit=unit))
-        object.__setattr__(self, "seed", integer("Wind.seed", self.seed))
+        object.__setattr__(self, "seed", integer("Wind.seed", self.seed, 0, 2**63 - 1))
 
     def mean_velocity(self, t: float) -> np.ndarray:
         """The spatially uniform part of the wind [m/s] at time t."""

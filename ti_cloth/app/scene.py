@@ -8,12 +8,13 @@ from __future__ import annotations
 
 import inspect
 import math
+import re
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
 
-from .. import backend
+from .. import backend, limits
 from .. import bodies as body_builders
 from ..colliders import Box, Capsule, Collider, Plane, Sphere
 from ..handles import Handle
@@ -33,6 +34,7 @@ from .scene_file import SceneError, Table, load_toml
 BODY_TYPES = ("grid", "mesh", "string", "hair", "tet_block")
 COLLIDER_TYPES = {"plane": Plane, "sphere": Sphere, "box": Box, "capsule": Capsule}
 VIEWS = ("3d", "2d")
+NAME_FORBIDDEN = r"[^\w .-]"
 
 
 @dataclass
@@ -107,21 +109,25 @@ def load_scene(path) -> Scene:
         raise FileNotFoundError(f"scene file not found: {path}")
     root = Table(load_toml(path), "", str(path))
     meta = root.table("scene") or Table({}, "scene", str(path))
-    name = meta.string("name", path.stem)
+    name = _name(meta, path.stem)
     description = meta.string("description", "")
     meta.finish()
 
     sim = root.table("simulation") or Table({}, "simulation", str(path))
     integrator = _integrator(sim)
-    fps = sim.number("fps", 30.0, 0.0, strict=True, unit="frames/s")
-    frames = round(sim.number("duration", 3.0, 0.0, strict=True, unit="s") * fps)
+    fps = sim.number("fps", 30.0, within=limits.FPS)
+    frames = round(sim.number("duration", 3.0, within=limits.DURATION) * fps)
     substeps = sim.value("substeps", "auto")
-    if substeps != "auto" and (isinstance(substeps, bool) or not isinstance(substeps, int) or substeps < 1):
-        sim._bad("substeps", substeps, '"auto" or an integer >= 1')
+    if substeps != "auto":
+        sim.integer("substeps", within=limits.SUBSTEPS)
     if sim.has("dt"):
         if sim.has("substeps"):
             sim.fail("simulation: give either dt or substeps, not both")
-        substeps = max(1, math.ceil(1.0 / fps / sim.number("dt", minimum=0.0, strict=True, unit="s") - 1e-9))
+        dt = sim.number("dt", within=limits.DT)
+        substeps = max(1, math.ceil(1.0 / fps / dt - 1e-9))
+        if substeps > limits.SUBSTEPS.high:
+            sim._bad("dt", dt, f">= {1.0 / fps / limits.SUBSTEPS.high:.3g} s at fps = {fps:g} "
+                     f"(at most {limits.SUBSTEPS.high:_} steps per frame)")
     precision = sim.string("precision", _default(backend.init, "precision"),
                            sorted(backend.PRECISIONS))
     tearing = sim.number("tearing", 0.0, 0.0, strict=True) if sim.has("tearing") else None
@@ -137,8 +143,8 @@ def load_scene(path) -> Scene:
     sim.finish()
 
     forces = root.table("forces") or Table({}, "forces", str(path))
-    gravity = forces.vector("gravity", _default(Simulation, "gravity"), unit="m/s^2")
-    drag = forces.number("drag", _default(Simulation, "drag"), 0.0, unit="1/s")
+    gravity = forces.vector("gravity", _default(Simulation, "gravity"), within=limits.ACCELERATION)
+    drag = forces.number("drag", _default(Simulation, "drag"), within=limits.DRAG)
     wind_table = forces.table("wind")
     wind = _wind(wind_table) if wind_table is not None else None
     forces.finish()
@@ -159,11 +165,50 @@ def load_scene(path) -> Scene:
     camera, camera_fit = _camera(camera_table) if camera_table is not None else (None, {})
     output = _output(root.table("output") or Table({}, "output", str(path)), name, colliders)
     root.finish()
-    return Scene(name=name, source=path, description=description, cloth=cloth,
-                 integrator=integrator, fps=fps, frames=max(frames, 1), substeps=substeps,
-                 precision=precision, gravity=gravity, drag=drag, wind=wind, tearing=tearing,
-                 strain_limit=strain_limit, handles=handles, colliders=colliders, camera=camera,
-                 camera_fit=camera_fit, output=output)
+    scene = Scene(name=name, source=path, description=description, cloth=cloth,
+                  integrator=integrator, fps=fps, frames=max(frames, 1), substeps=substeps,
+                  precision=precision, gravity=gravity, drag=drag, wind=wind, tearing=tearing,
+                  strain_limit=strain_limit, handles=handles, colliders=colliders, camera=camera,
+                  camera_fit=camera_fit, output=output)
+    _check_runnable(scene, root)
+    return scene
+
+
+def _name(meta: Table, stem: str) -> str:
+    """scene.name (it names the GIF/MP4 and the default folder): letters, digits, spaces and
+    _ - . , at most limits.NAME_LENGTH long, not starting with "."; the default is the file's
+    stem with other characters replaced by "_"."""
+    if not meta.has("name"):
+        return re.sub(NAME_FORBIDDEN, "_", stem.lstrip("."))[:limits.NAME_LENGTH] or "scene"
+    name = meta.string("name")
+    if not (0 < len(name) <= limits.NAME_LENGTH and not name.startswith(".")
+            and not re.search(NAME_FORBIDDEN, name)):
+        meta._bad("name", name, f"1 to {limits.NAME_LENGTH} letters, digits, spaces, '_', '-' or "
+                  "'.' (it names files), not starting with '.'")
+    return name
+
+
+def _check_runnable(scene: Scene, root: Table) -> None:
+    """What only the whole scene decides, checked before anything runs: the wind has triangles
+    to act on, the step count per frame and per run, and the camera can frame the body."""
+    if scene.wind is not None and scene.cloth.mesh.triangle_count == 0:
+        root.fail("forces.wind: wind acts on triangles, and these bodies have none (strings and "
+                  "hair: use forces.drag)")
+    substeps = scene.resolved_substeps()
+    if substeps > limits.SUBSTEPS.high:
+        root.fail(f"simulation.substeps = \"auto\" needs {substeps:_} steps per frame (a stable "
+                  f"step of {scene.frame_dt / substeps:.3g} s for these springs and masses), more "
+                  f"than {limits.SUBSTEPS.high:_}: soften the stiffest springs or raise the "
+                  "density (limits: README)")
+    if scene.frames * substeps > limits.STEPS.high:
+        root.fail(f"simulation.duration: {scene.frames:_} frames x {substeps:_} steps is more "
+                  f"than {limits.STEPS.high:_} steps")
+    if scene.camera is None:
+        out = scene.output
+        try:
+            Camera.fit(scene.cloth, aspect=out.width / out.height, **scene.camera_fit)
+        except ValueError as err:
+            root.fail(f"camera: {err}")
 
 
 def _default(constructor, name: str):
@@ -252,7 +297,8 @@ def _body(table: Table, folder: Path, offset: int) -> tuple[Cloth, list[Handle]]
     kind = table.string("type", choices=BODY_TYPES)
     options = {}
     if kind == "grid":
-        rows, cols = table.integer("rows", 16, 2), table.integer("cols", 16, 2)
+        rows = table.integer("rows", 16, within=limits.GRID_SIDE)
+        cols = table.integer("cols", 16, within=limits.GRID_SIDE)
         table.optional(options, "size", "vector", length=2, unit="m")
         table.optional(options, "plane", "string", choices=sorted(PLANES))
         table.optional(options, "origin", "vector", unit="m")
@@ -261,15 +307,15 @@ def _body(table: Table, folder: Path, offset: int) -> tuple[Cloth, list[Handle]]
         pinned = _indices(table, "pinned", mesh.vertex_count, names)
         cloth = table.build(Cloth, mesh, _material(table), pinned=pinned)
     elif kind == "mesh":
-        mesh = table.build(load_mesh, folder / table.string("path"))
-        scale = table.number("scale", 1.0, 0.0, strict=True)
+        mesh = _mesh_file(table, folder)
+        scale = table.number("scale", 1.0, within=limits.SCALE)
         translate = np.asarray(table.vector("translate", (0.0, 0.0, 0.0), unit="m"))
         mesh = Mesh(mesh.vertices * scale + translate, mesh.triangles)
         names = {}
         cloth = table.build(Cloth, mesh, _material(table),
                             pinned=_indices(table, "pinned", mesh.vertex_count))
     elif kind == "string":
-        n = table.integer("n", 20, 2)
+        n = table.integer("n", 20, within=limits.CHAIN)
         names = {"start": [0], "end": [n - 1]}
         length = table.number("length", 1.0, unit="m")
         table.optional(options, "mass", unit="kg")
@@ -279,7 +325,8 @@ def _body(table: Table, folder: Path, offset: int) -> tuple[Cloth, list[Handle]]
         table.optional(options, "fixed", "string", choices=body_builders.STRING_ENDS)
         cloth = table.build(body_builders.string, n, length, **options)
     elif kind == "hair":
-        strands, segments = table.integer("strands", 64, 1), table.integer("segments", 12, 1)
+        strands = table.integer("strands", 64, within=limits.STRANDS)
+        segments = table.integer("segments", 12, within=limits.SEGMENTS)
         length = table.number("length", 0.3, unit="m")
         table.optional(options, "anchor", "vector", unit="m")
         table.optional(options, "radius", unit="m")
@@ -304,6 +351,17 @@ def _body(table: Table, folder: Path, offset: int) -> tuple[Cloth, list[Handle]]
         h.finish()
     table.finish()
     return cloth, handles
+
+
+def _mesh_file(table: Table, folder: Path) -> Mesh:
+    """The mesh of a `path` key, relative to the scene file's folder."""
+    path = folder / table.string("path")
+    if not path.is_file():
+        table._bad("path", str(path), "a mesh file (OBJ, PLY, STL, ... anything meshio reads)")
+    try:
+        return load_mesh(path)
+    except ValueError as err:
+        table.fail(f"{table.path('path')}: {err}")
 
 
 def _path(table: Table):
@@ -343,7 +401,7 @@ def _wind(table: Table) -> Wind:
         if table.has(key):
             options[key] = table.number(key)
     if table.has("seed"):
-        options["seed"] = table.integer("seed")
+        options["seed"] = table.integer("seed", minimum=0)
     wind = table.build(Wind, **options)
     table.finish()
     return wind
@@ -354,7 +412,7 @@ def _camera(table: Table):
     direction, up, fov) to fit the body."""
     options = {}
     table.optional(options, "up", "vector")
-    table.optional(options, "fov", minimum=0.0, strict=True, unit="degrees")
+    table.optional(options, "fov", within=limits.FOV)
     if table.has("position"):
         options["position"] = table.vector("position", unit="m")
         table.optional(options, "target", "vector", unit="m")
@@ -376,15 +434,24 @@ def _output(table: Table, name: str, colliders) -> Output:
         ground = planes[0].point[1] if planes else None
     elif ground is False:
         ground = None
-    elif isinstance(ground, bool) or not isinstance(ground, (int, float)):
-        table._bad("ground", ground, '"auto", false or a height [m]')
+    elif (isinstance(ground, bool) or not isinstance(ground, (int, float))
+          or not limits.COORDINATE.low <= ground <= limits.COORDINATE.high):
+        table._bad("ground", ground, f'"auto", false or a height {limits.COORDINATE.text()}')
     options = {}
     table.optional(options, "style", lambda k: _style(table.table(k)))
-    for key, minimum in (("width", 16), ("height", 16), ("supersample", 1), ("gif_width", 16)):
-        table.optional(options, key, "integer", minimum=minimum)
+    for key, within in (("width", limits.IMAGE_SIDE), ("height", limits.IMAGE_SIDE),
+                        ("supersample", limits.SUPERSAMPLE), ("gif_width", limits.IMAGE_SIDE)):
+        table.optional(options, key, "integer", within=within)
     table.optional(options, "view", "string", choices=VIEWS)
-    output = Output(folder=Path(table.string("folder", f"renders/{name}")),
-                    gif="gif" in formats, mp4="mp4" in formats, ground=ground, **options)
+    folder = table.string("folder", f"renders/{name}")
+    if not folder or "\0" in folder:
+        table._bad("folder", folder, "a folder path")
+    output = Output(folder=Path(folder), gif="gif" in formats, mp4="mp4" in formats,
+                    ground=ground, **options)
+    samples = output.width * output.height * output.supersample**2
+    if samples > limits.SAMPLES:
+        table._bad("width", output.width, f"such that width x height x supersample^2 "
+                   f"({output.width} x {output.height} x {output.supersample}^2) <= {limits.SAMPLES:_}")
     table.finish()
     return output
 

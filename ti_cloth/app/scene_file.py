@@ -10,6 +10,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from ..limits import Range
+
 MISSING = object()
 
 
@@ -23,11 +25,18 @@ def load_toml(path) -> dict:
         import tomllib
     except ModuleNotFoundError:      # Python 3.10
         import tomli as tomllib
-    with open(path, "rb") as f:
-        try:
+    try:
+        with open(path, "rb") as f:
             return tomllib.load(f)
-        except tomllib.TOMLDecodeError as err:
-            raise SceneError(f"{path}: not valid TOML: {err}") from None
+    except tomllib.TOMLDecodeError as err:
+        raise SceneError(f"{path}: not valid TOML: {err}") from None
+    except UnicodeDecodeError as err:
+        raise SceneError(f"{path}: not valid TOML: not UTF-8 text (byte {err.object[err.start]:#04x} "
+                         f"at offset {err.start}); save the file as UTF-8") from None
+    except RecursionError:
+        raise SceneError(f"{path}: not valid TOML: arrays or tables nested too deeply") from None
+    except OSError as err:
+        raise SceneError(f"{path}: cannot read the scene file: {err.strerror}") from None
 
 
 class Table:
@@ -60,20 +69,31 @@ class Table:
         self.fail(f"{self.path(key)} must be {allowed}, got {value!r:.80}")
 
     def number(self, key: str, default=MISSING, minimum: float | None = None, *,
-               strict: bool = False, unit: str = "") -> float:
+               strict: bool = False, unit: str = "", within: Range | None = None) -> float:
+        """A finite number >= minimum (> when strict), or within a limits.Range."""
         value = self._get(key, default)
         bound = "" if minimum is None else f" {'>' if strict else '>='} {minimum}"
         allowed = f"a number{bound}{' ' + unit if unit else ''}"
+        if within is not None:
+            allowed, minimum, strict = f"a number {within.text()}", within.low, False
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
             self._bad(key, value, allowed)
         if minimum is not None and (value <= minimum if strict else value < minimum):
             self._bad(key, value, allowed)
+        if within is not None and value > within.high:
+            self._bad(key, value, allowed)
         return float(value)
 
-    def integer(self, key: str, default=MISSING, minimum: int | None = None) -> int:
+    def integer(self, key: str, default=MISSING, minimum: int | None = None, *,
+                within: Range | None = None) -> int:
+        """An integer >= minimum, or within a limits.Range."""
         value = self._get(key, default)
-        if isinstance(value, bool) or not isinstance(value, int) or (minimum is not None and value < minimum):
-            self._bad(key, value, "an integer" + ("" if minimum is None else f" >= {minimum}"))
+        low, high = (minimum, None) if within is None else (within.low, within.high)
+        allowed = "an integer" + (f" {within.text()}" if within else
+                                  "" if minimum is None else f" >= {minimum}")
+        if (isinstance(value, bool) or not isinstance(value, int) or (low is not None and value < low)
+                or (high is not None and value > high)):
+            self._bad(key, value, allowed)
         return value
 
     def string(self, key: str, default=MISSING, choices=None) -> str:
@@ -88,13 +108,17 @@ class Table:
             self._bad(key, value, "true or false")
         return value
 
-    def vector(self, key: str, default=MISSING, length: int = 3, unit: str = "") -> tuple:
+    def vector(self, key: str, default=MISSING, length: int = 3, unit: str = "",
+               within: Range | None = None) -> tuple:
+        """A list of `length` finite numbers, each within a limits.Range if given."""
         value = self._get(key, default)
+        low, high = (-math.inf, math.inf) if within is None else (within.low, within.high)
         ok = (isinstance(value, (list, tuple)) and len(value) == length
               and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-                      for v in value))
+                      and low <= v <= high for v in value))
         if not ok:
-            self._bad(key, value, f"a list of {length} numbers{' [' + unit + ']' if unit else ''}")
+            each = f", each {within.text()}" if within else f" [{unit}]" if unit else ""
+            self._bad(key, value, f"a list of {length} numbers{each}")
         return tuple(float(v) for v in value)
 
     def value(self, key: str, default=MISSING) -> Any:

@@ -20,7 +20,7 @@ def make_integrator(spec) -> Integrator:
     """An Integrator from its name (default options) or an Integrator instance as is."""
     if isinstance(spec, Integrator):
         return spec
-    if spec not in INTEGRATORS:
+    if not isinstance(spec, str) or spec not in INTEGRATORS:
         raise ValueError(f"integrator must be one of {sorted(INTEGRATORS)} or an Integrator "
                          f"instance, got {spec!r}")
     return INTEGRATORS[spec]()

@@ -23,8 +23,8 @@ import math
 
 import taichi as ti
 
-from .. import backend
-from .._validate import finite_number, integer, require
+from .. import backend, limits
+from .._validate import count, finite_number, require
 from ..forces import compute_forces
 from ..state import store_particle
 from .base import Integrator
@@ -228,7 +228,7 @@ class ImplicitEuler(Integrator):
     def __init__(self, *, tolerance: float = 1e-5, max_iterations: int = 200):
         self.tolerance = finite_number("ImplicitEuler.tolerance", tolerance, 0.0, strict=True)
         require(self.tolerance < 1.0, "ImplicitEuler.tolerance", tolerance, "a number in (0, 1)")
-        self.max_iterations = integer("ImplicitEuler.max_iterations", max_iterations, 1)
+        self.max_iterations = count("ImplicitEuler.max_iterations", max_iterations, limits.ITERATIONS)
         self.last_iterations = 0
         self.last_residual = 0.0
 

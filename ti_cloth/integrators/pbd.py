@@ -1,9 +1,12 @@
 """The lecture's cloth: Verlet prediction under external forces, then spring relaxation."""
 
 
+from collections.abc import Mapping
+
 import taichi as ti
 
-from .._validate import finite_number, integer, require
+from .. import limits
+from .._validate import count, finite_number, require
 from ..constraints import relax_springs, sweep
 from ..forces import compute_forces
 from ..material import SpringKind
@@ -52,9 +55,11 @@ class PBD(Integrator):
     step_limited = False
 
     def __init__(self, *, iterations: int = 2, damping: float = 0.0, stiffness=None):
-        self.iterations = integer("PBD.iterations", iterations, 1)
+        self.iterations = count("PBD.iterations", iterations, limits.ITERATIONS)
         self.damping = finite_number("PBD.damping", damping, 0.0)
         require(self.damping < 1.0, "PBD.damping", damping, "a number in [0, 1)")
+        require(stiffness is None or isinstance(stiffness, Mapping), "PBD.stiffness", stiffness,
+                "None or a table {stretch = 1.0, shear = ..., bend = ...}")
         stiffness = dict(stiffness or {})
         unknown = set(stiffness) - {k.name.lower() for k in SpringKind}
         require(not unknown, "PBD.stiffness keys", sorted(unknown), "'stretch', 'shear', 'bend'")

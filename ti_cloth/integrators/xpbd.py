@@ -4,8 +4,8 @@ constraints with compliance 1 / k, so the cloth has its material stiffness in N/
 
 import taichi as ti
 
-from .. import backend
-from .._validate import integer
+from .. import backend, limits
+from .._validate import count
 from ..constraints import sweep, xpbd_springs
 from ..forces import compute_forces
 from .base import Integrator
@@ -50,7 +50,7 @@ class XPBD(Integrator):
     step_limited = False
 
     def __init__(self, *, iterations: int = 10):
-        self.iterations = integer("XPBD.iterations", iterations, 1)
+        self.iterations = count("XPBD.iterations", iterations, limits.ITERATIONS)
 
     def options(self):
         return {"iterations": self.iterations}

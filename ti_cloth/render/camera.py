@@ -13,7 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validate import as_array, finite_number, require
+from .. import limits
+from .._validate import as_array, finite_number, in_range, require
 
 DEFAULT_DIRECTION = (0.55, 0.4, 1.0)   # from the target towards the camera: front-right, above
 
@@ -22,7 +23,7 @@ DEFAULT_DIRECTION = (0.55, 0.4, 1.0)   # from the target towards the camera: fro
 class Camera:
     """position, target [m]; up: which way is up on screen (need not be exactly perpendicular).
 
-    fov: vertical field of view [deg] of the perspective camera, in (0, 180).
+    fov: vertical field of view [deg] of the perspective camera, in [1, 170] (limits.FOV).
     orthographic: parallel projection showing `height` metres vertically instead.
     near: nothing closer than this depth [m] is drawn.
     """
@@ -46,9 +47,7 @@ class Camera:
         up = np.asarray(self.up)
         require(np.linalg.norm(np.cross(forward, up)) > 1e-6 * max(np.linalg.norm(up), 1e-300),
                 "Camera.up", self.up, "a direction not parallel to the viewing direction")
-        fov = finite_number("Camera.fov", self.fov, 0.0, strict=True, unit="deg")
-        require(fov < 180.0, "Camera.fov", fov, "a finite number in (0, 180) deg")
-        object.__setattr__(self, "fov", fov)
+        object.__setattr__(self, "fov", in_range("Camera.fov", self.fov, limits.FOV))
         object.__setattr__(self, "height", finite_number("Camera.height", self.height, 0.0,
                                                          strict=True, unit="m"))
         object.__setattr__(self, "near", finite_number("Camera.near", self.near, 0.0,

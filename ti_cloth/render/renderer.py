@@ -18,7 +18,8 @@ from dataclasses import dataclass, fields
 import numpy as np
 import taichi as ti
 
-from .._validate import as_array, finite_number, integer, require
+from .. import limits
+from .._validate import as_array, finite_number, in_range, integer, require
 from ..backend import taichi_dtype
 from ..colliders import BOX, CAPSULE, SPHERE, Box, Capsule, Plane, Sphere
 from ..material import SpringKind
@@ -111,9 +112,9 @@ class SurfaceStyle:
         require(contrast <= 1.0, "SurfaceStyle.checker_contrast", contrast, "a number in [0, 1]")
         require(isinstance(self.strain, bool), "SurfaceStyle.strain", self.strain, "True or False")
         finite_number("SurfaceStyle.strain_max", self.strain_max, 0.0, strict=True)
-        for name in ("wireframe", "particles"):
-            finite_number(f"SurfaceStyle.{name}", getattr(self, name), 0.0, unit="pixels")
-        finite_number("SurfaceStyle.line_width", self.line_width, 0.0, strict=True, unit="pixels")
+        for name in ("wireframe", "particles", "line_width"):
+            in_range(f"SurfaceStyle.{name}", getattr(self, name), limits.LINE_WIDTH)
+        require(self.line_width > 0, "SurfaceStyle.line_width", self.line_width, "> 0 pixels")
 
 
 class _Topology:
@@ -149,6 +150,8 @@ class Renderer:
         for name, value, top in (("width", width, 16384), ("height", height, 16384),
                                  ("supersample", supersample, 8)):
             integer(name, value, 1, top)
+        require(width * height * supersample**2 <= limits.SAMPLES, "width x height x supersample^2",
+                width * height * supersample**2, f"<= {limits.SAMPLES:_} samples")
         require(camera is None or isinstance(camera, Camera), "camera", camera, "a Camera or None")
         require(isinstance(light, Light), "light", light, "a Light")
         require(isinstance(background, Background), "background", background, "a Background")

@@ -1,0 +1,148 @@
+"""The documented range of every count and rate ti_cloth accepts, and the memory and work a
+simulation needs, estimated from its counts before anything is allocated or stepped.
+
+The ranges keep every value where the float precisions, the stable-step estimate and the
+int32 indices of the kernels stay exact (a stiffness of 1e20 makes the auto step 1e-9 s;
+a gravity of 1e300 overflows f32), and every run within hours rather than geological time.
+The README's "Limits" table is `markdown()`; a test keeps the two equal.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Range:
+    """Allowed values of one quantity: low <= value <= high, in `unit`."""
+
+    low: float
+    high: float
+    unit: str
+    applies_to: str
+
+    def text(self) -> str:
+        """"in [low, high] unit", for messages."""
+        return f"in [{_number(self.low)}, {_number(self.high)}]{' ' + self.unit if self.unit else ''}"
+
+
+def _number(value: float) -> str:
+    return f"{value:_}" if isinstance(value, int) else f"{value:g}"
+
+
+STIFFNESS = Range(0.0, 1e9, "N/m", "spring stiffness k (stretch, shear, bend)")
+DAMPING = Range(0.0, 1e6, "kg/s", "spring damping kd")
+DENSITY = Range(1e-6, 1e5, "kg/m^2 (cloth), kg/m^3 (soft bodies)", "material density")
+MASS = Range(1e-9, 1e6, "kg", "string and strand mass, hem mass (0 allowed)")
+LENGTH = Range(1e-6, 1e4, "m", "sizes, lengths, radii, thicknesses (0 allowed for thickness)")
+SCALE = Range(1e-6, 1e6, "", "mesh scale factor")
+COORDINATE = Range(-1e5, 1e5, "m", "positions: origins, anchors, collider centres, paths")
+ACCELERATION = Range(-1e4, 1e4, "m/s^2", "each gravity component")
+SPEED_COMPONENT = Range(-1e3, 1e3, "m/s", "each wind velocity component")
+GUARD = Range(1e-6, 1e12, "m", "position_limit: the divergence guard's box")
+DRAG = Range(0.0, 1e4, "1/s", "air drag")
+DT = Range(1e-7, 1.0, "s", "time step dt")
+FPS = Range(1.0, 1000.0, "frames/s", "frame rate")
+DURATION = Range(1e-3, 3600.0, "s", "scene duration")
+SUBSTEPS = Range(1, 100_000, "", "steps per frame")
+ITERATIONS = Range(1, 10_000, "", "pbd/xpbd passes, strain-limit passes, implicit CG iterations")
+THREADS = Range(1, 1024, "", "CPU threads (init(threads=...))")
+GRID_SIDE = Range(2, 10_000, "", "grid rows, cols")
+CHAIN = Range(2, 10_000_000, "", "string particles n")
+STRANDS = Range(1, 1_000_000, "", "hair strands")
+SEGMENTS = Range(1, 10_000, "", "segments per strand")
+CELLS = Range(1, 1_000, "", "tet_block cells per axis")
+STEPS = Range(0, 2**31 - 2, "", "steps of one simulation (the kernels index steps in int32)")
+IMAGE_SIDE = Range(16, 8192, "px", "frame width, height, gif_width")
+SUPERSAMPLE = Range(1, 8, "", "supersampling factor")
+FOV = Range(1.0, 170.0, "degrees", "camera field of view")
+LINE_WIDTH = Range(0.0, 64.0, "px", "style line widths and particle sizes")
+SAMPLES = 2**26                # width x height x supersample^2: ~1.6 GB of raster buffers
+NAME_LENGTH = 100              # scene names: letters, digits, "_", "-", "." (file names)
+
+TABLE = (STIFFNESS, DAMPING, DENSITY, MASS, LENGTH, SCALE, COORDINATE, ACCELERATION, SPEED_COMPONENT, DRAG, GUARD, DT,
+         FPS, DURATION, SUBSTEPS, ITERATIONS, THREADS, GRID_SIDE, CHAIN, STRANDS, SEGMENTS, CELLS,
+         STEPS, IMAGE_SIDE, SUPERSAMPLE, FOV, LINE_WIDTH)
+
+# Memory, measured: a 512 x 512 grid (262,144 particles, 1,567,746 springs) peaks at 663 MB
+# above the interpreter while its Cloth and Simulation are built (numpy topology, then the
+# Taichi fields); these rates give 692 MB for it.
+BYTES_PER_PARTICLE = 250
+BYTES_PER_SPRING = 400
+MEMORY_SHARE = 0.75            # refuse a body needing more than this share of physical memory
+
+# Work: spring updates per second of the slowest common case on one CPU core (pbd and
+# implicit Euler at 128 x 128 run about 1.5e7 per second on two cores), for "this run is long".
+SPRING_STEPS_PER_SECOND = 1e7
+LONG_RUN_SECONDS = 60.0
+
+
+def physical_memory() -> int:
+    """Bytes of physical memory of this machine (0 when the OS does not say)."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return 0
+
+
+def memory_needed(particles: int, springs: int) -> int:
+    """Bytes a body of these counts needs while it is built and simulated (estimate)."""
+    return BYTES_PER_PARTICLE * particles + BYTES_PER_SPRING * springs
+
+
+def check_memory(field: str, value, particles: int, springs: int) -> None:
+    """Raise ValueError naming `field` when a body of these counts would need more than
+    MEMORY_SHARE of this machine's memory: called before anything is allocated."""
+    needed, have = memory_needed(particles, springs), physical_memory()
+    if have and needed > MEMORY_SHARE * have:
+        raise ValueError(f"{field} = {value} makes {particles:,} particles and {springs:,} "
+                         f"springs, which need about {_gigabytes(needed)}; this machine has "
+                         f"{_gigabytes(have)} (at most {MEMORY_SHARE:.0%} of it may be used)")
+
+
+def _gigabytes(size: float) -> str:
+    return f"{size / 2**30:.3g} GB" if size >= 2**27 else f"{size / 2**20:.3g} MB"
+
+
+@dataclass(frozen=True)
+class Work:
+    """What a run will do: steps, spring updates (springs x steps x passes), memory."""
+
+    steps: int
+    spring_steps: float
+    memory: int
+
+    @property
+    def seconds(self) -> float:
+        """A rough wall time at SPRING_STEPS_PER_SECOND (slow integrators; fast ones beat it)."""
+        return self.spring_steps / SPRING_STEPS_PER_SECOND
+
+    def describe(self) -> str:
+        return (f"{self.steps:,} steps, {self.spring_steps:.3g} spring updates, about "
+                f"{_duration(self.seconds)} at {SPRING_STEPS_PER_SECOND:.0e} spring updates/s")
+
+
+def work(particles: int, springs: int, steps: int, passes: int = 1) -> Work:
+    """The Work of `steps` steps of a body, each `passes` sweeps over its springs."""
+    return Work(steps=steps, spring_steps=float(max(springs, particles)) * steps * passes,
+                memory=memory_needed(particles, springs))
+
+
+def _duration(seconds: float) -> str:
+    for unit, size in (("days", 86400.0), ("h", 3600.0), ("min", 60.0)):
+        if seconds >= size:
+            return f"{seconds / size:.3g} {unit}"
+    return f"{max(seconds, 0.0):.2g} s"
+
+
+def markdown() -> str:
+    """The README's Limits table."""
+    rows = ["| quantity | allowed | unit |", "|---|---|---|"]
+    for r in TABLE:
+        rows.append(f"| {r.applies_to} | {_number(r.low)} .. {_number(r.high)} | {r.unit or '-'} |")
+    rows.append(f"| frame samples (width x height x supersample^2) | .. {SAMPLES:,} | - |")
+    rows.append(f"| scene name | 1 .. {NAME_LENGTH} characters of A-Z a-z 0-9 _ - . | - |")
+    rows.append(f"| memory of one simulation | {BYTES_PER_PARTICLE} B per particle + "
+                f"{BYTES_PER_SPRING} B per spring, .. {MEMORY_SHARE:.0%} of physical memory | - |")
+    return "\n".join(rows)
