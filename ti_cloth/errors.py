@@ -6,15 +6,17 @@ import math
 
 
 class SimulationDiverged(RuntimeError):
-    """A step produced NaN, inf or a runaway coordinate.
+    """A step produced NaN, inf, a runaway coordinate or a tear avalanche (`reason` says which).
 
     step: index of the first bad step (0-based); time: simulated time at its end [s];
     dt: the step used [s]; stable_dt: predicted largest stable step [s] (inf: no limit known,
     0: no stable step for this integrator); integrator: its name.
     """
 
-    def __init__(self, step: int, time: float, dt: float, stable_dt: float, integrator: str):
+    def __init__(self, step: int, time: float, dt: float, stable_dt: float, integrator: str,
+                 reason: str = "positions or velocities became non-finite or left the guard box"):
         self.step, self.time, self.dt, self.stable_dt, self.integrator = step, time, dt, stable_dt, integrator
+        self.reason = reason
         if stable_dt == 0:
             advice = (f"{integrator} has no stable step for undamped springs; add spring damping "
                       "(kd) or use symplectic_euler, verlet or pbd")
@@ -23,7 +25,7 @@ class SimulationDiverged(RuntimeError):
         else:
             advice = f"a stable dt for {integrator} is about {stable_dt:.3g} s or less"
         super().__init__(f"simulation diverged at step {step} (t = {time:.6g} s, dt = {dt:.3g} s): "
-                         f"positions or velocities became non-finite or left the guard box; {advice}")
+                         f"{reason}; {advice}")
 
 
 class StaleSimulation(RuntimeError):

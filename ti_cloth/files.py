@@ -14,9 +14,24 @@ def atomic_path(path):
     from it); rename it to `path` when the block succeeds, delete it when it fails."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
+    tmp = temporary_name(path)
     try:
         yield tmp
         tmp.replace(path)
     finally:
         tmp.unlink(missing_ok=True)
+
+
+def temporary_name(path: Path) -> Path:
+    """The temporary name atomic_path writes `path` under."""
+    return path.with_name(f".{path.stem}.tmp{path.suffix}")
+
+
+def remove_temporaries(folder) -> list[Path]:
+    """Delete the temporary files an earlier process killed mid-write (SIGKILL, power loss)
+    left in `folder`; returns them."""
+    stale = [p for p in Path(folder).glob(".*.tmp*") if p.is_file()
+             and temporary_name(p.with_name(p.name[1:].replace(".tmp", "", 1))) == p]
+    for p in stale:
+        p.unlink(missing_ok=True)
+    return stale

@@ -51,8 +51,6 @@ class HandleSet:
     """
 
     def __init__(self, handles: Sequence[Handle], rest_position: np.ndarray):
-        require(isinstance(handles, (list, tuple)), "handles", handles,
-                "a list of Handle objects (handles=[Handle(...)])")
         self.handles = tuple(handles)
         count = len(rest_position)
         for h in self.handles:

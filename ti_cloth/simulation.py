@@ -27,7 +27,7 @@ from .model import Model
 from .stability import auto_dt, stable_dt
 from .strain_limit import StrainLimit, StrainLimiter
 from .state import NO_BAD_STEP
-from .tearing import Tearing, torn_triangles
+from .tearing import RUNAWAY_STRAIN, Tearing, torn_triangles
 from .topology import Cloth
 from .wind import WindField
 
@@ -70,6 +70,8 @@ class Simulation:
         if tearing is not None and not isinstance(tearing, Tearing):
             tearing = Tearing(tearing)
         self.tearing = tearing
+        require(isinstance(handles, (list, tuple)), "handles", handles,
+                "a list of Handle objects (handles=[Handle(...)])")
         handles = tuple(handles)
         self.handles = HandleSet(handles, cloth.particle_position) if handles else None
         self.wind = WindField(wind, cloth) if wind is not None else None
@@ -85,6 +87,8 @@ class Simulation:
                 strain_limit, "None or a StrainLimit")
         self.strain_limiter = (StrainLimiter(strain_limit, cloth.particle_count, tearing is not None)
                                if strain_limit is not None and cloth.spring_count else None)
+        require(isinstance(colliders, (list, tuple)), "colliders", colliders,
+                "a list of colliders (colliders=[Plane(...)])")
         colliders = tuple(colliders)
         self.colliders = ColliderSet(colliders, cloth.particle_count) if colliders else None
         stages = dict(strain_limit=self.strain_limiter, colliders=self.colliders,
@@ -146,8 +150,20 @@ class Simulation:
             self._diverged = SimulationDiverged(
                 bad, (bad + 1) * self.dt, self.dt,
                 stable_dt(self.cloth, self.integrator, self.forces.drag, self.model.pinned),
-                self.integrator.name)
+                self.integrator.name, *self._divergence_reason(bad))
             raise self._diverged
+
+    def _divergence_reason(self, bad: int) -> tuple[str, ...]:
+        """(why step `bad` was flagged,) when it was a tear avalanche; () for the default."""
+        if self.tearing is None:
+            return ()
+        torn = int(np.sum(self.spring_torn_step() == bad))
+        x = self.positions()
+        if torn and np.isfinite(x).all() and np.abs(x).max() <= float(self.state.limit):
+            return (f"{torn} springs tore in that step, stretched more than "
+                    f"{RUNAWAY_STRAIN:g} rest lengths past the tear strain (a step this large "
+                    "explodes and tearing hides it)",)
+        return ()
 
     def _check_runtime(self) -> None:
         """Raise StaleSimulation if ti_cloth.init ran again after this simulation was built."""

@@ -39,6 +39,15 @@ class Tearing:
         tear_springs(model, state, self.strain, step_index)
 
 
+# A spring found stretched more than RUNAWAY_STRAIN beyond its tear strain has not torn: the
+# step has exploded. Under a stable step a spring's strain grows by far less than its rest
+# length per step (the largest relative speed x dt), so it tears just past its tear strain
+# (tearing demo: at most 0.03 past it at 0.5 and 0.95 x the stable step); tears avalanching out
+# of an unstable step overshoot by many rest lengths (0.26 at 1.2 x, over 1 at 3 x). Tearing would
+# otherwise hide the blow-up: the torn pieces fly apart, finite, for ever.
+RUNAWAY_STRAIN = 0.5
+
+
 @ti.kernel
 def tear_springs(model: ti.template(), state: ti.template(), strain: float, step: ti.i32):
     """Remove every intact spring longer than (1 + strain) x rest; record the step it tore."""
@@ -48,14 +57,18 @@ def tear_springs(model: ti.template(), state: ti.template(), strain: float, step
 @ti.func
 def tear_overstretched(model: ti.template(), state: ti.template(), strain, step, begin, end):
     """tear_springs' loop over springs begin .. end - 1, for kernels that run whole steps
-    (integrators/fused.py)."""
+    (integrators/fused.py). A tear more than RUNAWAY_STRAIN past the tear strain flags the
+    step as diverged (state.first_bad_step)."""
     for s in range(begin, end):
         rest = model.spring_rest_length[s]
         if state.spring_alive[s] != 0 and rest > 0:
             i, j = model.spring_indices[s][0], model.spring_indices[s][1]
-            if (state.particle_position[i] - state.particle_position[j]).norm() > (1.0 + strain) * rest:
+            length = (state.particle_position[i] - state.particle_position[j]).norm()
+            if length > (1.0 + strain) * rest:
                 state.spring_alive[s] = ti.i8(0)
                 state.spring_torn_step[s] = step
+                if length > (1.0 + strain + RUNAWAY_STRAIN) * rest:
+                    ti.atomic_min(state.first_bad_step[None], step)
 
 
 def torn_triangles(triangle_edge_spring: np.ndarray, torn: np.ndarray) -> np.ndarray:

@@ -33,23 +33,34 @@ def _run_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progress=True,
         test=False, mp4=None) -> tuple[int, list[Path]]:
-    """Load, initialise, run and report; returns (exit code, frame paths)."""
+    """Load, initialise, run and report; returns (exit code, frame paths). Exit codes: 0 done,
+    1 diverged, 2 a scene the run refuses (the message names the key), 128 + signal when
+    stopped by Ctrl-C (130) or SIGTERM (143)."""
+    from . import signals
+    from ..limits import LONG_RUN_SECONDS
     from .runner import run_scene
     from .scene import load_scene
     from .scene_file import SceneError
 
     try:
-        scene = load_scene(scene_path)
+        with signals.stop_signals_raise():
+            scene = load_scene(scene_path)
+            output = scene.output
+            if test:
+                frames = min(frames or TEST_FRAMES, TEST_FRAMES)
+                output = replace(output, width=TEST_SIZE[0], height=TEST_SIZE[1], supersample=1)
+            if mp4 is not None:
+                output = replace(output, mp4=mp4)
+            work = scene.work(frames)
+            if work.seconds > LONG_RUN_SECONDS:
+                print(f"note: '{scene.name}' is a long run: {work.describe()}", file=sys.stderr)
+            backend.init(arch=arch, precision=precision or scene.precision)
     except (SceneError, FileNotFoundError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2, []
-    output = scene.output
-    if test:
-        frames = min(frames or TEST_FRAMES, TEST_FRAMES)
-        output = replace(output, width=TEST_SIZE[0], height=TEST_SIZE[1], supersample=1)
-    if mp4 is not None:
-        output = replace(output, mp4=mp4)
-    backend.init(arch=arch, precision=precision or scene.precision)
+    except KeyboardInterrupt as stop:
+        print("interrupted before the first frame", file=sys.stderr)
+        return signals.exit_code(stop), []
     result = run_scene(scene, folder=out, frames=frames, progress=progress, output=output)
     folder = result.frames[0].parent if result.frames else (out or scene.output.folder)
     summary = (f"{len(result.frames)} frames of '{scene.name}' in {result.wall_seconds:.1f} s "
@@ -57,7 +68,7 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
                f"{folder}/ {' '.join(p.name for p in result.outputs)}")
     if result.interrupted:
         print(f"interrupted: {summary}", file=sys.stderr)
-        return 130, result.frames
+        return 128 + result.stop_signal, result.frames
     if result.diverged is not None:
         print(f"error: {result.diverged}\n{summary}", file=sys.stderr)
         return 1, result.frames
@@ -68,6 +79,7 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
 def study(scene_path, *, out=None, integrators=None, dts=None, precisions=("f64", "f32"),
           iterations=None, duration=None, arch="cpu", plot=True, progress=True) -> int:
     """Run the speed/accuracy study of a scene and write study.csv, study.md, study.png."""
+    from . import signals
     from . import study as study_module
     from .scene import load_scene
     from .scene_file import SceneError
@@ -81,12 +93,17 @@ def study(scene_path, *, out=None, integrators=None, dts=None, precisions=("f64"
     options = {k: v for k, v in options.items() if v is not None}
     start = time.perf_counter()
     try:
-        result = study_module.run_study(scene, precisions=tuple(precisions), duration=duration,
-                                        arch=arch, progress=progress, **options)
-        written = result.write(out or Path("renders") / f"study_{scene.name}", plot=plot)
+        with signals.stop_signals_raise():
+            result = study_module.run_study(scene, precisions=tuple(precisions), duration=duration,
+                                            arch=arch, progress=progress, **options)
+        with signals.stop_signals_held():
+            written = result.write(out or Path("renders") / f"study_{scene.name}", plot=plot)
     except (ValueError, RuntimeError, ImportError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt as stop:
+        print("interrupted: the study wrote nothing (its table needs every run)", file=sys.stderr)
+        return signals.exit_code(stop)
     print(result.markdown())
     print(f"{len(result.runs)} runs in {time.perf_counter() - start:.0f} s -> "
           f"{' '.join(str(p) for p in written)}")

@@ -1,8 +1,9 @@
 """Run a Scene: step it frame by frame, render each frame, write numbered PNGs (and a GIF/MP4).
 
 Frame 0 is the initial state; frame k is the state after k x substeps steps. Every frame is
-written atomically as soon as it is rendered, so a run stopped by Ctrl-C (or a divergence)
-keeps every finished frame; the GIF/MP4 are assembled from whatever frames exist.
+written atomically as soon as it is rendered, so a run stopped by Ctrl-C, SIGTERM (signals.py)
+or a divergence keeps every finished frame; the GIF/MP4 are assembled from whatever frames
+exist, with stop signals held until they are written.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import numpy as np
 from ..errors import SimulationDiverged
 from ..render import Camera, FrameSequence, Renderer
 from ..render.springs2d import FRONT, SpringView
+from . import signals
 
 
 @dataclass
@@ -29,6 +31,7 @@ class RunResult:
     wall_seconds: float
     interrupted: bool = False
     diverged: SimulationDiverged | None = None
+    stop_signal: int | None = None   # the signal that interrupted the run (SIGINT, SIGTERM)
 
     @property
     def complete(self) -> bool:
@@ -63,35 +66,43 @@ def run_scene(scene, *, folder=None, frames: int | None = None, progress: bool =
               output=None) -> RunResult:
     """Simulate and render `frames` frames (default: the scene's duration x fps) into `folder`
     (default: the output's folder). output: an app.scene.Output replacing the scene's (size,
-    formats, style). Call ti_cloth.init first. Returns a RunResult; a KeyboardInterrupt or a
-    SimulationDiverged ends the run early with every finished frame kept."""
+    formats, style). Call ti_cloth.init first. Returns a RunResult; Ctrl-C, SIGTERM (in the
+    main thread) or a SimulationDiverged end the run early, in any phase, with every finished
+    frame kept and the GIF/MP4 assembled from them."""
     from tqdm import tqdm
 
     substeps = scene.resolved_substeps()
-    sim = scene.build(dt=scene.frame_dt / substeps)
     frames = scene.frames if frames is None else frames
     out = scene.output if output is None else output
     sequence = FrameSequence(folder or out.folder, fps=scene.fps, gif=out.gif, mp4=out.mp4, name=scene.name,
                              gif_width=min(out.gif_width, out.width))
-    paint = _frame_painter(scene, sim, out)
     start = time.perf_counter()
-    interrupted, diverged = False, None
+    sim, stop, diverged = None, None, None
     bar = tqdm(total=frames, unit="frame", disable=not progress, dynamic_ncols=True)
-    try:
-        for frame in range(frames):
-            if frame:
-                sim.step(substeps)
-            sequence.write(paint())
-            elapsed = time.perf_counter() - start
-            bar.set_postfix_str(f"t={sim.time:.3f} s, {sim.step_count / max(elapsed, 1e-9):,.0f} steps/s")
-            bar.update()
-    except KeyboardInterrupt:
-        interrupted = True
-    except SimulationDiverged as err:
-        diverged = err
-    finally:
-        bar.close()
-    outputs = sequence.close()
-    return RunResult(frames=sequence.paths, outputs=outputs, steps=sim.step_count, dt=sim.dt,
-                     wall_seconds=time.perf_counter() - start, interrupted=interrupted,
-                     diverged=diverged)
+    with signals.stop_signals_raise():
+        try:
+            sim = scene.build(dt=scene.frame_dt / substeps)
+            paint = _frame_painter(scene, sim, out)
+            for frame in range(frames):
+                if frame:
+                    sim.step(substeps)
+                sequence.write(paint())
+                elapsed = time.perf_counter() - start
+                bar.set_postfix_str(f"t={sim.time:.3f} s, "
+                                    f"{sim.step_count / max(elapsed, 1e-9):,.0f} steps/s")
+                bar.update()
+        except KeyboardInterrupt as err:
+            stop = err
+        except SimulationDiverged as err:
+            diverged = err
+        finally:
+            bar.close()
+    with signals.stop_signals_held() as held:
+        outputs = sequence.close()
+    if stop is None and held:
+        stop = signals.Stopped(held[0])
+    return RunResult(frames=sequence.paths, outputs=outputs,
+                     steps=sim.step_count if sim is not None else 0,
+                     dt=sim.dt if sim is not None else scene.frame_dt / substeps,
+                     wall_seconds=time.perf_counter() - start, interrupted=stop is not None,
+                     diverged=diverged, stop_signal=None if stop is None else signals.exit_code(stop) - 128)

@@ -35,6 +35,7 @@ BODY_TYPES = ("grid", "mesh", "string", "hair", "tet_block")
 COLLIDER_TYPES = {"plane": Plane, "sphere": Sphere, "box": Box, "capsule": Capsule}
 VIEWS = ("3d", "2d")
 NAME_FORBIDDEN = r"[^\w .-]"
+GUARD_SIZES = 100.0   # a run has diverged once a coordinate is this many body sizes out
 
 
 @dataclass
@@ -78,6 +79,12 @@ class Scene:
     output: Output
 
     @property
+    def size(self) -> float:
+        """The bodies' size [m]: the diagonal of their rest bounding box."""
+        x = self.cloth.particle_position
+        return float(np.linalg.norm(x.max(axis=0) - x.min(axis=0)))
+
+    @property
     def frame_dt(self) -> float:
         return 1.0 / self.fps
 
@@ -90,10 +97,21 @@ class Scene:
         except ValueError as err:
             raise SceneError(f"{self.source}: {err}") from None
 
+    def work(self, frames: int | None = None) -> limits.Work:
+        """What running `frames` frames (default: all) will take: steps, spring updates (each
+        pbd/xpbd pass and strain-limit pass a sweep over the springs), memory."""
+        steps = (self.frames if frames is None else frames) * self.resolved_substeps()
+        passes = getattr(self.integrator, "iterations", 1)
+        passes += self.strain_limit.passes if self.strain_limit is not None else 0
+        return limits.work(self.cloth.particle_count, self.cloth.spring_count, steps, passes)
+
     def build(self, integrator=None, dt: float | None = None, **options) -> Simulation:
         """The Simulation of this scene (call ti_cloth.init first); `integrator` and `dt`
         replace the scene's (the speed/accuracy study sweeps them); options: further
-        Simulation arguments (position_limit)."""
+        Simulation arguments. The divergence guard's box (position_limit) reaches GUARD_SIZES
+        body sizes beyond the rest positions: anything further has left the scene."""
+        options.setdefault("position_limit", GUARD_SIZES * self.size
+                           + float(np.abs(self.cloth.particle_position).max()))
         integrator = self.integrator if integrator is None else integrator
         dt = self.frame_dt / self.resolved_substeps() if dt is None else dt
         return Simulation(self.cloth, integrator=integrator, dt=dt, gravity=self.gravity,

@@ -11,7 +11,7 @@ import imageio.v3 as iio
 import numpy as np
 
 from .._validate import finite_number, require
-from ..files import atomic_path
+from ..files import atomic_path, remove_temporaries
 
 MP4_HINT = "pip install 'ti_cloth[video]' (or: pip install imageio-ffmpeg)"
 
@@ -89,7 +89,8 @@ def write_mp4(frames, path, fps: float = 30.0, quality: float = 8.0) -> Path:
 class FrameSequence:
     """Numbered PNG frames in `folder` (frame_00000.png, ...), each written atomically as it
     comes, then assembled by `close` into `<name>.gif` and/or `<name>.mp4`. Frames left in the
-    folder by an earlier, longer run are removed when the sequence starts."""
+    folder by an earlier, longer run, and temporary files of a killed one, are removed when the
+    sequence starts."""
 
     def __init__(self, folder, *, fps: float = 30.0, gif: bool = True, mp4: bool = False,
                  name: str | None = None, gif_width: int | None = None):
@@ -103,6 +104,7 @@ class FrameSequence:
         self.folder.mkdir(parents=True, exist_ok=True)
         for stale in self.folder.glob("frame_[0-9][0-9][0-9][0-9][0-9].png"):
             stale.unlink()
+        remove_temporaries(self.folder)
 
     def write(self, image: np.ndarray) -> Path:
         """Write the next frame; returns its path."""

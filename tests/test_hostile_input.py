@@ -1,0 +1,265 @@
+"""Hostile input: every mistake in a scene file or an API call stops with a message naming the
+key or argument, before anything is allocated or run (limits.py holds the ranges), and runs
+that would hide a blow-up or outlive their process say so. The property-based version of
+these cases is test_fuzz.py."""
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import ti_cloth as tc
+from ti_cloth import limits
+from ti_cloth.app.scene import load_scene
+from ti_cloth.app.scene_file import SceneError
+from ti_cloth.errors import StaleSimulation
+from ti_cloth.render.image import FrameSequence
+
+BASE = """
+[scene]
+name = "base"
+[simulation]
+{simulation}
+[forces]
+{forces}
+[[bodies]]
+type = "{body}"
+{body_keys}
+[camera]
+{camera}
+[output]
+{output}
+"""
+
+
+def scene_text(simulation="", forces="", body="grid", body_keys="", camera="", output=""):
+    return BASE.format(simulation=simulation, forces=forces, body=body, body_keys=body_keys,
+                       camera=camera, output=output)
+
+
+# (what the user wrote, the key the message must name); each one printed a traceback, hung,
+# allocated without bound or ran to silent nonsense before (issue 16)
+SCENE_MISTAKES = [
+    (dict(camera="direction = [0, 1, 0]"), "Camera.up"),
+    (dict(camera="direction = [0, 0, 0]"), "direction"),
+    (dict(camera="fov = 1e-300"), "camera.fov"),
+    (dict(output="width = 100000\nheight = 100000"), "output.width"),
+    (dict(output="width = 8192\nheight = 8192\nsupersample = 2"), "output.width"),
+    (dict(output="supersample = 1000"), "output.supersample"),
+    (dict(output="ground = nan"), "output.ground"),
+    (dict(output='folder = ""'), "output.folder"),
+    (dict(output="style = { wireframe = 1e300 }"), "SurfaceStyle.wireframe"),
+    (dict(forces="wind = { velocity = [1, 0, 0], seed = -1 }"), "forces.wind.seed"),
+    (dict(forces="wind = { velocity = [1, 0, 0] }", body="string"), "forces.wind"),
+    (dict(forces="gravity = [1e300, 0, 0]"), "forces.gravity"),
+    (dict(forces="drag = 1e300"), "forces.drag"),
+    (dict(body_keys="material = { density = 1e300 }"), "Material.density"),
+    (dict(body_keys="material = { density = 1e39 }"), "Material.density"),
+    (dict(body_keys="material = { density = 1e-45 }"), "Material.density"),
+    (dict(body_keys="material = { stretch = { k = 1e20 } }"), "SpringParams.k"),
+    (dict(body_keys="material = { stretch = { k = 100, kd = 1e300 } }"), "SpringParams.kd"),
+    (dict(simulation="strain_limit = { kinds = 5 }"), "StrainLimit.kinds"),
+    (dict(simulation="strain_limit = { kinds = [[1]] }"), "StrainLimit.kinds"),
+    (dict(simulation='integrator = { name = "pbd", stiffness = [1, 2] }'), "PBD.stiffness"),
+    (dict(simulation='integrator = { name = "pbd", stiffness = "high" }'), "PBD.stiffness"),
+    (dict(simulation='integrator = { name = "xpbd", iterations = 1000000000 }'), "XPBD.iterations"),
+    (dict(simulation="fps = 1e308\nduration = 1e308"), "simulation.fps"),
+    (dict(simulation="fps = 1e-300"), "simulation.fps"),
+    (dict(simulation="duration = 1e308"), "simulation.duration"),
+    (dict(simulation="dt = 1e-320"), "simulation.dt"),
+    (dict(simulation="dt = 1e-9"), "simulation.dt"),
+    (dict(simulation="fps = 1\ndt = 2e-7"), "simulation.dt"),
+    (dict(simulation="substeps = 1000000000000"), "simulation.substeps"),
+    (dict(simulation="substeps = 1180591620717411303424"), "simulation.substeps"),
+    (dict(body_keys="material = { density = 1e-6, stretch = { k = 1e9 } }"),
+     "simulation.substeps"),                 # auto: a stable step of ~1e-9 s, 3e7 steps per frame
+    (dict(body_keys="rows = 1000000000"), "bodies[0].rows"),
+    (dict(body_keys="rows = 100000\ncols = 100000"), "bodies[0].rows"),
+    (dict(body_keys="rows = 100000000000000000000"), "bodies[0].rows"),
+    (dict(body_keys="size = [1e300, 1e300]"), "size[0]"),
+    (dict(body_keys="origin = [1e300, 0, 0]"), "vertices"),
+    (dict(body="string", body_keys="n = 1000000000"), "bodies[0].n"),
+    (dict(body="tet_block", body_keys="cells = [1000, 1000, 1000]"), "cells"),
+    (dict(body="hair", body_keys="strands = 100000000"), "bodies[0].strands"),
+    (dict(body="mesh", body_keys='path = "."'), "bodies[0].path"),
+    (dict(body="mesh", body_keys='path = "../../../../../../etc/passwd"'), "bodies[0].path"),
+    (dict(body="mesh", body_keys='path = "scene.toml"'), "bodies[0].path"),
+    (dict(body="mesh", body_keys='path = "garbage.obj"'), "bodies[0].path"),
+    (dict(body="mesh", body_keys='path = "garbage.stl"'), "bodies[0].path"),
+]
+
+
+def write_scene(folder: Path, text: str) -> Path:
+    rng = np.random.default_rng(16)
+    (folder / "garbage.obj").write_bytes(rng.bytes(500))
+    (folder / "garbage.stl").write_bytes(b"solid x\n" + rng.bytes(300))
+    path = folder / "scene.toml"
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")     # meshio's STL reader on garbage
+@pytest.mark.parametrize("keys, named", SCENE_MISTAKES, ids=[m[1] + ":" + next(iter(m[0].values()))[:24]
+                                                            for m in SCENE_MISTAKES])
+def test_a_scene_mistake_is_refused_at_load_naming_the_key(tmp_path, keys, named):
+    load_scene(write_scene(tmp_path, scene_text()))           # the base scene itself loads
+    path = write_scene(tmp_path, scene_text(**keys))
+    with pytest.raises(SceneError, match=re.escape(named)):
+        load_scene(path)
+
+
+@pytest.mark.parametrize("name", ['"a\\u0000b"', '"' + "a" * 300 + '"', '"../../escape"', '".hidden"',
+                                  '"a/b"', '""'])
+def test_scene_names_that_are_not_file_names_are_refused(tmp_path, name):
+    path = write_scene(tmp_path, scene_text().replace('name = "base"', f"name = {name}"))
+    with pytest.raises(SceneError, match=r"scene\.name"):
+        load_scene(path)
+
+
+def test_a_file_name_that_is_not_a_scene_name_gives_a_safe_default(tmp_path):
+    path = tmp_path / "my scene (v2)!.toml"
+    path.write_text(scene_text().replace('name = "base"', ""))
+    assert load_scene(path).name == "my scene _v2__"
+
+
+@pytest.mark.parametrize("data, says", [
+    (b"# caf\xe9\n[[bodies]]\ntype = \"grid\"\n", "not UTF-8 text (byte 0xe9 at offset 5)"),
+    ("[[bodies]]\ntype = \"grid\"\n".encode("utf-16"), "not UTF-8 text (byte 0xff at offset 0)"),
+    (bytes(range(256)) * 4, "not UTF-8"),
+    (b"a = " + b"[" * 10_000 + b"]" * 10_000 + b"\n", "nested too deeply"),
+])
+def test_files_that_are_not_utf8_toml_are_refused_with_a_reason(tmp_path, data, says):
+    path = tmp_path / "scene.toml"
+    path.write_bytes(data)
+    with pytest.raises(SceneError, match=re.escape(says)):
+        load_scene(path)
+
+
+def test_a_long_legal_run_says_so_up_front(tmp_path):
+    """Work is estimated from the counts: 400 x 400 particles at 2,000 steps per frame for a
+    minute of frames is far beyond LONG_RUN_SECONDS; the default tiny scene is not."""
+    long = load_scene(write_scene(tmp_path, scene_text(
+        simulation="substeps = 2000\nduration = 60", body_keys="rows = 400\ncols = 400")))
+    work = long.work()
+    springs = long.cloth.spring_count
+    assert work.steps == 30 * 60 * 2000 and work.spring_steps == springs * work.steps
+    assert work.seconds > limits.LONG_RUN_SECONDS and "days" in work.describe()
+    assert load_scene(write_scene(tmp_path, scene_text())).work().seconds < limits.LONG_RUN_SECONDS
+
+
+# ---------------------------------------------------------------- the Python API
+
+def sheet(rows=4):
+    return tc.Cloth(tc.grid_mesh(rows, rows), tc.Material(), pinned=[0])
+
+
+API_MISTAKES = [
+    (lambda: tc.stable_dt(sheet(), drag=-1e6), "drag"),
+    (lambda: tc.auto_substeps(sheet(), "symplectic_euler", frame_dt=0), "frame_dt"),
+    (lambda: tc.Cloth(tc.grid_mesh(4, 4), tc.Material(), pinned=np.array([0.0, 1.5])), "pinned"),
+    (lambda: tc.Cloth(tc.grid_mesh(4, 4), tc.Material(), pinned=np.array([0.0, 1.0])), "pinned"),
+    (lambda: tc.init(threads=10**6), "threads"),
+    (lambda: tc.init(threads=True), "threads"),
+    (lambda: tc.grid_mesh(10**20, 3), "rows"),
+    (lambda: tc.string(10**9, 1.0), "n"),
+    (lambda: tc.hair(10**8, 4, 0.3), "strands"),
+    (lambda: tc.tet_block(cells=(1000, 1000, 1000)), "cells"),
+    (lambda: tc.SpringParams(1e300), "SpringParams.k"),
+    (lambda: tc.Material(density=1e-300), "Material.density"),
+    (lambda: tc.PBD(stiffness=[1, 2]), "PBD.stiffness"),
+    (lambda: tc.XPBD(iterations=10**9), "XPBD.iterations"),
+    (lambda: tc.StrainLimit(kinds=[[1]]), "StrainLimit.kinds"),
+    (lambda: tc.Wind(velocity=(1e300, 0, 0)), "Wind.velocity[0]"),
+    (lambda: tc.Wind(seed=-1), "Wind.seed"),
+    (lambda: tc.Sphere(radius=1e300), "Sphere.radius"),
+    (lambda: tc.Plane(point=(0, 1e300, 0)), "Plane.point[1]"),
+    (lambda: tc.Keyframes((0.0,), ((1e300, 0, 0),)), "Keyframes.values"),
+    (lambda: tc.Simulation(sheet(), integrator=["rk4"]), "integrator"),
+]
+
+
+@pytest.mark.parametrize("call, named", API_MISTAKES, ids=[m[1] for m in API_MISTAKES])
+def test_an_api_mistake_raises_value_error_naming_the_argument(call, named):
+    with pytest.raises(ValueError, match=re.escape(named)):
+        call()
+
+
+SIMULATION_MISTAKES = [
+    (dict(gravity=(1e300, 0, 0)), "gravity[0]"),
+    (dict(dt=1e-320), "dt"),
+    (dict(drag=1e300), "drag"),
+    (dict(handles=tc.Handle([1], lambda t: (0, 0, 0))), "handles"),
+    (dict(handles=[tc.Handle([1], lambda t: (0.0, 1.0))]), "Handle.path(0.0)"),
+    (dict(handles=[tc.Handle([1], lambda t: (1e300, 0, 0))]), "Handle.path(0.0)"),
+]
+
+
+@pytest.mark.parametrize("options, named", SIMULATION_MISTAKES, ids=[m[1] for m in SIMULATION_MISTAKES])
+def test_a_simulation_mistake_raises_naming_the_argument(f64, options, named):
+    with pytest.raises(ValueError, match=re.escape(named)):
+        tc.Simulation(sheet(), **options)
+
+
+def test_step_counts_must_be_ints_within_the_step_range(f64):
+    sim = tc.Simulation(sheet(), dt=1e-3)
+    for bad in (True, 2**63, -1, 1.0):
+        with pytest.raises(ValueError, match="n must be an int in"):
+            sim.step(bad)
+    assert sim.step_count == 0
+
+
+def test_a_body_too_big_for_memory_is_refused_before_allocating(monkeypatch):
+    """The estimate (limits.memory_needed) against a machine of 1 GB: a 1,000 x 1,000 grid
+    needs 250 B x 1e6 + 400 B x 6e6 = 2.65 GB and is refused naming rows x cols; 100 x 100 fits."""
+    monkeypatch.setattr(limits, "physical_memory", lambda: 2**30)
+    with pytest.raises(ValueError, match=r"rows x cols = 1000 x 1000 .* need about 2.\d+ GB; "
+                                         r"this machine has 1 GB"):
+        tc.grid_mesh(1000, 1000)
+    assert tc.grid_mesh(100, 100).vertex_count == 10_000
+
+
+def test_a_simulation_used_after_a_second_init_raises_instead_of_crashing(f64):
+    """init resets Taichi and frees every field: stepping or reading an older simulation
+    crashed the process (SIGSEGV); now it raises StaleSimulation, and a new one works."""
+    sim = tc.Simulation(sheet(), dt=1e-3)
+    tc.init(precision="f32")
+    try:
+        for use_it in (sim.step, sim.positions, sim.velocities, sim.spring_alive, sim.restart,
+                       lambda: sim.set_positions(np.zeros((16, 3)))):
+            with pytest.raises(StaleSimulation, match="init was called again"):
+                use_it()
+    finally:
+        tc.init(precision="f64")
+    fresh = tc.Simulation(sheet(), dt=1e-3)
+    fresh.step(2)
+    assert np.isfinite(fresh.positions()).all()
+
+
+def test_tearing_does_not_hide_a_step_ten_times_too_large(f64):
+    """Issue 16: at 10 x the stable step a tearable cloth exploded into finite pieces flying at
+    hundreds of m/s and the run ended 'fine'. Now the tear avalanche stops it, naming the step
+    and a stable dt; at half the stable step the same cloth tears nothing."""
+    cloth = tc.Cloth(tc.grid_mesh(8, 8, size=(0.5, 0.5)), tc.Material(), pinned=[56, 63])
+    stable = tc.stable_dt(cloth, "symplectic_euler")
+    sim = tc.Simulation(cloth, dt=10 * stable, tearing=0.3)
+    with pytest.raises(tc.SimulationDiverged, match=r"springs tore in that step") as err:
+        sim.step(200)
+    assert err.value.step < 50 and err.value.stable_dt == pytest.approx(stable)
+    assert np.isfinite(sim.positions()).all()            # finite: only the tear check saw it
+    calm = tc.Simulation(cloth, dt=0.5 * stable, tearing=0.3)
+    calm.step(400)
+    assert calm.torn_count == 0
+
+
+def test_temporaries_of_a_killed_run_are_removed_when_the_next_run_starts(tmp_path):
+    (tmp_path / ".frame_00048.tmp.png").write_bytes(b"")
+    (tmp_path / ".tiny.tmp.gif").write_bytes(b"")
+    (tmp_path / ".keep.png").write_bytes(b"")
+    FrameSequence(tmp_path, gif=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".keep.png"]
+
+
+def test_the_readme_limits_table_is_the_one_in_limits_py():
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    assert limits.markdown() in readme
