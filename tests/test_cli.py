@@ -1,5 +1,6 @@
-"""The ti-cloth command: run, info, strict arguments, Ctrl-C and divergence."""
+"""The ti-cloth command: run, info, strict arguments, Ctrl-C, SIGTERM and divergence."""
 
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -7,6 +8,8 @@ from pathlib import Path
 import pytest
 
 from ti_cloth.app import cli
+from ti_cloth.app.scene import Scene
+from ti_cloth.render import image
 from ti_cloth.simulation import Simulation
 
 SCENE = """
@@ -60,22 +63,41 @@ def test_arguments_are_parsed_strictly(argv):
     assert err.value.code == 2
 
 
-def test_ctrl_c_keeps_every_finished_frame_and_says_how_many(scene, tmp_path, capsys, monkeypatch):
+def test_sigterm_keeps_every_finished_frame_and_the_gif(scene, tmp_path, capsys, monkeypatch):
+    """SIGTERM (as `timeout` sends it) in the third step call ends the run like Ctrl-C: the
+    frames drawn so far stay, with no temporaries, and exit code 143; a Ctrl-C while the GIF is
+    written is held until the GIF is complete. (Without the handlers SIGTERM kills the process
+    and the GIF's Ctrl-C escapes as a KeyboardInterrupt traceback.)"""
     calls = {"n": 0}
-    original = Simulation.step
+    original_step, original_gif = Simulation.step, image.write_gif
 
     def interrupted_step(self, n=1):
         calls["n"] += 1
         if calls["n"] == 3:
-            raise KeyboardInterrupt
-        original(self, n)
+            signal.raise_signal(signal.SIGTERM)
+        original_step(self, n)
+
+    def interrupted_gif(*args, **kwargs):
+        signal.raise_signal(signal.SIGINT)
+        return original_gif(*args, **kwargs)
 
     monkeypatch.setattr(Simulation, "step", interrupted_step)
+    monkeypatch.setattr(image, "write_gif", interrupted_gif)
     out = tmp_path / "out"
-    assert cli.main(["run", str(scene), "--out", str(out), "--no-progress"]) == 130
-    assert len(frames_in(out)) == 3
+    assert cli.main(["run", str(scene), "--out", str(out), "--no-progress"]) == 143
+    assert len(frames_in(out)) == 3 and (out / "tiny.gif").is_file()
     assert not list(out.glob(".*"))                        # no half-written temp files
     assert "interrupted: 3 frames" in capsys.readouterr().err
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL   # handlers restored
+
+
+def test_a_stop_signal_before_the_first_frame_exits_cleanly(scene, tmp_path, capsys, monkeypatch):
+    def interrupted_build(self, *args, **kwargs):
+        signal.raise_signal(signal.SIGTERM)
+
+    monkeypatch.setattr(Scene, "build", interrupted_build)
+    assert cli.main(["run", str(scene), "--out", str(tmp_path / "out"), "--no-progress"]) == 143
+    assert "interrupted: 0 frames" in capsys.readouterr().err
 
 
 def test_a_diverging_scene_exits_1_naming_the_step_and_a_stable_dt(scene, tmp_path, capsys):

@@ -4,6 +4,7 @@ that would hide a blow-up or outlive their process say so. The property-based ve
 these cases is test_fuzz.py."""
 
 import re
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +12,7 @@ import pytest
 
 import ti_cloth as tc
 from ti_cloth import limits
+from ti_cloth.app import signals
 from ti_cloth.app.scene import load_scene
 from ti_cloth.app.scene_file import SceneError
 from ti_cloth.errors import StaleSimulation
@@ -201,14 +203,6 @@ def test_a_simulation_mistake_raises_naming_the_argument(f64, options, named):
         tc.Simulation(sheet(), **options)
 
 
-def test_step_counts_must_be_ints_within_the_step_range(f64):
-    sim = tc.Simulation(sheet(), dt=1e-3)
-    for bad in (True, 2**63, -1, 1.0):
-        with pytest.raises(ValueError, match="n must be an int in"):
-            sim.step(bad)
-    assert sim.step_count == 0
-
-
 def test_a_body_too_big_for_memory_is_refused_before_allocating(monkeypatch):
     """The estimate (limits.memory_needed) against a machine of 1 GB: a 1,000 x 1,000 grid
     needs 250 B x 1e6 + 400 B x 6e6 = 2.65 GB and is refused naming rows x cols; 100 x 100 fits."""
@@ -219,10 +213,15 @@ def test_a_body_too_big_for_memory_is_refused_before_allocating(monkeypatch):
     assert tc.grid_mesh(100, 100).vertex_count == 10_000
 
 
-def test_a_simulation_used_after_a_second_init_raises_instead_of_crashing(f64):
-    """init resets Taichi and frees every field: stepping or reading an older simulation
-    crashed the process (SIGSEGV); now it raises StaleSimulation, and a new one works."""
+def test_step_counts_are_checked_and_a_simulation_after_a_second_init_raises(f64):
+    """sim.step(True) stepped and sim.step(2**63) was accepted; init resets Taichi and frees
+    every field, so stepping or reading an older simulation crashed the process (SIGSEGV).
+    Now: ValueError naming n, StaleSimulation, and a new simulation works."""
     sim = tc.Simulation(sheet(), dt=1e-3)
+    for bad in (True, 2**63, limits.STEPS.high + 1, -1, 1.0):
+        with pytest.raises(ValueError, match="n must be an int in"):
+            sim.step(bad)
+    assert sim.step_count == 0
     tc.init(precision="f32")
     try:
         for use_it in (sim.step, sim.positions, sim.velocities, sim.spring_alive, sim.restart,
@@ -247,9 +246,9 @@ def test_tearing_does_not_hide_a_step_ten_times_too_large(f64):
         sim.step(200)
     assert err.value.step < 50 and err.value.stable_dt == pytest.approx(stable)
     assert np.isfinite(sim.positions()).all()            # finite: only the tear check saw it
-    calm = tc.Simulation(cloth, dt=0.5 * stable, tearing=0.3)
-    calm.step(400)
-    assert calm.torn_count == 0
+    sim.restart(dt=0.5 * stable)
+    sim.step(400)
+    assert sim.torn_count == 0
 
 
 def test_temporaries_of_a_killed_run_are_removed_when_the_next_run_starts(tmp_path):
@@ -258,6 +257,11 @@ def test_temporaries_of_a_killed_run_are_removed_when_the_next_run_starts(tmp_pa
     (tmp_path / ".keep.png").write_bytes(b"")
     FrameSequence(tmp_path, gif=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == [".keep.png"]
+
+
+def test_exit_codes_are_128_plus_the_signal():
+    assert signals.exit_code(KeyboardInterrupt()) == 130                 # Ctrl-C
+    assert signals.exit_code(signals.Stopped(signal.SIGTERM)) == 143
 
 
 def test_the_readme_limits_table_is_the_one_in_limits_py():

@@ -47,7 +47,7 @@ def as_array(field: str, value, dtype, shape: tuple) -> np.ndarray:
     float arrays must be finite."""
     try:
         array = np.asarray(value, dtype=dtype)
-    except (TypeError, ValueError) as err:
+    except (TypeError, ValueError, OverflowError) as err:
         raise ValueError(f"{field} must be an array of {np.dtype(dtype).name} with shape "
                          f"{_shape_text(shape)}, got {value!r:.80}") from err
     if array.size == 0 and len(shape) == 2 and shape[1] is not None:
@@ -79,5 +79,8 @@ def in_range(field: str, value, allowed) -> float:
 
 
 def count(field: str, value, allowed) -> int:
-    """`value` as an int in the limits.Range `allowed`."""
-    return integer(field, value, allowed.low, allowed.high)
+    """`value` as an int in the limits.Range `allowed`: 'must be an int in [a, b]'."""
+    ok = (isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+          and allowed.low <= value <= allowed.high)
+    require(ok, field, value, f"an int {allowed.text()}")
+    return int(value)

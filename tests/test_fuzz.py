@@ -1,0 +1,178 @@
+"""Property-based hostile input (Hypothesis): generated scene files and API arguments either
+load / construct or raise the project's error naming a key or argument, never another
+exception, and never take long (each example has a deadline). The hand-picked cases are in
+test_hostile_input.py; stepping a loaded scene is covered by test_scene.py and test_cli.py."""
+
+import json
+import re
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import ti_cloth as tc
+from ti_cloth.app.scene import load_scene
+from ti_cloth.app.scene_file import SceneError
+
+BASE = {
+    "scene": {"name": "fuzz"},
+    "simulation": {"integrator": "symplectic_euler", "fps": 30, "duration": 1.0,
+                   "strain_limit": {"max_strain": 0.1}},
+    "forces": {"gravity": [0, -9.81, 0], "drag": 0.1, "wind": {"velocity": [1, 0, 0], "seed": 3}},
+    "bodies": [{"type": "grid", "rows": 6, "cols": 6, "size": [1, 1], "pinned": ["top"],
+                "material": {"density": 0.2, "stretch": {"k": 500, "kd": 0.5}},
+                "handles": [{"particles": ["top_left"],
+                             "path": {"type": "oscillation", "amplitude": [0, 0.1, 0],
+                                      "frequency": 1}}]}],
+    "colliders": [{"type": "sphere", "centre": [0, -1, 0], "radius": 0.3}],
+    "camera": {"fov": 40, "direction": [0.5, 0.4, 1]},
+    "output": {"width": 64, "height": 48, "supersample": 1, "style": {"wireframe": 1}},
+}
+
+
+def paths(table, prefix=()):
+    """Every key path of a nested scene: ("bodies", 0, "material", "density"), ..."""
+    items = table.items() if isinstance(table, dict) else enumerate(table)
+    for key, value in items:
+        yield prefix + (key,)
+        if isinstance(value, (dict, list)) and (isinstance(value, dict) or
+                                                all(isinstance(v, dict) for v in value)):
+            yield from paths(value, prefix + (key,))
+
+
+PATHS = [p for p in paths(BASE) if isinstance(p[-1], str)]
+KEY_NAMES = sorted({p[-1] for p in PATHS} | {"integrator", "name", "Camera", "vertices"})
+
+scalars = st.one_of(
+    st.integers(min_value=-2**80, max_value=2**80),
+    st.sampled_from([0, 1, -1, 2**31, 2**63 - 1, 10**20]),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from([0.0, -0.0, 1e-320, 1e-300, 1e300, float("nan"), float("inf"), -1e9]),
+    st.booleans(),
+    st.text(alphabet=st.characters(blacklist_categories=("Cs",)), max_size=12),
+    st.sampled_from(["auto", "top", "", "..", "pbd", "xz"]),
+)
+values = st.recursive(scalars, lambda inner: st.one_of(
+    st.lists(inner, max_size=4), st.dictionaries(st.sampled_from(["k", "kd", "name", "x"]), inner,
+                                                 max_size=3)), max_leaves=8)
+
+
+def toml(value) -> str:
+    """A TOML literal (inline tables, arrays; JSON string escapes are TOML's)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        return "nan" if value != value else "inf" if value == np.inf else "-inf" if value == -np.inf else repr(value)
+    if isinstance(value, str):
+        return json.dumps(value, ensure_ascii=False)
+    if isinstance(value, list):
+        return "[" + ", ".join(toml(v) for v in value) + "]"
+    return "{" + ", ".join(f"{json.dumps(k)} = {toml(v)}" for k, v in value.items()) + "}"
+
+
+def document(scene: dict) -> str:
+    """The scene as TOML: one [table] or [[array]] per top-level key, inline below."""
+    lines = []
+    for key, value in scene.items():
+        if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+            for item in value:
+                lines += [f"[[{key}]]"] + [f"{k} = {toml(v)}" for k, v in item.items()]
+        elif isinstance(value, dict):
+            lines += [f"[{key}]"] + [f"{k} = {toml(v)}" for k, v in value.items()]
+        else:
+            lines.insert(0, f"{key} = {toml(value)}")
+    return "\n".join(lines) + "\n"
+
+
+def mutated(changes) -> tuple[dict, list[str]]:
+    scene = json.loads(json.dumps(BASE))
+    touched = []
+    for path, value, new_key in changes:
+        owner = scene
+        for key in path[:-1]:
+            owner = owner[key]
+        key = path[-1] if new_key is None else new_key
+        if isinstance(owner, dict):
+            owner[key] = value
+            touched.append(str(key))
+    return scene, touched
+
+
+changes = st.lists(st.tuples(st.sampled_from(PATHS), values,
+                             st.one_of(st.none(), st.none(), st.text(min_size=1, max_size=6))),
+                   min_size=1, max_size=3)
+
+
+def names_a_key(message: str, touched) -> bool:
+    return ("not valid TOML" in message or any(k in message for k in touched)
+            or any(re.search(rf"\b{re.escape(k)}\b", message) for k in KEY_NAMES))
+
+
+@settings(max_examples=150, deadline=5000, suppress_health_check=[HealthCheck.function_scoped_fixture,
+                                                                  HealthCheck.too_slow])
+@given(changes=changes)
+def test_a_generated_scene_file_loads_or_is_refused_naming_a_key(tmp_path, changes):
+    scene, touched = mutated(changes)
+    path = tmp_path / "scene.toml"
+    path.write_text(document(scene), encoding="utf-8")
+    try:
+        loaded = load_scene(path)
+    except SceneError as err:
+        assert names_a_key(str(err), touched), str(err)
+        return
+    work = loaded.work()
+    assert work.steps >= loaded.frames and np.isfinite(work.seconds)
+
+
+def test_the_unmutated_fuzz_scene_loads(tmp_path):
+    path = tmp_path / "scene.toml"
+    path.write_text(document(BASE))
+    assert load_scene(path).cloth.particle_count == 36
+
+
+numbers = st.one_of(st.floats(allow_nan=True, allow_infinity=True),
+                    st.integers(min_value=-2**70, max_value=2**70), st.booleans(), st.none(),
+                    st.text(max_size=3), st.lists(st.floats(), max_size=4))
+small_counts = st.one_of(st.integers(min_value=-3, max_value=12), st.sampled_from([10**9, 2**70]),
+                         st.floats(), st.booleans(), st.text(max_size=2))
+
+API = {
+    "SpringParams": (lambda a, b: tc.SpringParams(a, b), ("SpringParams",), (numbers, numbers)),
+    "Material": (lambda a, b: tc.Material(density=a, hem_mass=b), ("Material",), (numbers, numbers)),
+    "grid_mesh": (lambda a, b: tc.grid_mesh(a, b), ("rows", "cols"), (small_counts, small_counts)),
+    "string": (lambda a, b: tc.string(a, b), ("n", "length"), (small_counts, numbers)),
+    "hair": (lambda a, b: tc.hair(a, 3, b), ("strands", "length"), (small_counts, numbers)),
+    "tet_block": (lambda a, b: tc.tet_block(cells=(a, 2, 2), size=(b, 1, 1)), ("cells", "size"),
+                  (small_counts, numbers)),
+    "Wind": (lambda a, b: tc.Wind(velocity=(a, 0, 0), seed=b), ("Wind",), (numbers, numbers)),
+    "Sphere": (lambda a, b: tc.Sphere(radius=a, thickness=b), ("Sphere",), (numbers, numbers)),
+    "Plane": (lambda a, b: tc.Plane(point=(0, a, 0), normal=(0, 1, b)), ("Plane",), (numbers, numbers)),
+    "StrainLimit": (lambda a, b: tc.StrainLimit(max_strain=a, passes=b), ("StrainLimit",),
+                    (numbers, small_counts)),
+    "PBD": (lambda a, b: tc.PBD(iterations=a, damping=b), ("PBD",), (small_counts, numbers)),
+    "XPBD": (lambda a, b: tc.XPBD(iterations=a), ("XPBD",), (small_counts, numbers)),
+    "ImplicitEuler": (lambda a, b: tc.ImplicitEuler(tolerance=a, max_iterations=b),
+                      ("ImplicitEuler",), (numbers, small_counts)),
+    "Oscillation": (lambda a, b: tc.Oscillation((a, 0, 0), b), ("Oscillation",), (numbers, numbers)),
+    "Tearing": (lambda a, b: tc.Tearing(a), ("Tearing",), (numbers, numbers)),
+    "stable_dt": (lambda a, b: tc.stable_dt(tc.string(4, 1.0), "verlet", drag=a), ("drag",),
+                  (numbers, numbers)),
+}
+
+
+@pytest.mark.parametrize("name", sorted(API))
+def test_generated_api_arguments_construct_or_raise_value_error_naming_the_argument(name):
+    make, fields, (first, second) = API[name]
+
+    @settings(max_examples=40, deadline=5000)
+    @given(a=first, b=second)
+    def check(a, b):
+        try:
+            make(a, b)
+        except ValueError as err:
+            assert any(f in str(err) for f in fields), str(err)
+
+    check()
