@@ -105,4 +105,5 @@ def run_scene(scene, *, folder=None, frames: int | None = None, progress: bool =
                      steps=sim.step_count if sim is not None else 0,
                      dt=sim.dt if sim is not None else scene.frame_dt / substeps,
                      wall_seconds=time.perf_counter() - start, interrupted=stop is not None,
-                     diverged=diverged, stop_signal=None if stop is None else signals.exit_code(stop) - 128)
+                     diverged=diverged,
+                     stop_signal=None if stop is None else signals.signal_number(stop))

@@ -137,7 +137,7 @@ def load_scene(path) -> Scene:
     frames = round(sim.number("duration", 3.0, within=limits.DURATION) * fps)
     substeps = sim.value("substeps", "auto")
     if substeps != "auto":
-        sim.integer("substeps", within=limits.SUBSTEPS)
+        substeps = sim.integer("substeps", within=limits.SUBSTEPS)
     if sim.has("dt"):
         if sim.has("substeps"):
             sim.fail("simulation: give either dt or substeps, not both")

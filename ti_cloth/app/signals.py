@@ -22,9 +22,14 @@ class Stopped(KeyboardInterrupt):
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
+def signal_number(stop: KeyboardInterrupt) -> int:
+    """The signal that stopped a run: Stopped's, or SIGINT for a plain KeyboardInterrupt."""
+    return int(getattr(stop, "signum", signal.SIGINT))
+
+
 def exit_code(stop: KeyboardInterrupt) -> int:
     """128 + the signal's number: 130 for Ctrl-C, 143 for SIGTERM."""
-    return 128 + getattr(stop, "signum", signal.SIGINT)
+    return 128 + signal_number(stop)
 
 
 def _raise_stopped(signum, frame):
