@@ -1,5 +1,6 @@
 """The ti-cloth command: run, info, strict arguments, Ctrl-C, SIGTERM and divergence."""
 
+import re
 import signal
 import subprocess
 import sys
@@ -123,3 +124,18 @@ def test_the_console_script_is_installed(scene, tmp_path):
                              "--no-progress"], capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
     assert len(frames_in(out)) == 2
+
+
+def test_a_long_legal_run_is_announced_before_it_starts(tmp_path, capsys, monkeypatch):
+    """400 x 400 particles at 2,000 steps per frame for a minute: the estimate (limits.Work)
+    is days, printed before the run starts (the run itself is replaced here)."""
+    from ti_cloth.app import runner
+
+    long = tmp_path / "long.toml"
+    long.write_text(SCENE.replace("rows = 5\ncols = 5", "rows = 400\ncols = 400")
+                    .replace("duration = 1.0", "duration = 60\nsubsteps = 2000"))
+    monkeypatch.setattr(runner, "run_scene", lambda scene, **kw: runner.RunResult(
+        frames=[], outputs=[], steps=0, dt=scene.frame_dt, wall_seconds=0.0))
+    assert cli.main(["run", str(long), "--out", str(tmp_path / "o"), "--no-progress"]) == 0
+    assert re.search(r"note: 'tiny' is a long run: 3,600,000 steps, .* about [\d.]+ days",
+                     capsys.readouterr().err)
