@@ -14,9 +14,9 @@ class SimulationDiverged(RuntimeError):
     """
 
     def __init__(self, step: int, time: float, dt: float, stable_dt: float, integrator: str,
-                 reason: str = "positions or velocities became non-finite or left the guard box"):
+                 reason: str | None = None):
         self.step, self.time, self.dt, self.stable_dt, self.integrator = step, time, dt, stable_dt, integrator
-        self.reason = reason
+        self.reason = reason or "positions or velocities became non-finite or left the guard box"
         if stable_dt == 0:
             advice = (f"{integrator} has no stable step for undamped springs; add spring damping "
                       "(kd) or use symplectic_euler, verlet or pbd")
@@ -25,7 +25,7 @@ class SimulationDiverged(RuntimeError):
         else:
             advice = f"a stable dt for {integrator} is about {stable_dt:.3g} s or less"
         super().__init__(f"simulation diverged at step {step} (t = {time:.6g} s, dt = {dt:.3g} s): "
-                         f"{reason}; {advice}")
+                         f"{self.reason}; {advice}")
 
 
 class StaleSimulation(RuntimeError):

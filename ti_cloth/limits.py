@@ -107,11 +107,10 @@ def _gigabytes(size: float) -> str:
 
 @dataclass(frozen=True)
 class Work:
-    """What a run will do: steps, spring updates (springs x steps x passes), memory."""
+    """What a run will do: steps and spring updates (springs x steps x passes)."""
 
     steps: int
     spring_steps: float
-    memory: int
 
     @property
     def seconds(self) -> float:
@@ -125,8 +124,7 @@ class Work:
 
 def work(particles: int, springs: int, steps: int, passes: int = 1) -> Work:
     """The Work of `steps` steps of a body, each `passes` sweeps over its springs."""
-    return Work(steps=steps, spring_steps=float(max(springs, particles)) * steps * passes,
-                memory=memory_needed(particles, springs))
+    return Work(steps=steps, spring_steps=float(max(springs, particles)) * steps * passes)
 
 
 def _duration(seconds: float) -> str:

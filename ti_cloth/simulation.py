@@ -150,20 +150,20 @@ class Simulation:
             self._diverged = SimulationDiverged(
                 bad, (bad + 1) * self.dt, self.dt,
                 stable_dt(self.cloth, self.integrator, self.forces.drag, self.model.pinned),
-                self.integrator.name, *self._divergence_reason(bad))
+                self.integrator.name, self._divergence_reason(bad))
             raise self._diverged
 
-    def _divergence_reason(self, bad: int) -> tuple[str, ...]:
-        """(why step `bad` was flagged,) when it was a tear avalanche; () for the default."""
+    def _divergence_reason(self, bad: int) -> str | None:
+        """Why step `bad` was flagged when it was a tear avalanche; None for the default."""
         if self.tearing is None:
-            return ()
+            return None
         torn = int(np.sum(self.spring_torn_step() == bad))
         x = self.positions()
         if torn and np.isfinite(x).all() and np.abs(x).max() <= float(self.state.limit):
             return (f"{torn} springs tore in that step, stretched more than "
                     f"{RUNAWAY_STRAIN:g} rest lengths past the tear strain (a step this large "
-                    "explodes and tearing hides it)",)
-        return ()
+                    "explodes and tearing hides it)")
+        return None
 
     def _check_runtime(self) -> None:
         """Raise StaleSimulation if ti_cloth.init ran again after this simulation was built."""

@@ -99,7 +99,7 @@ class Scene:
 
     def work(self, frames: int | None = None) -> limits.Work:
         """What running `frames` frames (default: all) will take: steps, spring updates (each
-        pbd/xpbd pass and strain-limit pass a sweep over the springs), memory."""
+        pbd/xpbd pass and strain-limit pass a sweep over the springs)."""
         steps = (self.frames if frames is None else frames) * self.resolved_substeps()
         passes = getattr(self.integrator, "iterations", 1)
         passes += self.strain_limit.passes if self.strain_limit is not None else 0
