@@ -182,21 +182,25 @@ def test_serial_and_parallel_sweeps_give_the_same_bits(f64, integrator, monkeypa
 
 @pytest.mark.parametrize("make", [tc.RK4, tc.ImplicitEuler, tc.XPBD], ids=["rk4", "implicit_euler", "xpbd"])
 def test_an_integrator_reused_across_simulations_and_runtimes(make):
-    """Working buffers belong to a State: a dropped simulation's go with it, and after init()
-    a reused integrator gives exactly what a fresh one gives."""
+    """Working buffers belong to a State: a dropped simulation's go back to the pool with it
+    and serve the next simulation of its structure, and after init() a reused integrator
+    gives exactly what a fresh one gives."""
     import gc
     cloth = tc.Cloth(tc.grid_mesh(4, 4, plane="xz"), tc.Material(), pinned=[0, 3])
     shared = make()
     tc.init(precision="f64")
     first = tc.Simulation(cloth, integrator=shared, dt=1e-3)
     first.step(3)
+    state, buffers = first.state, shared.buffers(first.state, lambda: None)
     del first
     gc.collect()
-    assert len(shared._buffers) == 0
+    second = tc.Simulation(cloth, integrator=make(), dt=1e-3)
+    assert second.state is state
+    assert second.integrator.buffers(second.state, lambda: None) is buffers
     tc.init(precision="f32")
     reused = tc.Simulation(cloth, integrator=shared, dt=1e-3)
     fresh = tc.Simulation(cloth, integrator=make(), dt=1e-3)
     reused.step(10)
     fresh.step(10)
     np.testing.assert_array_equal(reused.positions(), fresh.positions())
-    assert len(shared._buffers) == 1
+    assert reused.state is not state and shared.buffers(reused.state, lambda: None) is not None

@@ -47,9 +47,9 @@ def run(sim, plan, steps, monkeypatch, per_launch=100):
         return
     many = sim._many_steps
     if plan == "team":       # two workers, whatever the cores, on the threads of the fixture
-        many.team = fused.Team(2, many.solo.arrived)
+        monkeypatch.setattr(many, "team", fused.Team(2, many.solo.arrived))
     monkeypatch.setattr(fused, "TEAM_MIN_SPRING_STEPS", 0 if plan == "team" else 1 << 62)
-    many.steps_per_launch = per_launch
+    monkeypatch.setattr(many, "steps_per_launch", per_launch)
     sim.step(steps)
 
 

@@ -35,6 +35,7 @@ class BackendConfig:
 
 _config: BackendConfig | None = None
 _generation = 0   # bumped by every init: trees of an earlier runtime must not be destroyed
+_tree_count = 0   # trees of this runtime FieldGroup allocated and has not destroyed
 
 
 def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None,
@@ -58,8 +59,9 @@ def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None,
     if threads is not None:
         options["cpu_max_num_threads"] = threads
     ti.init(**options)
-    global _generation
+    global _generation, _tree_count
     _generation += 1
+    _tree_count = 0
     _config = BackendConfig(arch=arch, precision=precision, threads=threads)
     return _config
 
@@ -138,11 +140,21 @@ class FieldGroup:
     Without it Taichi gives every batch of fields created after a kernel has run a tree of its
     own and never frees it; a process runs out of trees (512) after a few dozen simulations.
     Freeing a tree makes Taichi drop every compiled kernel, so dead trees are freed in batches
-    of DEAD_TREE_BATCH, when a new group is allocated, not one by one as objects die.
+    of DEAD_TREE_BATCH, when a new group is allocated, not one by one as objects die (or
+    sooner, when the live ones reach TREE_BUDGET: past TREE_LIMIT Taichi crashes, so a group
+    beyond the budget is refused with a RuntimeError instead).
     Create every field through `scalar` / `vector`, then call `finalize(owner)` before use.
     """
 
     def __init__(self):
+        """Raises RuntimeError, naming the cause, when Taichi has no tree left to give."""
+        if len(_dead_trees) >= DEAD_TREE_BATCH or tree_count() >= TREE_BUDGET:
+            free_dead_trees()
+        if tree_count() >= TREE_BUDGET:
+            raise RuntimeError(
+                f"Taichi holds {tree_count()} live field trees, the most ti_cloth uses of its "
+                f"{TREE_LIMIT}: too many simulations, models or renderers alive at once (each "
+                "holds a few); drop some, or run them in separate processes")
         self._builder = ti.FieldsBuilder()
 
     def scalar(self, dtype, shape):
@@ -162,20 +174,29 @@ class FieldGroup:
 
     def finalize(self, owner) -> None:
         """Allocate the fields; their tree is freed some time after `owner` is collected."""
-        if len(_dead_trees) >= DEAD_TREE_BATCH:
-            free_dead_trees()
         tree = self._builder.finalize()
+        global _tree_count
+        _tree_count += 1
         finalizer = weakref.finalize(owner, _dead_trees.append, (tree, _generation))
         finalizer.atexit = False
 
 
+TREE_LIMIT = 512       # SNode trees a Taichi 1.7 program can hold (beyond it: a crash)
+TREE_BUDGET = 448      # trees ti_cloth allocates before it must free dead ones or refuse
 DEAD_TREE_BATCH = 192
 _dead_trees: list = []
 
 
+def tree_count() -> int:
+    """Field trees of this runtime allocated by FieldGroup and not yet destroyed."""
+    return _tree_count
+
+
 def free_dead_trees() -> None:
     """Free the trees of collected objects now (those of an earlier runtime are already gone)."""
+    global _tree_count
     dead, _dead_trees[:] = list(_dead_trees), []
     for tree, generation in dead:
         if generation == _generation:
             tree.destroy()
+            _tree_count -= 1

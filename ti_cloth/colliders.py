@@ -209,11 +209,7 @@ class ColliderSet:
     particle positions at the start of the current step (`step_start`) the response needs."""
 
     def __init__(self, colliders, particle_count: int):
-        self.colliders = tuple(colliders)
-        for c in self.colliders:
-            require(isinstance(c, Collider) and type(c) is not Collider, "colliders", c,
-                    "Plane, Sphere, Box or Capsule objects")
-        real, count = backend.real(), len(self.colliders)
+        real, count = backend.real(), len(colliders)
         self.count = count
         fields = backend.FieldGroup()
         self.kind = fields.scalar(ti.i32, count)
@@ -226,6 +222,20 @@ class ColliderSet:
         self.velocity = fields.vector(3, real, count)
         self.step_start = fields.vector(3, real, particle_count)
         fields.finalize(self)
+        self.load(colliders, particle_count)
+
+    @staticmethod
+    def structure(colliders, particle_count: int) -> tuple:
+        """What the kernels of a ColliderSet read at compile time: sets of equal structure
+        are interchangeable once load() has put the colliders in (pool.py)."""
+        return ("ColliderSet", len(colliders), particle_count)
+
+    def load(self, colliders, particle_count: int) -> None:
+        """Upload `colliders` (as many as this set holds), placed at time 0."""
+        self.colliders = tuple(colliders)
+        for c in self.colliders:
+            require(isinstance(c, Collider) and type(c) is not Collider, "colliders", c,
+                    "Plane, Sphere, Box or Capsule objects")
         packed = [c.packed() for c in self.colliders]
         self.moving = any(c.path is not None for c in self.colliders)
         self._rest = [(p[1], p[2]) for p in packed]

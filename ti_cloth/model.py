@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 import taichi as ti
 
@@ -13,7 +15,9 @@ from .topology import Cloth, color_springs
 
 @backend.kernel_argument
 class Model:
-    """Masses, springs and per-particle spring adjacency, uploaded once and never changed.
+    """Masses, springs and per-particle spring adjacency of one cloth (load()), read-only to
+    every kernel. A Simulation's model is lent by pool.py and loaded again for the next
+    simulation of its structure once that one is collected.
 
     particle_mass         [kg], shape (particle_count,)
     particle_inv_mass     [1/kg]; 0 for pinned particles (lecture: "set 1/m to zero")
@@ -36,14 +40,9 @@ class Model:
 
     def __init__(self, cloth: Cloth, pinned: np.ndarray | None = None):
         real = backend.real()
-        self.cloth = cloth
         self.particle_count = n = cloth.particle_count
         self.spring_count = s = cloth.spring_count
         self.relative_damping = cloth.damping == "relative"
-        self.pinned = cloth.pinned if pinned is None else np.asarray(pinned, bool)
-        inv_mass = np.where(self.pinned, 0.0, 1.0 / np.where(cloth.particle_mass > 0,
-                                                              cloth.particle_mass, 1.0))
-
         fields = backend.FieldGroup()
         s1 = max(s, 1)
         self.particle_mass = fields.scalar(real, n)
@@ -59,7 +58,26 @@ class Model:
         self.adjacency_spring = fields.scalar(ti.i32, max(2 * s, 1))
         self.adjacency_other = fields.scalar(ti.i32, max(2 * s, 1))
         fields.finalize(self)
+        self._colouring = None
+        self.load(cloth, pinned)
 
+    @staticmethod
+    def structure(cloth: Cloth, pinned: np.ndarray | None = None) -> tuple:
+        """What the kernels of a Model of `cloth` read at compile time, and the topology its
+        adjacency and colouring come from: Models of equal structure are interchangeable once
+        load() has put a cloth's values in (pool.py reuses them)."""
+        topology = hashlib.blake2b(np.ascontiguousarray(cloth.spring_indices).tobytes(),
+                                   digest_size=16).hexdigest()
+        return ("Model", cloth.particle_count, cloth.spring_count, cloth.damping == "relative",
+                topology)
+
+    def load(self, cloth: Cloth, pinned: np.ndarray | None = None) -> None:
+        """Upload `cloth` (of this model's structure) with `pinned` (default: the cloth's)."""
+        self.cloth = cloth
+        self.pinned = cloth.pinned if pinned is None else np.asarray(pinned, bool)
+        inv_mass = np.where(self.pinned, 0.0, 1.0 / np.where(cloth.particle_mass > 0,
+                                                              cloth.particle_mass, 1.0))
+        n, s = self.particle_count, self.spring_count
         ends = cloth.spring_indices
         owner = np.concatenate([ends[:, 0], ends[:, 1]])
         other = np.concatenate([ends[:, 1], ends[:, 0]])
@@ -69,18 +87,17 @@ class Model:
         start = np.concatenate([[0], np.cumsum(np.bincount(owner, minlength=n))])
         split = start[:-1] + np.bincount(ends[:, 1], minlength=n)
         upload(((self.particle_mass, cloth.particle_mass),
-                        (self.particle_inv_mass, inv_mass),
-                        (self.particle_rest_position, cloth.particle_position),
-                        (self.spring_indices, cloth.spring_indices),
-                        (self.spring_rest_length, cloth.spring_rest_length),
-                        (self.spring_stiffness, cloth.spring_stiffness),
-                        (self.spring_damping, cloth.spring_damping),
-                        (self.spring_kind, cloth.spring_kind),
-                        (self.particle_spring_start, start),
-                        (self.particle_spring_split, split),
-                        (self.adjacency_spring, spring[order]),
-                        (self.adjacency_other, other[order])))
-        self._colouring = None
+                (self.particle_inv_mass, inv_mass),
+                (self.particle_rest_position, cloth.particle_position),
+                (self.spring_indices, cloth.spring_indices),
+                (self.spring_rest_length, cloth.spring_rest_length),
+                (self.spring_stiffness, cloth.spring_stiffness),
+                (self.spring_damping, cloth.spring_damping),
+                (self.spring_kind, cloth.spring_kind),
+                (self.particle_spring_start, start),
+                (self.particle_spring_split, split),
+                (self.adjacency_spring, spring[order]),
+                (self.adjacency_other, other[order])))
 
     def state(self, position_limit: float = 1e6) -> State:
         """A fresh State at the rest configuration, at rest, with every spring intact, whose

@@ -24,9 +24,10 @@ from .forces import ForceSettings, energies
 from .handles import Handle, HandleSet
 from .integrators import fused, make_integrator
 from .model import Model
+from .pool import POOL
 from .stability import auto_dt, stable_dt
 from .strain_limit import StrainLimit, StrainLimiter
-from .state import NO_BAD_STEP
+from .state import NO_BAD_STEP, State
 from .tearing import RUNAWAY_STRAIN, Tearing, torn_triangles
 from .topology import Cloth
 from .wind import WindField
@@ -74,23 +75,33 @@ class Simulation:
                 "a list of Handle objects (handles=[Handle(...)])")
         handles = tuple(handles)
         self.handles = HandleSet(handles, cloth.particle_position) if handles else None
-        self.wind = WindField(wind, cloth) if wind is not None else None
-        self.forces = ForceSettings(gravity=tuple(gravity), drag=drag, tearable=tearing is not None,
-                                    wind=self.wind)
         pinned = self.handles.pin(cloth.pinned) if self.handles is not None else cloth.pinned
         position_limit = in_range("position_limit", position_limit, limits.GUARD)
-        self.model = Model(cloth, pinned=pinned)
-        if auto:
-            self.dt = auto_dt(cloth, self.integrator, drag, pinned)
-        self.state = self.model.state(position_limit)
         require(strain_limit is None or isinstance(strain_limit, StrainLimit), "strain_limit",
                 strain_limit, "None or a StrainLimit")
-        self.strain_limiter = (StrainLimiter(strain_limit, cloth.particle_count, tearing is not None)
-                               if strain_limit is not None and cloth.spring_count else None)
         require(isinstance(colliders, (list, tuple)), "colliders", colliders,
                 "a list of colliders (colliders=[Plane(...)])")
         colliders = tuple(colliders)
-        self.colliders = ColliderSet(colliders, cloth.particle_count) if colliders else None
+        parts = {"model": (Model, (cloth, pinned)),
+                 "state": (State, (cloth.particle_count, cloth.spring_count, position_limit))}
+        if wind is not None:
+            parts["wind"] = (WindField, (wind, cloth))
+        if strain_limit is not None and cloth.spring_count:
+            parts["strain_limiter"] = (StrainLimiter, (strain_limit, cloth.particle_count,
+                                                       tearing is not None))
+        if colliders:
+            parts["colliders"] = (ColliderSet, (colliders, cloth.particle_count))
+        self._lent = self._lend(parts)
+        self.model, self.state = self._lent["model"], self._lent["state"]
+        self.wind = self._lent.get("wind")
+        self.strain_limiter = self._lent.get("strain_limiter")
+        self.colliders = self._lent.get("colliders")
+        self.forces = POOL.keep(ForceSettings(gravity=tuple(gravity), drag=drag,
+                                              tearable=tearing is not None, wind=self.wind))
+        self.integrator = POOL.keep(self.integrator)   # an equal one, whose kernels exist
+        if auto:
+            self.dt = auto_dt(cloth, self.integrator, drag, pinned)
+        self.state.reset(self.model.particle_rest_position)
         stages = dict(strain_limit=self.strain_limiter, colliders=self.colliders,
                       handles=self.handles, tearing=self.tearing)
         self.stages = ("integrator",) + tuple(name for name in STEP_ORDER[1:]
@@ -101,11 +112,24 @@ class Simulation:
         self._diverged: SimulationDiverged | None = None
         self._place_handles_at_start()
         # Many steps per launch on the CPU when every stage is fused; made on the first
-        # step(n > 1), so a simulation stepped one at a time allocates nothing.
+        # step(n > 1), so a simulation stepped one at a time allocates nothing (and kept with
+        # the lent objects).
         self._many_per_launch = (self.integrator.fused and backend.config().arch == "cpu"
                                  and self.wind is None
                                  and set(self.stages) <= set(fused.FUSED_STAGES))
-        self._many_steps_plan = None
+
+    def _lend(self, parts: dict) -> dict:
+        """The objects this simulation passes to kernels, {name: cls(*args)}, lent by the pool
+        (pool.py) as one set, so their kernels are compiled once per structure in a process;
+        a set lent before is loaded with these args."""
+        key = tuple((name, cls.structure(*args)) for name, (cls, args) in parts.items())
+        size = limits.memory_needed(self.cloth.particle_count, self.cloth.spring_count)
+        lent, reused = POOL.lend(key, lambda: {name: cls(*args) for name, (cls, args)
+                                               in parts.items()}, self, size)
+        if reused:
+            for name, (cls, args) in parts.items():
+                lent[name].load(*args)
+        return lent
 
     def restart(self, dt: float | None = None) -> None:
         """Back to time 0: rest positions, at rest, every spring intact, handles and colliders
@@ -182,9 +206,11 @@ class Simulation:
     @property
     def _many_steps(self) -> fused.ManySteps | None:
         """The plan that runs step(n > 1) in few launches, or None when steps go one by one."""
-        if self._many_per_launch and self._many_steps_plan is None:
-            self._many_steps_plan = fused.ManySteps(self.model)
-        return self._many_steps_plan
+        if not self._many_per_launch:
+            return None
+        if "many_steps" not in self._lent:
+            self._lent["many_steps"] = fused.ManySteps(self.model)
+        return self._lent["many_steps"]
 
     def positions(self) -> np.ndarray:
         """Particle positions [m], (N, 3) float64 copy."""

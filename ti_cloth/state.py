@@ -49,6 +49,23 @@ class State:
         fields.finalize(self)
         self.limit = position_limit
         self.prev_valid = False
+        self._workspaces = {}
+
+    @staticmethod
+    def structure(particle_count: int, spring_count: int, position_limit: float = 1e6) -> tuple:
+        """What the kernels of a State read at compile time: its field shapes (pool.py)."""
+        return ("State", particle_count, spring_count)
+
+    def load(self, particle_count: int, spring_count: int, position_limit: float = 1e6) -> None:
+        """Guard at position_limit from the next reset() on (a State of this structure)."""
+        self.limit = position_limit
+
+    def workspace(self, key, make):
+        """Working storage of this state made by make() on first use under `key` (an
+        integrator's buffers), kept for the state's life."""
+        if key not in self._workspaces:
+            self._workspaces[key] = make()
+        return self._workspaces[key]
 
     def reset(self, rest_position) -> None:
         """Positions (and history) = rest_position, at rest, every spring intact, no bad step

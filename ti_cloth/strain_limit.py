@@ -46,11 +46,21 @@ class StrainLimiter:
     before the correction, so velocities can follow it. tearable: springs may be torn."""
 
     def __init__(self, limit: StrainLimit, particle_count: int, tearable: bool):
-        self.limit = limit
         self.tearable = tearable
         fields = backend.FieldGroup()
         self.before = fields.vector(3, backend.real(), particle_count)
         fields.finalize(self)
+        self.load(limit, particle_count, tearable)
+
+    @staticmethod
+    def structure(limit: StrainLimit, particle_count: int, tearable: bool) -> tuple:
+        """What the kernels of a StrainLimiter read at compile time (pool.py); its `limit`
+        is passed to them as arguments, so limiters of one structure take any limit."""
+        return ("StrainLimiter", particle_count, tearable)
+
+    def load(self, limit: StrainLimit, particle_count: int, tearable: bool) -> None:
+        """Limit strains to `limit` from now on (a limiter of this structure)."""
+        self.limit = limit
 
     def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
         copy_positions(state, self.before)

@@ -95,13 +95,9 @@ class WindField:
     gather the triangle forces deterministically, the turbulence modes and per-step values."""
 
     def __init__(self, wind: Wind, cloth):
-        require(isinstance(wind, Wind), "wind", wind, "None or a ti_cloth.Wind")
-        triangles = cloth.mesh.triangles
-        require(len(triangles) > 0, "wind", wind,
-                "used only with a body that has triangles (strings and hair: use drag=)")
-        self.wind = wind
+        self.structure(wind, cloth)
         real = backend.real()
-        self.triangle_count = len(triangles)
+        self.triangle_count = len(cloth.mesh.triangles)
         fields = backend.FieldGroup()
         self.triangle = fields.vector(3, ti.i32, self.triangle_count)
         self.triangle_edge_spring = fields.vector(3, ti.i32, self.triangle_count)
@@ -113,7 +109,25 @@ class WindField:
         self.mode_direction = fields.vector(3, real, TURBULENCE_MODES)
         self.mode_phase = fields.scalar(real, TURBULENCE_MODES)
         fields.finalize(self)
+        self.load(wind, cloth)
 
+    @staticmethod
+    def structure(wind: Wind, cloth) -> tuple:
+        """What the kernel of a WindField reads at compile time (the counts and the Wind's
+        attributes _accumulate_wind reads; velocity, gust and seed are uploaded): fields of
+        equal structure are interchangeable once load() has run (pool.py). Raises ValueError
+        unless `wind` is a Wind and the cloth has triangles."""
+        require(isinstance(wind, Wind), "wind", wind, "None or a ti_cloth.Wind")
+        require(len(cloth.mesh.triangles) > 0, "wind", wind,
+                "used only with a body that has triangles (strings and hair: use drag=)")
+        compiled = (wind.turbulence, wind.air_density, wind.drag_coefficient,
+                    wind.lift_coefficient, wind.friction_coefficient)
+        return ("WindField", compiled, cloth.particle_count, len(cloth.mesh.triangles))
+
+    def load(self, wind: Wind, cloth) -> None:
+        """Upload `cloth`'s triangles and `wind`'s turbulence; the wind of time 0."""
+        self.wind = wind
+        triangles = cloth.mesh.triangles
         start, adjacent = vertex_triangles(triangles, cloth.particle_count)
         wave, direction, phase = wind.turbulence_modes()
         upload(((self.triangle, triangles), (self.particle_triangle_start, start),

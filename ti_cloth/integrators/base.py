@@ -4,7 +4,6 @@ step()."""
 from __future__ import annotations
 
 import math
-import weakref
 from typing import ClassVar
 
 
@@ -57,16 +56,21 @@ class Integrator:
 
     def buffers(self, state, make):
         """This integrator's working storage for `state`, made by make() on first use and
-        dropped with the State (keyed weakly, so a later State never inherits the buffers of a
-        collected one, nor of a runtime that init() has replaced)."""
-        store = self.__dict__.setdefault("_buffers", weakref.WeakKeyDictionary())
-        if state not in store:
-            store[state] = make()
-        return store[state]
+        kept with the State (State.workspace, under the integrator's class: an equal
+        integrator of a later simulation lent the same State reuses it)."""
+        return state.workspace(type(self), make)
 
     def options(self) -> dict:
         """Constructor options, for reports and repr."""
         return {}
+
+    def __eq__(self, other) -> bool:
+        """Integrators of one class with equal options are the same method (and share
+        compiled kernels: pool.py)."""
+        return type(other) is type(self) and other.options() == self.options()
+
+    def __hash__(self) -> int:
+        return hash((type(self), repr(sorted(self.options().items()))))
 
     def __repr__(self) -> str:
         opts = ", ".join(f"{k}={v!r}" for k, v in self.options().items())
