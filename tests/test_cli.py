@@ -137,5 +137,26 @@ def test_a_long_legal_run_is_announced_before_it_starts(tmp_path, capsys, monkey
     monkeypatch.setattr(runner, "run_scene", lambda scene, **kw: runner.RunResult(
         frames=[], outputs=[], steps=0, dt=scene.frame_dt, wall_seconds=0.0))
     assert cli.main(["run", str(long), "--out", str(tmp_path / "o"), "--no-progress"]) == 0
-    assert re.search(r"note: 'tiny' is a long run: 3,600,000 steps, .* about [\d.]+ days",
-                     capsys.readouterr().err)
+    err = capsys.readouterr().err
+    assert re.search(r"note: 'tiny' is a long run: 3,600,000 steps, .* about [\d.]+ days", err)
+    assert "finding its stable step" not in err      # 956,002 springs: not a large body
+
+
+def test_a_large_body_is_announced_before_its_stable_step_is_sought(tmp_path, capsys, monkeypatch):
+    """Above limits.LARGE_BODY springs the stable-step analysis takes seconds to a minute: the
+    command says so first, naming the counts (lowered here below the 5 x 5 scene's 40 + 32 + 30 springs)."""
+    from ti_cloth import limits
+    from ti_cloth.app import scene as scene_module
+
+    heard = []
+    monkeypatch.setattr(limits, "LARGE_BODY", 101)
+    original = scene_module._check_runnable
+    monkeypatch.setattr(scene_module, "_check_runnable",
+                        lambda *args: (heard.append(capsys.readouterr().err), original(*args)))
+    path = tmp_path / "tiny.toml"
+    path.write_text(SCENE)
+    assert cli.main(["run", str(path), "--out", str(tmp_path / "o"), "--no-progress",
+                     "--frames", "1"]) == 0
+    assert heard == ["note: 'tiny' has 25 particles and 102 springs: finding its stable step "
+                     "takes a while\n"]
+

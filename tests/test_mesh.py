@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
+from ti_cloth.mesh import unique_rows
 
 
 def test_grid_layout_and_counts():
@@ -70,3 +71,15 @@ def test_import_does_not_start_taichi():
     code = ("import ti_cloth, taichi as ti; assert ti.lang.impl.get_runtime().prog is None; "
             "import ti_cloth.render")
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+@pytest.mark.parametrize("columns, high", [(2, 50), (3, 50), (2, 2**40)])
+def test_unique_rows_is_numpys_row_unique(columns, high):
+    """The int64 encoding gives exactly np.unique(axis=0): rows, first indices, inverse and
+    counts; 2**40 in two columns overflows the code and takes the fallback."""
+    rows = np.random.default_rng(columns).integers(0, high, (3999, columns))
+    rows[1::3] = rows[::3]                           # repeats
+    for options in ({}, dict(return_index=True, return_inverse=True, return_counts=True)):
+        ours, numpys = unique_rows(rows, **options), np.unique(rows, axis=0, **options)
+        for a, b in zip(ours if options else [ours], numpys if options else [numpys]):
+            np.testing.assert_array_equal(np.ravel(a), np.ravel(b))

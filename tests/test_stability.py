@@ -38,13 +38,17 @@ def dense_stiffest(cloth):
     return np.linalg.eigvalsh(A)[-1]
 
 
-@pytest.mark.parametrize("name", ["sheet", "strip", "string"])
-def test_power_iteration_finds_the_stiffest_mode(name):
-    cloth = cloths()[name]
+@pytest.mark.parametrize("name", ["sheet", "strip", "string", "20 x 20 sheet"])
+def test_lanczos_finds_the_stiffest_mode(name):
+    """Within LANCZOS_TOLERANCE-ish of the dense eigenvalue, from below (a Ritz value). The
+    100 power iterations used before stopped 1e-5 short on the small bodies and 1.6e-3 short
+    on the 20 x 20 sheet, whose top eigenvalues crowd together."""
+    cloth = cloths()[name] if name in cloths() else tc.Cloth(
+        tc.grid_mesh(20, 20, plane="xz"), tc.Material(), pinned=[0, 19])
     w2, _ = stiffest_mode(cloth)
     exact = dense_stiffest(cloth)
-    report(f"{name}: w^2 power iteration vs dense", w2, exact)
-    assert exact * 0.99 <= w2 <= exact * (1 + 1e-12)
+    report(f"{name}: w^2 Lanczos vs dense", w2, exact)
+    assert exact * (1 - 1e-6) <= w2 <= exact * (1 + 1e-12)
 
 
 def diverges(sim, dt, start, steps=1500):

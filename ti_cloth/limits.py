@@ -76,6 +76,7 @@ MEMORY_SHARE = 0.75            # refuse a body needing more than this share of p
 # implicit Euler at 128 x 128 run about 1.5e7 per second on two cores), for "this run is long".
 SPRING_STEPS_PER_SECOND = 1e7
 LONG_RUN_SECONDS = 60.0
+LARGE_BODY = 1_000_000         # springs: the stable-step analysis (modes.py) takes seconds
 
 
 def physical_memory() -> int:

@@ -63,11 +63,11 @@ class Mesh:
 
     def edges(self) -> np.ndarray:
         """Unique undirected edges (i < j), shape (edge_count, 2), sorted lexicographically."""
-        return np.unique(triangle_edges(self.triangles), axis=0).reshape(-1, 2)
+        return unique_rows(triangle_edges(self.triangles)).reshape(-1, 2)
 
     def boundary_edges(self) -> np.ndarray:
         """Edges used by exactly one triangle (i < j), shape (B, 2)."""
-        edges, counts = np.unique(triangle_edges(self.triangles), axis=0, return_counts=True)
+        edges, counts = unique_rows(triangle_edges(self.triangles), return_counts=True)
         return edges[counts == 1].reshape(-1, 2)
 
     def boundary_vertices(self) -> np.ndarray:
@@ -90,6 +90,27 @@ class Mesh:
         return f"Mesh(vertex_count={self.vertex_count}, triangle_count={self.triangle_count}{grid}{tets})"
 
 
+def unique_rows(rows: np.ndarray, **options):
+    """np.unique(rows, axis=0, **options) for non-negative integer rows, as fast as a 1-D
+    unique: each row is encoded as one int64 in mixed radix (lexicographic order kept), and
+    decoded back (np.unique over rows sorts void records, about 10x slower: 8 s of the 16 s
+    a 1,000 x 1,000 grid took to build). Falls back to the row unique when the codes could
+    overflow int64."""
+    rows = np.asarray(rows, np.int64)
+    radix = int(rows.max()) + 1 if rows.size else 1
+    if radix ** rows.shape[1] >= 2**63:
+        return np.unique(rows, axis=0, **options)
+    code = np.zeros(len(rows), np.int64)
+    for column in range(rows.shape[1]):
+        code = code * radix + rows[:, column]
+    found = np.unique(code, **options)
+    codes, rest = (found[0], found[1:]) if isinstance(found, tuple) else (found, ())
+    unique = np.empty((len(codes), rows.shape[1]), np.int64)
+    for column in reversed(range(rows.shape[1])):
+        codes, unique[:, column] = np.divmod(codes, radix)
+    return (unique, *rest) if rest else unique
+
+
 def signed_volumes(vertices: np.ndarray, tetrahedra: np.ndarray) -> np.ndarray:
     """Signed volume [m^3] of each tetrahedron (a, b, c, d): (b-a) . ((c-a) x (d-a)) / 6."""
     p = vertices[tetrahedra]
@@ -101,8 +122,7 @@ def surface_triangles(vertices: np.ndarray, tetrahedra: np.ndarray) -> np.ndarra
     """The faces used by exactly one tetrahedron, wound so their normals point outwards."""
     faces = tetrahedra[:, [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]]].reshape(-1, 3)
     opposite = tetrahedra.ravel()
-    _, first, counts = np.unique(np.sort(faces, axis=1), axis=0, return_index=True,
-                                 return_counts=True)
+    _, first, counts = unique_rows(np.sort(faces, axis=1), return_index=True, return_counts=True)
     outer = np.sort(first[counts == 1])
     faces, inner = faces[outer], vertices[opposite[outer]]
     p = vertices[faces]

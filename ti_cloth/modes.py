@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-POWER_ITERATIONS = 100
-POWER_TOLERANCE = 1e-6        # stop once the Rayleigh quotient grows by less than this, relative
+LANCZOS_STEPS = 100
+LANCZOS_TOLERANCE = 1e-7      # stop once the largest Ritz value grows by less than this, relative
 
 
 def row_bounds(cloth, drag: float, pinned) -> tuple[np.ndarray, np.ndarray]:
@@ -27,15 +27,17 @@ def row_bounds(cloth, drag: float, pinned) -> tuple[np.ndarray, np.ndarray]:
     return omega2, np.where(pinned, 0.0, gamma + drag)
 
 
-def stiffest_mode(cloth, drag: float = 0.0, pinned=None, iterations: int = POWER_ITERATIONS):
+def stiffest_mode(cloth, drag: float = 0.0, pinned=None, steps: int = LANCZOS_STEPS):
     """(w^2 [1/s^2], g [1/s]) of the stiffest mode of the springs linearised about rest.
 
-    Power iteration on A = M^-1/2 K M^-1/2 (K_s = k n n^T per spring at rest, pins removed),
-    started from a fixed random vector; w^2 is the Rayleigh quotient, which grows towards the
-    largest eigenvalue from below (stopped after POWER_ITERATIONS or once it grows by less than
-    POWER_TOLERANCE; within 1 % of a dense eigensolver on the tests' three bodies). g is the mode's damping rate: the
-    Rayleigh quotient of M^-1/2 C M^-1/2 (C from kd, "axial" along n n^T, "relative" I) on
-    the same vector, plus drag. (0, 0) if nothing is free or there are no springs.
+    Lanczos on A = M^-1/2 K M^-1/2 (K_s = k n n^T per spring at rest, pins removed), started
+    from a fixed random vector: w^2 is the largest Ritz value, which grows towards the largest
+    eigenvalue from below (stopped after `steps` or once it grows by less than
+    LANCZOS_TOLERANCE; within 1e-6 of a dense eigensolver on the tests' bodies; on a 300 x 300
+    grid 26 steps, where the 100 power iterations used before stopped 0.7 % short in 3.5x the
+    time). g is the mode's damping rate: the Rayleigh quotient of M^-1/2 C M^-1/2 (C from
+    kd, "axial" along n n^T, "relative" I) on the Ritz vector, plus drag. (0, 0) if nothing is free or there are no
+    springs.
     """
     pinned = cloth.pinned if pinned is None else pinned
     free = ~np.asarray(pinned, bool)
@@ -47,27 +49,63 @@ def stiffest_mode(cloth, drag: float = 0.0, pinned=None, iterations: int = POWER
     length = np.linalg.norm(d, axis=1)
     n = d / np.where(length > 0, length, 1.0)[:, None]
     n[length == 0] = 0.0    # zero-length springs: no direction at rest (linear k I handled as 0)
+    # Component-major (3, S) and (3, N) arrays: 1-D gathers and bincounts over contiguous
+    # rows run 3-4x faster than over the columns of (S, 3) ones (a 1,000 x 1,000 grid).
+    n_i, n_j = n.T * scale[i], n.T * scale[j]        # M^-1/2 folded into n
     relative = cloth.damping == "relative"
-
     count = cloth.particle_count
 
     def product(x, coefficient, isotropic=False):
-        y = x * scale[:, None]
-        diff = y[i] - y[j]
-        f = coefficient[:, None] * (diff if isotropic else np.sum(diff * n, axis=1)[:, None] * n)
-        out = np.stack([np.bincount(i, f[:, c], count) - np.bincount(j, f[:, c], count)
-                        for c in range(3)], axis=1)
-        return out * scale[:, None]
+        """M^-1/2 K M^-1/2 x, x of shape (3, N), for K of `coefficient` n n^T per spring
+        (isotropic: coefficient I)."""
+        if isotropic:
+            f = [coefficient * (scale[i] * x[c][i] - scale[j] * x[c][j]) for c in range(3)]
+            return np.stack([np.bincount(i, scale[i] * f[c], count)
+                             - np.bincount(j, scale[j] * f[c], count) for c in range(3)])
+        t = coefficient * sum(n_i[c] * x[c][i] - n_j[c] * x[c][j] for c in range(3))
+        return np.stack([np.bincount(i, t * n_i[c], count) - np.bincount(j, t * n_j[c], count)
+                         for c in range(3)])
 
-    x = np.random.default_rng(0).normal(size=(count, 3)) * free[:, None]
-    omega2 = 0.0
-    for _ in range(iterations):
-        x /= np.linalg.norm(x)
-        y = product(x, cloth.spring_stiffness)
-        previous, omega2 = omega2, float(np.sum(x * y))
-        if not np.any(y) or omega2 - previous <= POWER_TOLERANCE * omega2:
-            break
-        x = y
-    x /= np.linalg.norm(x)
-    gamma = float(np.sum(x * product(x, cloth.spring_damping, relative))) + drag
+    start = (np.random.default_rng(0).normal(size=(count, 3)) * free[:, None]).T.copy()
+    omega2, ritz = largest_ritz(lambda x: product(x, cloth.spring_stiffness), start, steps)
+    gamma = float(np.vdot(ritz, product(ritz, cloth.spring_damping, relative))) + drag
     return omega2, gamma
+
+
+def largest_ritz(apply, start: np.ndarray, steps: int) -> tuple[float, np.ndarray]:
+    """(largest Ritz value, its unit Ritz vector) of the symmetric operator `apply` after at
+    most `steps` Lanczos steps from `start` (Golub & Van Loan 10.1). No reorthogonalisation:
+    lost orthogonality only repeats converged Ritz values. The vector is rebuilt by a second
+    run of the same recurrence, so memory stays a few vectors, not one per step."""
+    alpha, beta = [], []
+    value = 0.0
+    for q, a, b in lanczos(apply, start, steps):
+        alpha.append(a)
+        previous, (values, vectors) = value, np.linalg.eigh(tridiagonal(alpha, beta))
+        value = float(values[-1])
+        if b <= 1e-12 * abs(value) or (len(alpha) > 1 and value - previous <= LANCZOS_TOLERANCE * value):
+            break
+        beta.append(b)
+    weights = vectors[:, -1]
+    ritz = sum(w * q for w, (q, _, _) in zip(weights, lanczos(apply, start, len(alpha))))
+    return value, ritz / np.linalg.norm(ritz)
+
+
+def lanczos(apply, start: np.ndarray, steps: int):
+    """Yields (q_k, alpha_k, beta_k) of the three-term Lanczos recurrence, k < steps: stops
+    early when beta_k = 0 (an invariant subspace)."""
+    previous, q, b = np.zeros_like(start), start / np.linalg.norm(start), 0.0
+    for _ in range(steps):
+        w = apply(q) - b * previous
+        a = float(np.vdot(q, w))
+        w -= a * q
+        b = float(np.linalg.norm(w))
+        yield q, a, b
+        if b == 0.0:
+            return
+        previous, q = q, w / b
+
+
+def tridiagonal(alpha: list, beta: list) -> np.ndarray:
+    """The symmetric tridiagonal matrix of diagonal alpha and off-diagonal beta."""
+    return np.diag(alpha) + np.diag(beta[:len(alpha) - 1], 1) + np.diag(beta[:len(alpha) - 1], -1)

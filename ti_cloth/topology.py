@@ -25,7 +25,7 @@ import numpy as np
 
 from ._validate import as_array, finite_number, require
 from .material import Material, SpringKind
-from .mesh import Mesh, triangle_edges
+from .mesh import Mesh, triangle_edges, unique_rows
 
 
 def grid_springs(rows: int, cols: int) -> dict[SpringKind, np.ndarray]:
@@ -53,7 +53,7 @@ def mesh_springs(triangles: np.ndarray) -> dict[SpringKind, np.ndarray]:
     """Stretch springs on every edge and bend springs across every interior edge."""
     directed = triangle_edges(triangles)
     opposite = triangles[:, [2, 0, 1]].ravel()
-    edges, inverse, counts = np.unique(directed, axis=0, return_inverse=True, return_counts=True)
+    edges, inverse, counts = unique_rows(directed, return_inverse=True, return_counts=True)
     inverse = inverse.ravel()
     order = np.argsort(inverse, kind="stable")
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
@@ -71,7 +71,7 @@ def unique_springs(springs: Mapping[SpringKind, np.ndarray]) -> tuple[np.ndarray
     kind = np.concatenate([np.full(len(springs[k]), int(k), np.int64) for k in kinds])
     keep = pairs[:, 0] != pairs[:, 1]
     pairs, kind = pairs[keep], kind[keep]
-    _, first = np.unique(pairs, axis=0, return_index=True)
+    _, first = unique_rows(pairs, return_index=True)
     first = np.sort(first)
     return pairs[first].reshape(-1, 2), kind[first]
 

@@ -44,7 +44,8 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
 
     try:
         with signals.stop_signals_raise():
-            scene = load_scene(scene_path)
+            scene = load_scene(scene_path, note=lambda message: print(f"note: {message}",
+                                                                      file=sys.stderr))
             output = scene.output
             if test:
                 frames = min(frames or TEST_FRAMES, TEST_FRAMES)

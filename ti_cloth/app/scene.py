@@ -120,8 +120,10 @@ class Scene:
                           strain_limit=self.strain_limit, **options)
 
 
-def load_scene(path) -> Scene:
-    """Read a scene file; raises SceneError naming the key, the value and what is allowed."""
+def load_scene(path, note=None) -> Scene:
+    """Read a scene file; raises SceneError naming the key, the value and what is allowed.
+    note(message), when given, hears before a slow step of loading begins (a body of more than
+    limits.LARGE_BODY springs: its stable-step analysis takes seconds to a minute)."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"scene file not found: {path}")
@@ -188,6 +190,9 @@ def load_scene(path) -> Scene:
                   precision=precision, gravity=gravity, drag=drag, wind=wind, tearing=tearing,
                   strain_limit=strain_limit, handles=handles, colliders=colliders, camera=camera,
                   camera_fit=camera_fit, output=output)
+    if note is not None and cloth.spring_count > limits.LARGE_BODY:
+        note(f"'{name}' has {cloth.particle_count:,} particles and {cloth.spring_count:,} "
+             "springs: finding its stable step takes a while")
     _check_runnable(scene, root)
     return scene
 
