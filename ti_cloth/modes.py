@@ -36,8 +36,8 @@ def stiffest_mode(cloth, drag: float = 0.0, pinned=None, steps: int = LANCZOS_ST
     LANCZOS_TOLERANCE; within 1e-6 of a dense eigensolver on the tests' bodies; on a 300 x 300
     grid 26 steps, where the 100 power iterations used before stopped 0.7 % short in 3.5x the
     time). g is the mode's damping rate: the Rayleigh quotient of M^-1/2 C M^-1/2 (C from
-    kd, "axial" along n n^T, "relative" I) on the Ritz vector, plus drag. (0, 0) if nothing is free or there are no
-    springs.
+    kd, "axial" along n n^T, "relative" I) on the Ritz vector, plus drag. (0, 0) if nothing
+    is free or there are no springs.
     """
     pinned = cloth.pinned if pinned is None else pinned
     free = ~np.asarray(pinned, bool)
