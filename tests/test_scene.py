@@ -19,7 +19,7 @@ DEMOS = Path(__file__).parents[1] / "demos"
 GRID = """
 [simulation]
 fps = 50
-substeps = 20
+substeps = 40
 duration = 0.1
 
 [forces]
@@ -47,12 +47,26 @@ def test_a_grid_scene_builds_the_same_simulation_as_the_api(tmp_path, f64):
     sim = scene.build()
     material = tc.Material.preset("cotton", hem_mass=0.001, stretch=tc.SpringParams(900.0, 0.2))
     cloth = tc.Cloth(tc.grid_mesh(6, 5, size=(0.5, 0.4)), material, pinned=[25, 29, 3])
-    api = tc.Simulation(cloth, dt=1 / 50 / 20, drag=0.3)
+    api = tc.Simulation(cloth, dt=1 / 50 / 40, drag=0.3)
     sim.step(40)
     api.step(40)
     report("max position difference scene vs API [m]", np.abs(sim.positions() - api.positions()).max(), 0.0)
     np.testing.assert_array_equal(sim.positions(), api.positions())
-    assert scene.frames == 5 and scene.resolved_substeps() == 20
+    assert scene.frames == 5 and scene.resolved_substeps() == 40
+
+
+def test_a_scene_hem_takes_grid_names_and_indices(tmp_path):
+    """hem = ["left", 4] is the API's hem of the same particles (less 25, pinned); without the
+    key, the bottom row."""
+    hemmed = load_scene(write(tmp_path, GRID.replace("pinned =", 'hem = ["left", 4]\npinned ='))).cloth
+    left = np.arange(0, 30, 5)
+    np.testing.assert_array_equal(np.flatnonzero(hemmed.hem), sorted(set(left) - {25} | {4}))
+    material = tc.Material.preset("cotton", hem_mass=0.001, stretch=tc.SpringParams(900.0, 0.2))
+    api = tc.Cloth(tc.grid_mesh(6, 5, size=(0.5, 0.4)), material, pinned=[25, 29, 3],
+                   hem=[*left, 4])
+    np.testing.assert_array_equal(hemmed.particle_mass, api.particle_mass)
+    default = load_scene(write(tmp_path, GRID)).cloth
+    np.testing.assert_array_equal(np.flatnonzero(default.hem), [0, 1, 2, 4])    # 3 is pinned
 
 
 def test_every_demo_scene_loads(tmp_path):
@@ -64,7 +78,7 @@ def test_every_demo_scene_loads(tmp_path):
 
 
 def test_auto_substeps_keep_dt_under_half_the_stable_step(tmp_path):
-    scene = load_scene(write(tmp_path, GRID.replace("substeps = 20", 'substeps = "auto"')))
+    scene = load_scene(write(tmp_path, GRID.replace("substeps = 40", 'substeps = "auto"')))
     n = scene.resolved_substeps()
     dt = scene.frame_dt / n
     stable = tc.stable_dt(scene.cloth, "symplectic_euler", 0.3)
@@ -80,10 +94,12 @@ def test_auto_substeps_keep_dt_under_half_the_stable_step(tmp_path):
     (("rows = 6", 'rows = "6"'), r"bodies\[0\]\.rows must be an integer in \[2, 10_000\], got '6'"),
     (("rows = 6", "rows = 1"), r"bodies\[0\]\.rows must be an integer in \[2, 10_000\], got 1"),
     (("fps = 50", "fps = 0"), r"simulation\.fps must be a number in \[1, 1000\] frames/s, got 0"),
-    (("substeps = 20", "substeps = 0"), r"simulation\.substeps must be an integer in \[1, 100_000\], got 0"),
+    (("substeps = 40", "substeps = 0"), r"simulation\.substeps must be an integer in \[1, 100_000\], got 0"),
     (('type = "grid"', 'type = "blanket"'), r"bodies\[0\]\.type must be one of \['grid'"),
     (('"top_left"', '"top_middle"'), r"bodies\[0\]\.pinned must be particle indices in \[0, 29\] or one of"),
     (("pinned = [", "pinned = [30, "), r"bodies\[0\]\.pinned must be particle indices in \[0, 29\]"),
+    (("pinned = [", 'hem = "hemline"\npinned = ['),
+     r"bodies\[0\]\.hem must be particle indices in \[0, 29\] or one of \['boundary'"),
     (("size = [0.5, 0.4]", "size = [0.5, -0.4]"), r"bodies\[0\]: size\[1\] must be a finite number in \[1e-06, 10000\] m, got -0.4"),
     (('preset = "cotton"', 'preset = "tweed"'), r"bodies\[0\]\.material\.preset must be one of"),
     (("drag = 0.3", "drag = -1"), r"forces\.drag must be a number in \[0, 10000\] 1/s, got -1"),
@@ -168,7 +184,7 @@ path = { type = "oscillation", amplitude = [0, 0.5, 0], frequency = 2.0 }
 """
     scene = load_scene(write(tmp_path, text))
     sim = scene.build()
-    sim.step(100)
+    sim.step(200)                                  # 0.1 s
     np.testing.assert_allclose(sim.positions()[0], scene.cloth.particle_position[0] + [0, -0.1, 0.05],
                                atol=1e-12)
     assert isinstance(scene.colliders[0], tc.Box) and scene.colliders[0].path is not None

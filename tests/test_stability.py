@@ -13,11 +13,12 @@ from ti_cloth.modes import stiffest_mode
 
 def cloths():
     """Three different bodies: a square sheet pinned at two corners, a strip with a heavy hem
-    and stiff shear, and a hanging string."""
+    all round and stiff shear, and a hanging string."""
     sheet = tc.Cloth(tc.grid_mesh(9, 9, size=(0.6, 0.6), plane="xz"), tc.Material(), pinned=[0, 8])
     hem = tc.Material(density=0.3, stretch=tc.SpringParams(2000.0, 0.5), shear=tc.SpringParams(800.0),
                       bend=tc.SpringParams(5.0), hem_mass=0.01)
-    strip = tc.Cloth(tc.grid_mesh(5, 14, size=(1.2, 0.4)), hem, pinned=list(range(56, 70)))
+    strip = tc.Cloth(tc.grid_mesh(5, 14, size=(1.2, 0.4)), hem, pinned=list(range(56, 70)),
+                     hem="boundary")
     rope = tc.string(12, 1.0, mass=0.02, stretch=tc.SpringParams(300.0), direction=(1, -1, 0))
     return {"sheet": sheet, "strip": strip, "string": rope}
 

@@ -15,10 +15,10 @@ def grid_cloth(rows=4, cols=5, width=2.0, height=1.5, **material):
 
 
 def test_masses_sum_to_density_times_area_plus_hem():
+    """The default hem of a grid is its bottom edge: cols particles."""
     rows, cols, width, height, rho, hem = 5, 7, 2.0, 1.5, 0.3, 0.01
     cloth = grid_cloth(rows, cols, width, height, density=rho, hem_mass=hem)
-    boundary = 2 * rows + 2 * cols - 4
-    expected = rho * width * height + hem * boundary
+    expected = rho * width * height + hem * cols
     report("total mass", cloth.particle_mass.sum(), expected)
     assert cloth.particle_mass.sum() == pytest.approx(expected, rel=1e-12)
 
@@ -39,15 +39,35 @@ def test_grid_masses_match_hand_computation():
         np.testing.assert_allclose(got, want, rtol=1e-12)
 
 
-def test_hem_mass_goes_to_boundary_only_and_override_wins():
+def test_hem_mass_goes_to_the_hem_never_to_pins_and_override_wins():
+    """A 4 x 5 grid (rows x cols, row 0 at the bottom), hem_mass 0.05 kg, corner 0 pinned:
+    the extra mass per particle, written out by hand for each choice of hem."""
     plain = grid_cloth(density=0.3)
-    hemmed = tc.Cloth(tc.grid_mesh(4, 5, size=(2.0, 1.5)), tc.Material(density=0.3, hem_mass=0.05),
-                      particle_mass_override={7: 1.25})
-    extra = hemmed.particle_mass - plain.particle_mass
-    boundary = hemmed.mesh.boundary_vertices()
-    np.testing.assert_allclose(np.delete(extra, boundary)[np.delete(np.arange(20), boundary) != 7], 0)
-    np.testing.assert_allclose(extra[boundary], 0.05, rtol=1e-12)
-    assert hemmed.particle_mass[7] == 1.25
+
+    def extra(**options):
+        body = tc.Cloth(tc.grid_mesh(4, 5, size=(2.0, 1.5)), tc.Material(density=0.3, hem_mass=0.05),
+                        pinned=[0], **options)
+        return ((body.particle_mass - plain.particle_mass) / 0.05).round(12).reshape(4, 5)
+
+    by_hand = {
+        "default (bottom)": ({}, [[0, 1, 1, 1, 1], [0] * 5, [0] * 5, [0] * 5]),
+        "left": (dict(hem="left"), [[0, 0, 0, 0, 0], [1, 0, 0, 0, 0], [1, 0, 0, 0, 0], [1, 0, 0, 0, 0]]),
+        "boundary": (dict(hem="boundary"), [[0, 1, 1, 1, 1], [1, 0, 0, 0, 1], [1, 0, 0, 0, 1],
+                                            [1, 1, 1, 1, 1]]),
+        "indices": (dict(hem=[0, 7, 19]), [[0, 0, 0, 0, 0], [0, 0, 1, 0, 0], [0] * 5, [0, 0, 0, 0, 1]]),
+        "none": (dict(hem=[]), [[0] * 5] * 4),
+    }
+    for label, (options, expected) in by_hand.items():
+        np.testing.assert_array_equal(extra(**options), expected, err_msg=label)
+    mesh = tc.Mesh(tc.grid_mesh(4, 5).vertices, tc.grid_mesh(4, 5).triangles)    # not a grid
+    body = tc.Cloth(mesh, tc.Material(hem_mass=0.05))
+    np.testing.assert_array_equal(np.flatnonzero(body.hem), mesh.boundary_vertices())
+    override = tc.Cloth(tc.grid_mesh(4, 5), tc.Material(hem_mass=0.05), particle_mass_override={2: 1.25})
+    assert override.particle_mass[2] == 1.25 and override.hem[2]
+    with pytest.raises(ValueError, match="hem must be one of .* got 'hem'"):
+        tc.Cloth(tc.grid_mesh(4, 5), tc.Material(), hem="hem")
+    with pytest.raises(ValueError, match=r"hem must be particle indices in \[0, 19\], got \[20\]"):
+        tc.Cloth(tc.grid_mesh(4, 5), tc.Material(), hem=[20])
 
 
 @pytest.mark.parametrize("rows, cols", [(2, 2), (2, 5), (3, 3), (4, 7), (9, 6)])

@@ -74,6 +74,19 @@ class Mesh:
         """Sorted indices of the vertices on a boundary edge."""
         return np.unique(self.boundary_edges())
 
+    def named_vertices(self) -> dict[str, np.ndarray]:
+        """Vertex sets by name, as scene files and `hem=` take them: "boundary", and for a grid
+        its edges and corners ("bottom" = row 0, "left" = column 0, "top_right", ...)."""
+        names = {"boundary": self.boundary_vertices()}
+        if self.grid_shape is not None:
+            rows, cols = self.grid_shape
+            index = np.arange(rows * cols).reshape(rows, cols)
+            names |= {"bottom_left": index[:1, 0], "bottom_right": index[:1, -1],
+                      "top_left": index[-1:, 0], "top_right": index[-1:, -1],
+                      "bottom": index[0], "top": index[-1], "left": index[:, 0],
+                      "right": index[:, -1]}
+        return names
+
     def triangle_areas(self) -> np.ndarray:
         """Rest area of each triangle [m^2], shape (triangle_count,)."""
         p = self.vertices[self.triangles]

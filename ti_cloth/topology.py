@@ -132,7 +132,9 @@ class Cloth:
     Arrays (read-only numpy, entity-first names):
       particle_position  rest positions [m], (N, 3)
       particle_mass      masses [kg], (N,): area x density / 3 per triangle corner (Stuyck 4.2),
-                         + hem_mass on boundary particles, then `particle_mass_override`
+                         + material.hem_mass on each hem particle, then
+                         `particle_mass_override`
+      hem                (N,) bool: the particles that got hem mass
       pinned             (N,) bool; pinned particles have inverse mass 0
       spring_indices     (S, 2) int, i < j
       spring_rest_length (S,) [m], from the reference configuration
@@ -143,13 +145,17 @@ class Cloth:
       body_offsets       particle ranges of the bodies joined by `combine` ((0, N) for one)
 
     pinned: particle indices or an (N,) bool mask. springs: explicit springs (see module doc).
+    hem: the particles on the hem (Stuyck 4.2: the edge "folded double and stitched" carries
+    material.hem_mass each): a name of mesh.named_vertices() ("boundary", a grid's "bottom",
+    "left", ...), particle indices or an (N,) bool mask; default a grid's bottom edge, else
+    the boundary. Pinned particles never get hem mass.
     particle_mass_override: {index: kg} applied last. particle_mass: (N,) masses [kg] that
     replace the area-lumped ones and hem mass (bodies without triangles need it).
     """
 
     def __init__(self, mesh: Mesh, material: Material, pinned=(), springs=None,
                  particle_mass_override: Mapping[int, float] | None = None,
-                 particle_mass=None):
+                 particle_mass=None, hem=None):
         require(isinstance(mesh, Mesh), "mesh", mesh, "a ti_cloth.Mesh")
         require(isinstance(material, Material), "material", material, "a ti_cloth.Material")
         self.mesh = mesh
@@ -157,6 +163,8 @@ class Cloth:
         n = mesh.vertex_count
         self.particle_position = mesh.vertices
 
+        self.pinned = _index_mask("pinned", pinned, n)
+        self.hem = np.zeros(n, bool)
         if particle_mass is not None:
             mass = as_array("particle_mass", particle_mass, np.float64, (n,)).copy()
             require(bool(np.all(mass >= 0)), "particle_mass", mass.min(), "masses >= 0 kg")
@@ -165,12 +173,12 @@ class Cloth:
                     "at least one triangle (masses come from triangle areas; pass particle_mass= "
                     "for a mesh without triangles)")
             mass = lumped_masses(mesh.vertices, mesh.triangles, material.density)
-            mass[mesh.boundary_vertices()] += material.hem_mass
+            self.hem = _hem_mask(hem, mesh) & ~self.pinned
+            mass[self.hem] += material.hem_mass
         for i, m in (particle_mass_override or {}).items():
             require(isinstance(i, (int, np.integer)) and 0 <= i < n, "particle_mass_override key",
                     i, f"a particle index in [0, {n - 1}]")
             mass[i] = finite_number(f"particle_mass_override[{i}]", m, 0.0, unit="kg")
-        self.pinned = _pin_mask(pinned, n)
         massless = np.flatnonzero((mass <= 0) & ~self.pinned)
         require(len(massless) == 0, f"particle_mass[{massless[:1].tolist()}]", 0.0,
                 f"> 0 kg for every unpinned particle ({len(massless)} massless: "
@@ -197,7 +205,7 @@ class Cloth:
         self._freeze()
 
     def _freeze(self) -> None:
-        for name in ("particle_mass", "pinned", "spring_indices", "spring_kind", "spring_rest_length",
+        for name in ("particle_mass", "pinned", "hem", "spring_indices", "spring_kind", "spring_rest_length",
                      "spring_stiffness", "spring_damping", "triangle_edge_spring"):
             getattr(self, name).flags.writeable = False
 
@@ -231,6 +239,7 @@ class Cloth:
         body.particle_position = body.mesh.vertices
         body.particle_mass = joined("particle_mass")
         body.pinned = joined("pinned")
+        body.hem = joined("hem")
         body.spring_indices = joined("spring_indices", particle_offsets)
         body.spring_kind = joined("spring_kind")
         body.spring_rest_length = joined("spring_rest_length")
@@ -269,20 +278,32 @@ class Cloth:
                 f"pinned={int(self.pinned.sum())}, mass={self.particle_mass.sum():.4g} kg)")
 
 
-def _pin_mask(pinned, n: int) -> np.ndarray:
-    pinned = np.asarray(pinned)
-    require(pinned.size == 0 or pinned.dtype == bool or np.issubdtype(pinned.dtype, np.integer),
-            "pinned", pinned if pinned.size < 8 else f"array of {pinned.dtype}",
+def _index_mask(field: str, value, n: int) -> np.ndarray:
+    """(n,) bool mask from particle indices or an (n,) bool mask; ValueError naming `field`."""
+    value = np.asarray(value)
+    require(value.size == 0 or value.dtype == bool or np.issubdtype(value.dtype, np.integer),
+            field, value if value.size < 8 else f"array of {value.dtype}",
             "particle indices (ints) or an (N,) bool mask")
-    if pinned.dtype == bool:
-        require(pinned.shape == (n,), "pinned.shape", pinned.shape, f"({n},) for a boolean mask")
-        return pinned.copy()
-    index = as_array("pinned", pinned, np.int64, (None,))
+    if value.dtype == bool:
+        require(value.shape == (n,), f"{field}.shape", value.shape, f"({n},) for a boolean mask")
+        return value.copy()
+    index = as_array(field, value, np.int64, (None,))
     bad = index[(index < 0) | (index >= n)]
-    require(len(bad) == 0, "pinned", bad[:3].tolist(), f"particle indices in [0, {n - 1}]")
+    require(len(bad) == 0, field, bad[:3].tolist(), f"particle indices in [0, {n - 1}]")
     mask = np.zeros(n, bool)
     mask[index] = True
     return mask
+
+
+def _hem_mask(hem, mesh: Mesh) -> np.ndarray:
+    """The hem particles of Cloth(hem=...) as a mask (see Cloth)."""
+    names = mesh.named_vertices()
+    if hem is None:
+        hem = "bottom" if mesh.grid_shape is not None else "boundary"
+    if isinstance(hem, str):
+        require(hem in names, "hem", hem, f"one of {list(names)} or particle indices")
+        hem = names[hem]
+    return _index_mask("hem", hem, mesh.vertex_count)
 
 
 def _explicit_springs(springs, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -290,14 +290,13 @@ def _material(owner: Table) -> Material:
     return table.build(lambda: Material(**{**base.__dict__, **changes}))
 
 
-def _grid_names(rows: int, cols: int) -> dict[str, list[int]]:
-    """Named particle sets of a grid (left = column 0, bottom = row 0)."""
-    return {
-        "bottom_left": [0], "bottom_right": [cols - 1], "top_left": [(rows - 1) * cols],
-        "top_right": [rows * cols - 1], "bottom": list(range(cols)),
-        "top": list(range((rows - 1) * cols, rows * cols)), "left": list(range(0, rows * cols, cols)),
-        "right": list(range(cols - 1, rows * cols, cols)),
-    }
+def _hem(table: Table, mesh: Mesh):
+    """A surface body's `hem` key: names of mesh.named_vertices() and indices, or None (the
+    default of Cloth: a grid's bottom edge, a mesh's boundary)."""
+    if not table.has("hem"):
+        return None
+    named = {k: v.tolist() for k, v in mesh.named_vertices().items()}
+    return _indices(table, "hem", mesh.vertex_count, named)
 
 
 def _indices(table: Table, key: str, count: int, named: dict | None = None) -> list[int]:
@@ -326,9 +325,9 @@ def _body(table: Table, folder: Path, offset: int) -> tuple[Cloth, list[Handle]]
         table.optional(options, "plane", "string", choices=sorted(PLANES))
         table.optional(options, "origin", "vector", unit="m")
         mesh = table.build(grid_mesh, rows, cols, **options)
-        names = _grid_names(rows, cols)
+        names = {k: v.tolist() for k, v in mesh.named_vertices().items() if k != "boundary"}
         pinned = _indices(table, "pinned", mesh.vertex_count, names)
-        cloth = table.build(Cloth, mesh, _material(table), pinned=pinned)
+        cloth = table.build(Cloth, mesh, _material(table), pinned=pinned, hem=_hem(table, mesh))
     elif kind == "mesh":
         mesh = _mesh_file(table, folder)
         scale = table.number("scale", 1.0, within=limits.SCALE)
@@ -336,7 +335,7 @@ def _body(table: Table, folder: Path, offset: int) -> tuple[Cloth, list[Handle]]
         mesh = Mesh(mesh.vertices * scale + translate, mesh.triangles)
         names = {}
         cloth = table.build(Cloth, mesh, _material(table),
-                            pinned=_indices(table, "pinned", mesh.vertex_count))
+                            pinned=_indices(table, "pinned", mesh.vertex_count), hem=_hem(table, mesh))
     elif kind == "string":
         n = table.integer("n", 20, within=limits.CHAIN)
         names = {"start": [0], "end": [n - 1]}
