@@ -190,6 +190,15 @@ path = { type = "oscillation", amplitude = [0, 0.5, 0], frequency = 2.0 }
     assert isinstance(scene.colliders[0], tc.Box) and scene.colliders[0].path is not None
 
 
+def test_a_handle_release_time_from_a_scene(tmp_path):
+    text = GRID + '[[bodies.handles]]\nparticles = [0]\nrelease = 0.05\n' \
+                  'path = { type = "oscillation", amplitude = [0, 0.1, 0], frequency = 1.0 }\n'
+    assert load_scene(write(tmp_path, text)).handles[0].release == 0.05
+    with pytest.raises(SceneError, match=r"bodies\[0\]\.handles\[0\]: Handle\.release must be a "
+                                         r"finite number in \[0, 1e\+06\] s, got -1"):
+        load_scene(write(tmp_path, text.replace("release = 0.05", "release = -1")))
+
+
 def test_the_readme_scene_reference_is_a_valid_scene(tmp_path, f64):
     """The README's scene-file reference lists the keys as a real scene: it must load, build
     and step, so the documentation cannot drift from the reader."""

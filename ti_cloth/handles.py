@@ -1,6 +1,9 @@
-"""Scripted handles: particles moved along a path (the lecture's "click a particle and pull it",
-headless). A handle's particles are pinned (inverse mass 0), so the integrators leave them alone;
-after every step they are put where the path says, with the velocity of that move."""
+"""Scripted handles: particles moved along a path (the lecture's "click one of the particles and
+pull it around", headless). A handle's particles are pinned (inverse mass 0) while it holds
+them, so the integrators leave them alone; after the integrator of every step they are put
+where the path says, with the velocity of that move, before strain limiting and colliders see
+them. A handle with a release time lets go: its particles get their inverse mass back and go
+on with the velocity the path gave them (no jump)."""
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -9,35 +12,50 @@ import numpy as np
 import taichi as ti
 
 from . import backend, limits
-from ._validate import as_array, require
+from ._validate import as_array, in_range, require
 
 
 @dataclass(frozen=True)
 class Handle:
     """Particles moved along a scripted path.
 
-    particles: indices of the particles the handle holds; they become pinned (inverse mass 0).
+    particles: indices of the particles the handle holds; they are pinned (inverse mass 0)
+        while it holds them.
     path: t [s] -> displacement [m] from their rest positions, shape (3,) (all move together)
         or (len(particles), 3).
+    release: time [s] the handle lets go, or None (it holds to the end). It holds for every
+        step ending at or before `release`; the first step ending after it moves the particles
+        freely, with their own masses and the velocity of the path's last move. A particle
+        the body itself pins stays pinned.
     """
 
     particles: Sequence[int]
     path: Callable[[float], object]
+    release: float | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "particles", as_array("Handle.particles", self.particles,
                                                        np.int64, (None,)))
         require(len(self.particles) > 0, "Handle.particles", [], "at least one particle index")
         require(callable(self.path), "Handle.path", self.path, "a callable t -> displacement")
+        if self.release is not None:
+            object.__setattr__(self, "release", in_range("Handle.release", self.release,
+                                                         limits.TIME))
+
+    def holds_after(self, t: float, dt: float) -> bool:
+        """Whether it still holds in the step after the one ending at t [s] (steps of dt)."""
+        return self.release is None or t + dt <= self.release * (1 + 1e-12)
 
 
 @ti.kernel
-def move_handles(state: ti.template(), index: ti.types.ndarray(), target: ti.types.ndarray(),
-                 dt: float):
-    """Put held particles on their targets; velocity = displacement / dt so springs damp right."""
+def move_handles(state: ti.template(), index: ti.types.ndarray(), previous: ti.types.ndarray(),
+                 target: ti.types.ndarray(), dt: float):
+    """Put held particles on their targets, with the path's history: the previous position its
+    target a step ago and velocity = (target - previous) / dt, whatever the integrator did
+    to them in between (it moves pinned particles by their velocity)."""
     for h in range(index.shape[0]):
         i = index[h]
-        x_old = state.particle_position[i]
+        x_old = ti.Vector([previous[h, 0], previous[h, 1], previous[h, 2]])
         x_new = ti.Vector([target[h, 0], target[h, 1], target[h, 2]])
         state.particle_prev_position[i] = x_old
         state.particle_position[i] = x_new
@@ -47,10 +65,12 @@ def move_handles(state: ti.template(), index: ti.types.ndarray(), target: ti.typ
 class HandleSet:
     """The handles of one simulation: which particles they hold and where those rest.
 
-    handles: Handle objects; rest_position: the body's rest positions [m], shape (N, 3).
+    handles: Handle objects; rest_position: the body's rest positions [m], shape (N, 3);
+    body_pinned: (N,) bool, the body's own pins (released particles never leave those).
     """
 
-    def __init__(self, handles: Sequence[Handle], rest_position: np.ndarray):
+    def __init__(self, handles: Sequence[Handle], rest_position: np.ndarray,
+                 body_pinned: np.ndarray):
         self.handles = tuple(handles)
         count = len(rest_position)
         for h in self.handles:
@@ -58,19 +78,28 @@ class HandleSet:
             bad = h.particles[(h.particles < 0) | (h.particles >= count)]
             require(len(bad) == 0, "Handle.particles", bad.tolist(),
                     f"particle indices in [0, {count - 1}]")
-        self.index = np.concatenate([h.particles for h in self.handles]).astype(np.int32)
         self.rest_position = rest_position
+        self.body_pinned = np.asarray(body_pinned, bool)
+        self._hold(self.handles)
 
-    def pin(self, pinned: np.ndarray) -> np.ndarray:
-        """`pinned` (N,) bool with every held particle added."""
-        pinned = pinned.copy()
-        pinned[self.index] = True
+    def _hold(self, holding: Sequence[Handle]) -> None:
+        self.holding = tuple(holding)
+        self.index = (np.concatenate([h.particles for h in self.holding]).astype(np.int32)
+                      if self.holding else np.zeros(0, np.int32))
+
+    def pinned(self, permanent: bool = False) -> np.ndarray:
+        """(N,) bool: the body's pins and the particles of the handles holding now, or with
+        `permanent` of those that never let go (the stable step is found without the rest)."""
+        pinned = self.body_pinned.copy()
+        for h in self.handles if permanent else self.holding:
+            if not permanent or h.release is None:
+                pinned[h.particles] = True
         return pinned
 
     def targets(self, t: float) -> np.ndarray:
         """Where the held particles belong at time t [m], shape (len(index), 3)."""
         targets = []
-        for h in self.handles:
+        for h in self.holding:
             offset = np.asarray(h.path(t))
             shape = (3,) if offset.shape == (3,) else (len(h.particles), 3)
             offset = as_array(f"Handle.path({t})", offset, np.float64, shape)
@@ -83,10 +112,26 @@ class HandleSet:
 
     def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
         """The handle stage of a step ending at time t (simulation.STEP_ORDER): the held
-        particles to their targets, with the velocity of that move over dt [s]."""
-        move_handles(state, self.index, self.targets(t).astype(backend.numpy_real()), dt)
+        particles to their targets, moving at the path's velocity over the step (dt [s]);
+        handles whose release falls before the next step's end let go (model.set_pinned)."""
+        if not self.holding:
+            return
+        self._move(state, self.targets(max(t - dt, 0.0)), self.targets(t), dt)
+        still = [h for h in self.holding if h.holds_after(t, dt)]
+        if len(still) < len(self.holding):
+            self._hold(still)
+            model.set_pinned(self.pinned())
 
     def place_at_start(self, model, state, dt: float) -> None:
-        """Held particles at their t = 0 targets, at rest."""
-        self.after_step(model, state, 0.0, dt, 0)
-        state.particle_velocity.fill(0)
+        """Every handle holding again, its particles at their t = 0 targets, at rest (and let
+        go at once by a handle whose release is before the first step's end)."""
+        self._hold(self.handles)
+        target = self.targets(0.0)
+        self._move(state, target, target, dt)
+        still = [h for h in self.holding if h.holds_after(0.0, dt)]
+        self._hold(still)
+        model.set_pinned(self.pinned())
+
+    def _move(self, state, previous: np.ndarray, target: np.ndarray, dt: float) -> None:
+        real = backend.numpy_real()
+        move_handles(state, self.index, previous.astype(real), target.astype(real), dt)

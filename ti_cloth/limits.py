@@ -45,6 +45,7 @@ DRAG = Range(0.0, 1e4, "1/s", "air drag")
 DT = Range(1e-7, 1.0, "s", "time step dt")
 FPS = Range(1.0, 1000.0, "frames/s", "frame rate")
 DURATION = Range(1e-3, 3600.0, "s", "scene duration")
+TIME = Range(0.0, 1e6, "s", "handle release time")
 SUBSTEPS = Range(1, 100_000, "", "steps per frame")
 ITERATIONS = Range(1, 10_000, "", "pbd/xpbd passes, strain-limit passes, implicit CG iterations")
 THREADS = Range(1, 1024, "", "CPU threads (init(threads=...))")
@@ -62,7 +63,7 @@ SAMPLES = 2**26                # width x height x supersample^2: ~1.6 GB of rast
 NAME_LENGTH = 100              # scene names: letters, digits, "_", "-", "." (file names)
 
 TABLE = (STIFFNESS, DAMPING, DENSITY, MASS, LENGTH, SCALE, COORDINATE, ACCELERATION, SPEED_COMPONENT, DRAG, GUARD, DT,
-         FPS, DURATION, SUBSTEPS, ITERATIONS, THREADS, GRID_SIDE, CHAIN, STRANDS, SEGMENTS, CELLS,
+         FPS, DURATION, TIME, SUBSTEPS, ITERATIONS, THREADS, GRID_SIDE, CHAIN, STRANDS, SEGMENTS, CELLS,
          STEPS, IMAGE_SIDE, SUPERSAMPLE, FOV, LINE_WIDTH)
 
 # Memory, measured: a 512 x 512 grid (262,144 particles, 1,567,746 springs) peaks at 663 MB

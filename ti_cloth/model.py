@@ -75,8 +75,7 @@ class Model:
         """Upload `cloth` (of this model's structure) with `pinned` (default: the cloth's)."""
         self.cloth = cloth
         self.pinned = cloth.pinned if pinned is None else np.asarray(pinned, bool)
-        inv_mass = np.where(self.pinned, 0.0, 1.0 / np.where(cloth.particle_mass > 0,
-                                                              cloth.particle_mass, 1.0))
+        inv_mass = inverse_masses(cloth.particle_mass, self.pinned)
         n, s = self.particle_count, self.spring_count
         ends = cloth.spring_indices
         owner = np.concatenate([ends[:, 0], ends[:, 1]])
@@ -99,6 +98,12 @@ class Model:
                 (self.adjacency_spring, spring[order]),
                 (self.adjacency_other, other[order])))
 
+    def set_pinned(self, pinned: np.ndarray) -> None:
+        """Pin exactly `pinned` (N,) bool from the next step on: inverse masses 0 there and
+        1/m elsewhere (handles holding and letting go)."""
+        self.pinned = np.asarray(pinned, bool)
+        upload(((self.particle_inv_mass, inverse_masses(self.cloth.particle_mass, self.pinned)),))
+
     def state(self, position_limit: float = 1e6) -> State:
         """A fresh State at the rest configuration, at rest, with every spring intact, whose
         divergence guard flags any |coordinate| beyond position_limit [m]."""
@@ -113,6 +118,11 @@ class Model:
             self._colouring = SpringColouring(*color_springs(self.cloth.spring_indices,
                                                              self.particle_count))
         return self._colouring
+
+
+def inverse_masses(mass: np.ndarray, pinned: np.ndarray) -> np.ndarray:
+    """1/m per particle, 0 where pinned (lecture: "set 1/m to zero")."""
+    return np.where(pinned, 0.0, 1.0 / np.where(mass > 0, mass, 1.0))
 
 
 @backend.kernel_argument

@@ -2,7 +2,9 @@
 
 One step, in this order (STEP_ORDER), the same in every launch plan:
 
-    integrator (forces, move)  ->  strain limiting  ->  colliders  ->  handles  ->  tearing
+    integrator (forces, move)  ->  handles  ->  strain limiting  ->  colliders  ->  tearing
+
+(held particles are on their paths before strain limiting and the colliders see them)
 
 Each stage after the integrator is an object with after_step(model, state, t, dt, step_index)
 (t: the time at the step's end), compiled and launched only when the simulation has it; the
@@ -32,7 +34,7 @@ from .tearing import RUNAWAY_STRAIN, Tearing, torn_triangles
 from .topology import Cloth
 from .wind import WindField
 
-STEP_ORDER = ("integrator", "strain_limit", "colliders", "handles", "tearing")
+STEP_ORDER = ("integrator", "handles", "strain_limit", "colliders", "tearing")
 
 
 class Simulation:
@@ -44,7 +46,8 @@ class Simulation:
     gravity: [m/s^2], any vector. drag: uniform air drag [1/s], >= 0.
     tearing: None (off: the tear kernel is never compiled nor launched), a tear strain
         (float) or a Tearing.
-    handles: scripted particles (Handle); their particles are pinned.
+    handles: scripted particles (Handle); their particles are pinned while held (until a
+        handle's release time). dt="auto" treats particles that are let go as free.
     colliders: Plane, Sphere, Box, Capsule objects (none: the collision kernels are never
         compiled nor launched).
     strain_limit: None (off: never compiled nor launched) or a StrainLimit (Provot 1995).
@@ -74,8 +77,9 @@ class Simulation:
         require(isinstance(handles, (list, tuple)), "handles", handles,
                 "a list of Handle objects (handles=[Handle(...)])")
         handles = tuple(handles)
-        self.handles = HandleSet(handles, cloth.particle_position) if handles else None
-        pinned = self.handles.pin(cloth.pinned) if self.handles is not None else cloth.pinned
+        self.handles = (HandleSet(handles, cloth.particle_position, cloth.pinned) if handles
+                        else None)
+        pinned = self.handles.pinned() if self.handles is not None else cloth.pinned
         position_limit = in_range("position_limit", position_limit, limits.GUARD)
         require(strain_limit is None or isinstance(strain_limit, StrainLimit), "strain_limit",
                 strain_limit, "None or a StrainLimit")
@@ -100,7 +104,8 @@ class Simulation:
                                               tearable=tearing is not None, wind=self.wind))
         self.integrator = POOL.keep(self.integrator)   # an equal one, whose kernels exist
         if auto:
-            self.dt = auto_dt(cloth, self.integrator, drag, pinned)
+            self.dt = auto_dt(cloth, self.integrator, drag, pinned if self.handles is None
+                              else self.handles.pinned(permanent=True))
         self.state.reset(self.model.particle_rest_position)
         stages = dict(strain_limit=self.strain_limiter, colliders=self.colliders,
                       handles=self.handles, tearing=self.tearing)
@@ -261,8 +266,8 @@ class Simulation:
         return torn_triangles(self.cloth.triangle_edge_spring, ~self.spring_alive())
 
     def pinned(self) -> np.ndarray:
-        """(N,) bool: particles the integrator does not move (the cloth's pins and every
-        handle's particles)."""
+        """(N,) bool: particles the integrator does not move now (the cloth's pins and the
+        particles of every handle still holding)."""
         return self.model.pinned.copy()
 
     def collider_shapes(self) -> tuple:

@@ -369,7 +369,10 @@ def _body(table: Table, folder: Path, offset: int) -> tuple[Cloth, list[Handle]]
         particles = _indices(h, "particles", cloth.particle_count, names)
         if not particles:
             h.fail(f"{h.path('particles')} must list at least one particle")
-        handles.append(h.build(Handle, [p + offset for p in particles], _path(h.table("path", True))))
+        release = {}
+        h.optional(release, "release", unit="s")
+        handles.append(h.build(Handle, [p + offset for p in particles], _path(h.table("path", True)),
+                               **release))
         h.finish()
     table.finish()
     return cloth, handles
