@@ -61,11 +61,14 @@ def test_string_fixed_at_both_ends_sags_to_the_independent_equilibrium(f64):
     assert expected[5, 1] < -0.05      # a real sag, not the straight rest line
 
 
-def test_hanging_string_stretches_by_the_weight_below_each_spring(f64):
+@pytest.mark.parametrize("end_mass", ["half", "full"])
+def test_hanging_string_stretches_by_the_weight_below_each_spring(f64, end_mass):
     """Fixed at the top, free below: spring j carries the weight of the particles under it,
-    so its length is L + g sum(m below) / k (closed form)."""
+    so its length is L + g sum(m below) / k (closed form), with lumped ends or the lecture's
+    equal masses."""
     n, k = 8, 200.0
-    cloth = tc.string(n, 0.7, mass=0.2, stretch=tc.SpringParams(k, 0.05), direction=(0, -1, 0))
+    cloth = tc.string(n, 0.7, mass=0.2, stretch=tc.SpringParams(k, 0.05), direction=(0, -1, 0),
+                      end_mass=end_mass)
     sim = tc.Simulation(cloth, dt=1e-3, drag=15.0)
     x = settle(sim, 4.0)
     below = np.cumsum(cloth.particle_mass[::-1])[::-1][1:]
@@ -81,6 +84,8 @@ def test_string_layout_masses_and_ends():
                       bend=tc.SpringParams(3.0))
     np.testing.assert_allclose(cloth.particle_position[-1], [1, 2, 5])
     np.testing.assert_allclose(cloth.particle_mass, [0.125, 0.25, 0.25, 0.25, 0.125])
+    lecture = tc.string(5, 2.0, mass=1.0, end_mass="full")
+    np.testing.assert_allclose(lecture.particle_mass, [0.2] * 5)      # the same m everywhere
     assert cloth.pinned.tolist() == [True, False, False, False, True]
     assert cloth.spring_count_by_kind() == {"stretch": 4, "shear": 0, "bend": 3}
     np.testing.assert_allclose(cloth.spring_rest_length[cloth.spring_kind == tc.SpringKind.BEND], 1.0)
@@ -88,7 +93,7 @@ def test_string_layout_masses_and_ends():
 
 @pytest.mark.parametrize("kwargs, field", [
     (dict(n=1, length=1.0), "n"), (dict(n=4, length=0.0), "length"),
-    (dict(n=4, length=1.0, fixed="left"), "fixed"), (dict(n=4, length=1.0, direction=(0, 0, 0)), "direction"),
+    (dict(n=4, length=1.0, fixed="left"), "fixed"), (dict(n=4, length=1.0, end_mass="heavy"), "end_mass"), (dict(n=4, length=1.0, direction=(0, 0, 0)), "direction"),
 ])
 def test_string_rejects_bad_input_by_name(kwargs, field):
     with pytest.raises(ValueError, match=field):

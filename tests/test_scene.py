@@ -71,10 +71,23 @@ def test_a_scene_hem_takes_grid_names_and_indices(tmp_path):
 
 def test_every_demo_scene_loads(tmp_path):
     scenes = sorted(DEMOS.glob("*.toml"))
-    assert len(scenes) == 9   # the eight demos and the study's standard scene
+    assert len(scenes) == 10   # the nine demos and the study's standard scene
     for path in scenes:
         scene = load_scene(path)
         assert scene.cloth.particle_count > 1 and scene.frames >= 15, path.name
+
+
+def test_the_demos_of_the_source_texts_run_their_schemes_as_written():
+    """stuyck_explicit: Stuyck's explicit Euler (eq. 4.8-4.9) with relative damping (eq. 4.7)
+    at a stable step; verlet_pbd_cloth: the lecture's loop (numIter = 2 substeps of a Verlet
+    update and one relaxation pass, 1.99 / 0.99) with a particle pulled and let go."""
+    stuyck = load_scene(DEMOS / "stuyck_explicit.toml")
+    assert stuyck.integrator.name == "explicit_euler" and stuyck.cloth.damping == "relative"
+    dt = stuyck.frame_dt / stuyck.resolved_substeps()
+    assert dt <= 0.5 * tc.stable_dt(stuyck.cloth, "explicit_euler", stuyck.drag)
+    lecture = load_scene(DEMOS / "verlet_pbd_cloth.toml")
+    assert lecture.integrator == tc.PBD(iterations=1, damping=0.01) and lecture.substeps == 2
+    assert [h.release for h in lecture.handles] == [2.5]
 
 
 def test_auto_substeps_keep_dt_under_half_the_stable_step(tmp_path):

@@ -14,6 +14,7 @@ from .mesh import Mesh, tet_grid_mesh
 from .topology import Cloth, unique_springs
 
 STRING_ENDS = ("start", "both", "none")
+END_MASSES = ("half", "full")
 
 
 def _unit(name: str, value) -> np.ndarray:
@@ -23,8 +24,12 @@ def _unit(name: str, value) -> np.ndarray:
     return v / length
 
 
-def _chain_masses(strands: int, particles: int, mass: float) -> np.ndarray:
-    """Each segment's mass split half to either end: the ends of a chain carry half as much."""
+def _chain_masses(strands: int, particles: int, mass: float, end_mass: str = "half") -> np.ndarray:
+    """A strand's `mass` over its particles: "half", each segment's mass split half to either
+    end (lumped: the ends carry half as much); "full", the same mass m = mass / particles on
+    every particle (the lecture's string)."""
+    if end_mass == "full":
+        return np.full(strands * particles, mass / particles)
     per_particle = np.full(particles, mass / (particles - 1))
     per_particle[[0, -1]] *= 0.5
     return np.tile(per_particle, strands)
@@ -32,7 +37,7 @@ def _chain_masses(strands: int, particles: int, mass: float) -> np.ndarray:
 
 def string(n: int, length: float, *, mass: float = 0.1, stretch=SpringParams(500.0, 0.1),
            bend: SpringParams | None = None, start=(0.0, 0.0, 0.0), direction=(1.0, 0.0, 0.0),
-           fixed: str = "start") -> Cloth:
+           fixed: str = "start", end_mass: str = "half") -> Cloth:
     """The lecture's elastic string: n particles in a straight line, neighbours joined by springs.
 
     length: rest length [m] from the first particle to the last. mass: total mass [kg], each
@@ -41,19 +46,23 @@ def string(n: int, length: float, *, mass: float = 0.1, stretch=SpringParams(500
     apart (None: no bend springs, a perfectly flexible string). start: position of particle 0 [m];
     direction: the line's direction. fixed: "start" (particle 0 fixed, the lecture's wall; the
     other end free: it simply has one spring, which is what the lecture's p_end = p_end-1 boundary
-    approximates), "both" (the string held at both ends) or "none".
+    approximates), "both" (the string held at both ends) or "none". end_mass: "half" (the ends
+    carry half a segment's mass, as lumping segments gives) or "full" (every particle the same
+    mass, mass / n: the lecture's m a_i = m g + ... for every i).
     """
     n = count("n", n, limits.CHAIN)
     limits.check_memory("n", n, n, 2 * n)
     length = in_range("length", length, limits.LENGTH)
     mass = in_range("mass", mass, limits.MASS)
     require(fixed in STRING_ENDS, "fixed", fixed, f"one of {STRING_ENDS}")
+    require(end_mass in END_MASSES, "end_mass", end_mass, f"one of {END_MASSES}")
     start = as_array("start", start, np.float64, (3,))
     positions = start + np.linspace(0.0, length, n)[:, None] * _unit("direction", direction)
     springs = _chain_springs(1, n, bend is not None)
     pinned = {"start": [0], "both": [0, n - 1], "none": []}[fixed]
     material = Material(stretch=stretch, bend=bend or SpringParams(0.0))
-    return Cloth.from_particles(positions, _chain_masses(1, n, mass), springs, material, pinned)
+    return Cloth.from_particles(positions, _chain_masses(1, n, mass, end_mass), springs, material,
+                                pinned)
 
 
 def _chain_springs(strands: int, particles: int, bend: bool) -> dict[SpringKind, np.ndarray]:

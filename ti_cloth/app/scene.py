@@ -345,6 +345,7 @@ def _body(table: Table, folder: Path, offset: int) -> tuple[Cloth, list[Handle]]
         table.optional(options, "start", "vector", unit="m")
         table.optional(options, "direction", "vector")
         table.optional(options, "fixed", "string", choices=body_builders.STRING_ENDS)
+        table.optional(options, "end_mass", "string", choices=body_builders.END_MASSES)
         cloth = table.build(body_builders.string, n, length, **options)
     elif kind == "hair":
         strands = table.integer("strands", 64, within=limits.STRANDS)
