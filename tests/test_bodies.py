@@ -6,6 +6,7 @@ import pytest
 
 import ti_cloth as tc
 from helpers import report
+from ti_cloth.bodies import GHOST_SHARE
 
 G = 9.81
 
@@ -101,7 +102,7 @@ def test_string_rejects_bad_input_by_name(kwargs, field):
 
 
 def test_hair_roots_lie_on_the_head_and_strands_point_outwards():
-    body = tc.hair(40, 6, 0.3, anchor=(0, 1.5, 0), radius=0.1, mass=2e-3)
+    body = tc.hair(40, 6, 0.3, anchor=(0, 1.5, 0), radius=0.1, mass=2e-3, ghosts=False)
     roots = np.flatnonzero(body.pinned)
     assert body.particle_count == 40 * 7 and len(roots) == 40
     np.testing.assert_array_equal(roots, np.arange(40) * 7)
@@ -119,7 +120,8 @@ def test_hair_follows_a_moving_head_and_the_tips_lag(f64):
     """Roots moved by a Handle follow the head exactly; a strand's tip trails behind, and
     once the head stops the strands hang straight down again below their roots."""
     body = tc.hair([[0.0, 1.0, 0.0]], 8, 0.4, directions=[[0.0, -1.0, 0.0]], mass=1e-3,
-                   stretch=tc.SpringParams(20.0, 0.01), bend=tc.SpringParams(0.5, 0.001))
+                   stretch=tc.SpringParams(20.0, 0.01), bend=tc.SpringParams(0.5, 0.001),
+                   ghosts=False)
     path = lambda t: (0.5 * min(t, 0.5), 0.0, 0.0)          # 1 m/s for 0.5 s, then still
     sim = tc.Simulation(body, dt=5e-4, drag=4.0,       # a quarter of the stable step
                         handles=[tc.Handle(np.flatnonzero(body.pinned), path)])
@@ -132,6 +134,119 @@ def test_hair_follows_a_moving_head_and_the_tips_lag(f64):
     report("tip offset from the root after the head stopped [m]", x[-1] - x[0], "straight down")
     assert np.abs(x[:, 0] - 0.25).max() < 1e-4
     assert (np.diff(x[:, 1]) < 0).all()
+
+
+def test_hair_ghosts_make_a_chain_of_tetrahedra_with_pinned_root_segment():
+    """Selle et al. 2008 as fig. 4.5 draws it: strand particles keep their indices and rest
+    positions, a ghost beside every segment after them, every root/ghost/particle/ghost
+    quadruple a tetrahedron of volume > 0, springs to the next three of the sequence, the root
+    segment pinned, GHOST_SHARE of each strand's mass on its ghosts."""
+    plain = tc.hair(3, 4, 0.3, mass=1e-3, ghosts=False)
+    body = tc.hair(3, 4, 0.3, mass=1e-3)
+    real, ghost = np.arange(15).reshape(3, 5), 15 + np.arange(12).reshape(3, 4)
+    np.testing.assert_array_equal(body.particle_position[:15], plain.particle_position)
+    np.testing.assert_array_equal(np.flatnonzero(body.ghost), ghost.ravel())
+    np.testing.assert_array_equal(np.flatnonzero(body.pinned),
+                                  sorted([*real[:, 0], *real[:, 1], *ghost[:, 0]]))
+    share = GHOST_SHARE
+    np.testing.assert_allclose(body.particle_mass[real].sum(axis=1), (1 - share) * 1e-3)
+    np.testing.assert_allclose(body.particle_mass[ghost].sum(axis=1), share * 1e-3)
+    sequence = np.empty((3, 9), int)
+    sequence[:, 0::2], sequence[:, 1::2] = real, ghost
+    x, segment = body.particle_position, 0.3 / 4
+    expected = set()
+    for strand in sequence:
+        for a in range(6):
+            tet = x[strand[a:a + 4]]
+            volume = abs(np.linalg.det(tet[1:] - tet[0])) / 6
+            assert volume > 1e-2 * segment ** 3, "a flat tetrahedron"
+        expected |= {tuple(sorted((strand[a], strand[a + o]))) for o in (1, 2, 3)
+                     for a in range(9 - o)}
+    assert set(map(tuple, body.spring_indices)) == expected
+    edges = np.isin(body.spring_indices, real).all(axis=1) & (body.spring_kind == tc.SpringKind.STRETCH)
+    np.testing.assert_allclose(body.spring_rest_length[edges], segment)
+
+
+def cantilever(bend_k, ghosts=True, segments=6):
+    """A 0.3 m strand rooted at the origin pointing along +x (horizontal)."""
+    return tc.hair([[0.0, 0.0, 0.0]], segments, 0.3, directions=[[1.0, 0.0, 0.0]], mass=2e-3,
+                   stretch=tc.SpringParams(200.0, 0.05), bend=tc.SpringParams(bend_k, 0.01 * bend_k),
+                   ghosts=ghosts)
+
+
+def droop_degrees(x, segments=6):
+    tip = x[segments] - x[0]
+    return np.degrees(np.arctan2(-tip[1], tip[0]))
+
+
+@pytest.mark.slow
+def test_a_cantilever_strand_droops_less_the_stiffer_it_bends(f64):
+    """Rooted horizontally: with ghosts the tip droops less as bend stiffness grows and stays
+    within 10 degrees of horizontal when stiff; without them (the plain chain) nothing holds
+    the root's direction and the strand hangs whatever its bend stiffness (the issue's 87°)."""
+    droops = {}
+    for k in (0.5, 5.0, 50.0, 500.0):
+        sim = tc.Simulation(cantilever(k), dt="auto", drag=20.0)
+        droops[k] = droop_degrees(settle(sim, 3.0))
+    plain = tc.Simulation(cantilever(500.0, ghosts=False), dt="auto", drag=20.0)
+    hanging = droop_degrees(settle(plain, 3.0))
+    report("tip droop [deg] by bend k; plain chain at k = 500", (droops, hanging),
+           "falling; < 10; > 60")
+    values = [droops[k] for k in sorted(droops)]
+    assert all(a > b for a, b in zip(values, values[1:]))
+    assert 0 < droops[500.0] < 10 and hanging > 60
+
+
+@pytest.mark.slow
+def test_a_stiff_cantilever_settles_at_the_minimum_of_its_spring_energy(f64):
+    """The settled shape equals the equilibrium found independently (Newton on the spring
+    forces plus weight, from the rest shape; its Jacobian negative definite there, so a
+    minimum of the energy), to 1e-7 m."""
+    body = cantilever(50.0)
+    sim = tc.Simulation(body, dt="auto", drag=20.0)
+    x = settle(sim, 4.0)
+    expected = string_equilibrium(body, body.particle_position.copy())
+    report("settled vs energy minimum, max |dx| [m]", np.abs(x - expected).max(), "< 1e-7")
+    assert np.abs(x - expected).max() < 1e-7
+    assert droop_degrees(expected) > 0.1, "it does droop"
+
+
+def rigid_misfit(x, rest):
+    """Largest distance [m] between x and rest after the best rigid motion (Kabsch)."""
+    a, b = x - x.mean(axis=0), rest - rest.mean(axis=0)
+    u, _, vt = np.linalg.svd(a.T @ b)
+    flip = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))])
+    return float(np.linalg.norm(a @ (u @ flip @ vt) - b, axis=1).max())
+
+
+@pytest.mark.slow
+def test_a_curly_strand_keeps_its_helix_while_hanging(f64):
+    """A helix of radius 2 cm and pitch 1 cm (2 turns) rooted pointing down: its rest strand
+    particles lie on the helix; hanging under its own weight the ghost-braced strand keeps that
+    shape up to a rigid motion within a quarter of the radius, where the plain chain (no
+    ghosts, the same springs) loses it. A coil is soft in extension: it takes springs of
+    2e4 N/m to hold 0.5 g of hair (2e3 N/m leave it 7 cm off at 4 turns)."""
+    radius, pitch, segments, length = 0.02, 0.01, 12, 0.25
+    misfit = {}
+    for ghosts in (True, False):
+        body = tc.hair([[0.0, 0.0, 0.0]], segments, length, directions=[[0.0, -1.0, 0.0]],
+                       mass=5e-4, stretch=tc.SpringParams(2e4, 0.2),
+                       bend=tc.SpringParams(2e4, 0.2), curl=(radius, pitch), ghosts=ghosts)
+        rest = body.particle_position[:segments + 1]
+        flat = rest[:, [0, 2]]                    # circle fit: |p|^2 = 2 c . p + const
+        solution = np.linalg.lstsq(np.c_[2 * flat, np.ones(len(flat))], (flat ** 2).sum(axis=1),
+                                   rcond=None)[0]
+        around = flat - solution[:2]
+        np.testing.assert_allclose(np.linalg.norm(around, axis=1), radius, rtol=1e-9)
+        turns = np.unwrap(np.arctan2(around[:, 1], around[:, 0]))
+        assert abs(turns[-1] - turns[0]) / (2 * np.pi) == pytest.approx(
+            length / np.hypot(2 * np.pi * radius, pitch), rel=1e-9)
+        np.testing.assert_allclose(np.diff(rest[:, 1]), -pitch * length / segments
+                                   / np.hypot(2 * np.pi * radius, pitch), rtol=1e-9)
+        x = settle(tc.Simulation(body, dt="auto", drag=20.0), 1.5)[:segments + 1]
+        misfit[ghosts] = rigid_misfit(x, rest)
+    report("helix misfit after hanging, ghosts / plain [m]", misfit, f"< {0.25 * radius} / more")
+    assert misfit[True] < 0.25 * radius < misfit[False]
 
 
 def test_hair_rejects_bad_input_by_name():

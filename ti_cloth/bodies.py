@@ -74,31 +74,48 @@ def _chain_springs(strands: int, particles: int, bend: bool) -> dict[SpringKind,
     return springs
 
 
+GHOST_SHARE = 0.2      # of a strand's mass carried by its ghost particles
+GHOST_OFFSET = 0.5     # a ghost's distance from its segment's midpoint, in segment lengths
+
+
 def hair(strands, segments: int, length: float, *, anchor=(0.0, 0.0, 0.0), radius: float = 0.1,
          directions=None, mass: float = 1e-3, stretch=SpringParams(50.0, 0.02),
-         bend=SpringParams(5.0, 0.005)) -> Cloth:
-    """Hair strands rooted on a head (Stuyck 4.6.1): chains of `segments` springs each.
+         bend=SpringParams(5.0, 0.005), twist: SpringParams | None = None, ghosts: bool = True,
+         curl=None) -> Cloth:
+    """Hair strands rooted on a head (Stuyck 4.6.1, fig. 4.5): chains of `segments` springs.
 
     strands: a count (roots spread evenly over the upper half of a sphere of `radius` [m]
         around `anchor` [m], strands growing outwards) or root positions [m], shape (S, 3),
         with `directions` (S, 3) (default: away from `anchor`).
-    length: rest length of each strand [m]; mass: mass of one strand [kg].
-    stretch: springs between neighbours; bend: springs between particles two apart (None: none).
+    length: rest length of each strand [m] (along the curve); mass: mass of one strand [kg].
+    stretch: springs between neighbouring strand particles.
+    ghosts: True (Selle et al. 2008, the ghost particles of fig. 4.5): a ghost particle beside
+        each segment, GHOST_OFFSET segment lengths off its midpoint and turned a quarter turn
+        about the strand from the last, so the sequence root, ghost, particle, ghost, ... is a
+        chain of tetrahedra; springs join each of its members to the next three: to the next
+        (stretch constants), two on (strand particles: `stretch`, the strand's edges; ghosts:
+        `bend`) and three on (`twist`, default `bend`: torsion). The root, its ghost and the
+        next strand particle are pinned, so the root holds its direction. Ghosts carry
+        GHOST_SHARE of the strand's mass and are never drawn.
+        False: the plain chain, stretch (i, i+1) and bend (i, i+2) springs, the root pinned;
+        nothing holds the root's direction, so strands hang.
+    curl: None (straight) or (radius, pitch) [m]: a helical rest shape about the strand's
+        direction (Iben et al. 2013), which the springs keep (with ghosts).
 
-    Strand s holds particles s * (segments + 1) ... (s + 1) * (segments + 1) - 1; its root (the
-    first) is pinned; move the head with Handle(np.flatnonzero(body.pinned), path).
-    No ghost particles (Stuyck fig. 4.5): a straight chain of points has no orientation to
-    twist, so torsion has nothing to act on; ghosts matter for curly rest shapes, which these
-    strands do not have. Stretch and bend springs alone give the strand's swing and stiffness.
+    Strand s holds particles s * (segments + 1) ... (s + 1) * (segments + 1) - 1 (root first);
+    with ghosts, the ghost of its segment k is S * (segments + 1) + s * segments + k and
+    `body.ghost` marks them. Move the head with Handle(np.flatnonzero(body.pinned), path).
     """
     segments = count("segments", segments, limits.SEGMENTS)
     length = in_range("length", length, limits.LENGTH)
     mass = in_range("mass", mass, limits.MASS)
+    require(isinstance(ghosts, bool), "ghosts", ghosts, "True or False")
     anchor = as_array("anchor", anchor, np.float64, (3,))
     if isinstance(strands, (int, np.integer)) and not isinstance(strands, bool):
         strand_count = count("strands", strands, limits.STRANDS)
-        limits.check_memory("strands", strands, strand_count * (segments + 1),
-                            2 * strand_count * segments)
+        per_strand = (2 * segments + 1) if ghosts else segments + 1
+        limits.check_memory("strands", strands, strand_count * per_strand,
+                            (3 if ghosts else 2) * strand_count * per_strand)
         radius = in_range("radius", radius, limits.LENGTH)
         normals = _upper_hemisphere(strand_count)
         roots = anchor + radius * normals
@@ -113,14 +130,83 @@ def hair(strands, segments: int, length: float, *, anchor=(0.0, 0.0, 0.0), radiu
     require(len(bad) == 0, f"directions[{bad[:1].tolist()}]", 0.0,
             "non-zero (a root may not sit on the anchor without an explicit direction)")
     normals = normals / lengths[:, None]
-    steps = np.linspace(0.0, length, segments + 1)
-    positions = (roots[:, None, :] + steps[None, :, None] * normals[:, None, :]).reshape(-1, 3)
-    particles = segments + 1
-    springs = _chain_springs(len(roots), particles, bend is not None)
-    pinned = np.arange(len(roots)) * particles
-    material = Material(stretch=stretch, bend=bend or SpringParams(0.0))
-    return Cloth.from_particles(positions, _chain_masses(len(roots), particles, mass), springs,
-                                material, pinned)
+    curve = _strand_curves(roots, normals, segments, length, curl)          # (S, n + 1, 3)
+    material = Material(stretch=stretch, bend=bend or SpringParams(0.0),
+                        shear=twist or bend or SpringParams(0.0))
+    strand_count, particles = len(roots), segments + 1
+    if not ghosts:
+        return Cloth.from_particles(curve.reshape(-1, 3),
+                                    _chain_masses(strand_count, particles, mass),
+                                    _chain_springs(strand_count, particles, bend is not None),
+                                    material, np.arange(strand_count) * particles)
+    ghost_position = _ghost_positions(curve)                                  # (S, n, 3)
+    real = np.arange(strand_count * particles).reshape(strand_count, particles)
+    ghost = strand_count * particles + np.arange(strand_count * segments).reshape(strand_count,
+                                                                                  segments)
+    sequence = np.empty((strand_count, 2 * segments + 1), np.int64)       # r0 g0 r1 g1 ... rn
+    sequence[:, 0::2], sequence[:, 1::2] = real, ghost
+    is_ghost = np.zeros(sequence.shape, bool)
+    is_ghost[:, 1::2] = True
+    springs = {SpringKind.STRETCH: [], SpringKind.BEND: [], SpringKind.SHEAR: []}
+    for step, kind in ((1, SpringKind.STRETCH), (2, SpringKind.BEND), (3, SpringKind.SHEAR)):
+        pairs = np.stack([sequence[:, :-step], sequence[:, step:]], axis=-1)
+        edges = (step == 2) & ~is_ghost[:, :-step]                           # r_k to r_k+1
+        springs[SpringKind.STRETCH].append(pairs[edges] if step == 2 else pairs[:0].reshape(-1, 2))
+        springs[kind].append(pairs[~edges] if step == 2 else pairs.reshape(-1, 2))
+    springs = {kind: np.concatenate(parts) for kind, parts in springs.items()}
+    strand_masses = _chain_masses(strand_count, particles, (1 - GHOST_SHARE) * mass)
+    ghost_masses = np.full(strand_count * segments, GHOST_SHARE * mass / segments)
+    pinned = np.concatenate([real[:, :2].ravel(), ghost[:, 0]])
+    return Cloth.from_particles(np.concatenate([curve.reshape(-1, 3), ghost_position.reshape(-1, 3)]),
+                                np.concatenate([strand_masses, ghost_masses]), springs, material,
+                                pinned, ghost=np.arange(len(strand_masses) + len(ghost_masses))
+                                >= len(strand_masses))
+
+
+def _strand_curves(roots, normals, segments: int, length: float, curl) -> np.ndarray:
+    """Rest positions of every strand's particles, (S, segments + 1, 3): straight along its
+    direction, or a helix of curl = (radius, pitch) about it, the root on the helix, particles
+    spaced evenly along the helix's arc."""
+    arc = np.linspace(0.0, length, segments + 1)
+    if curl is None:
+        return roots[:, None, :] + arc[None, :, None] * normals[:, None, :]
+    curl = as_array("curl", curl, np.float64, (2,))
+    helix_radius = in_range("curl[0] (radius)", curl[0], limits.LENGTH)
+    pitch = in_range("curl[1] (pitch)", curl[1], limits.LENGTH)
+    turn = np.hypot(2 * np.pi * helix_radius, pitch)                     # arc length per turn
+    u = _perpendicular(normals)
+    v = np.cross(normals, u)
+    angle = 2 * np.pi * arc / turn
+    return (roots[:, None, :]
+            + helix_radius * (np.cos(angle)[None, :, None] - 1) * u[:, None, :]
+            + helix_radius * np.sin(angle)[None, :, None] * v[:, None, :]
+            + (pitch * arc / turn)[None, :, None] * normals[:, None, :])
+
+
+def _perpendicular(directions: np.ndarray) -> np.ndarray:
+    """A unit vector perpendicular to each unit row of `directions`."""
+    helper = np.where(np.abs(directions[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    u = np.cross(directions, helper)
+    return u / np.linalg.norm(u, axis=1, keepdims=True)
+
+
+def _ghost_positions(curve: np.ndarray) -> np.ndarray:
+    """A ghost beside each segment of each strand, (S, n, 3): GHOST_OFFSET segment lengths from
+    the midpoint, perpendicular to the segment, a quarter turn further round the strand than
+    the last (a frame carried along the strand by parallel transport), so that each root,
+    ghost, particle, ghost quadruple spans a tetrahedron of volume > 0."""
+    segment = np.diff(curve, axis=1)
+    length = np.linalg.norm(segment, axis=2, keepdims=True)
+    tangent = segment / length
+    ghosts = np.empty_like(segment)
+    u = _perpendicular(tangent[:, 0])
+    for k in range(segment.shape[1]):
+        t = tangent[:, k]
+        u = u - np.sum(u * t, axis=1, keepdims=True) * t
+        u /= np.linalg.norm(u, axis=1, keepdims=True)
+        offset = np.cos(k * np.pi / 2) * u + np.sin(k * np.pi / 2) * np.cross(t, u)
+        ghosts[:, k] = curve[:, k] + 0.5 * segment[:, k] + GHOST_OFFSET * length[:, k] * offset
+    return ghosts
 
 
 def _upper_hemisphere(count: int) -> np.ndarray:

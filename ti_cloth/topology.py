@@ -135,6 +135,7 @@ class Cloth:
                          + material.hem_mass on each hem particle, then
                          `particle_mass_override`
       hem                (N,) bool: the particles that got hem mass
+      ghost              (N,) bool: simulated, never drawn (hair's ghost particles)
       pinned             (N,) bool; pinned particles have inverse mass 0
       spring_indices     (S, 2) int, i < j
       spring_rest_length (S,) [m], from the reference configuration
@@ -155,7 +156,7 @@ class Cloth:
 
     def __init__(self, mesh: Mesh, material: Material, pinned=(), springs=None,
                  particle_mass_override: Mapping[int, float] | None = None,
-                 particle_mass=None, hem=None):
+                 particle_mass=None, hem=None, ghost=None):
         require(isinstance(mesh, Mesh), "mesh", mesh, "a ti_cloth.Mesh")
         require(isinstance(material, Material), "material", material, "a ti_cloth.Material")
         self.mesh = mesh
@@ -164,6 +165,7 @@ class Cloth:
         self.particle_position = mesh.vertices
 
         self.pinned = _index_mask("pinned", pinned, n)
+        self.ghost = _index_mask("ghost", () if ghost is None else ghost, n)
         self.hem = np.zeros(n, bool)
         if particle_mass is not None:
             mass = as_array("particle_mass", particle_mass, np.float64, (n,)).copy()
@@ -205,7 +207,7 @@ class Cloth:
         self._freeze()
 
     def _freeze(self) -> None:
-        for name in ("particle_mass", "pinned", "hem", "spring_indices", "spring_kind", "spring_rest_length",
+        for name in ("particle_mass", "pinned", "hem", "ghost", "spring_indices", "spring_kind", "spring_rest_length",
                      "spring_stiffness", "spring_damping", "triangle_edge_spring"):
             getattr(self, name).flags.writeable = False
 
@@ -240,6 +242,7 @@ class Cloth:
         body.particle_mass = joined("particle_mass")
         body.pinned = joined("pinned")
         body.hem = joined("hem")
+        body.ghost = joined("ghost")
         body.spring_indices = joined("spring_indices", particle_offsets)
         body.spring_kind = joined("spring_kind")
         body.spring_rest_length = joined("spring_rest_length")
@@ -252,11 +255,12 @@ class Cloth:
 
     @classmethod
     def from_particles(cls, positions, particle_mass, springs, material: Material | None = None,
-                       pinned=()) -> "Cloth":
+                       pinned=(), ghost=None) -> "Cloth":
         """A body without a surface: particles [m], masses [kg], explicit springs (S, 2) or
-        {kind: (S, 2)}; spring constants come from `material` by kind."""
+        {kind: (S, 2)}; spring constants come from `material` by kind; ghost: particles that
+        are simulated but never drawn (indices or a mask)."""
         return cls(Mesh(positions, np.zeros((0, 3), np.int64)), material or Material(),
-                   pinned=pinned, springs=springs, particle_mass=particle_mass)
+                   pinned=pinned, springs=springs, particle_mass=particle_mass, ghost=ghost)
 
     @property
     def particle_count(self) -> int:

@@ -47,7 +47,7 @@ def _frame_painter(scene, sim, out):
         view = SpringView((lo - reach, hi + reach), FRONT, res=(out.width, out.height))
         cloth = scene.cloth
         return lambda: view.render(sim.positions(), cloth.spring_indices, cloth.spring_kind,
-                                   sim.pinned(), sim.spring_alive())
+                                   sim.pinned(), sim.spring_alive(), cloth.ghost)
     camera = scene.camera or Camera.fit(scene.cloth, aspect=out.width / out.height,
                                         **scene.camera_fit)
     renderer = Renderer(out.width, out.height, camera, supersample=out.supersample)

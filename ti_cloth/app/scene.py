@@ -354,7 +354,9 @@ def _body(table: Table, folder: Path, offset: int) -> tuple[Cloth, list[Handle]]
         table.optional(options, "anchor", "vector", unit="m")
         table.optional(options, "radius", unit="m")
         table.optional(options, "mass", unit="kg")
-        _spring_options(table, options, "stretch", "bend")
+        table.optional(options, "ghosts", "boolean")
+        table.optional(options, "curl", "vector", length=2, unit="m")
+        _spring_options(table, options, "stretch", "bend", "twist")
         cloth = table.build(body_builders.hair, strands, segments, length, **options)
         names = {"roots": np.flatnonzero(cloth.pinned).tolist()}
     else:

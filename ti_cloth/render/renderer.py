@@ -296,7 +296,7 @@ class Renderer:
     def draw_simulation(self, sim, style: SurfaceStyle = SurfaceStyle()) -> None:
         """The body of a Simulation at its current time: its triangles (torn ones dropped),
         and the stretch springs of particles on no triangle (strings, hair) as lines; plus
-        particles."""
+        particles. Ghost particles (cloth.ghost) and their springs are never drawn."""
         self._require_frame()
         cloth, x = sim.cloth, sim.positions()
         alive = sim.spring_alive()
@@ -309,12 +309,14 @@ class Renderer:
         on_surface = np.zeros(cloth.particle_count, bool)
         on_surface[triangles.ravel()] = True
         i, j = cloth.spring_indices.T
-        lines = alive & (cloth.spring_kind == SpringKind.STRETCH) & ~on_surface[i] & ~on_surface[j]
+        shown = ~on_surface & ~cloth.ghost
+        lines = alive & (cloth.spring_kind == SpringKind.STRETCH) & shown[i] & shown[j]
         if lines.any():
             self.draw_lines(x, cloth.spring_indices[lines], width=style.line_width, colour=style.front)
         if style.particles > 0:
             colours = np.where(sim.pinned()[:, None], style.pin_colour, style.particle_colour)
-            self.draw_points(x, radius=style.particles, colour=colours)
+            drawn = ~cloth.ghost
+            self.draw_points(x[drawn], radius=style.particles, colour=colours[drawn])
 
     # -- ground and colliders ---------------------------------------------------------------
 

@@ -39,12 +39,19 @@ class SpringView:
     def _to_screen(self, points):
         return (points @ self.projection.T - self._lo) / self._size
 
-    def render(self, positions, spring_indices, spring_kind, pinned, alive=None) -> np.ndarray:
-        """(H, W, 3) uint8 image of the body at `positions` [m]."""
+    def render(self, positions, spring_indices, spring_kind, pinned, alive=None,
+               ghost=None) -> np.ndarray:
+        """(H, W, 3) uint8 image of the body at `positions` [m]; ghost particles (a mask) and
+        their springs are not drawn."""
         gui = self._gui
         gui.clear(BACKGROUND)
         p = self._to_screen(np.asarray(positions, np.float64))
         keep = np.ones(len(spring_indices), bool) if alive is None else np.asarray(alive, bool)
+        shown = np.ones(len(p), bool) if ghost is None else ~np.asarray(ghost, bool)
+        keep = keep & shown[spring_indices[:, 0]] & shown[spring_indices[:, 1]]
+        pinned = np.asarray(pinned, bool)
+        p, pinned = p[shown], pinned[shown]
+        spring_indices = np.cumsum(shown)[spring_indices] - 1
         for kind in self.kinds:
             sel = keep & (spring_kind == kind)
             if sel.any():
