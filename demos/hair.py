@@ -1,4 +1,4 @@
-"""Hair strands swinging from a moving head: runs demos/hair.toml.
+"""Styled straight and curly hair (ghost-braced strands) on swaying heads: runs demos/hair.toml.
 
     python demos/hair.py            # renders/hair/frame_00000.png ... + hair.gif
     python demos/hair.py --test     # tiny and fast
