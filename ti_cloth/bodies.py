@@ -145,15 +145,11 @@ def hair(strands, segments: int, length: float, *, anchor=(0.0, 0.0, 0.0), radiu
                                                                                   segments)
     sequence = np.empty((strand_count, 2 * segments + 1), np.int64)       # r0 g0 r1 g1 ... rn
     sequence[:, 0::2], sequence[:, 1::2] = real, ghost
-    is_ghost = np.zeros(sequence.shape, bool)
-    is_ghost[:, 1::2] = True
-    springs = {SpringKind.STRETCH: [], SpringKind.BEND: [], SpringKind.SHEAR: []}
-    for step, kind in ((1, SpringKind.STRETCH), (2, SpringKind.BEND), (3, SpringKind.SHEAR)):
-        pairs = np.stack([sequence[:, :-step], sequence[:, step:]], axis=-1)
-        edges = (step == 2) & ~is_ghost[:, :-step]                           # r_k to r_k+1
-        springs[SpringKind.STRETCH].append(pairs[edges] if step == 2 else pairs[:0].reshape(-1, 2))
-        springs[kind].append(pairs[~edges] if step == 2 else pairs.reshape(-1, 2))
-    springs = {kind: np.concatenate(parts) for kind, parts in springs.items()}
+    pairs = {step: np.stack([sequence[:, :-step], sequence[:, step:]], axis=-1) for step in (1, 2, 3)}
+    strand_edge = np.zeros(pairs[2].shape[:2], bool)
+    strand_edge[:, 0::2] = True                                  # (r_k, r_k+1), not (g_k, g_k+1)
+    springs = {SpringKind.STRETCH: np.concatenate([pairs[1].reshape(-1, 2), pairs[2][strand_edge]]),
+               SpringKind.BEND: pairs[2][~strand_edge], SpringKind.SHEAR: pairs[3].reshape(-1, 2)}
     strand_masses = _chain_masses(strand_count, particles, (1 - GHOST_SHARE) * mass)
     ghost_masses = np.full(strand_count * segments, GHOST_SHARE * mass / segments)
     pinned = np.concatenate([real[:, :2].ravel(), ghost[:, 0]])

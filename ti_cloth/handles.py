@@ -91,9 +91,9 @@ class HandleSet:
         """(N,) bool: the body's pins and the particles of the handles holding now, or with
         `permanent` of those that never let go (the stable step is found without the rest)."""
         pinned = self.body_pinned.copy()
-        for h in self.handles if permanent else self.holding:
-            if not permanent or h.release is None:
-                pinned[h.particles] = True
+        held = [h for h in self.handles if h.release is None] if permanent else self.holding
+        for h in held:
+            pinned[h.particles] = True
         return pinned
 
     def targets(self, t: float) -> np.ndarray:
