@@ -35,14 +35,16 @@ def stiffest_mode(cloth, drag: float = 0.0, pinned=None, steps: int = LANCZOS_ST
     Lanczos on A = M^-1/2 K M^-1/2 (K_s = k n n^T per spring at rest, pins removed), started
     from a fixed random vector: w^2 is the largest Ritz value, which grows towards the largest
     eigenvalue from below (stopped after `steps` or once it grew by less than
-    LANCZOS_TOLERANCE in LANCZOS_WINDOW steps; within 1e-6 of a dense eigensolver on the
+    LANCZOS_TOLERANCE in LANCZOS_WINDOW steps). Within 1e-6 of a dense eigensolver on the
     tests' bodies, where the 100 power iterations used before stopped up to 1.6e-3 short;
-    2.9x faster than they were on a 300 x 300 grid, median of 3, both Lanczos runs). g is
-    the largest damping rate of any mode: the largest eigenvalue of M^-1/2 C M^-1/2 (C from
-    kd, "axial" along n n^T, "relative" I), by Lanczos too, plus drag. The pair is conservative: a light particle on damped springs (a hair's ghost) can
-    have a mode far more damped than the stiffest one, and explicit damping is unstable once
-    h g > 2 whatever w is (the stiffest mode's own damping rate missed that: symplectic Euler
-    diverged at half its predicted step). (0, 0) if nothing is free or there are no springs.
+    2.9x faster than they were on a 300 x 300 grid (median of 3, both Lanczos runs).
+
+    g is the largest damping rate of any mode: the largest eigenvalue of M^-1/2 C M^-1/2 (C
+    from kd, "axial" along n n^T, "relative" I), by Lanczos too, plus drag. The pair is
+    conservative: a light particle on damped springs (a hair's ghost) can have a mode far more
+    damped than the stiffest one, and explicit damping is unstable once h g > 2 whatever w is
+    (the stiffest mode's own damping rate missed that: symplectic Euler diverged at half its
+    predicted step). (0, 0) if nothing is free or there are no springs.
     """
     pinned = cloth.pinned if pinned is None else pinned
     free = ~np.asarray(pinned, bool)
