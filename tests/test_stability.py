@@ -2,6 +2,7 @@
 measured by running symplectic Euler; dt = "auto"."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -9,6 +10,8 @@ import pytest
 import ti_cloth as tc
 from helpers import report
 from ti_cloth.modes import stiffest_mode
+
+DEMOS = Path(__file__).parents[1] / "demos"
 
 
 def cloths():
@@ -93,6 +96,32 @@ def test_symplectic_euler_stable_below_prediction_and_diverges_above(f64, name):
     measured = 0.5 * (low + high)
     report(f"{name}: predicted / measured stable dt", (predicted, measured), "within 25 %")
     assert abs(predicted / measured - 1) < 0.25
+
+
+def test_stuycks_scheme_is_stable_below_its_prediction_and_blows_up_just_above(f64):
+    """Explicit Euler with relative damping (demos/stuyck_explicit.toml), 0.5 s: at 0.9 x the
+    prediction the sheet falls with a kinetic energy below 0.2 m g L (the physical swing: 0.11);
+    at 1.2 x its sideways-damped modes explode (h > 2 / g: v' = (1 - h g) v), the kinetic
+    energy passing m g L, though the damping's nonlinearity keeps positions inside the guard.
+    The sprung-mode rule alone predicted 1.46 x this, deep in the blown regime."""
+    from ti_cloth.app.scene import load_scene
+
+    scene = load_scene(DEMOS / "stuyck_explicit.toml")
+    predicted = tc.stable_dt(scene.cloth, "explicit_euler", scene.drag)
+    weight_drop = scene.cloth.particle_mass.sum() * 9.81 * 1.0           # m g L, L = 1 m
+
+    def peak_kinetic(fraction):
+        sim = scene.build(dt=fraction * predicted)
+        peak = 0.0
+        for _ in range(50):
+            sim.step(max(1, round(0.01 / sim.dt)))
+            peak = max(peak, sim.energy()["kinetic"])
+        return peak / weight_drop
+
+    calm, blown = peak_kinetic(0.9), peak_kinetic(1.2)
+    report("peak kinetic energy / m g L at 0.9 x and 1.2 x the prediction", (calm, blown),
+           "< 0.2, > 1")
+    assert calm < 0.2 < 1.0 < blown
 
 
 def test_light_particles_on_damped_springs_are_stable_below_the_prediction(f64):

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import taichi as ti
 
-from ..modes import row_bounds
+from ..modes import row_bounds, stiffest_mode
 from ..state import store_particle
 from .base import Integrator
 
@@ -32,12 +32,18 @@ class ExplicitEuler(Integrator):
 
     def stable_step(self, cloth, drag, pinned):
         """h < g / w^2 per mode (the smaller root (g - sqrt(g^2 - 4 w^2)) / w^2 when
-        overdamped). The worst mode is the least damped relative to its stiffness, not the
-        stiffest, so this takes the smallest ratio over the per-particle Gershgorin bounds
-        (modes.row_bounds; conservative); 0 when some stiff particle has no damping."""
+        overdamped), and h < 2 / g for a mode damped but barely sprung (relative damping damps
+        sideways motion that the springs do not resist: v' = (1 - h g) v). The worst sprung
+        mode is the least damped relative to its stiffness, not the stiffest, so the first
+        takes the smallest ratio over the per-particle Gershgorin bounds (modes.row_bounds);
+        the second the largest damping rate (modes.stiffest_mode). 0 when some stiff particle
+        has no damping. On demos/stuyck_explicit.toml: 4.3e-4 s, measured 5.2e-4 s (the
+        first rule alone said 6.3e-4 s, where it diverges)."""
         omega2, gamma = row_bounds(cloth, drag, pinned)
         stiff = omega2 > 0
         if not stiff.any():
             return math.inf
         w2, g = omega2[stiff], gamma[stiff]
-        return float(np.min((g - np.sqrt(np.maximum(g * g - 4.0 * w2, 0.0))) / w2))
+        sprung = float(np.min((g - np.sqrt(np.maximum(g * g - 4.0 * w2, 0.0))) / w2))
+        _, most_damped = stiffest_mode(cloth, drag, pinned)
+        return min(sprung, 2.0 / most_damped) if most_damped > 0 else sprung
