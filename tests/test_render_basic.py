@@ -121,3 +121,29 @@ def test_mp4_without_imageio_ffmpeg_says_what_to_install(tmp_path, monkeypatch):
         write_mp4(frames_of(2), tmp_path / "clip.mp4")
     with pytest.raises(ImportError, match="imageio-ffmpeg"):
         FrameSequence(tmp_path, mp4=True)
+
+
+def test_ghost_particles_are_never_drawn(f32):
+    """A ghost-braced strand renders exactly like its strand particles alone (the same
+    positions, pins and edges, no ghosts): in the 3-D renderer and the 2-D view."""
+    from ti_cloth.render import Camera, Renderer, SurfaceStyle
+
+    hair = tc.hair([[0.0, 0.0, 0.0]], 5, 0.5, directions=[[1.0, -0.3, 0.2]])
+    real = ~hair.ghost
+    strand = tc.Cloth.from_particles(hair.particle_position[real], hair.particle_mass[real],
+                                     [[k, k + 1] for k in range(5)], pinned=[0, 1])
+    camera = Camera.fit(strand, aspect=1.0)
+    style = SurfaceStyle(particles=3.0, line_width=2.0)
+    images = []
+    for body in (hair, strand):
+        sim = tc.Simulation(body, dt=1e-3)
+        with Renderer(64, 64, camera) as r:
+            r.begin()
+            r.draw_simulation(sim, style)
+            images.append(r.end())
+        view = SpringView((np.array([-0.1, -0.3]), np.array([0.6, 0.2])), res=(64, 64))
+        images.append(view.render(sim.positions(), body.spring_indices, body.spring_kind,
+                                  sim.pinned(), ghost=body.ghost))
+    assert images[0].std() > 1 and images[1].std() > 1, "something is drawn"
+    np.testing.assert_array_equal(images[0], images[2])
+    np.testing.assert_array_equal(images[1], images[3])
