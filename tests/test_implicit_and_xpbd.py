@@ -204,3 +204,22 @@ def test_an_integrator_reused_across_simulations_and_runtimes(make):
     fresh.step(10)
     np.testing.assert_array_equal(reused.positions(), fresh.positions())
     assert reused.state is not state and shared.buffers(reused.state, lambda: None) is not None
+
+
+def test_xpbd_damps_relative_motion_on_a_relative_damped_body(f64):
+    """Two free particles joined by a spring of k = 0 (no constraint) and kd = 0.3 kg/s,
+    relative damping (Stuyck eq. 4.7), no gravity, moving apart sideways: each xpbd step is the
+    backward Euler step of -kd (v_p - v_q), so the relative velocity shrinks by exactly
+    1 / (1 + h kd (1/m_p + 1/m_q)) per step and the momentum stays. Axial damping (the
+    constraint's own) would leave this sideways motion undamped."""
+    h, kd, masses = 1e-2, 0.3, np.array([0.1, 0.3])
+    material = tc.Material(stretch=tc.SpringParams(0.0, kd), damping="relative")
+    body = tc.Cloth.from_particles([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0]], masses, [[0, 1]], material)
+    sim = tc.Simulation(body, integrator=tc.XPBD(iterations=3), dt=h, gravity=(0, 0, 0))
+    v0 = np.array([[0.0, 0.3, 0.1], [0.0, -0.1, 0.0]])
+    sim.set_velocities(v0)
+    sim.step(10)
+    shrink = (1 + h * kd * (1 / masses).sum()) ** -10
+    v = sim.velocities()
+    np.testing.assert_allclose(v[0] - v[1], shrink * (v0[0] - v0[1]), atol=1e-14)
+    np.testing.assert_allclose(masses @ v, masses @ v0, atol=1e-15)

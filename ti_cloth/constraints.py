@@ -86,7 +86,7 @@ def _xpbd(model: ti.template(), state: ti.template(), s, multiplier: ti.template
         n = d / length
         k = model.spring_stiffness[s]
         compliance = 1.0 / (k * dt * dt)
-        gamma = model.spring_damping[s] / (k * dt)
+        gamma = 0.0 if ti.static(model.relative_damping) else model.spring_damping[s] / (k * dt)
         motion = (state.particle_position[p] - state.particle_prev_position[p]
                   - state.particle_position[q] + state.particle_prev_position[q])
         dlambda = ((-(length - model.spring_rest_length[s]) - compliance * multiplier[s]
@@ -124,8 +124,44 @@ def xpbd_springs(model: ti.template(), state: ti.template(), colours: ti.templat
                 _xpbd(model, state, colours.order[t], multiplier, dt, tearable)
 
 
+@ti.func
+def _damp(model: ti.template(), state: ti.template(), s, dt, tearable: ti.template()):
+    alive = model.spring_damping[s] > 0
+    if ti.static(tearable):
+        alive = alive and state.spring_alive[s] != 0
+    p, q = model.spring_indices[s][0], model.spring_indices[s][1]
+    wp, wq = model.particle_inv_mass[p], model.particle_inv_mass[q]
+    if alive and wp + wq > 0:
+        rate = dt * model.spring_damping[s] * (wp + wq)
+        dv = (state.particle_velocity[p] - state.particle_velocity[q]) * (rate / (1.0 + rate))
+        state.particle_velocity[p] -= wp / (wp + wq) * dv
+        state.particle_velocity[q] += wq / (wp + wq) * dv
+
+
+@ti.kernel
+def damp_springs(model: ti.template(), state: ti.template(), colours: ti.template(), dt: float,
+                 tearable: ti.template(), passes: ti.i32, serial: ti.template()):
+    """Relative damping (Stuyck eq. 4.7, f_p = -kd (v_p - v_q)) solved implicitly spring by
+    spring on velocities; `passes` of them when serial, else one. For one spring the backward
+    Euler step is exact: v_p - v_q shrinks by 1 / (1 + h kd (w_p + w_q)), split by inverse
+    mass so momentum is kept; a pass is the product of these exact steps, spring by spring in
+    colour order (a further pass would damp again, not converge). XPBD runs one after its
+    position passes on relative-damped bodies (its own damping acts along springs only)."""
+    if ti.static(serial):
+        for _ in range(1):
+            for _pass in range(passes):
+                for c in range(colours.count):
+                    for t in range(colours.start[c], colours.start[c + 1]):
+                        _damp(model, state, colours.order[t], dt, tearable)
+    else:
+        for c in ti.static(range(colours.count)):
+            for t in range(colours.offsets[c], colours.offsets[c + 1]):
+                _damp(model, state, colours.order[t], dt, tearable)
+
+
 def sweep(kernel, model, state, passes: int, *args) -> None:
-    """Run `passes` passes of relax_springs or xpbd_springs on the model's launch plan; args
+    """Run `passes` passes of relax_springs, xpbd_springs or damp_springs on the model's launch
+    plan; args
     are the kernel's arguments after `colours` and before `passes`."""
     colours = model.spring_colouring()
     if serial_is_faster(model):

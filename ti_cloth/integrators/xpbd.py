@@ -6,7 +6,7 @@ import taichi as ti
 
 from .. import backend, limits
 from .._validate import count
-from ..constraints import sweep, xpbd_springs
+from ..constraints import damp_springs, sweep, xpbd_springs
 from ..forces import compute_forces
 from .base import Integrator
 from .pbd import update_velocity
@@ -38,8 +38,12 @@ class XPBD(Integrator):
 
     Unlike pbd, the result does not depend on the iteration count once converged: it is the
     backward Euler step of the same Hookean springs (compliance 1/k) the force-based
-    integrators use, with axial damping kd. Unconverged (few iterations, stiff springs,
-    large h), the cloth is softer than its material.
+    integrators use, with axial damping kd. On a body with relative damping (Stuyck eq. 4.7)
+    the constraints are undamped and one pass of implicit relative damping on the new
+    velocities follows (constraints.damp_springs: each spring's backward Euler step in turn,
+    stable at any h); positions keep their solve, as in position-based damping (Mueller et al.
+    2007), and the next prediction starts from the damped velocities. Unconverged (few
+    iterations, stiff springs, large h), the cloth is softer than its material.
     iterations: Gauss-Seidel passes per step, >= 1.
     Order 1. No step-size stability limit.
     """
@@ -63,4 +67,6 @@ class XPBD(Integrator):
             multiplier.fill(0)
             sweep(xpbd_springs, model, state, self.iterations, multiplier, dt, forces.tearable)
         update_velocity(model, state, dt, step_index)
+        if model.spring_count and model.relative_damping:
+            sweep(damp_springs, model, state, 1, dt, forces.tearable)
         state.prev_valid = False
