@@ -86,6 +86,8 @@ SCENE_MISTAKES = [
     (dict(body="hair", body_keys="strands = 100000000"), "bodies[0].strands"),
     (dict(body="hair", body_keys="ghosts = 1"), "bodies[0].ghosts"),
     (dict(body="hair", body_keys="curl = [0.01]"), "bodies[0].curl"),
+    (dict(body="hair", body_keys="altitude = 1"), "bodies[0].altitude"),
+    (dict(body="hair", body_keys="altitude = { k = -1.0 }"), "k"),
     (dict(body="hair", body_keys="curl = [0.01, -0.01]"), "curl[1] (pitch)"),
     (dict(body="string", body_keys='end_mass = "heavy"'), "bodies[0].end_mass"),
     (dict(body="string", body_keys='hem = "bottom"'), "bodies[0].hem"),

@@ -81,7 +81,7 @@ GHOST_OFFSET = 0.5     # a ghost's distance from its segment's midpoint, in segm
 def hair(strands, segments: int, length: float, *, anchor=(0.0, 0.0, 0.0), radius: float = 0.1,
          directions=None, mass: float = 1e-3, stretch=SpringParams(50.0, 0.02),
          bend=SpringParams(5.0, 0.005), twist: SpringParams | None = None, ghosts: bool = True,
-         curl=None) -> Cloth:
+         curl=None, altitude: SpringParams | bool = True) -> Cloth:
     """Hair strands rooted on a head (Stuyck 4.6.1, fig. 4.5): chains of `segments` springs.
 
     strands: a count (roots spread evenly over the upper half of a sphere of `radius` [m]
@@ -110,12 +110,16 @@ def hair(strands, segments: int, length: float, *, anchor=(0.0, 0.0, 0.0), radiu
     length = in_range("length", length, limits.LENGTH)
     mass = in_range("mass", mass, limits.MASS)
     require(isinstance(ghosts, bool), "ghosts", ghosts, "True or False")
+    require(isinstance(altitude, (bool, SpringParams)), "altitude", altitude,
+            "True (the twist constants), False (none) or a SpringParams(k, kd)")
     anchor = as_array("anchor", anchor, np.float64, (3,))
     if isinstance(strands, (int, np.integer)) and not isinstance(strands, bool):
         strand_count = count("strands", strands, limits.STRANDS)
         per_strand = (2 * segments + 1) if ghosts else segments + 1
         limits.check_memory("strands", strands, strand_count * per_strand,
-                            (3 if ghosts else 2) * strand_count * per_strand)
+                            (3 + 4 * limits.ALTITUDE_SPRINGS * (altitude is not False)
+                             if ghosts else 2)
+                            * strand_count * per_strand)
         radius = in_range("radius", radius, limits.LENGTH)
         normals = _upper_hemisphere(strand_count)
         roots = anchor + radius * normals
@@ -133,6 +137,8 @@ def hair(strands, segments: int, length: float, *, anchor=(0.0, 0.0, 0.0), radiu
     curve = _strand_curves(roots, normals, segments, length, curl)          # (S, n + 1, 3)
     material = Material(stretch=stretch, bend=bend or SpringParams(0.0),
                         shear=twist or bend or SpringParams(0.0))
+    if altitude is True:
+        altitude = material.shear
     strand_count, particles = len(roots), segments + 1
     if not ghosts:
         return Cloth.from_particles(curve.reshape(-1, 3),
@@ -153,10 +159,13 @@ def hair(strands, segments: int, length: float, *, anchor=(0.0, 0.0, 0.0), radiu
     strand_masses = _chain_masses(strand_count, particles, (1 - GHOST_SHARE) * mass)
     ghost_masses = np.full(strand_count * segments, GHOST_SHARE * mass / segments)
     pinned = np.concatenate([real[:, :2].ravel(), ghost[:, 0]])
+    tetrahedra = np.stack([sequence[:, a:a + 4] for a in range(2 * segments - 2)], axis=1)
     return Cloth.from_particles(np.concatenate([curve.reshape(-1, 3), ghost_position.reshape(-1, 3)]),
                                 np.concatenate([strand_masses, ghost_masses]), springs, material,
                                 pinned, ghost=np.arange(len(strand_masses) + len(ghost_masses))
-                                >= len(strand_masses))
+                                >= len(strand_masses),
+                                altitude_tetrahedra=tetrahedra.reshape(-1, 4) if altitude else None,
+                                altitude=altitude or None)
 
 
 def _strand_curves(roots, normals, segments: int, length: float, curl) -> np.ndarray:

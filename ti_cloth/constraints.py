@@ -14,13 +14,15 @@ SERIAL_SPRING_LIMIT springs (XPBD, 10 passes: 6.4x faster at 1.4k springs, 1.8x 
 import taichi as ti
 
 from . import backend
+from .forces import altitude_frame
 
 SERIAL_SPRING_LIMIT = 50_000   # serial sweeps faster at 24k springs, parallel ones at 97k
 
 
 def serial_is_faster(model) -> bool:
     """Whether this model's sweeps run faster serially in one launch (CPU, few springs)."""
-    return backend.config().arch == "cpu" and model.spring_count <= SERIAL_SPRING_LIMIT
+    return (backend.config().arch == "cpu"
+            and model.spring_count + model.altitude_count <= SERIAL_SPRING_LIMIT)
 
 
 @ti.func
@@ -43,9 +45,28 @@ def _relax(model: ti.template(), state: ti.template(), s, stiffness, tearable: t
         state.particle_position[q] -= wq / (wp + wq) * dx
 
 
+@ti.func
+def _relax_altitude(model: ti.template(), state: ti.template(), a, stiffness):
+    """Project altitude spring a (Selle et al. 2008; forces.altitude_frame) to its rest
+    altitude: C = h - h0 with gradient g_c n on corner c, so corner c moves by
+    -stiffness C w_c g_c n / sum_l w_l g_l^2 (the lecture's mass-weighted projection of one
+    constraint, w = 1/m)."""
+    corner = model.altitude_indices[a]
+    n, h, w = altitude_frame(state.particle_position[corner[0]], state.particle_position[corner[1]],
+                             state.particle_position[corner[2]], state.particle_position[corner[3]])
+    g = ti.Vector([1.0, -w[0], -w[1], -w[2]])
+    weight = ti.Vector([model.particle_inv_mass[corner[c]] for c in ti.static(range(4))])
+    norm = (weight * g * g).sum()
+    if norm > 0 and n.norm() > 0:
+        scale = -stiffness * (h - model.altitude_rest_length[a]) / norm
+        for c in ti.static(range(4)):
+            state.particle_position[corner[c]] += scale * weight[c] * g[c] * n
+
+
 @ti.kernel
 def relax_springs(model: ti.template(), state: ti.template(), colours: ti.template(),
-                  stiffness: ti.math.vec3, tearable: ti.template(), max_strain: float,
+                  altitude_colours: ti.template(), stiffness: ti.math.vec3,
+                  altitude_stiffness: float, tearable: ti.template(), max_strain: float,
                   stretched_only: ti.template(), passes: ti.i32, serial: ti.template()):
     """Relaxation passes over every spring (lecture, "relaxation"); `passes` of them when
     serial, else one.
@@ -56,7 +77,8 @@ def relax_springs(model: ti.template(), state: ti.template(), colours: ti.templa
     m_q / (m_p + m_q) = w_p / (w_p + w_q); pins (w = 0) do not move. stiffness[kind] scales the
     correction (1 = the lecture's full projection; 0 leaves that kind alone). PBD uses
     max_strain = 0; strain limiting (Provot 1995) uses stretched_only, which leaves springs no
-    longer than L.
+    longer than L. After the springs, each pass projects the altitude springs (_relax_altitude,
+    scaled by altitude_stiffness), colour by colour too; strain limiting leaves them alone.
     """
     if ti.static(serial):
         for _ in range(1):
@@ -65,11 +87,20 @@ def relax_springs(model: ti.template(), state: ti.template(), colours: ti.templa
                     for t in range(colours.start[c], colours.start[c + 1]):
                         _relax(model, state, colours.order[t], stiffness, tearable, max_strain,
                                stretched_only)
+                if ti.static(model.altitude_count > 0 and not stretched_only):
+                    for c in range(altitude_colours.count):
+                        for t in range(altitude_colours.start[c], altitude_colours.start[c + 1]):
+                            _relax_altitude(model, state, altitude_colours.order[t],
+                                            altitude_stiffness)
     else:
         for c in ti.static(range(colours.count)):
             for t in range(colours.offsets[c], colours.offsets[c + 1]):
                 _relax(model, state, colours.order[t], stiffness, tearable, max_strain,
                        stretched_only)
+        if ti.static(model.altitude_count > 0 and not stretched_only):
+            for c in ti.static(range(altitude_colours.count)):
+                for t in range(altitude_colours.offsets[c], altitude_colours.offsets[c + 1]):
+                    _relax_altitude(model, state, altitude_colours.order[t], altitude_stiffness)
 
 
 @ti.func
@@ -97,10 +128,37 @@ def _xpbd(model: ti.template(), state: ti.template(), s, multiplier: ti.template
         state.particle_position[q] -= wq * dlambda * n
 
 
+@ti.func
+def _xpbd_altitude(model: ti.template(), state: ti.template(), a, multiplier: ti.template(), dt):
+    """XPBD for altitude spring a: C = h - h0, gradient g_c n on corner c, compliance
+    1 / (k h^2) and damping kd on the altitude's rate, as _xpbd with sum_c w_c g_c^2 for
+    w_p + w_q."""
+    k = model.altitude_stiffness[a]
+    corner = model.altitude_indices[a]
+    n, h, w = altitude_frame(state.particle_position[corner[0]], state.particle_position[corner[1]],
+                             state.particle_position[corner[2]], state.particle_position[corner[3]])
+    g = ti.Vector([1.0, -w[0], -w[1], -w[2]])
+    weight = ti.Vector([model.particle_inv_mass[corner[c]] for c in ti.static(range(4))])
+    norm = (weight * g * g).sum()
+    if k > 0 and norm > 0 and n.norm() > 0:
+        compliance = 1.0 / (k * dt * dt)
+        gamma = model.altitude_damping[a] / (k * dt)
+        motion = 0.0
+        for c in ti.static(range(4)):
+            motion += g[c] * n.dot(state.particle_position[corner[c]]
+                                   - state.particle_prev_position[corner[c]])
+        dlambda = ((-(h - model.altitude_rest_length[a]) - compliance * multiplier[a]
+                    - gamma * motion) / ((1.0 + gamma) * norm + compliance))
+        multiplier[a] += dlambda
+        for c in ti.static(range(4)):
+            state.particle_position[corner[c]] += weight[c] * dlambda * g[c] * n
+
+
 @ti.kernel
 def xpbd_springs(model: ti.template(), state: ti.template(), colours: ti.template(),
-                 multiplier: ti.template(), dt: float, tearable: ti.template(), passes: ti.i32,
-                 serial: ti.template()):
+                 altitude_colours: ti.template(), multiplier: ti.template(),
+                 altitude_multiplier: ti.template(), dt: float, tearable: ti.template(),
+                 passes: ti.i32, serial: ti.template()):
     """XPBD passes over every spring (Macklin et al. 2016, eq. 18; damping as Macklin et al.
     2019, "Small steps", with beta = kd); `passes` of them when serial, else one.
 
@@ -110,7 +168,8 @@ def xpbd_springs(model: ti.template(), state: ti.template(), colours: ti.templat
               / ((1 + gamma)(w_p + w_q) + alpha~),
     x_p += w_p dlambda n, x_q -= w_q dlambda n, lambda += dlambda. At convergence this is the
     implicit step of the Hookean energy 1/2 k C^2 (Stuyck eq. 4.4) with axial damping kd.
-    Springs with k = 0 are not constraints.
+    Springs with k = 0 are not constraints. After the springs, each pass visits the altitude
+    springs (_xpbd_altitude), colour by colour.
     """
     if ti.static(serial):
         for _ in range(1):
@@ -118,10 +177,20 @@ def xpbd_springs(model: ti.template(), state: ti.template(), colours: ti.templat
                 for c in range(colours.count):
                     for t in range(colours.start[c], colours.start[c + 1]):
                         _xpbd(model, state, colours.order[t], multiplier, dt, tearable)
+                if ti.static(model.altitude_count > 0):
+                    for c in range(altitude_colours.count):
+                        for t in range(altitude_colours.start[c], altitude_colours.start[c + 1]):
+                            _xpbd_altitude(model, state, altitude_colours.order[t],
+                                           altitude_multiplier, dt)
     else:
         for c in ti.static(range(colours.count)):
             for t in range(colours.offsets[c], colours.offsets[c + 1]):
                 _xpbd(model, state, colours.order[t], multiplier, dt, tearable)
+        if ti.static(model.altitude_count > 0):
+            for c in ti.static(range(altitude_colours.count)):
+                for t in range(altitude_colours.offsets[c], altitude_colours.offsets[c + 1]):
+                    _xpbd_altitude(model, state, altitude_colours.order[t], altitude_multiplier,
+                                   dt)
 
 
 @ti.func
@@ -139,14 +208,17 @@ def _damp(model: ti.template(), state: ti.template(), s, dt, tearable: ti.templa
 
 
 @ti.kernel
-def damp_springs(model: ti.template(), state: ti.template(), colours: ti.template(), dt: float,
-                 tearable: ti.template(), passes: ti.i32, serial: ti.template()):
+def damp_springs(model: ti.template(), state: ti.template(), colours: ti.template(),
+                 altitude_colours: ti.template(), dt: float, tearable: ti.template(),
+                 passes: ti.i32, serial: ti.template()):
     """Relative damping (Stuyck eq. 4.7, f_p = -kd (v_p - v_q)) solved implicitly spring by
     spring on velocities; `passes` of them when serial, else one. For one spring the backward
     Euler step is exact: v_p - v_q shrinks by 1 / (1 + h kd (w_p + w_q)), split by inverse
     mass so momentum is kept; a pass is the product of these exact steps, spring by spring in
     colour order (a further pass would damp again, not converge). XPBD runs one after its
-    position passes on relative-damped bodies (its own damping acts along springs only)."""
+    position passes on relative-damped bodies (its own damping acts along springs only).
+    Altitude springs are damped in their XPBD pass, on the altitude's rate (altitude_colours
+    is not read here)."""
     if ti.static(serial):
         for _ in range(1):
             for _pass in range(passes):
@@ -161,11 +233,10 @@ def damp_springs(model: ti.template(), state: ti.template(), colours: ti.templat
 
 def sweep(kernel, model, state, passes: int, *args) -> None:
     """Run `passes` passes of relax_springs, xpbd_springs or damp_springs on the model's launch
-    plan; args
-    are the kernel's arguments after `colours` and before `passes`."""
-    colours = model.spring_colouring()
+    plan; args are the kernel's arguments after `altitude_colours` and before `passes`."""
+    colours, altitude_colours = model.spring_colouring(), model.altitude_colouring()
     if serial_is_faster(model):
-        kernel(model, state, colours, *args, passes, True)
+        kernel(model, state, colours, altitude_colours, *args, passes, True)
     else:
         for _ in range(passes):
-            kernel(model, state, colours, *args, 1, False)
+            kernel(model, state, colours, altitude_colours, *args, 1, False)

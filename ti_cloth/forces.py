@@ -1,11 +1,12 @@
-"""Forces as Taichi functions (gravity, Hookean springs, spring damping, air drag) and the
-energies they derive from, evaluated on the host in float64.
+"""Forces as Taichi functions (gravity, Hookean springs, spring damping, air drag, Selle et al.
+2008's altitude springs) and the energies they derive from, evaluated on the host in float64.
 
 Each spring's force is computed once per evaluation, from its first end's side, into
 State.spring_force (a loop over springs); every particle then gathers + or - the forces of its
 own springs in a fixed order (Model adjacency: second-end springs first, then first-end ones).
 No float atomics, so a run is deterministic; each spring's formula is evaluated once, not once
-per end; Newton's third law holds exactly.
+per end; Newton's third law holds exactly. Altitude springs (four particles each) are evaluated
+the same way: once each, into one force per corner, which each corner gathers in a fixed order.
 
 The pieces are ti.funcs, so integrators/fused.py can put a whole step (springs, gather, update)
 in one kernel: its loops run in parallel when that kernel is launched once per step, and split
@@ -21,6 +22,7 @@ import taichi as ti
 
 from . import backend
 from .material import SpringKind
+from .topology import altitude_frames
 from .wind import accumulate_wind
 
 
@@ -86,7 +88,7 @@ def spring_force(xi, xj, vi, vj, rest, k, kd, relative: ti.template()):
 def evaluate_springs(model: ti.template(), state: ti.template(), tearable: ti.template(), begin,
                      end):
     """spring_force[s] = force of spring s on its first end (eq. 4.5, 4.7), 0 once torn, for
-    springs begin .. end - 1."""
+    springs begin .. end - 1. (Altitude springs: evaluate_altitudes; they do not tear.)"""
     for s in range(begin, end):
         i, j = model.spring_indices[s][0], model.spring_indices[s][1]
         f = ti.Vector([0.0, 0.0, 0.0])
@@ -99,6 +101,54 @@ def evaluate_springs(model: ti.template(), state: ti.template(), tearable: ti.te
                              model.spring_rest_length[s], model.spring_stiffness[s],
                              model.spring_damping[s], model.relative_damping)
         state.spring_force[s] = f
+
+
+@ti.func
+def altitude_frame(xp, xa, xb, xc):
+    """(n, h, w) of an altitude spring (Selle et al. 2008) with corners p, a, b, c:
+    n = (x_b - x_a) x (x_c - x_a) / |...| the face normal, h = (x_p - x_a) . n the signed
+    altitude of p over the face, and w = (w_a, w_b, w_c) the barycentric coordinates of p's
+    foot on the face's plane. The gradient of h is (n, -w_a n, -w_b n, -w_c n) (the foot's
+    tangential terms cancel), so -k (h - h0) times it is the exact force of the energy
+    1/2 k (h - h0)^2, along n, with zero net force and torque. A face of zero area has no
+    normal: n = 0, h = 0, w = 0 (no force)."""
+    e1, e2, u = xb - xa, xc - xa, xp - xa
+    normal = e1.cross(e2)
+    area2 = normal.norm()
+    n = ti.Vector([0.0, 0.0, 0.0])
+    w = ti.Vector([0.0, 0.0, 0.0])
+    h = 0.0
+    if area2 > 0:
+        n = normal / area2
+        h = u.dot(n)
+        wb = u.cross(e2).dot(n) / area2
+        wc = e1.cross(u).dot(n) / area2
+        w = ti.Vector([1.0 - wb - wc, wb, wc])
+    return n, h, w
+
+
+@ti.func
+def evaluate_altitudes(model: ti.template(), state: ti.template(), begin, end):
+    """altitude_force[4 a + c] = force of altitude spring a on its corner c (p, a, b, c), for
+    altitude springs begin .. end - 1: with g = (1, -w_a, -w_b, -w_c) and the rate
+    dh/dt = n . sum_c g_c v_c, f_c = -(k (h - h0) + kd dh/dt) g_c n (Stuyck eq. 4.5 and 4.7
+    with the altitude for the spring's length: damping acts on the altitude's rate).
+    Compiled out for a body without altitude springs."""
+    if ti.static(model.altitude_count > 0):
+        for a in range(begin, end):
+            corner = model.altitude_indices[a]
+            n, h, w = altitude_frame(state.particle_position[corner[0]],
+                                     state.particle_position[corner[1]],
+                                     state.particle_position[corner[2]],
+                                     state.particle_position[corner[3]])
+            g = ti.Vector([1.0, -w[0], -w[1], -w[2]])
+            rate = 0.0
+            for c in ti.static(range(4)):
+                rate += g[c] * n.dot(state.particle_velocity[corner[c]])
+            magnitude = -(model.altitude_stiffness[a] * (h - model.altitude_rest_length[a])
+                          + model.altitude_damping[a] * rate)
+            for c in ti.static(range(4)):
+                state.altitude_force[4 * a + c] = magnitude * g[c] * n
 
 
 @ti.func
@@ -115,6 +165,9 @@ def gather_force(model: ti.template(), state: ti.template(), forces: ti.template
             f -= state.spring_force[model.adjacency_spring[a]]
         for a in range(split, model.particle_spring_start[i + 1]):
             f += state.spring_force[model.adjacency_spring[a]]
+        if ti.static(model.altitude_count > 0):
+            for a in range(model.particle_altitude_start[i], model.particle_altitude_start[i + 1]):
+                f += state.altitude_force[model.adjacency_altitude[a]]
     if ti.static(forces.has_wind):
         f += forces.wind.particle_wind_force[i]
     return f
@@ -126,6 +179,7 @@ def accumulate_forces(model: ti.template(), state: ti.template(), forces: ti.tem
     """state.particle_force = gather_force(i) for every particle, springs evaluated first."""
     if ti.static(springs):
         evaluate_springs(model, state, forces.tearable, 0, model.spring_count)
+        evaluate_altitudes(model, state, 0, model.altitude_count)
     for i in range(model.particle_count):
         state.particle_force[i] = gather_force(model, state, forces, i, springs)
 
@@ -134,7 +188,8 @@ def compute_forces(model, state, forces: ForceSettings, springs: bool = True) ->
     """particle_force at the current state: the wind's kernel if any, then springs and gather."""
     if forces.wind is not None:
         accumulate_wind(model, state, forces.wind, forces.tearable)
-    accumulate_forces(model, state, forces, springs and model.spring_count > 0)
+    accumulate_forces(model, state, forces,
+                      springs and model.spring_count + model.altitude_count > 0)
 
 
 def energies(cloth, positions: np.ndarray, velocities: np.ndarray, gravity,
@@ -142,8 +197,9 @@ def energies(cloth, positions: np.ndarray, velocities: np.ndarray, gravity,
     """Kinetic, gravitational and spring energy [J], in float64 on the host.
 
     kinetic = sum 1/2 m |v|^2; gravity = -sum m g . x (Stuyck 4.3.1, zero at the origin);
-    spring = sum 1/2 k (|x_i - x_j| - L)^2 (Stuyck eq. 4.4) over intact springs, also per kind
-    as spring_stretch, spring_shear, spring_bend; total = kinetic + gravity + spring.
+    spring = sum 1/2 k (|x_i - x_j| - L)^2 (Stuyck eq. 4.4) over intact springs, plus
+    sum 1/2 k (h - h0)^2 over altitude springs; also per kind as spring_stretch, spring_shear,
+    spring_bend and spring_altitude; total = kinetic + gravity + spring.
     """
     m = cloth.particle_mass
     kinetic = 0.5 * float(np.sum(m * np.sum(velocities * velocities, axis=1)))
@@ -154,7 +210,16 @@ def energies(cloth, positions: np.ndarray, velocities: np.ndarray, gravity,
     if alive is not None:
         per_spring = per_spring * alive
     by_kind = np.bincount(cloth.spring_kind, weights=per_spring, minlength=len(SpringKind))
-    result = {"kinetic": kinetic, "gravity": potential, "spring": float(by_kind.sum())}
+    altitude = altitude_energy(cloth, positions)
+    result = {"kinetic": kinetic, "gravity": potential, "spring": float(by_kind.sum()) + altitude}
     result.update({f"spring_{k.name.lower()}": float(by_kind[k]) for k in SpringKind})
+    result["spring_altitude"] = altitude
     result["total"] = kinetic + potential + result["spring"]
     return result
+
+
+def altitude_energy(cloth, positions: np.ndarray) -> float:
+    """sum 1/2 k (h - h0)^2 over the altitude springs [J], h the signed altitude of p over the
+    face (a, b, c) (forces.altitude_frame)."""
+    _, h, _ = altitude_frames(positions, cloth.altitude_indices)
+    return float(np.sum(0.5 * cloth.altitude_stiffness * (h - cloth.altitude_rest_length) ** 2))

@@ -71,6 +71,8 @@ TABLE = (STIFFNESS, DAMPING, DENSITY, MASS, LENGTH, SCALE, COORDINATE, ACCELERAT
 # Taichi fields); these rates give 692 MB for it.
 BYTES_PER_PARTICLE = 250
 BYTES_PER_SPRING = 400
+ALTITUDE_SPRINGS = 4   # an altitude spring (four corners' forces, adjacency) costs about four
+                       # springs, in memory and in work
 MEMORY_SHARE = 0.75            # refuse a body needing more than this share of physical memory
 
 # Work: spring updates per second of the slowest common case on one CPU core (pbd and

@@ -33,15 +33,22 @@ class Model:
                           no float atomics)
     particle_spring_split i is the second end of its springs in [start[i], split[i]) and the
                           first end in [split[i], start[i + 1]), so a gather knows each sign
+    altitude_indices      [p, a, b, c] per altitude spring (Selle et al. 2008; topology.py),
+                          shape (altitude_count,); altitude_rest_length [m],
+                          altitude_stiffness [N/m], altitude_damping [kg/s]
+    particle_altitude_start CSR offsets, shape (particle_count + 1,): particle i is corner
+                          adjacency_altitude[a] % 4 of altitude spring adjacency_altitude[a] // 4
+                          for a in [start[i], start[i + 1]), in increasing order (the gather's)
 
     Python attributes read at compile time (fixed for the model's life):
-    particle_count, spring_count, relative_damping.
+    particle_count, spring_count, altitude_count, relative_damping.
     """
 
     def __init__(self, cloth: Cloth, pinned: np.ndarray | None = None):
         real = backend.real()
         self.particle_count = n = cloth.particle_count
         self.spring_count = s = cloth.spring_count
+        self.altitude_count = a = cloth.altitude_count
         self.relative_damping = cloth.damping == "relative"
         fields = backend.FieldGroup()
         s1 = max(s, 1)
@@ -57,8 +64,15 @@ class Model:
         self.particle_spring_split = fields.scalar(ti.i32, n)
         self.adjacency_spring = fields.scalar(ti.i32, max(2 * s, 1))
         self.adjacency_other = fields.scalar(ti.i32, max(2 * s, 1))
+        self.altitude_indices = fields.vector(4, ti.i32, max(a, 1))
+        self.altitude_rest_length = fields.scalar(real, max(a, 1))
+        self.altitude_stiffness = fields.scalar(real, max(a, 1))
+        self.altitude_damping = fields.scalar(real, max(a, 1))
+        self.particle_altitude_start = fields.scalar(ti.i32, n + 1)
+        self.adjacency_altitude = fields.scalar(ti.i32, max(4 * a, 1))
         fields.finalize(self)
         self._colouring = None
+        self._altitude_colouring = None
         self.load(cloth, pinned)
 
     @staticmethod
@@ -66,10 +80,11 @@ class Model:
         """What the kernels of a Model of `cloth` read at compile time, and the topology its
         adjacency and colouring come from: Models of equal structure are interchangeable once
         load() has put a cloth's values in (pool.py reuses them)."""
-        topology = hashlib.blake2b(np.ascontiguousarray(cloth.spring_indices).tobytes(),
-                                   digest_size=16).hexdigest()
-        return ("Model", cloth.particle_count, cloth.spring_count, cloth.damping == "relative",
-                topology)
+        digest = hashlib.blake2b(digest_size=16)
+        digest.update(np.ascontiguousarray(cloth.spring_indices).tobytes())
+        digest.update(np.ascontiguousarray(cloth.altitude_indices).tobytes())
+        return ("Model", cloth.particle_count, cloth.spring_count, cloth.altitude_count,
+                cloth.damping == "relative", digest.hexdigest())
 
     def load(self, cloth: Cloth, pinned: np.ndarray | None = None) -> None:
         """Upload `cloth` (of this model's structure) with `pinned` (default: the cloth's)."""
@@ -85,6 +100,9 @@ class Model:
         order = np.lexsort((other, first_end, owner))
         start = np.concatenate([[0], np.cumsum(np.bincount(owner, minlength=n))])
         split = start[:-1] + np.bincount(ends[:, 1], minlength=n)
+        corners = cloth.altitude_indices.ravel()
+        altitude_order = np.argsort(corners, kind="stable")   # by particle, then element, corner
+        altitude_start = np.concatenate([[0], np.cumsum(np.bincount(corners, minlength=n))])
         upload(((self.particle_mass, cloth.particle_mass),
                 (self.particle_inv_mass, inv_mass),
                 (self.particle_rest_position, cloth.particle_position),
@@ -96,7 +114,13 @@ class Model:
                 (self.particle_spring_start, start),
                 (self.particle_spring_split, split),
                 (self.adjacency_spring, spring[order]),
-                (self.adjacency_other, other[order])))
+                (self.adjacency_other, other[order]),
+                (self.altitude_indices, cloth.altitude_indices),
+                (self.altitude_rest_length, cloth.altitude_rest_length),
+                (self.altitude_stiffness, cloth.altitude_stiffness),
+                (self.altitude_damping, cloth.altitude_damping),
+                (self.particle_altitude_start, altitude_start),
+                (self.adjacency_altitude, altitude_order)))
 
     def set_pinned(self, pinned: np.ndarray) -> None:
         """Pin exactly `pinned` (N,) bool from the next step on: inverse masses 0 there and
@@ -107,7 +131,7 @@ class Model:
     def state(self, position_limit: float = 1e6) -> State:
         """A fresh State at the rest configuration, at rest, with every spring intact, whose
         divergence guard flags any |coordinate| beyond position_limit [m]."""
-        state = State(self.particle_count, self.spring_count, position_limit)
+        state = State(self.particle_count, self.spring_count, position_limit, self.altitude_count)
         state.reset(self.particle_rest_position)
         return state
 
@@ -118,6 +142,16 @@ class Model:
             self._colouring = SpringColouring(*color_springs(self.cloth.spring_indices,
                                                              self.particle_count))
         return self._colouring
+
+    def altitude_colouring(self) -> SpringColouring:
+        """The altitude springs grouped so that no two in a colour share a particle (position-
+        based passes; the spring colouring when there are none, never read then)."""
+        if self.altitude_count == 0:
+            return self.spring_colouring()
+        if self._altitude_colouring is None:
+            self._altitude_colouring = SpringColouring(*color_springs(
+                self.cloth.altitude_indices, self.particle_count))
+        return self._altitude_colouring
 
 
 def inverse_masses(mass: np.ndarray, pinned: np.ndarray) -> np.ndarray:

@@ -87,7 +87,8 @@ class Simulation:
                 "a list of colliders (colliders=[Plane(...)])")
         colliders = tuple(colliders)
         parts = {"model": (Model, (cloth, pinned)),
-                 "state": (State, (cloth.particle_count, cloth.spring_count, position_limit))}
+                 "state": (State, (cloth.particle_count, cloth.spring_count, position_limit,
+                                   cloth.altitude_count))}
         if wind is not None:
             parts["wind"] = (WindField, (wind, cloth))
         if strain_limit is not None and cloth.spring_count:
@@ -128,7 +129,8 @@ class Simulation:
         (pool.py) as one set, so their kernels are compiled once per structure in a process;
         a set lent before is loaded with these args."""
         key = tuple((name, cls.structure(*args)) for name, (cls, args) in parts.items())
-        size = limits.memory_needed(self.cloth.particle_count, self.cloth.spring_count)
+        size = limits.memory_needed(self.cloth.particle_count, self.cloth.spring_count
+                                    + limits.ALTITUDE_SPRINGS * self.cloth.altitude_count)
         lent, reused = POOL.lend(key, lambda: {name: cls(*args) for name, (cls, args)
                                                in parts.items()}, self, size)
         if reused:

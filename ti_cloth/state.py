@@ -21,6 +21,8 @@ class State:
     particle_force          total force of the last evaluation [N]
     spring_force            force of each spring on its first end at the last evaluation [N]
                             (its second end feels the negation)
+    altitude_force          force of altitude spring a on its corner c at the last evaluation
+                            [N], at index 4 a + c (Selle et al. 2008; forces.py)
     spring_alive            1 while a spring exists, 0 once torn (Stuyck 4.5); lives here, not
                             in the Model, so the Model stays immutable and state() starts whole
     spring_torn_step        step index at which each spring tore, -1 if intact
@@ -33,7 +35,8 @@ class State:
     prev_valid              False until particle_prev_position holds a real previous step
     """
 
-    def __init__(self, particle_count: int, spring_count: int, position_limit: float = 1e6):
+    def __init__(self, particle_count: int, spring_count: int, position_limit: float = 1e6,
+                 altitude_count: int = 0):
         real = backend.real()
         fields = backend.FieldGroup()
         self.particle_position = fields.vector(3, real, particle_count)
@@ -44,6 +47,7 @@ class State:
         self.spring_force = fields.vector(3, real, max(spring_count, 1))
         self.spring_alive = fields.scalar(ti.i8, max(spring_count, 1))
         self.spring_torn_step = fields.scalar(ti.i32, max(spring_count, 1))
+        self.altitude_force = fields.vector(3, real, max(4 * altitude_count, 1))
         self.first_bad_step = fields.scalar(ti.i32, ())
         self.position_limit = fields.scalar(real, ())
         fields.finalize(self)
@@ -52,11 +56,13 @@ class State:
         self._workspaces = {}
 
     @staticmethod
-    def structure(particle_count: int, spring_count: int, position_limit: float = 1e6) -> tuple:
+    def structure(particle_count: int, spring_count: int, position_limit: float = 1e6,
+                  altitude_count: int = 0) -> tuple:
         """What the kernels of a State read at compile time: its field shapes (pool.py)."""
-        return ("State", particle_count, spring_count)
+        return ("State", particle_count, spring_count, altitude_count)
 
-    def load(self, particle_count: int, spring_count: int, position_limit: float = 1e6) -> None:
+    def load(self, particle_count: int, spring_count: int, position_limit: float = 1e6,
+             altitude_count: int = 0) -> None:
         """Guard at position_limit from the next reset() on (a State of this structure)."""
         self.limit = position_limit
 

@@ -65,7 +65,7 @@ class StrainLimiter:
     def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
         copy_positions(state, self.before)
         # the lecture's relaxation, for stretched springs only
-        sweep(relax_springs, model, state, self.limit.passes, self.limit.kind_mask(),
+        sweep(relax_springs, model, state, self.limit.passes, self.limit.kind_mask(), 0.0,
               self.tearable, self.limit.max_strain, True)
         _follow_velocity(state, self, dt)
 

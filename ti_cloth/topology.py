@@ -24,7 +24,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from ._validate import as_array, finite_number, require
-from .material import Material, SpringKind
+from .material import Material, SpringKind, SpringParams
 from .mesh import Mesh, triangle_edges, unique_rows
 
 
@@ -96,12 +96,16 @@ def lumped_masses(vertices: np.ndarray, triangles: np.ndarray, density: float) -
 
 
 def color_springs(indices: np.ndarray, particle_count: int) -> tuple[np.ndarray, np.ndarray]:
-    """Partition springs into colours in which no two springs share a particle.
+    """Partition springs (or any elements: rows of particle indices, (E, k)) into colours in
+    which no two share a particle.
 
-    Returns (order, offsets): springs order[offsets[c]:offsets[c + 1]] form colour c. Each
-    colour is a maximal matching grown by deterministic random priorities, so springs of one
-    colour can be relaxed in parallel with Gauss-Seidel semantics (lecture: "relaxation").
+    Returns (order, offsets): elements order[offsets[c]:offsets[c + 1]] form colour c. Each
+    colour is a maximal independent set grown by deterministic random priorities, so elements
+    of one colour can be relaxed in parallel with Gauss-Seidel semantics (lecture:
+    "relaxation").
     """
+    indices = np.asarray(indices)
+    indices = indices.reshape(len(indices), -1) if indices.size else indices.reshape(0, 2)
     rng = np.random.default_rng(0)
     priority = rng.permutation(len(indices))
     colour = np.full(len(indices), -1)
@@ -111,19 +115,64 @@ def color_springs(indices: np.ndarray, particle_count: int) -> tuple[np.ndarray,
         taken = np.zeros(particle_count, bool)
         candidates = remaining
         while candidates.size:
-            a, b = indices[candidates, 0], indices[candidates, 1]
+            ends = indices[candidates]
             best = np.full(particle_count, -1)
-            np.maximum.at(best, a, priority[candidates])
-            np.maximum.at(best, b, priority[candidates])
-            won = (best[a] == priority[candidates]) & (best[b] == priority[candidates])
+            for column in ends.T:
+                np.maximum.at(best, column, priority[candidates])
+            won = (best[ends] == priority[candidates][:, None]).all(axis=1)
             colour[candidates[won]] = len(offsets) - 1
-            taken[a[won]] = taken[b[won]] = True
+            taken[ends[won].ravel()] = True
             candidates = candidates[~won]
-            candidates = candidates[~(taken[indices[candidates, 0]] | taken[indices[candidates, 1]])]
+            candidates = candidates[~taken[indices[candidates]].any(axis=1)]
         remaining = remaining[colour[remaining] < 0]
         offsets.append(len(indices) - len(remaining))
     order = np.argsort(colour, kind="stable")
     return order, np.asarray(offsets, np.int64)
+
+
+def altitude_springs(positions: np.ndarray, tetrahedra) -> tuple[np.ndarray, np.ndarray]:
+    """Selle et al. 2008's point-face altitude springs of tetrahedra: four per tetrahedron,
+    each a corner p and the face (a, b, c) opposite it, ordered so that the rest altitude
+    h0 = (x_p - x_a) . n, n = (x_b - x_a) x (x_c - x_a) / |...|, is positive.
+
+    Returns (indices (4T, 4) [p, a, b, c], rest altitudes (4T,) [m]). Raises ValueError
+    naming the tetrahedron for one of zero volume (no altitude to keep).
+    """
+    tets = as_array("altitude_tetrahedra", tetrahedra, np.int64, (None, 4))
+    bad = np.flatnonzero((tets < 0).any(axis=1) | (tets >= len(positions)).any(axis=1))
+    require(len(bad) == 0, f"altitude_tetrahedra[{bad[:1].tolist()}]", tets[bad[:1]].tolist(),
+            f"four particle indices in [0, {len(positions) - 1}]")
+    corners = positions[tets]
+    volume = np.linalg.det(corners[:, 1:] - corners[:, :1]) / 6.0
+    longest = np.max(np.linalg.norm(corners[:, :, None] - corners[:, None], axis=3), axis=(1, 2))
+    flat = np.flatnonzero(np.abs(volume) <= 1e-9 * longest ** 3)
+    if len(flat):
+        t = int(flat[0])
+        raise ValueError(f"altitude_tetrahedra[{t}] (particles {tets[t].tolist()}) must have a "
+                         f"volume > 0 m^3, got {volume[t]:.3g} m^3 ({len(flat)} flat tetrahedra)")
+    faces = np.array([[0, 1, 2, 3], [1, 0, 2, 3], [2, 0, 1, 3], [3, 0, 1, 2]])
+    indices = tets[:, faces].reshape(-1, 4)
+    _, rest, _ = altitude_frames(positions, indices)
+    indices[rest < 0] = indices[rest < 0][:, [0, 1, 3, 2]]
+    return indices, np.abs(rest)
+
+
+def altitude_frames(positions: np.ndarray, indices: np.ndarray):
+    """(n (A, 3), h (A,), g (A, 4)) of altitude springs [p, a, b, c] at `positions`, in numpy:
+    the face normal, the signed altitude of p and the weights of the altitude's gradient
+    (1, -w_a, -w_b, -w_c), w the barycentric coordinates of p's foot on the face's plane (the
+    host twin of forces.altitude_frame; zero for a face of zero area)."""
+    p, a, b, c = (positions[indices[:, corner]] for corner in range(4))
+    e1, e2, u = b - a, c - a, p - a
+    normal = np.cross(e1, e2)
+    area2 = np.linalg.norm(normal, axis=1)
+    safe = np.where(area2 > 0, area2, np.inf)[:, None]
+    n = normal / safe
+    h = np.einsum("ij,ij->i", u, n)
+    wb = np.einsum("ij,ij->i", np.cross(u, e2), n) / safe[:, 0]
+    wc = np.einsum("ij,ij->i", np.cross(e1, u), n) / safe[:, 0]
+    g = np.stack([np.where(area2 > 0, 1.0, 0.0), wb + wc - 1.0, -wb, -wc], axis=1)
+    return n, h, g
 
 
 class Cloth:
@@ -143,6 +192,10 @@ class Cloth:
       spring_damping     (S,) [kg/s]
       spring_kind        (S,) SpringKind values
       triangle_edge_spring (T, 3): spring along edge (t0,t1), (t1,t2), (t2,t0), or -1
+      altitude_indices   (A, 4) int: Selle et al. 2008's altitude springs, a particle p and
+                         the face (a, b, c) opposite it in a tetrahedron (altitude_springs)
+      altitude_rest_length (A,) [m]: rest altitude of p over its face, > 0
+      altitude_stiffness (A,) [N/m], altitude_damping (A,) [kg/s]
       body_offsets       particle ranges of the bodies joined by `combine` ((0, N) for one)
 
     pinned: particle indices or an (N,) bool mask. springs: explicit springs (see module doc).
@@ -152,11 +205,16 @@ class Cloth:
     the boundary. Pinned particles never get hem mass.
     particle_mass_override: {index: kg} applied last. particle_mass: (N,) masses [kg] that
     replace the area-lumped ones and hem mass (bodies without triangles need it).
+    altitude_tetrahedra: (T, 4) particle indices; each tetrahedron gets the four altitude
+    springs of Selle et al. 2008 (a corner kept at its rest height over the opposite face,
+    signed, so the tetrahedron resists flattening and cannot invert without work) with the
+    constants `altitude` (a SpringParams). Default none.
     """
 
     def __init__(self, mesh: Mesh, material: Material, pinned=(), springs=None,
                  particle_mass_override: Mapping[int, float] | None = None,
-                 particle_mass=None, hem=None, ghost=None):
+                 particle_mass=None, hem=None, ghost=None, altitude_tetrahedra=None,
+                 altitude: SpringParams | None = None):
         require(isinstance(mesh, Mesh), "mesh", mesh, "a ti_cloth.Mesh")
         require(isinstance(material, Material), "material", material, "a ti_cloth.Material")
         self.mesh = mesh
@@ -203,12 +261,21 @@ class Cloth:
         self.spring_stiffness = np.array([p.k for p in params])[kind]
         self.spring_damping = np.array([p.kd for p in params])[kind]
         self.triangle_edge_spring = _edge_springs(mesh.triangles, pairs, n)
+        self.altitude_indices, self.altitude_rest_length = (
+            altitude_springs(x, altitude_tetrahedra) if altitude_tetrahedra is not None
+            else (np.zeros((0, 4), np.int64), np.zeros(0)))
+        require(altitude is None or isinstance(altitude, SpringParams), "altitude", altitude,
+                "None or a SpringParams(k, kd)")
+        altitude = altitude or SpringParams(0.0)
+        self.altitude_stiffness = np.full(self.altitude_count, altitude.k)
+        self.altitude_damping = np.full(self.altitude_count, altitude.kd)
         self.body_offsets = (0, n)
         self._freeze()
 
     def _freeze(self) -> None:
         for name in ("particle_mass", "pinned", "hem", "ghost", "spring_indices", "spring_kind", "spring_rest_length",
-                     "spring_stiffness", "spring_damping", "triangle_edge_spring"):
+                     "spring_stiffness", "spring_damping", "triangle_edge_spring", "altitude_indices",
+                     "altitude_rest_length", "altitude_stiffness", "altitude_damping"):
             getattr(self, name).flags.writeable = False
 
     @classmethod
@@ -249,18 +316,23 @@ class Cloth:
         body.spring_stiffness = joined("spring_stiffness")
         body.spring_damping = joined("spring_damping")
         body.triangle_edge_spring = joined("triangle_edge_spring", spring_offsets)
+        body.altitude_indices = joined("altitude_indices", particle_offsets)
+        for name in ("altitude_rest_length", "altitude_stiffness", "altitude_damping"):
+            setattr(body, name, joined(name))
         body.body_offsets = tuple(int(o) for o in particle_offsets)
         body._freeze()
         return body
 
     @classmethod
     def from_particles(cls, positions, particle_mass, springs, material: Material | None = None,
-                       pinned=(), ghost=None) -> "Cloth":
+                       pinned=(), ghost=None, altitude_tetrahedra=None,
+                       altitude: SpringParams | None = None) -> "Cloth":
         """A body without a surface: particles [m], masses [kg], explicit springs (S, 2) or
         {kind: (S, 2)}; spring constants come from `material` by kind; ghost: particles that
-        are simulated but never drawn (indices or a mask)."""
+        are simulated but never drawn (indices or a mask); altitude springs as in Cloth."""
         return cls(Mesh(positions, np.zeros((0, 3), np.int64)), material or Material(),
-                   pinned=pinned, springs=springs, particle_mass=particle_mass, ghost=ghost)
+                   pinned=pinned, springs=springs, particle_mass=particle_mass, ghost=ghost,
+                   altitude_tetrahedra=altitude_tetrahedra, altitude=altitude)
 
     @property
     def particle_count(self) -> int:
@@ -269,6 +341,10 @@ class Cloth:
     @property
     def spring_count(self) -> int:
         return len(self.spring_indices)
+
+    @property
+    def altitude_count(self) -> int:
+        return len(self.altitude_indices)
 
     @property
     def damping(self) -> str:

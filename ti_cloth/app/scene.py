@@ -103,7 +103,8 @@ class Scene:
         steps = (self.frames if frames is None else frames) * self.resolved_substeps()
         passes = getattr(self.integrator, "iterations", 1)
         passes += self.strain_limit.passes if self.strain_limit is not None else 0
-        return limits.work(self.cloth.particle_count, self.cloth.spring_count, steps, passes)
+        return limits.work(self.cloth.particle_count, self.cloth.spring_count
+                           + limits.ALTITUDE_SPRINGS * self.cloth.altitude_count, steps, passes)
 
     def build(self, integrator=None, dt: float | None = None, **options) -> Simulation:
         """The Simulation of this scene (call ti_cloth.init first); `integrator` and `dt`
@@ -266,6 +267,19 @@ def _spring_options(table: Table, options: dict, *keys: str) -> None:
         table.optional(options, key, lambda k: _springs(table.table(k), None))
 
 
+def _altitude_springs(table: Table):
+    """Reads a hair's `altitude` key: true (the twist constants), false (none) or { k, kd }."""
+    def read(key):
+        value = table.value(key, None)
+        if isinstance(value, bool):
+            return value
+        if not isinstance(value, dict):
+            table.fail(f"{table.path(key)} must be true, false or a table {{ k, kd }}, "
+                       f"got {value!r:.80}")
+        return _springs(table.table(key), None)
+    return read
+
+
 def _material(owner: Table) -> Material:
     value = owner.value("material", None)
     if value is None:
@@ -357,6 +371,7 @@ def _body(table: Table, folder: Path, offset: int) -> tuple[Cloth, list[Handle]]
         table.optional(options, "ghosts", "boolean")
         table.optional(options, "curl", "vector", length=2, unit="m")
         _spring_options(table, options, "stretch", "bend", "twist")
+        table.optional(options, "altitude", _altitude_springs(table))
         cloth = table.build(body_builders.hair, strands, segments, length, **options)
         names = {"roots": np.flatnonzero(cloth.pinned).tolist()}
     else:

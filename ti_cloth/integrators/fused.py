@@ -19,16 +19,18 @@ about 30 us. So a run of steps is one launch, shared by a `Team`:
 
 Every plan evaluates each spring and moves each particle with the same formula and gathers in
 the same order, so explicit and symplectic Euler give the same bits in every plan. Verlet's
-results agree to rounding: fast math lets LLVM contract its three-term update differently in
-different kernels, and exact IEEE math would cost 40 % at 32 x 32.
+results, and those of bodies with altitude springs, agree to rounding between a launch per step
+and many: fast math lets LLVM contract Verlet's three-term update and an altitude spring's
+cross and dot products differently in different kernels, and exact IEEE math would cost 40 %
+at 32 x 32. A team and one worker run the same kernel, so thread counts never change a bit.
 """
 
 
 import taichi as ti
 
-from .. import backend
+from .. import backend, limits
 from ..errors import TeamStalled
-from ..forces import evaluate_springs, gather_force
+from ..forces import evaluate_altitudes, evaluate_springs, gather_force
 from ..state import NO_BAD_STEP
 from ..tearing import tear_overstretched
 from ..wind import accumulate_wind
@@ -97,6 +99,7 @@ def advance_one(integrator: ti.template(), model: ti.template(), state: ti.templ
                 forces: ti.template(), dt: float, step: ti.i32, start: ti.i32):
     """One step, its loops in parallel. start: 1 if the state has no history yet."""
     evaluate_springs(model, state, forces.tearable, 0, model.spring_count)
+    evaluate_altitudes(model, state, 0, model.altitude_count)
     move_particles(integrator, model, state, forces, dt, step, start, 0, model.particle_count)
 
 
@@ -107,9 +110,11 @@ def run_steps(integrator: ti.template(), model: ti.template(), state: ti.templat
     """Worker `worker`'s share of steps first .. first + count - 1: each step is the
     FUSED_STAGES of simulation.STEP_ORDER, the integrator and then tearing when it is on."""
     s_begin, s_end = team.share(model.spring_count, worker)
+    a_begin, a_end = team.share(model.altitude_count, worker)
     p_begin, p_end = team.share(model.particle_count, worker)
     for k in range(count):
         evaluate_springs(model, state, forces.tearable, s_begin, s_end)
+        evaluate_altitudes(model, state, a_begin, a_end)
         team.meet(2 * k + 1)                  # every spring force of this step is written
         move_particles(integrator, model, state, forces, dt, first + k,
                        ti.i32(start != 0 and k == 0), p_begin, p_end)
@@ -144,6 +149,11 @@ def step_once(integrator, model, state, forces, dt: float, step_index: int) -> N
     state.prev_valid = integrator.records_history
 
 
+def spring_work(model) -> int:
+    """A step's work in springs (limits.ALTITUDE_SPRINGS per altitude spring)."""
+    return model.spring_count + limits.ALTITUDE_SPRINGS * model.altitude_count
+
+
 class ManySteps:
     """Runs many steps of a fused integrator on the CPU in few launches (nothing but tearing
     may act between them: the wind, for one, is set between steps).
@@ -155,7 +165,7 @@ class ManySteps:
 
     def __init__(self, model):
         self.steps_per_launch = max(1, min(MAX_STEPS_PER_LAUNCH,
-                                           SPRING_STEPS_PER_LAUNCH // max(model.spring_count, 1)))
+                                           SPRING_STEPS_PER_LAUNCH // max(spring_work(model), 1)))
         fields = backend.FieldGroup()
         arrived = fields.scalar(ti.i32, ())
         fields.finalize(self)
@@ -167,7 +177,7 @@ class ManySteps:
 
     def team_for(self, model, steps: int) -> Team:
         """The team that runs a launch of `steps` steps."""
-        return self.team if steps * model.spring_count >= TEAM_MIN_SPRING_STEPS else self.solo
+        return self.team if steps * spring_work(model) >= TEAM_MIN_SPRING_STEPS else self.solo
 
     def run(self, integrator, model, state, forces, dt: float, first: int, count: int,
             tear_stretch: float) -> int:

@@ -8,7 +8,9 @@ Per spring (Stuyck eq. 4.5), with n the unit direction and l the current length,
 df_i/dx_i = -k (n n^T + c (I - n n^T)), c = 1 - L / l. Under compression c < 0 makes K
 indefinite; c is clamped at 0 (Choi & Ko 2002) so the system matrix stays symmetric positive
 definite and CG applies. Damping: axial df_i/dv_i = -kd n n^T, relative (eq. 4.7) -kd I, drag
--drag m I. Wind is treated explicitly (it enters f_n only). Pins: dv is filtered to zero on
+-drag m I. An altitude spring (Selle et al. 2008; forces.altitude_frame) contributes
+-k G G^T to K and -kd G G^T to D, G = g (x) n its altitude's gradient: its curvature term
+-k (h - h0) d^2h/dx^2 is dropped, as c's compressed part is, keeping A positive definite. Wind is treated explicitly (it enters f_n only). Pins: dv is filtered to zero on
 particles of inverse mass 0 (Baraff & Witkin's modified CG with S = 0 there).
 
 The system is never assembled: each CG iteration gathers A p per particle over its springs in
@@ -25,7 +27,7 @@ import taichi as ti
 
 from .. import backend, limits
 from .._validate import count, finite_number, require
-from ..forces import compute_forces
+from ..forces import altitude_frame, compute_forces
 from ..state import store_particle
 from .base import Integrator
 
@@ -37,7 +39,7 @@ PAP, RZ, RR, BB, BETA = range(5)  # slots of the workspace's scalar field
 class _Workspace:
     """CG vectors, per-spring linearisation and the partial sums of one State's solve."""
 
-    def __init__(self, particle_count: int, spring_count: int):
+    def __init__(self, particle_count: int, spring_count: int, altitude_count: int):
         real = backend.real()
         n = particle_count
         self.block_count = math.ceil(n / BLOCK)
@@ -50,6 +52,9 @@ class _Workspace:
         self.diagonal = fields.vector(3, real, n)
         self.spring_normal = fields.vector(3, real, max(spring_count, 1))
         self.spring_lateral = fields.scalar(real, max(spring_count, 1))
+        self.altitude_normal = fields.vector(3, real, max(altitude_count, 1))
+        self.altitude_weight = fields.scalar(real, max(4 * altitude_count, 1))   # g, per corner
+        self.altitude_projection = fields.scalar(real, max(altitude_count, 1))   # G . (v or p)
         self.partial = fields.vector(2, real, self.block_count)
         self.scalar = fields.scalar(real, 5)
         fields.finalize(self)
@@ -68,6 +73,33 @@ def _damping_times(kd, n, d, relative: ti.template()):
     result = kd * n.dot(d) * n
     if ti.static(relative):
         result = kd * d
+    return result
+
+
+@ti.func
+def _project_altitudes(model: ti.template(), ws: ti.template(), vectors: ti.template()):
+    """altitude_projection[a] = G_a . vectors = n . sum_c g_c vectors[corner c] (compiled
+    out for a body without altitude springs)."""
+    for a in range(model.altitude_count):
+        corner = model.altitude_indices[a]
+        total = 0.0
+        for c in ti.static(range(4)):
+            total += ws.altitude_weight[4 * a + c] * ws.altitude_normal[a].dot(vectors[corner[c]])
+        ws.altitude_projection[a] = total
+
+
+@ti.func
+def _altitudes_times(model: ti.template(), ws: ti.template(), i, dt):
+    """Particle i's rows of (h^2 K + h D) times the vector altitude_projection was taken of,
+    over its altitude springs: (h^2 k + h kd) g_i n (G . vector)."""
+    result = ti.Vector([0.0, 0.0, 0.0])
+    if ti.static(model.altitude_count > 0):
+        for a in range(model.particle_altitude_start[i], model.particle_altitude_start[i + 1]):
+            code = model.adjacency_altitude[a]
+            e = code // 4
+            result += ((dt * dt * model.altitude_stiffness[e] + dt * model.altitude_damping[e])
+                       * ws.altitude_weight[code] * ws.altitude_projection[e]
+                       * ws.altitude_normal[e])
     return result
 
 
@@ -107,6 +139,18 @@ def _linearise(model: ti.template(), state: ti.template(), ws: ti.template(), dt
                 c, n = 0.0, ti.Vector([0.0, 0.0, 0.0])
         ws.spring_normal[s] = n
         ws.spring_lateral[s] = c
+    if ti.static(model.altitude_count > 0):
+        for a in range(model.altitude_count):
+            corner = model.altitude_indices[a]
+            n, _, w = altitude_frame(state.particle_position[corner[0]],
+                                     state.particle_position[corner[1]],
+                                     state.particle_position[corner[2]],
+                                     state.particle_position[corner[3]])
+            ws.altitude_normal[a] = n
+            ws.altitude_weight[4 * a] = 1.0
+            for c in ti.static(range(3)):
+                ws.altitude_weight[4 * a + 1 + c] = -w[c]
+        _project_altitudes(model, ws, state.particle_velocity)
     for block in range(ws.block_count):
         begin, end = _block_range(block, model.particle_count)
         rz, bb = 0.0, 0.0
@@ -129,6 +173,16 @@ def _linearise(model: ti.template(), state: ti.template(), ws: ti.template(), dt
                     if state.spring_alive[s] == 0:
                         damp = ti.Vector([0.0, 0.0, 0.0])
                 diagonal += dt * dt * k * (n2 + c * (1.0 - n2)) + dt * damp
+            if ti.static(model.altitude_count > 0):
+                for a in range(model.particle_altitude_start[i],
+                               model.particle_altitude_start[i + 1]):
+                    code = model.adjacency_altitude[a]
+                    e = code // 4
+                    n = ws.altitude_normal[e]
+                    g = ws.altitude_weight[code]
+                    kv += model.altitude_stiffness[e] * g * ws.altitude_projection[e] * n
+                    diagonal += ((dt * dt * model.altitude_stiffness[e]
+                                  + dt * model.altitude_damping[e]) * g * g * n * n)
             b = free * dt * (state.particle_force[i] - dt * kv)
             if free == 0:
                 diagonal = ti.Vector([1.0, 1.0, 1.0])   # a pin's row is the identity (b = 0 there)
@@ -152,6 +206,8 @@ def _linearise(model: ti.template(), state: ti.template(), ws: ti.template(), dt
 def _apply(model: ti.template(), state: ti.template(), ws: ti.template(), dt: float, drag: float,
            tearable: ti.template()):
     """ap = A p (rows of pinned particles 0) and p . ap."""
+    if ti.static(model.altitude_count > 0):
+        _project_altitudes(model, ws, ws.p)
     for block in range(ws.block_count):
         begin, end = _block_range(block, model.particle_count)
         pap = 0.0
@@ -169,6 +225,7 @@ def _apply(model: ti.template(), state: ti.template(), ws: ti.template(), dt: fl
                 if alive:
                     ap += dt * dt * _stiffness_times(model.spring_stiffness[s], n, ws.spring_lateral[s], d)
                     ap += dt * _damping_times(model.spring_damping[s], n, d, model.relative_damping)
+            ap += _altitudes_times(model, ws, i, dt)
             ap *= free
             ws.ap[i] = ap
             pap += pi.dot(ap)
@@ -236,7 +293,8 @@ class ImplicitEuler(Integrator):
         return {"tolerance": self.tolerance, "max_iterations": self.max_iterations}
 
     def step(self, model, state, dt, forces, step_index):
-        ws = self.buffers(state, lambda: _Workspace(model.particle_count, model.spring_count))
+        ws = self.buffers(state, lambda: _Workspace(model.particle_count, model.spring_count,
+                                                    model.altitude_count))
         compute_forces(model, state, forces)
         _linearise(model, state, ws, dt, forces.drag, forces.tearable)
         iterations = 0

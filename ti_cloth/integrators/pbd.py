@@ -32,6 +32,9 @@ def _predict(model: ti.template(), state: ti.template(), dt: float, damping: flo
                       start, step)
 
 
+STIFFNESS_KEYS = tuple(k.name.lower() for k in SpringKind) + ("altitude",)
+
+
 class PBD(Integrator):
     """Position-based dynamics as in the lecture: springs are constraints.
 
@@ -44,7 +47,9 @@ class PBD(Integrator):
 
     iterations: relaxation passes per step, >= 1 (the lecture uses 1-2).
     damping: lecture factor d in [0, 1), as Verlet.
-    stiffness: fraction of the correction applied per pass, per kind, {"stretch": 1.0, ...}.
+    stiffness: fraction of the correction applied per pass, per kind, {"stretch": 1.0, ...};
+        "altitude" for the altitude springs (each a corner projected to its rest height over
+        the opposite face of a tetrahedron: constraints._relax_altitude).
     Order 1 (velocity from positions); no step-size stability limit: positions are projected,
     never extrapolated by stiff forces.
     """
@@ -61,9 +66,10 @@ class PBD(Integrator):
         require(stiffness is None or isinstance(stiffness, Mapping), "PBD.stiffness", stiffness,
                 "None or a table {stretch = 1.0, shear = ..., bend = ...}")
         stiffness = dict(stiffness or {})
-        unknown = set(stiffness) - {k.name.lower() for k in SpringKind}
-        require(not unknown, "PBD.stiffness keys", sorted(unknown), "'stretch', 'shear', 'bend'")
-        self.stiffness = {k.name.lower(): 1.0 for k in SpringKind} | {
+        unknown = set(stiffness) - set(STIFFNESS_KEYS)
+        require(not unknown, "PBD.stiffness keys", sorted(unknown),
+                ", ".join(repr(k) for k in STIFFNESS_KEYS))
+        self.stiffness = {k: 1.0 for k in STIFFNESS_KEYS} | {
             name: finite_number(f"PBD.stiffness[{name!r}]", value, 0.0) for name, value in stiffness.items()}
         for name, value in self.stiffness.items():
             require(value <= 1.0, f"PBD.stiffness[{name!r}]", value, "a fraction in [0, 1]")
@@ -75,7 +81,8 @@ class PBD(Integrator):
         compute_forces(model, state, forces, springs=False)   # external forces only
         _predict(model, state, dt, self.damping, not state.prev_valid, step_index)
         state.prev_valid = True
-        if model.spring_count:
+        if model.spring_count + model.altitude_count:
             stiffness = ti.math.vec3(*(self.stiffness[k.name.lower()] for k in SpringKind))
-            sweep(relax_springs, model, state, self.iterations, stiffness, forces.tearable, 0.0, False)
+            sweep(relax_springs, model, state, self.iterations, stiffness,
+                  self.stiffness["altitude"], forces.tearable, 0.0, False)
         update_velocity(model, state, dt, step_index)

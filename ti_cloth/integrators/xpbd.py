@@ -23,11 +23,12 @@ def _predict(model: ti.template(), state: ti.template(), dt: float):
 
 
 class _Multipliers:
-    """One Lagrange multiplier per spring [N s^2], reset every step."""
+    """One Lagrange multiplier per spring and per altitude spring [N s^2], reset every step."""
 
-    def __init__(self, spring_count: int):
+    def __init__(self, spring_count: int, altitude_count: int):
         fields = backend.FieldGroup()
-        self.value = fields.scalar(backend.real(), spring_count)
+        self.value = fields.scalar(backend.real(), max(spring_count, 1))
+        self.altitude = fields.scalar(backend.real(), max(altitude_count, 1))
         fields.finalize(self)
 
 
@@ -62,10 +63,13 @@ class XPBD(Integrator):
     def step(self, model, state, dt, forces, step_index):
         compute_forces(model, state, forces, springs=False)   # external forces only
         _predict(model, state, dt)
-        if model.spring_count:
-            multiplier = self.buffers(state, lambda: _Multipliers(model.spring_count)).value
-            multiplier.fill(0)
-            sweep(xpbd_springs, model, state, self.iterations, multiplier, dt, forces.tearable)
+        if model.spring_count + model.altitude_count:
+            multipliers = self.buffers(state, lambda: _Multipliers(model.spring_count,
+                                                                   model.altitude_count))
+            multipliers.value.fill(0)
+            multipliers.altitude.fill(0)
+            sweep(xpbd_springs, model, state, self.iterations, multipliers.value,
+                  multipliers.altitude, dt, forces.tearable)
         update_velocity(model, state, dt, step_index)
         if model.spring_count and model.relative_damping:
             sweep(damp_springs, model, state, 1, dt, forces.tearable)
