@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from ti_cloth import constraints, handles, strain_limit, tearing, wind
+from ti_cloth import constraints, handles, self_collision, strain_limit, tearing, wind
 from ti_cloth.colliders import resolve_collisions
 from ti_cloth.integrators import implicit_euler, rk4, xpbd
 from ti_cloth.state import copy_positions
@@ -18,7 +18,7 @@ OPTIONAL = {
     "strain-limit velocity": strain_limit._follow_velocity, "tearing": tearing.tear_springs,
     "handles": handles.move_handles, "xpbd": constraints.xpbd_springs,
     "xpbd prediction": xpbd._predict, "implicit solve": implicit_euler._linearise,
-    "rk4 stages": rk4._stage,
+    "rk4 stages": rk4._stage, "self-collision": self_collision._count_contacts,
 }
 
 
@@ -36,7 +36,8 @@ def full_simulation(integrator, n=8):
         cloth, integrator=integrator, dt=1e-4, drag=0.2, tearing=0.5,
         wind=tc.Wind(velocity=(1.0, 0.0, 0.5), turbulence=0.5),
         handles=[tc.Handle([n * n - 1], tc.Oscillation(amplitude=(0.0, 0.05, 0.0), frequency=1.0))],
-        colliders=[tc.Sphere(centre=(0.5, -0.3, 0.5), radius=0.2)], strain_limit=tc.StrainLimit(0.1))
+        colliders=[tc.Sphere(centre=(0.5, -0.3, 0.5), radius=0.2)], strain_limit=tc.StrainLimit(0.1),
+        self_collision=tc.SelfCollision(thickness=0.01))
 
 
 @pytest.fixture
@@ -64,5 +65,5 @@ def test_each_feature_compiles_its_kernels_only_when_used(f64, fresh_kernels, in
     sim = full_simulation(integrator)
     sim.step(5)
     features = {"wind", "collisions", "collision snapshot", "relaxation", "strain-limit velocity",
-                "tearing", "handles"}
+                "tearing", "handles", "self-collision"}
     assert compiled_features() == features | own

@@ -19,6 +19,7 @@ from .handles import Handle
 from .simulation import Simulation
 from .stability import AUTO_MAX_DT, auto_dt, auto_substeps, stable_dt
 from .state import State
+from .self_collision import SelfCollision
 from .strain_limit import StrainLimit
 from .tearing import Tearing
 from .topology import Cloth
@@ -30,7 +31,7 @@ __all__ = [
     "INTEGRATORS", "Integrator", "ExplicitEuler", "SymplecticEuler", "Verlet", "PBD", "XPBD",
     "ImplicitEuler", "RK4", "PRESETS", "Material", "SpringKind", "SpringParams", "Mesh", "grid_mesh",
     "tet_grid_mesh", "load_mesh", "save_mesh", "Model", "Keyframes", "Oscillation", "Handle",
-    "Simulation", "stable_dt", "auto_dt", "auto_substeps", "AUTO_MAX_DT", "State", "StrainLimit",
+    "Simulation", "stable_dt", "auto_dt", "auto_substeps", "AUTO_MAX_DT", "State", "StrainLimit", "SelfCollision",
     "Tearing", "Cloth", "Wind", "string", "hair", "soft_body", "tet_block",
 ]
 

@@ -2,13 +2,14 @@
 
 One step, in this order (STEP_ORDER), the same in every launch plan:
 
-    integrator (forces, move)  ->  handles  ->  strain limiting  ->  colliders  ->  tearing
+    integrator (forces, move)  ->  handles  ->  strain limiting  ->  colliders
+        ->  self-collision  ->  tearing
 
 (held particles are on their paths before strain limiting and the colliders see them)
 
 Each stage after the integrator is an object with after_step(model, state, t, dt, step_index)
 (t: the time at the step's end), compiled and launched only when the simulation has it; the
-colliders and the wind also have before_step(state, t) (t: the step's start). On the CPU, a
+colliders, self-collision and the wind also have before_step(state, t) (t: the step's start). On the CPU, a
 fused integrator whose stages are all among integrators.fused.FUSED_STAGES runs many steps in
 one launch (tested to give the same bits as a launch per step).
 """
@@ -21,6 +22,7 @@ import numpy as np
 from . import backend, limits
 from ._validate import as_array, in_range, integer, require
 from .colliders import ColliderSet
+from .self_collision import SelfCollision, SelfContact
 from .errors import SimulationDiverged, StaleSimulation
 from .forces import ForceSettings, energies
 from .handles import Handle, HandleSet
@@ -34,7 +36,7 @@ from .tearing import RUNAWAY_STRAIN, Tearing, torn_triangles
 from .topology import Cloth
 from .wind import WindField
 
-STEP_ORDER = ("integrator", "handles", "strain_limit", "colliders", "tearing")
+STEP_ORDER = ("integrator", "handles", "strain_limit", "colliders", "self_collision", "tearing")
 
 
 class Simulation:
@@ -60,7 +62,7 @@ class Simulation:
     def __init__(self, cloth: Cloth, integrator="symplectic_euler", dt: float = 1e-3,
                  gravity=(0.0, -9.81, 0.0), drag: float = 0.0, wind=None, tearing=None,
                  handles: Sequence[Handle] = (), colliders=(), strain_limit=None,
-                 position_limit: float = 1e6):
+                 position_limit: float = 1e6, self_collision: SelfCollision | None = None):
         require(isinstance(cloth, Cloth), "cloth", cloth, "a ti_cloth.Cloth")
         self._runtime = backend.generation()
         self.cloth = cloth
@@ -96,11 +98,16 @@ class Simulation:
                                                        tearing is not None))
         if colliders:
             parts["colliders"] = (ColliderSet, (colliders, cloth.particle_count))
+        require(self_collision is None or isinstance(self_collision, SelfCollision),
+                "self_collision", self_collision, "None or a SelfCollision(thickness=...)")
+        if self_collision is not None:
+            parts["self_contact"] = (SelfContact, (self_collision, cloth))
         self._lent = self._lend(parts)
         self.model, self.state = self._lent["model"], self._lent["state"]
         self.wind = self._lent.get("wind")
         self.strain_limiter = self._lent.get("strain_limiter")
         self.colliders = self._lent.get("colliders")
+        self.self_contact = self._lent.get("self_contact")
         self.forces = POOL.keep(ForceSettings(gravity=tuple(gravity), drag=drag,
                                               tearable=tearing is not None, wind=self.wind))
         self.integrator = POOL.keep(self.integrator)   # an equal one, whose kernels exist
@@ -109,11 +116,12 @@ class Simulation:
                               else self.handles.pinned(permanent=True))
         self.state.reset(self.model.particle_rest_position)
         stages = dict(strain_limit=self.strain_limiter, colliders=self.colliders,
-                      handles=self.handles, tearing=self.tearing)
+                      self_collision=self.self_contact, handles=self.handles, tearing=self.tearing)
         self.stages = ("integrator",) + tuple(name for name in STEP_ORDER[1:]
                                               if stages[name] is not None)
         self._after = [stages[name] for name in self.stages[1:]]
-        self._before = [stage for stage in (self.colliders, self.wind) if stage is not None]
+        self._before = [stage for stage in (self.colliders, self.self_contact, self.wind)
+                        if stage is not None]
         self.step_count = 0
         self._diverged: SimulationDiverged | None = None
         self._place_handles_at_start()

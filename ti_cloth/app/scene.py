@@ -26,6 +26,7 @@ from ..render.camera import Camera
 from ..render.renderer import SurfaceStyle
 from ..simulation import Simulation
 from ..stability import auto_substeps
+from ..self_collision import SelfCollision
 from ..strain_limit import StrainLimit
 from ..topology import Cloth
 from ..wind import Wind
@@ -72,6 +73,7 @@ class Scene:
     wind: Wind | None
     tearing: float | None
     strain_limit: StrainLimit | None
+    self_collision: SelfCollision | None
     handles: list
     colliders: list
     camera: Camera | None
@@ -118,7 +120,8 @@ class Scene:
         return Simulation(self.cloth, integrator=integrator, dt=dt, gravity=self.gravity,
                           drag=self.drag, wind=self.wind, tearing=self.tearing,
                           handles=self.handles, colliders=self.colliders,
-                          strain_limit=self.strain_limit, **options)
+                          strain_limit=self.strain_limit, self_collision=self.self_collision,
+                          **options)
 
 
 def load_scene(path, note=None) -> Scene:
@@ -161,6 +164,14 @@ def load_scene(path, note=None) -> Scene:
         limit.optional(options, "kinds", "value")
         strain_limit = limit.build(StrainLimit, **options)
         limit.finish()
+    contact = sim.table("self_collision")
+    self_collision = None
+    if contact is not None:
+        options = {}
+        contact.optional(options, "thickness", unit="m")
+        contact.optional(options, "iterations", "integer", minimum=1)
+        self_collision = contact.build(SelfCollision, **options)
+        contact.finish()
     sim.finish()
 
     forces = root.table("forces") or Table({}, "forces", str(path))
@@ -189,7 +200,8 @@ def load_scene(path, note=None) -> Scene:
     scene = Scene(name=name, source=path, description=description, cloth=cloth,
                   integrator=integrator, fps=fps, frames=max(frames, 1), substeps=substeps,
                   precision=precision, gravity=gravity, drag=drag, wind=wind, tearing=tearing,
-                  strain_limit=strain_limit, handles=handles, colliders=colliders, camera=camera,
+                  strain_limit=strain_limit, self_collision=self_collision, handles=handles,
+                  colliders=colliders, camera=camera,
                   camera_fit=camera_fit, output=output)
     if note is not None and cloth.spring_count > limits.LARGE_BODY:
         note(f"'{name}' has {cloth.particle_count:,} particles and {cloth.spring_count:,} "

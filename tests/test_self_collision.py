@@ -1,0 +1,130 @@
+"""Self-collision and cloth-on-cloth (self_collision.py), checked against independent geometry
+written here: brute-force point-triangle distances and segment-triangle intersections."""
+
+import numpy as np
+import pytest
+
+import ti_cloth as tc
+
+THICKNESS = 0.01
+
+
+def point_triangle_distances(points, corners):
+    """(P, T) distances from every point to every triangle (corners (T, 3, 3)): the plane
+    distance where the foot is inside, else the nearest of the three edges."""
+    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
+    normal = np.cross(b - a, c - a)
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    rel = points[:, None] - a[None]                                   # (P, T, 3)
+    height = np.einsum("ptk,tk->pt", rel, normal)
+    foot = points[:, None] - height[..., None] * normal[None]
+    inside = np.ones(height.shape, bool)
+    for p, q in ((a, b), (b, c), (c, a)):                             # same side of every edge
+        inside &= np.einsum("ptk,tk->pt", np.cross(q - p, foot - p[None]), normal) >= 0
+    best = np.where(inside, np.abs(height), np.inf)
+    for p, q in ((a, b), (b, c), (c, a)):
+        d = q - p
+        s = np.clip(np.einsum("ptk,tk->pt", points[:, None] - p[None], d) / (d * d).sum(1), 0, 1)
+        best = np.minimum(best, np.linalg.norm(points[:, None] - (p[None] + s[..., None] * d[None]),
+                                               axis=2))
+    return best
+
+
+def segments_cross_triangles(ends, corners):
+    """(E, T) bool: segment e passes through triangle t (Moller-Trumbore, strictly inside)."""
+    p, q = ends[:, 0], ends[:, 1]
+    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
+    e1, e2, d = b - a, c - a, q - p
+    h = np.cross(d[:, None], e2[None])                                # (E, T, 3)
+    det = np.einsum("etk,tk->et", h, e1)
+    ok = np.abs(det) > 1e-14
+    det = np.where(ok, det, 1.0)
+    s = p[:, None] - a[None]
+    u = np.einsum("etk,etk->et", s, h) / det
+    qv = np.cross(s, e1[None])
+    v = np.einsum("etk,ek->et", qv, d) / det
+    t = np.einsum("etk,tk->et", qv, e2) / det
+    return ok & (u > 0) & (v > 0) & (u + v < 1) & (t > 0) & (t < 1)
+
+
+def violations(cloth, x):
+    """(closest vertex-triangle distance over pairs sharing no particle, edges through triangles)."""
+    tris = cloth.mesh.triangles
+    own = (np.arange(cloth.particle_count)[:, None, None] == tris[None]).any(axis=2)
+    distances = np.where(own, np.inf, point_triangle_distances(x, x[tris]))
+    edges = np.unique(np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), 1), axis=0)
+    shares = (edges[:, None, :, None] == tris[None, :, None, :]).any(axis=(2, 3))
+    crossings = segments_cross_triangles(x[edges], x[tris]) & ~shares
+    return float(distances.min()), int(crossings.sum())
+
+
+def two_sheets():
+    """A 12 x 12 sheet pinned flat at y = 0 and a free 12 x 12 sheet 0.2 m above it."""
+    lower = tc.Cloth(tc.grid_mesh(12, 12, size=(1.0, 1.0), plane="xz"), tc.Material(),
+                     pinned=np.arange(144))
+    mesh = tc.grid_mesh(12, 12, size=(0.8, 0.8), plane="xz")
+    upper = tc.Cloth(tc.Mesh(mesh.vertices + [0.1, 0.2, 0.1], mesh.triangles), tc.Material())
+    return tc.Cloth.combine([lower, upper])
+
+
+@pytest.mark.slow
+def test_a_sheet_dropped_on_another_rests_on_it_and_never_passes_through(f64):
+    """Every 1/60 s of a 1 s fall and rest (xpbd, 1/240 s steps): no vertex nearer than half
+    the thickness to a triangle it is not a corner of, no edge through a triangle; at the end
+    the upper sheet lies one thickness above the lower. Without self-collision it falls through."""
+    body = two_sheets()
+    worst = []
+    sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240, self_collision=tc.SelfCollision(THICKNESS))
+    for _ in range(60):
+        sim.step(4)
+        worst.append(violations(body, sim.positions()))
+    closest, crossings = min(w[0] for w in worst), max(w[1] for w in worst)
+    upper = sim.positions()[144:, 1]
+    print(f"closest vertex-triangle {closest:.4g} m, edge crossings {crossings}, upper sheet at "
+          f"{upper.min():.4g}..{upper.max():.4g} m")
+    assert closest > 0.5 * THICKNESS and crossings == 0
+    assert np.abs(upper - THICKNESS).max() < 0.2 * THICKNESS
+    free = tc.Simulation(body, integrator="xpbd", dt=1 / 240)
+    free_worst = []
+    for _ in range(60):
+        free.step(4)
+        free_worst.append(violations(body, free.positions()))
+    assert min(w[0] for w in free_worst) < 0.5 * THICKNESS, "the same check fails without it"
+    assert free.positions()[144:, 1].max() < -0.5, "without self-collision it falls through"
+
+
+def test_reruns_give_the_same_bits(f64):
+    body = two_sheets()
+    runs = []
+    for _ in range(2):
+        sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240, self_collision=tc.SelfCollision(THICKNESS))
+        sim.step(60)
+        runs.append(sim.positions())
+    np.testing.assert_array_equal(runs[0], runs[1])
+    assert runs[0][144:, 1].max() < 0.1, "the sheet reached the other"
+
+
+@pytest.mark.parametrize("kwargs, field", [({"thickness": 0.0}, "SelfCollision.thickness"),
+                                           ({"thickness": float("nan")}, "SelfCollision.thickness"),
+                                           ({"iterations": 0}, "SelfCollision.iterations")])
+def test_bad_settings_are_refused_by_name(kwargs, field):
+    with pytest.raises(ValueError, match=field):
+        tc.SelfCollision(**kwargs)
+    with pytest.raises(ValueError, match="self_collision must be None or a SelfCollision"):
+        tc.Simulation(tc.string(3, 1.0), self_collision=0.01)
+
+
+def test_one_thread_and_two_give_the_same_bits():
+    """Contacts are listed in index order and gathered per particle in list order."""
+    body = two_sheets()
+    runs = []
+    try:
+        for threads in (1, 2):
+            tc.init(arch="cpu", precision="f64", threads=threads)
+            sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240,
+                                self_collision=tc.SelfCollision(THICKNESS))
+            sim.step(60)
+            runs.append(sim.positions())
+    finally:
+        tc.init(arch="cpu", precision="f64")
+    np.testing.assert_array_equal(runs[0], runs[1])
