@@ -128,3 +128,31 @@ def test_one_thread_and_two_give_the_same_bits():
     finally:
         tc.init(arch="cpu", precision="f64")
     np.testing.assert_array_equal(runs[0], runs[1])
+
+
+@pytest.mark.slow
+def test_a_ribbon_folded_onto_itself_stays_two_layers(f64):
+    """A 1.2 m ribbon on the ground, its end carried over it by a handle (1 s), so the lifted
+    part folds down onto the rest: in every frame no vertex nearer than half the thickness to a
+    triangle of the ribbon it is not a corner of and no edge through a triangle. Without
+    self-collision the folded layer lands in the lower one (distance 0, edges through)."""
+    cloth = tc.Cloth(tc.grid_mesh(4, 30, size=(1.2, 0.15), plane="xz"), tc.Material())
+    end = np.flatnonzero(np.isclose(cloth.particle_position[:, 0], 1.2))
+
+    def carried(t):
+        s = min(t, 1.0)
+        return (-0.9 * s, 0.12 * np.sin(np.pi * s), 0.0)
+
+    worst = {}
+    for contact in (tc.SelfCollision(THICKNESS), None):
+        sim = tc.Simulation(cloth, integrator="xpbd", dt=1 / 240, self_collision=contact,
+                            handles=[tc.Handle(end, carried)],
+                            colliders=[tc.Plane(point=(0.0, -0.01, 0.0), static_friction=0.5)])
+        frames = []
+        for _ in range(75):
+            sim.step(4)
+            frames.append(violations(cloth, sim.positions()))
+        worst[contact is not None] = (min(f[0] for f in frames), max(f[1] for f in frames))
+    print(f"closest vertex-triangle, most edge crossings (with, without): {worst}")
+    assert worst[True][0] > 0.5 * THICKNESS and worst[True][1] == 0
+    assert worst[False][0] < 0.5 * THICKNESS and worst[False][1] > 0
