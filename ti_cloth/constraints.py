@@ -46,17 +46,26 @@ def _relax(model: ti.template(), state: ti.template(), s, stiffness, tearable: t
 
 
 @ti.func
+def _altitude_constraint(model: ti.template(), state: ti.template(), a):
+    """(corners, n, h, g, w, sum_c w_c g_c^2) of altitude spring a now: the constraint
+    C = h - h0 has gradient g_c n on corner c (forces.altitude_frame); w = 1/m per corner."""
+    corner = model.altitude_indices[a]
+    n, h, foot = altitude_frame(state.particle_position[corner[0]],
+                                state.particle_position[corner[1]],
+                                state.particle_position[corner[2]],
+                                state.particle_position[corner[3]])
+    g = ti.Vector([1.0, -foot[0], -foot[1], -foot[2]])
+    weight = ti.Vector([model.particle_inv_mass[corner[c]] for c in ti.static(range(4))])
+    return corner, n, h, g, weight, (weight * g * g).sum()
+
+
+@ti.func
 def _relax_altitude(model: ti.template(), state: ti.template(), a, stiffness):
     """Project altitude spring a (Selle et al. 2008; forces.altitude_frame) to its rest
     altitude: C = h - h0 with gradient g_c n on corner c, so corner c moves by
     -stiffness C w_c g_c n / sum_l w_l g_l^2 (the lecture's mass-weighted projection of one
     constraint, w = 1/m)."""
-    corner = model.altitude_indices[a]
-    n, h, w = altitude_frame(state.particle_position[corner[0]], state.particle_position[corner[1]],
-                             state.particle_position[corner[2]], state.particle_position[corner[3]])
-    g = ti.Vector([1.0, -w[0], -w[1], -w[2]])
-    weight = ti.Vector([model.particle_inv_mass[corner[c]] for c in ti.static(range(4))])
-    norm = (weight * g * g).sum()
+    corner, n, h, g, weight, norm = _altitude_constraint(model, state, a)
     if norm > 0 and n.norm() > 0:
         scale = -stiffness * (h - model.altitude_rest_length[a]) / norm
         for c in ti.static(range(4)):
@@ -134,12 +143,7 @@ def _xpbd_altitude(model: ti.template(), state: ti.template(), a, multiplier: ti
     1 / (k h^2) and damping kd on the altitude's rate, as _xpbd with sum_c w_c g_c^2 for
     w_p + w_q."""
     k = model.altitude_stiffness[a]
-    corner = model.altitude_indices[a]
-    n, h, w = altitude_frame(state.particle_position[corner[0]], state.particle_position[corner[1]],
-                             state.particle_position[corner[2]], state.particle_position[corner[3]])
-    g = ti.Vector([1.0, -w[0], -w[1], -w[2]])
-    weight = ti.Vector([model.particle_inv_mass[corner[c]] for c in ti.static(range(4))])
-    norm = (weight * g * g).sum()
+    corner, n, h, g, weight, norm = _altitude_constraint(model, state, a)
     if k > 0 and norm > 0 and n.norm() > 0:
         compliance = 1.0 / (k * dt * dt)
         gamma = model.altitude_damping[a] / (k * dt)

@@ -25,6 +25,7 @@ Each contact pass:
 Velocities follow the positions' correction (v += dx / h), as after strain limiting.
 """
 
+import hashlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -70,8 +71,8 @@ class SelfContact:
     def __init__(self, settings: SelfCollision, cloth):
         n = cloth.particle_count
         triangles = np.asarray(cloth.mesh.triangles, np.int64).reshape(-1, 3)
-        edges = unique_rows(np.sort(triangle_edges(triangles), axis=1)) if len(triangles) else \
-            np.zeros((0, 2), np.int64)
+        edges = (unique_rows(np.sort(triangle_edges(triangles), axis=1)) if len(triangles)
+                 else np.zeros((0, 2), np.int64))
         self.particle_count = n
         self.triangle_count = len(triangles)
         self.edge_count = len(edges)
@@ -102,7 +103,9 @@ class SelfContact:
 
     @staticmethod
     def structure(settings: SelfCollision, cloth) -> tuple:
-        return ("SelfContact", cloth.particle_count, cloth.mesh.triangles.tobytes())
+        triangles = np.ascontiguousarray(cloth.mesh.triangles).tobytes()
+        return ("SelfContact", cloth.particle_count,
+                hashlib.blake2b(triangles, digest_size=16).hexdigest())
 
     def load(self, settings: SelfCollision, cloth) -> None:
         require(isinstance(settings, SelfCollision), "self_collision", settings,
