@@ -3,13 +3,15 @@ closer than `thickness` to a triangle it is not a corner of, nor an edge closer 
 to an edge it shares no particle with, across every body of the simulation.
 
 Each contact pass:
-1. Broad phase (particle_grid.py): the particles sorted into cells of side 2 L + thickness,
-   L the longest edge now, so every triangle within `thickness` of a particle, and every edge
-   within `thickness` of an edge, has a corner in the 3 x 3 x 3 block of cells around it.
+1. Broad phase (particle_grid.py): the particles sorted into cells of side L + thickness,
+   L the longest edge now, so every triangle within `thickness` of a particle has a corner in
+   the 3 x 3 x 3 block of cells around it, and every edge within `thickness` of an edge has an
+   end in the block around one of the edge's ends.
 2. Narrow phase, per particle (vertex-triangle) and per edge (edge-edge), in parallel, counted
    first and then written at offsets from a prefix sum of the counts: a fixed, index-ordered
    list of contacts. A pair is found from one side only (the vertex; the lower-numbered edge)
-   and through one corner of the other (the first one within reach), so it is listed once.
+   and through one corner of the other (the first one within reach; for edges, the first pair
+   of ends within reach), so it is listed once.
    - vertex v and triangle t: v's foot on t's plane inside t, and v's height over t, measured
      on the side v was on at the start of the step, below `thickness` (a vertex that crossed
      the plane during the step is caught and pushed back to the side it came from);
@@ -123,7 +125,7 @@ class SelfContact:
         copy_positions(state, self.before)
         for _ in range(self.settings.iterations):
             _longest_edge(self, state)
-            self.grid.build(state.particle_position, 2.0 * float(self.reach[None]) + thickness)
+            self.grid.build(state.particle_position, float(self.reach[None]) + thickness)
             _count_contacts(self, model, state, thickness)
             total = _prefix(self)
             if total > self.capacity:
@@ -299,43 +301,64 @@ def _vertex_contacts(stage: ti.template(), model: ti.template(), state: ti.templ
 
 
 @ti.func
+def _first_close_ends(positions: ti.template(), ends, other, reach):
+    """The first pair of ends (one of each edge) within reach of each other, in the order
+    (e0, f0), (e0, f1), (e1, f0), (e1, f1); (-1, -1) if none."""
+    first, second = -1, -1
+    for p in ti.static(range(2)):
+        for q in ti.static(range(2)):
+            if first < 0 and (positions[ends[p]] - positions[other[q]]).norm() <= reach:
+                first, second = ends[p], other[q]
+    return first, second
+
+
+@ti.func
 def _edge_contacts(stage: ti.template(), model: ti.template(), state: ti.template(), e,
                    thickness, write: ti.template()):
     """Contacts of edge e with edges f > e sharing no particle with it (counted, or written
-    from pair_start[N + e]): f is reached through its first end within reach of e's first."""
+    from pair_start[N + e]). Two edges within thickness have an end each within
+    L + thickness of each other (each closest point is within L / 2 of an end): f is found
+    from each end of e through the particles within that reach, and kept from the first such
+    pair of ends only (_first_close_ends)."""
     found = 0
     ends = stage.edges[e]
-    x = state.particle_position[ends[0]]
-    reach = 2.0 * stage.reach[None] + thickness
-    lo, hi = cell_block(stage.grid, x)
-    for cz in range(lo[2], hi[2] + 1):
-        for cy in range(lo[1], hi[1] + 1):
-            for cx in range(lo[0], hi[0] + 1):
-                begin, end = cell_range(stage.grid, ti.Vector([cx, cy, cz]))
-                for a in range(begin, end):
-                    j = stage.grid.cell_particle[a]
-                    if (state.particle_position[j] - x).norm() <= reach:
-                        for k in range(stage.edge_start[j], stage.edge_start[j + 1]):
-                            f = stage.particle_edge[k]
-                            other = stage.edges[f]
-                            first = other[1]
-                            if (state.particle_position[other[0]] - x).norm() <= reach:
-                                first = other[0]
-                            shared = (other[0] == ends[0] or other[0] == ends[1]
-                                      or other[1] == ends[0] or other[1] == ends[1])
-                            if f > e and first == j and not shared and _boxes_near(
-                                    x, state.particle_position[ends[1]],
-                                    state.particle_position[other[0]],
-                                    state.particle_position[other[1]], thickness):
-                                touching, n, gap, s, t = _edge_edge(
-                                    stage, state.particle_position, stage.step_start, e, f, thickness)
-                                corners = ti.Vector([ends[0], ends[1], other[0], other[1]])
-                                weights = ti.Vector([1.0 - s, s, t - 1.0, -t])
-                                if touching and not _rest_close(model, corners, weights, thickness):
-                                    if ti.static(write):
-                                        _contact_move(model, stage, stage.pair_start[
-                                            stage.particle_count + e] + found, corners, weights, n, gap)
-                                    found += 1
+    reach = stage.reach[None] + thickness
+    for p in range(2):
+        mine = ti.select(p == 0, ends[0], ends[1])
+        x = state.particle_position[mine]
+        lo, hi = cell_block(stage.grid, x)
+        for cz in range(lo[2], hi[2] + 1):
+            for cy in range(lo[1], hi[1] + 1):
+                for cx in range(lo[0], hi[0] + 1):
+                    begin, end = cell_range(stage.grid, ti.Vector([cx, cy, cz]))
+                    for a in range(begin, end):
+                        j = stage.grid.cell_particle[a]
+                        if (state.particle_position[j] - x).norm() <= reach:
+                            for k in range(stage.edge_start[j], stage.edge_start[j + 1]):
+                                f = stage.particle_edge[k]
+                                other = stage.edges[f]
+                                shared = (other[0] == ends[0] or other[0] == ends[1]
+                                          or other[1] == ends[0] or other[1] == ends[1])
+                                if f > e and not shared:
+                                    first, second = _first_close_ends(state.particle_position,
+                                                                      ends, other, reach)
+                                    if first == mine and second == j and _boxes_near(
+                                            state.particle_position[ends[0]],
+                                            state.particle_position[ends[1]],
+                                            state.particle_position[other[0]],
+                                            state.particle_position[other[1]], thickness):
+                                        touching, n, gap, s, t = _edge_edge(
+                                            stage, state.particle_position, stage.step_start, e,
+                                            f, thickness)
+                                        corners = ti.Vector([ends[0], ends[1], other[0], other[1]])
+                                        weights = ti.Vector([1.0 - s, s, t - 1.0, -t])
+                                        if touching and not _rest_close(model, corners, weights,
+                                                                        thickness):
+                                            if ti.static(write):
+                                                _contact_move(model, stage, stage.pair_start[
+                                                    stage.particle_count + e] + found, corners,
+                                                    weights, n, gap)
+                                            found += 1
     return found
 
 
