@@ -14,7 +14,7 @@ SERIAL_SPRING_LIMIT springs (XPBD, 10 passes: 6.4x faster at 1.4k springs, 1.8x 
 import taichi as ti
 
 from . import backend
-from .forces import altitude_frame
+from .forces import altitude_gradient
 
 SERIAL_SPRING_LIMIT = 50_000   # serial sweeps faster at 24k springs, parallel ones at 97k
 
@@ -48,13 +48,9 @@ def _relax(model: ti.template(), state: ti.template(), s, stiffness, tearable: t
 @ti.func
 def _altitude_constraint(model: ti.template(), state: ti.template(), a):
     """(corners, n, h, g, w, sum_c w_c g_c^2) of altitude spring a now: the constraint
-    C = h - h0 has gradient g_c n on corner c (forces.altitude_frame); w = 1/m per corner."""
+    C = h - h0 has gradient g_c n on corner c (forces.altitude_gradient); w = 1/m per corner."""
     corner = model.altitude_indices[a]
-    n, h, foot = altitude_frame(state.particle_position[corner[0]],
-                                state.particle_position[corner[1]],
-                                state.particle_position[corner[2]],
-                                state.particle_position[corner[3]])
-    g = ti.Vector([1.0, -foot[0], -foot[1], -foot[2]])
+    n, h, g = altitude_gradient(state.particle_position, corner)
     weight = ti.Vector([model.particle_inv_mass[corner[c]] for c in ti.static(range(4))])
     return corner, n, h, g, weight, (weight * g * g).sum()
 

@@ -128,6 +128,15 @@ def altitude_frame(xp, xa, xb, xc):
 
 
 @ti.func
+def altitude_gradient(positions: ti.template(), corner):
+    """(n, h, g) of the altitude spring with corners `corner` (p, a, b, c) at `positions`:
+    altitude_frame's normal and height, and g = (1, -w_a, -w_b, -w_c), so grad h = g_c n."""
+    n, h, w = altitude_frame(positions[corner[0]], positions[corner[1]], positions[corner[2]],
+                             positions[corner[3]])
+    return n, h, ti.Vector([1.0, -w[0], -w[1], -w[2]])
+
+
+@ti.func
 def evaluate_altitudes(model: ti.template(), state: ti.template(), begin, end):
     """altitude_force[4 a + c] = force of altitude spring a on its corner c (p, a, b, c), for
     altitude springs begin .. end - 1: with g = (1, -w_a, -w_b, -w_c) and the rate
@@ -137,11 +146,7 @@ def evaluate_altitudes(model: ti.template(), state: ti.template(), begin, end):
     if ti.static(model.altitude_count > 0):
         for a in range(begin, end):
             corner = model.altitude_indices[a]
-            n, h, w = altitude_frame(state.particle_position[corner[0]],
-                                     state.particle_position[corner[1]],
-                                     state.particle_position[corner[2]],
-                                     state.particle_position[corner[3]])
-            g = ti.Vector([1.0, -w[0], -w[1], -w[2]])
+            n, h, g = altitude_gradient(state.particle_position, corner)
             rate = 0.0
             for c in ti.static(range(4)):
                 rate += g[c] * n.dot(state.particle_velocity[corner[c]])

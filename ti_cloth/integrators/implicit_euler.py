@@ -8,7 +8,7 @@ Per spring (Stuyck eq. 4.5), with n the unit direction and l the current length,
 df_i/dx_i = -k (n n^T + c (I - n n^T)), c = 1 - L / l. Under compression c < 0 makes K
 indefinite; c is clamped at 0 (Choi & Ko 2002) so the system matrix stays symmetric positive
 definite and CG applies. Damping: axial df_i/dv_i = -kd n n^T, relative (eq. 4.7) -kd I, drag
--drag m I. An altitude spring (Selle et al. 2008; forces.altitude_frame) contributes
+-drag m I. An altitude spring (Selle et al. 2008; forces.altitude_gradient) contributes
 -k G G^T to K and -kd G G^T to D, G = g (x) n its altitude's gradient: its curvature term
 -k (h - h0) d^2h/dx^2 is dropped, as c's compressed part is, keeping A positive definite. Wind is treated explicitly (it enters f_n only). Pins: dv is filtered to zero on
 particles of inverse mass 0 (Baraff & Witkin's modified CG with S = 0 there).
@@ -27,7 +27,7 @@ import taichi as ti
 
 from .. import backend, limits
 from .._validate import count, finite_number, require
-from ..forces import altitude_frame, compute_forces
+from ..forces import altitude_gradient, compute_forces
 from ..state import store_particle
 from .base import Integrator
 
@@ -142,14 +142,10 @@ def _linearise(model: ti.template(), state: ti.template(), ws: ti.template(), dt
     if ti.static(model.altitude_count > 0):
         for a in range(model.altitude_count):
             corner = model.altitude_indices[a]
-            n, _, w = altitude_frame(state.particle_position[corner[0]],
-                                     state.particle_position[corner[1]],
-                                     state.particle_position[corner[2]],
-                                     state.particle_position[corner[3]])
+            n, _, g = altitude_gradient(state.particle_position, corner)
             ws.altitude_normal[a] = n
-            ws.altitude_weight[4 * a] = 1.0
-            for c in ti.static(range(3)):
-                ws.altitude_weight[4 * a + 1 + c] = -w[c]
+            for c in ti.static(range(4)):
+                ws.altitude_weight[4 * a + c] = g[c]
         _project_altitudes(model, ws, state.particle_velocity)
     for block in range(ws.block_count):
         begin, end = _block_range(block, model.particle_count)
