@@ -7,7 +7,7 @@ import importlib
 from .backend import init
 from .bodies import hair, soft_body, string, tet_block
 from .colliders import Box, Capsule, Collider, Plane, Sphere
-from .errors import SimulationDiverged, TeamStalled
+from .errors import ContactMissed, SimulationDiverged, TeamStalled
 from .forces import ForceSettings
 from .integrators import (INTEGRATORS, PBD, RK4, XPBD, ExplicitEuler, ImplicitEuler, Integrator,
                           SymplecticEuler, Verlet)
@@ -19,7 +19,7 @@ from .handles import Handle
 from .simulation import Simulation
 from .stability import AUTO_MAX_DT, auto_dt, auto_substeps, stable_dt
 from .state import State
-from .self_collision import SelfCollision
+from .self_collision import SelfCollision, SelfContacts
 from .strain_limit import StrainLimit
 from .tearing import Tearing
 from .topology import Cloth
@@ -32,6 +32,7 @@ __all__ = [
     "ImplicitEuler", "RK4", "PRESETS", "Material", "SpringKind", "SpringParams", "Mesh", "grid_mesh",
     "tet_grid_mesh", "load_mesh", "save_mesh", "Model", "Keyframes", "Oscillation", "Handle",
     "Simulation", "stable_dt", "auto_dt", "auto_substeps", "AUTO_MAX_DT", "State", "StrainLimit", "SelfCollision",
+    "SelfContacts", "ContactMissed",
     "Tearing", "Cloth", "Wind", "string", "hair", "soft_body", "tet_block",
 ]
 

@@ -2,29 +2,41 @@
 closer than `thickness` to a triangle it is not a corner of, nor an edge closer than `thickness`
 to an edge it shares no particle with, across every body of the simulation.
 
-Each contact pass:
-1. Broad phase (particle_grid.py): the particles sorted into cells of side L + thickness,
-   L the longest edge now, so every triangle within `thickness` of a particle has a corner in
-   the 3 x 3 x 3 block of cells around it, and every edge within `thickness` of an edge has an
-   end in the block around one of the edge's ends.
-2. Narrow phase, per particle (vertex-triangle) and per edge (edge-edge), in parallel, counted
-   first and then written at offsets from a prefix sum of the counts: a fixed, index-ordered
-   list of contacts. A pair is found from one side only (the vertex; the lower-numbered edge)
-   and through one corner of the other (the first one within reach; for edges, the first pair
-   of ends within reach), so it is listed once.
-   - vertex v and triangle t: v's foot on t's plane inside t, and v's height over t, measured
-     on the side v was on at the start of the step, below `thickness` (a vertex that crossed
-     the plane during the step is caught and pushed back to the side it came from);
-   - edges e and f: the closest points of the two segments (interior to both) nearer than
-     `thickness`, or on the other side of each other than at the step's start.
-   Pairs closer than `thickness` in the rest shape (neighbours through the mesh) are skipped.
-3. Response: each contact is the one-sided constraint C = distance - thickness >= 0 with
-   gradient g_k n on its four particles (vertex 1, corners -w; edges (1 - s, s, -(1 - t), -t)),
-   projected mass-weighted as a position-based constraint: particle k moves by
-   -C w_k g_k n / sum_j w_j g_j^2. Each particle gathers its contacts' moves in list order and
-   takes their mean (Jacobi with averaging: many contacts on one particle do not add up to an
-   overshoot). No float atomics, so reruns and thread counts give the same bits.
-Velocities follow the positions' correction (v += dx / h), as after strain limiting.
+Candidates (a Verlet list, as molecular dynamics keeps its neighbour lists), made at a step's
+end: the vertex-triangle and edge-edge pairs whose boxes swept over the step (the box of their
+positions at the step's start and end) meet within `near` = thickness + skin, and which are now
+nearer than `near` plus how far they moved relative to each other in the step. That holds every
+pair within `near` now and every pair that passed through each other during the step (its
+depth on the wrong side is at most its relative motion), however fast it moved: nothing
+tunnels between list and contact. The broad phase is two uniform grids of swept boxes
+(box_grid.py), of the particles (queried by each triangle's box) and of the edges (queried by
+each edge's, f > e), each pair met once. Counted, prefix-summed and written per triangle and
+per edge in index order: a fixed list. Pairs within `thickness` in the rest shape (neighbours
+through the mesh) are never listed.
+The list is kept while no two particles have moved more than the skin relative to each other
+since it was made - their relative motion is at most the diagonal of the bounding box of all
+displacements (an exact max/min reduction) - so a pair left out cannot come within `thickness`,
+nor pass through, before the list is made again. A body that falls as a whole keeps its list;
+one whose parts move apart fast makes one every step.
+
+Each contact pass evaluates every listed pair:
+- vertex v and triangle t: v's foot on t's plane inside t, and v's height over t, measured on
+  the side v was on at the start of the step, below `thickness` (a vertex that crossed the plane
+  during the step is pushed back to the side it came from);
+- edges e and f: the closest points of the two segments, interior to both, nearer than
+  `thickness` or on the other side of each other than at the step's start.
+Each contact is the one-sided constraint C = distance - thickness >= 0 with gradient g_k n on
+its four particles (vertex 1, corners -w; edges (1 - s, s, -(1 - t), -t)), projected
+mass-weighted as a position-based constraint: particle k moves by -w_k g_k (C n + f) / W,
+W = sum_j w_j g_j^2, where f is the Coulomb friction correction: the tangential relative motion
+of the two contact points over the step, removed entirely when it is at most
+friction x penetration depth, shortened by that much otherwise (as the colliders do). Each
+particle gathers its contacts' moves in list order and takes their mean (Jacobi with averaging:
+many contacts on one particle do not add up to an overshoot). No float atomics except exact
+max/min, so reruns and thread counts give the same bits. Velocities follow the positions'
+correction (v += dx / h), as after strain limiting.
+
+Strings and hair (no triangles) do not take part.
 """
 
 import hashlib
@@ -37,11 +49,15 @@ from . import backend, limits
 from ._validate import count, finite_number, require
 from .forces import altitude_frame
 from .mesh import triangle_edges, unique_rows
-from .particle_grid import ParticleGrid, cell_block, cell_range
+from .box_grid import (BLOCK, BoxGrid, box_cell, box_cell_count, cell_box, cell_range,
+                       found_here)
+from .proximity import segment_distance, segment_parameters, triangle_distance
 from .state import copy_positions
 from .transfer import upload
 
-PAIRS_PER_PARTICLE = 8      # contact list capacity, per particle
+PAIRS_PER_PARTICLE = 16     # candidate list room at first, per particle
+MAX_PAIRS_PER_PARTICLE = 256
+SKIN = 1.0                  # the list's slack (skin), in thicknesses
 INSIDE = 1e-6               # a foot this far outside a triangle (in barycentric terms) is inside
 
 
@@ -49,9 +65,11 @@ INSIDE = 1e-6               # a foot this far outside a triangle (in barycentric
 class SelfCollision:
     """thickness: the distance [m] kept between a particle and any triangle it is not a corner
     of, and between edges that share no particle, > 0 (Blender's self_distance_min, 0.015 m).
-    iterations: contact passes per step (broad phase, narrow phase, response), >= 1."""
+    friction: Coulomb coefficient between touching layers, >= 0.
+    iterations: contact passes per step, >= 1."""
 
     thickness: float = 0.005
+    friction: float = 0.0
     iterations: int = 2
 
     def __post_init__(self):
@@ -60,15 +78,28 @@ class SelfCollision:
         require(thickness <= limits.LENGTH.high, "SelfCollision.thickness", thickness,
                 f"in (0, {limits.LENGTH.high:g}] m")
         object.__setattr__(self, "thickness", thickness)
+        object.__setattr__(self, "friction", finite_number("SelfCollision.friction",
+                                                           self.friction, 0.0))
         object.__setattr__(self, "iterations", count("SelfCollision.iterations", self.iterations,
                                                      limits.ITERATIONS))
+
+
+@dataclass(frozen=True)
+class SelfContacts:
+    """Pairs of a simulation's self-collision (Simulation.self_contacts): vertex_triangle
+    (K, 2) rows (vertex, triangle index into the mesh), edge_edge (M, 2) rows of edge
+    indices into `edges` (E, 2) particle pairs."""
+
+    vertex_triangle: np.ndarray
+    edge_edge: np.ndarray
+    edges: np.ndarray
 
 
 @backend.kernel_argument
 class SelfContact:
     """The self-collision stage of one simulation: the body's triangles and edges, each
-    particle's triangles and edges (CSR), the grid, the contact list and the positions at the
-    start of the step."""
+    particle's edges (CSR), the grid, the candidate list and the positions at the start of the
+    step and at the list's making."""
 
     def __init__(self, settings: SelfCollision, cloth):
         n = cloth.particle_count
@@ -78,30 +109,30 @@ class SelfContact:
         self.particle_count = n
         self.triangle_count = len(triangles)
         self.edge_count = len(edges)
-        self.capacity = PAIRS_PER_PARTICLE * max(n, 1)
+        self.edge_rows = edges
         real = backend.real()
         fields = backend.FieldGroup()
         self.triangles = fields.vector(3, ti.i32, max(len(triangles), 1))
         self.edges = fields.vector(2, ti.i32, max(len(edges), 1))
-        self.triangle_start = fields.scalar(ti.i32, n + 1)
-        self.particle_triangle = fields.scalar(ti.i32, max(3 * len(triangles), 1))
-        self.edge_start = fields.scalar(ti.i32, n + 1)
-        self.particle_edge = fields.scalar(ti.i32, max(2 * len(edges), 1))
         self.step_start = fields.vector(3, real, n)
         self.before = fields.vector(3, real, n)
-        self.reach = fields.scalar(real, ())
-        self.pair_start = fields.scalar(ti.i32, n + len(edges) + 1)
-        self.pair_particles = fields.vector(4, ti.i32, self.capacity)
-        self.pair_move = fields.vector(3, real, 4 * self.capacity)
+        self.listed_at = fields.vector(3, real, n)
+        self.block_count = -(-n // BLOCK)
+        self.edge_block_count = max(-(-len(edges) // BLOCK), 1)
+        self.block_span = fields.vector(3, real, 2 * self.block_count)
+        self.span = fields.vector(3, real, 2)      # the box of the displacements since listing
+        self.block_longest = fields.scalar(real, self.edge_block_count)
+        self.longest = fields.scalar(real, ())
+        self.pair_start = fields.scalar(ti.i32, len(triangles) + len(edges) + 1)
+        self.active = fields.scalar(ti.i32, ())
         self.contact_start = fields.scalar(ti.i32, n + 1)
         self.contact_fill = fields.scalar(ti.i32, n)
-        self.contact = fields.scalar(ti.i32, 4 * self.capacity)
         fields.finalize(self)
-        self.grid = ParticleGrid(n)
+        self.vertex_grid = BoxGrid(n)
+        self.edge_grid = BoxGrid(len(edges))
+        self.candidates = PairList(PAIRS_PER_PARTICLE * max(n, 1))
         self.load(settings, cloth)
-        upload(((self.triangles, triangles), (self.edges, edges),
-                *_incidence(self.triangle_start, self.particle_triangle, triangles, n),
-                *_incidence(self.edge_start, self.particle_edge, edges, n)))
+        upload(((self.triangles, triangles), (self.edges, edges)))
 
     @staticmethod
     def structure(settings: SelfCollision, cloth) -> tuple:
@@ -113,6 +144,12 @@ class SelfContact:
         require(isinstance(settings, SelfCollision), "self_collision", settings,
                 "None or a SelfCollision")
         self.settings = settings
+        self.forget()
+
+    def forget(self) -> None:
+        """Drop the candidate list: the next step makes a new one (after a restart)."""
+        self.listed = False
+        self.pair_total = self.vertex_pairs = 0
 
     def before_step(self, state, t: float) -> None:
         copy_positions(state, self.step_start)
@@ -122,94 +159,293 @@ class SelfContact:
         if self.triangle_count == 0:
             return
         thickness = self.settings.thickness
+        if not self.listed or _moved_since_listed(self, state) > SKIN * thickness:
+            self._make_list(model, state, step_index)
+        if self.pair_total == 0:
+            return
         copy_positions(state, self.before)
         for _ in range(self.settings.iterations):
-            _longest_edge(self, state)
-            self.grid.build(state.particle_position, float(self.reach[None]) + thickness)
-            _count_contacts(self, model, state, thickness)
-            total = _prefix(self)
-            if total > self.capacity:
-                raise RuntimeError(
-                    f"self-collision found {total} contacts in step {step_index}, more than its "
-                    f"{self.capacity} slots ({PAIRS_PER_PARTICLE} per particle): the cloth is "
-                    "crushed far below its thickness; use more substeps or a smaller thickness")
-            if total == 0:
+            if _evaluate(self, self.candidates, model, state, thickness,
+                         self.settings.friction) == 0:
                 break
-            _write_contacts(self, model, state, thickness)
-            _index_contacts(self)
-            _apply_contacts(self, model, state)
+            _apply_contacts(self, self.candidates, model, state)
         _follow(self, state, dt)
 
+    def _make_list(self, model, state, step_index: int) -> None:
+        """List the pairs that met within thickness + skin during the step (their swept boxes
+        meet) and are now nearer than that plus how far they moved relative to each other."""
+        near = (1.0 + SKIN) * self.settings.thickness
+        _sweep_boxes(self, state)
+        cell = float(_longest_edge(self, state)) + 2.0 * near
+        self.vertex_grid.build(cell)
+        self.edge_grid.build(cell)
+        _count_pairs(self, self.candidates, model, state, near, self.settings.thickness)
+        total = _prefix(self)
+        if total > self.candidates.capacity:
+            if total > MAX_PAIRS_PER_PARTICLE * self.particle_count:
+                raise RuntimeError(
+                    f"self-collision found {total} pairs within {near:.3g} m in step "
+                    f"{step_index}, more than {MAX_PAIRS_PER_PARTICLE} per particle: the cloth "
+                    "is crushed far below its thickness; use more substeps or a smaller "
+                    "thickness")
+            self.candidates = PairList(min(2 * total,
+                                           MAX_PAIRS_PER_PARTICLE * self.particle_count))
+        _write_pairs(self, self.candidates, model, state, near, self.settings.thickness)
+        _index_contacts(self, self.candidates)
+        copy_positions(state, self.listed_at)
+        self.listed, self.pair_total = True, total
+        self.vertex_pairs = int(self.pair_start[self.triangle_count])
 
-def _incidence(start_field, list_field, elements: np.ndarray, n: int):
-    """(field, values) pairs of a CSR from particles to the elements (rows) they belong to, in
-    element order."""
-    owners = elements.ravel()
-    order = np.argsort(owners, kind="stable")
-    start = np.concatenate([[0], np.cumsum(np.bincount(owners, minlength=n))])
-    return (start_field, start), (list_field, order // elements.shape[1] if len(owners) else order)
+    def pairs(self, active: bool = True) -> SelfContacts:
+        """The listed candidate pairs, or (active) those in contact in the last pass of the
+        last step."""
+        total = self.pair_total
+        kept = np.arange(total)
+        if active:
+            kept = kept[self.candidates.active.to_numpy()[:total] > 0]
+        elements = self.candidates.elements.to_numpy()[kept]
+        vertex = kept < self.vertex_pairs
+        return SelfContacts(elements[vertex], elements[~vertex], self.edge_rows)
+
+
+@backend.kernel_argument
+class PairList:
+    """Room for `capacity` listed pairs: each pair's elements ((vertex, triangle) or (edge,
+    edge)), its four particles, whether it is in contact and its four particles' moves; and
+    per particle, the slots 4 p + k that move it (contact, indexed by the stage's
+    contact_start). A bigger list replaces a full one (its kernels compile again, once)."""
+
+    def __init__(self, capacity: int):
+        self.capacity = capacity
+        real = backend.real()
+        fields = backend.FieldGroup()
+        self.elements = fields.vector(2, ti.i32, capacity)
+        self.particles = fields.vector(4, ti.i32, capacity)
+        self.active = fields.scalar(ti.i32, capacity)
+        self.move = fields.vector(3, real, 4 * capacity)
+        self.contact = fields.scalar(ti.i32, 4 * capacity)
+        fields.finalize(self)
 
 
 @ti.kernel
-def _longest_edge(stage: ti.template(), state: ti.template()):
-    """reach = the longest edge now [m] (a max: exact in any order)."""
-    stage.reach[None] = 0.0
+def _moved_since_listed(stage: ti.template(), state: ti.template()) -> ti.f64:
+    """The diagonal of the bounding box of every particle's displacement since the list was
+    made [m]: the most any two particles moved relative to each other. Each block of BLOCK
+    particles is reduced by one thread, then the blocks in order (a max and a min are exact in
+    any order; no contended atomics)."""
+    for b in range(stage.block_count):
+        begin = b * BLOCK
+        lo = hi = state.particle_position[begin] - stage.listed_at[begin]
+        for i in range(begin + 1, ti.min(begin + BLOCK, stage.particle_count)):
+            moved = state.particle_position[i] - stage.listed_at[i]
+            lo, hi = ti.min(lo, moved), ti.max(hi, moved)
+        stage.block_span[2 * b] = lo
+        stage.block_span[2 * b + 1] = hi
+    for _ in range(1):
+        stage.span[0], stage.span[1] = stage.block_span[0], stage.block_span[1]
+        for b in range(1, stage.block_count):
+            stage.span[0] = ti.min(stage.span[0], stage.block_span[2 * b])
+            stage.span[1] = ti.max(stage.span[1], stage.block_span[2 * b + 1])
+    return ti.cast((stage.span[1] - stage.span[0]).norm(), ti.f64)
+
+
+@ti.kernel
+def _sweep_boxes(stage: ti.template(), state: ti.template()):
+    """Each particle's and each edge's box over the step (its positions at the start and now)."""
+    x = ti.static(state.particle_position)
+    for i in range(stage.particle_count):
+        stage.vertex_grid.lo[i] = ti.min(x[i], stage.step_start[i])
+        stage.vertex_grid.hi[i] = ti.max(x[i], stage.step_start[i])
     for e in range(stage.edge_count):
-        ends = stage.edges[e]
-        ti.atomic_max(stage.reach[None],
-                      (state.particle_position[ends[0]] - state.particle_position[ends[1]]).norm())
+        a, b = stage.edges[e][0], stage.edges[e][1]
+        stage.edge_grid.lo[e] = ti.min(x[a], x[b], stage.step_start[a], stage.step_start[b])
+        stage.edge_grid.hi[e] = ti.max(x[a], x[b], stage.step_start[a], stage.step_start[b])
+
+
+@ti.kernel
+def _longest_edge(stage: ti.template(), state: ti.template()) -> ti.f64:
+    """The longest edge now [m], reduced per block of BLOCK edges, then over the blocks."""
+    for b in range(stage.edge_block_count):
+        longest = 0.0
+        for e in range(b * BLOCK, ti.min((b + 1) * BLOCK, stage.edge_count)):
+            ends = stage.edges[e]
+            longest = ti.max(longest, (state.particle_position[ends[0]]
+                                       - state.particle_position[ends[1]]).norm())
+        stage.block_longest[b] = longest
+    for _ in range(1):
+        stage.longest[None] = 0.0
+        for b in range(stage.edge_block_count):
+            stage.longest[None] = ti.max(stage.longest[None], stage.block_longest[b])
+    return stage.longest[None]
 
 
 @ti.func
-def _segments(p1, q1, p2, q2):
-    """Parameters (s, t) of the closest points p1 + s (q1 - p1), p2 + t (q2 - p2) of two
-    segments of non-zero length (Ericson, Real-Time Collision Detection, 5.1.9)."""
-    d1, d2, r = q1 - p1, q2 - p2, p1 - p2
-    a, e, f = d1.dot(d1), d2.dot(d2), d2.dot(r)
-    c, b = d1.dot(r), d1.dot(d2)
-    denominator = a * e - b * b
-    s = 0.0
-    if denominator > 1e-12 * a * e:
-        s = ti.math.clamp((b * f - c * e) / denominator, 0.0, 1.0)
-    t = (b * s + f) / e
-    if t < 0.0:
-        t = 0.0
-        s = ti.math.clamp(-c / a, 0.0, 1.0)
-    elif t > 1.0:
-        t = 1.0
-        s = ti.math.clamp((b - c) / a, 0.0, 1.0)
-    return s, t
+def _moved(stage: ti.template(), state: ti.template(), i, j):
+    """How far particles i and j moved relative to each other in this step [m]."""
+    return ((state.particle_position[i] - stage.step_start[i])
+            - (state.particle_position[j] - stage.step_start[j])).norm()
 
 
 @ti.func
-def _vertex_triangle(stage: ti.template(), positions: ti.template(), start: ti.template(), v, t,
-                     thickness):
-    """(in contact, n, gap, w) of vertex v and triangle t at `positions`, the side taken from
-    `start`: n the unit normal towards v's side at the start, gap = v's height over the plane
-    along n minus thickness (< 0 in contact), w the barycentric coordinates of v's foot."""
+def _triangle_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template(),
+                    state: ti.template(), t, near, thickness, write: ti.template()):
+    """Vertices v whose box over the step meets triangle t's grown by `near`, nearer to t now
+    than `near` + how far v moved relative to t's corners in the step, and farther than
+    `thickness` from it in the rest shape (counted, or written from pair_start[t] when
+    `write`), in cell order."""
+    found = 0
+    x, rest, start = ti.static(state.particle_position, model.particle_rest_position,
+                               stage.step_start)
     tri = stage.triangles[t]
-    n, h, w = altitude_frame(positions[v], positions[tri[0]], positions[tri[1]], positions[tri[2]])
-    n0, h0, _ = altitude_frame(start[v], start[tri[0]], start[tri[1]], start[tri[2]])
-    side = ti.select(h0 >= 0.0, 1.0, -1.0)
-    if n.dot(n0) < 0.0:
-        side = -side                                 # the triangle turned over in the step
-    gap = side * h - thickness
-    inside = w.min() >= -INSIDE and n.norm() > 0
-    return inside and gap < 0.0 and gap > -stage.reach[None] - thickness, side * n, gap, w
+    lo = ti.min(x[tri[0]], x[tri[1]], x[tri[2]], start[tri[0]], start[tri[1]],
+                start[tri[2]]) - near
+    hi = ti.max(x[tri[0]], x[tri[1]], x[tri[2]], start[tri[0]], start[tri[1]],
+                start[tri[2]]) + near
+    first, last = cell_box(stage.vertex_grid, lo, hi)
+    for k in range(box_cell_count(first, last)):
+        cell = box_cell(first, last, k)
+        begin, end = cell_range(stage.vertex_grid, cell)
+        for a in range(begin, end):
+            v = stage.vertex_grid.cell_item[a]
+            if v != tri[0] and v != tri[1] and v != tri[2]:
+                if not found_here(stage.vertex_grid, v, cell, first, lo, hi):
+                    continue
+                moved = ti.max(_moved(stage, state, v, tri[0]), _moved(stage, state, v, tri[1]),
+                               _moved(stage, state, v, tri[2]))
+                if (triangle_distance(x[v], x[tri[0]], x[tri[1]], x[tri[2]]) < near + moved
+                        and triangle_distance(rest[v], rest[tri[0]], rest[tri[1]],
+                                              rest[tri[2]]) >= thickness):
+                    if ti.static(write):
+                        slot = stage.pair_start[t] + found
+                        pairs.elements[slot] = ti.Vector([v, t])
+                        pairs.particles[slot] = ti.Vector([v, tri[0], tri[1], tri[2]])
+                    found += 1
+    return found
 
 
 @ti.func
-def _edge_edge(stage: ti.template(), positions: ti.template(), start: ti.template(), e, f,
-               thickness):
-    """(in contact, n, gap, s, t) of edges e and f: closest points at parameters s on e and t
-    on f, n the unit direction from f's point to e's on the side e was at the start of the
-    step, gap = distance along n minus thickness."""
-    a, b = stage.edges[e][0], stage.edges[e][1]
-    c, d = stage.edges[f][0], stage.edges[f][1]
-    s, t = _segments(positions[a], positions[b], positions[c], positions[d])
+def _edge_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template(),
+                state: ti.template(), e, near, thickness, write: ti.template()):
+    """Edges f > e sharing no particle with e whose boxes over the step meet e's grown by
+    `near`, nearer to e now than `near` + how far their ends moved relative to each other in
+    the step, and farther than `thickness` in the rest shape (counted, or written from
+    pair_start[T + e])."""
+    found = 0
+    x, rest = ti.static(state.particle_position, model.particle_rest_position)
+    ends = stage.edges[e]
+    lo, hi = stage.edge_grid.lo[e] - near, stage.edge_grid.hi[e] + near
+    first, last = cell_box(stage.edge_grid, lo, hi)
+    for k in range(box_cell_count(first, last)):
+        cell = box_cell(first, last, k)
+        begin, end = cell_range(stage.edge_grid, cell)
+        for a in range(begin, end):
+            f = stage.edge_grid.cell_item[a]
+            other = stage.edges[f]
+            if f > e and other[0] != ends[0] and other[0] != ends[1] and other[1] != ends[0] \
+                    and other[1] != ends[1]:
+                if not found_here(stage.edge_grid, f, cell, first, lo, hi):
+                    continue
+                moved = ti.max(_moved(stage, state, ends[0], other[0]),
+                               _moved(stage, state, ends[0], other[1]),
+                               _moved(stage, state, ends[1], other[0]),
+                               _moved(stage, state, ends[1], other[1]))
+                if (segment_distance(x[ends[0]], x[ends[1]], x[other[0]], x[other[1]])
+                        < near + moved
+                        and segment_distance(rest[ends[0]], rest[ends[1]], rest[other[0]],
+                                             rest[other[1]]) >= thickness):
+                    if ti.static(write):
+                        slot = stage.pair_start[stage.triangle_count + e] + found
+                        pairs.elements[slot] = ti.Vector([e, f])
+                        pairs.particles[slot] = ti.Vector([ends[0], ends[1], other[0],
+                                                           other[1]])
+                    found += 1
+    return found
+
+
+@ti.kernel
+def _count_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template(),
+                 state: ti.template(), near: float, thickness: float):
+    """pair_start[1 + t] = the pairs of triangle t, pair_start[1 + T + e] = of edge e."""
+    for t in range(stage.triangle_count):
+        stage.pair_start[t + 1] = _triangle_pairs(stage, pairs, model, state, t, near,
+                                                  thickness, False)
+    for e in range(stage.edge_count):
+        stage.pair_start[stage.triangle_count + e + 1] = _edge_pairs(
+            stage, pairs, model, state, e, near, thickness, False)
+
+
+@ti.kernel
+def _prefix(stage: ti.template()) -> ti.i32:
+    """Inclusive prefix sum of the counts (serial): pair_start becomes offsets; the total."""
+    stage.pair_start[0] = 0
+    for _ in range(1):
+        for k in range(stage.triangle_count + stage.edge_count):
+            stage.pair_start[k + 1] += stage.pair_start[k]
+    return stage.pair_start[stage.triangle_count + stage.edge_count]
+
+
+@ti.kernel
+def _write_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template(),
+                 state: ti.template(), near: float, thickness: float):
+    for t in range(stage.triangle_count):
+        if stage.pair_start[t + 1] > stage.pair_start[t]:
+            _triangle_pairs(stage, pairs, model, state, t, near, thickness, True)
+    for e in range(stage.edge_count):
+        k = stage.triangle_count + e
+        if stage.pair_start[k + 1] > stage.pair_start[k]:
+            _edge_pairs(stage, pairs, model, state, e, near, thickness, True)
+
+
+@ti.kernel
+def _index_contacts(stage: ti.template(), pairs: ti.template()):
+    """contact[contact_start[i]:contact_start[i + 1]] = the slots 4 p + k at which pair p
+    moves particle i, in pair order (counts, prefix sum and fill all serial)."""
+    total = stage.pair_start[stage.triangle_count + stage.edge_count]
+    for _ in range(1):
+        for i in range(stage.particle_count + 1):
+            stage.contact_start[i] = 0
+        for p in range(total):
+            for k in ti.static(range(4)):
+                stage.contact_start[pairs.particles[p][k] + 1] += 1
+        for i in range(stage.particle_count):
+            stage.contact_start[i + 1] += stage.contact_start[i]
+            stage.contact_fill[i] = stage.contact_start[i]
+        for p in range(total):
+            for k in ti.static(range(4)):
+                i = pairs.particles[p][k]
+                pairs.contact[stage.contact_fill[i]] = 4 * p + k
+                stage.contact_fill[i] += 1
+
+
+@ti.func
+def _vertex_triangle(positions: ti.template(), start: ti.template(), corners, thickness):
+    """(in contact, n, gap, w) of vertex corners[0] and triangle corners[1:] at `positions`,
+    the side taken from `start`: n the unit normal towards the vertex's side at the start,
+    gap = its height over the plane along n minus thickness (< 0 in contact), w the barycentric
+    coordinates of its foot."""
+    v, a, b, c = corners[0], corners[1], corners[2], corners[3]
+    n, h, w = altitude_frame(positions[v], positions[a], positions[b], positions[c])
+    inside = w.min() >= -INSIDE and n.norm() > 0
+    side = 1.0
+    if inside:                                       # else no contact: skip the start's frame
+        n0, h0, _ = altitude_frame(start[v], start[a], start[b], start[c])
+        side = ti.select(h0 >= 0.0, 1.0, -1.0)
+        if n.dot(n0) < 0.0:
+            side = -side                             # the triangle turned over in the step
+    gap = side * h - thickness
+    return inside and gap < 0.0, side * n, gap, w
+
+
+@ti.func
+def _edge_edge(positions: ti.template(), start: ti.template(), corners, thickness):
+    """(in contact, n, gap, s, t) of edges corners[0:2] and corners[2:4]: closest points at
+    parameters s and t, n the unit direction from the second edge's point to the first's on
+    the side they were at the start of the step, gap = distance along n minus thickness."""
+    a, b, c, d = corners[0], corners[1], corners[2], corners[3]
+    s, t = segment_parameters(positions[a], positions[b], positions[c], positions[d])
     between = (positions[a] + s * (positions[b] - positions[a])
                - positions[c] - t * (positions[d] - positions[c]))
-    s0, t0 = _segments(start[a], start[b], start[c], start[d])
+    s0, t0 = segment_parameters(start[a], start[b], start[c], start[d])
     before = start[a] + s0 * (start[b] - start[a]) - start[c] - t0 * (start[d] - start[c])
     distance = between.norm()
     n = between / ti.max(distance, 1e-30)
@@ -223,209 +459,72 @@ def _edge_edge(stage: ti.template(), positions: ti.template(), start: ti.templat
 
 
 @ti.func
-def _near_box(x, a, b, c, margin):
-    """Whether x is within `margin` of the bounding box of a, b, c (a cheap test first)."""
-    lo, hi = ti.min(a, b, c) - margin, ti.max(a, b, c) + margin
-    return (x >= lo).all() and (x <= hi).all()
-
-
-@ti.func
-def _boxes_near(a, b, c, d, margin):
-    """Whether the bounding boxes of segments ab and cd are within `margin` of each other."""
-    return ((ti.min(a, b) - margin <= ti.max(c, d)).all()
-            and (ti.min(c, d) - margin <= ti.max(a, b)).all())
-
-
-@ti.func
-def _rest_close(model: ti.template(), corners, weights, thickness):
-    """Whether the pair (corners, gradient weights: sum_k g_k x_k is its separation) is within
-    thickness in the rest shape."""
-    separation = ti.Vector([0.0, 0.0, 0.0])
-    for k in ti.static(range(4)):
-        separation += weights[k] * model.particle_rest_position[corners[k]]
-    return separation.norm() < thickness
-
-
-@ti.func
-def _contact_move(model: ti.template(), stage: ti.template(), slot, corners, weights, n, gap):
-    """Write the position-based projection of one contact: particle k of `corners` moves by
-    -gap w_k g_k n / sum_j w_j g_j^2 (pair_move[4 slot + k])."""
+def _contact_move(stage: ti.template(), pairs: ti.template(), model: ti.template(),
+                  state: ti.template(), p, corners, weights, n, gap, friction):
+    """Write the position-based projection of contact p with its friction: particle k of
+    `corners` moves by -w_k g_k (gap n + f) / sum_j w_j g_j^2 (move[4 p + k])."""
     norm = 0.0
+    motion = ti.Vector([0.0, 0.0, 0.0])
     for k in ti.static(range(4)):
-        norm += model.particle_inv_mass[corners[k]] * weights[k] * weights[k]
+        i = corners[k]
+        norm += model.particle_inv_mass[i] * weights[k] * weights[k]
+        motion += weights[k] * (state.particle_position[i] - stage.step_start[i])
+    tangential = motion - motion.dot(n) * n
+    length = tangential.norm()
+    slip = 0.0
+    if length > 0:
+        slip = ti.min(friction * -gap / length, 1.0)
     scale = 0.0
     if norm > 0:
-        scale = -gap / norm
-    stage.pair_particles[slot] = corners
+        scale = -1.0 / norm
     for k in ti.static(range(4)):
-        stage.pair_move[4 * slot + k] = scale * model.particle_inv_mass[corners[k]] * weights[k] * n
-
-
-@ti.func
-def _vertex_contacts(stage: ti.template(), model: ti.template(), state: ti.template(), v,
-                     thickness, write: ti.template()):
-    """Contacts of vertex v with triangles (counted, or written from pair_start[v] when
-    `write`): each triangle is reached through its first corner within reach of v."""
-    found = 0
-    x = state.particle_position[v]
-    reach = stage.reach[None] + thickness
-    lo, hi = cell_block(stage.grid, x)
-    for cz in range(lo[2], hi[2] + 1):
-        for cy in range(lo[1], hi[1] + 1):
-            for cx in range(lo[0], hi[0] + 1):
-                begin, end = cell_range(stage.grid, ti.Vector([cx, cy, cz]))
-                for a in range(begin, end):
-                    j = stage.grid.cell_particle[a]
-                    if (state.particle_position[j] - x).norm() <= reach:
-                        for k in range(stage.triangle_start[j], stage.triangle_start[j + 1]):
-                            t = stage.particle_triangle[k]
-                            tri = stage.triangles[t]
-                            first = -1
-                            for c in ti.static(range(3)):
-                                if first < 0 and (state.particle_position[tri[c]] - x).norm() <= reach:
-                                    first = tri[c]
-                            if (first == j and v != tri[0] and v != tri[1] and v != tri[2]
-                                    and _near_box(x, state.particle_position[tri[0]],
-                                                  state.particle_position[tri[1]],
-                                                  state.particle_position[tri[2]], thickness)):
-                                touching, n, gap, w = _vertex_triangle(
-                                    stage, state.particle_position, stage.step_start, v, t, thickness)
-                                corners = ti.Vector([v, tri[0], tri[1], tri[2]])
-                                weights = ti.Vector([1.0, -w[0], -w[1], -w[2]])
-                                if touching and not _rest_close(model, corners, weights, thickness):
-                                    if ti.static(write):
-                                        _contact_move(model, stage, stage.pair_start[v] + found,
-                                                      corners, weights, n, gap)
-                                    found += 1
-    return found
-
-
-@ti.func
-def _first_close_ends(positions: ti.template(), ends, other, reach):
-    """The first pair of ends (one of each edge) within reach of each other, in the order
-    (e0, f0), (e0, f1), (e1, f0), (e1, f1); (-1, -1) if none."""
-    first, second = -1, -1
-    for p in ti.static(range(2)):
-        for q in ti.static(range(2)):
-            if first < 0 and (positions[ends[p]] - positions[other[q]]).norm() <= reach:
-                first, second = ends[p], other[q]
-    return first, second
-
-
-@ti.func
-def _edge_contacts(stage: ti.template(), model: ti.template(), state: ti.template(), e,
-                   thickness, write: ti.template()):
-    """Contacts of edge e with edges f > e sharing no particle with it (counted, or written
-    from pair_start[N + e]). Two edges within thickness have an end each within
-    L + thickness of each other (each closest point is within L / 2 of an end): f is found
-    from each end of e through the particles within that reach, and kept from the first such
-    pair of ends only (_first_close_ends)."""
-    found = 0
-    ends = stage.edges[e]
-    reach = stage.reach[None] + thickness
-    for p in range(2):
-        mine = ti.select(p == 0, ends[0], ends[1])
-        x = state.particle_position[mine]
-        lo, hi = cell_block(stage.grid, x)
-        for cz in range(lo[2], hi[2] + 1):
-            for cy in range(lo[1], hi[1] + 1):
-                for cx in range(lo[0], hi[0] + 1):
-                    begin, end = cell_range(stage.grid, ti.Vector([cx, cy, cz]))
-                    for a in range(begin, end):
-                        j = stage.grid.cell_particle[a]
-                        if (state.particle_position[j] - x).norm() <= reach:
-                            for k in range(stage.edge_start[j], stage.edge_start[j + 1]):
-                                f = stage.particle_edge[k]
-                                other = stage.edges[f]
-                                shared = (other[0] == ends[0] or other[0] == ends[1]
-                                          or other[1] == ends[0] or other[1] == ends[1])
-                                if f > e and not shared:
-                                    first, second = _first_close_ends(state.particle_position,
-                                                                      ends, other, reach)
-                                    if first == mine and second == j and _boxes_near(
-                                            state.particle_position[ends[0]],
-                                            state.particle_position[ends[1]],
-                                            state.particle_position[other[0]],
-                                            state.particle_position[other[1]], thickness):
-                                        touching, n, gap, s, t = _edge_edge(
-                                            stage, state.particle_position, stage.step_start, e,
-                                            f, thickness)
-                                        corners = ti.Vector([ends[0], ends[1], other[0], other[1]])
-                                        weights = ti.Vector([1.0 - s, s, t - 1.0, -t])
-                                        if touching and not _rest_close(model, corners, weights,
-                                                                        thickness):
-                                            if ti.static(write):
-                                                _contact_move(model, stage, stage.pair_start[
-                                                    stage.particle_count + e] + found, corners,
-                                                    weights, n, gap)
-                                            found += 1
-    return found
+        pairs.move[4 * p + k] = (scale * model.particle_inv_mass[corners[k]] * weights[k]
+                                      * (gap * n + slip * tangential))
 
 
 @ti.kernel
-def _count_contacts(stage: ti.template(), model: ti.template(), state: ti.template(),
-                    thickness: float):
-    """pair_start[1 + v] = contacts of vertex v, pair_start[1 + N + e] = of edge e."""
-    for v in range(stage.particle_count):
-        stage.pair_start[v + 1] = _vertex_contacts(stage, model, state, v, thickness, False)
-    for e in range(stage.edge_count):
-        stage.pair_start[stage.particle_count + e + 1] = _edge_contacts(
-            stage, model, state, e, thickness, False)
+def _evaluate(stage: ti.template(), pairs: ti.template(), model: ti.template(),
+              state: ti.template(), thickness: float, friction: float) -> ti.i32:
+    """Evaluate every listed pair at the current positions: active[p] and, for contacts,
+    their moves. Returns how many are in contact (an integer count: exact)."""
+    stage.active[None] = 0
+    vertex_pairs = stage.pair_start[stage.triangle_count]
+    for p in range(stage.pair_start[stage.triangle_count + stage.edge_count]):
+        corners = pairs.particles[p]
+        touching = False
+        n = ti.Vector([0.0, 0.0, 0.0])
+        gap = 0.0
+        weights = ti.Vector([0.0, 0.0, 0.0, 0.0])
+        if p < vertex_pairs:
+            touching, n, gap, w = _vertex_triangle(state.particle_position, stage.step_start,
+                                                   corners, thickness)
+            weights = ti.Vector([1.0, -w[0], -w[1], -w[2]])
+        else:
+            touching, n, gap, s, t = _edge_edge(state.particle_position, stage.step_start,
+                                                corners, thickness)
+            weights = ti.Vector([1.0 - s, s, t - 1.0, -t])
+        pairs.active[p] = ti.select(touching, 1, 0)
+        if touching:
+            _contact_move(stage, pairs, model, state, p, corners, weights, n, gap, friction)
+            ti.atomic_add(stage.active[None], 1)
+    return stage.active[None]
 
 
 @ti.kernel
-def _prefix(stage: ti.template()) -> ti.i32:
-    """Inclusive prefix sum of the counts (serial): pair_start becomes offsets; the total."""
-    stage.pair_start[0] = 0
-    for _ in range(1):
-        for k in range(stage.particle_count + stage.edge_count):
-            stage.pair_start[k + 1] += stage.pair_start[k]
-    return stage.pair_start[stage.particle_count + stage.edge_count]
-
-
-@ti.kernel
-def _write_contacts(stage: ti.template(), model: ti.template(), state: ti.template(),
-                    thickness: float):
-    for v in range(stage.particle_count):
-        if stage.pair_start[v + 1] > stage.pair_start[v]:
-            _vertex_contacts(stage, model, state, v, thickness, True)
-    for e in range(stage.edge_count):
-        k = stage.particle_count + e
-        if stage.pair_start[k + 1] > stage.pair_start[k]:
-            _edge_contacts(stage, model, state, e, thickness, True)
-
-
-@ti.kernel
-def _index_contacts(stage: ti.template()):
-    """contact[contact_start[i]:contact_start[i + 1]] = the slots 4 p + k at which contact p
-    moves particle i, in contact order (counts, prefix sum and fill all serial)."""
-    total = stage.pair_start[stage.particle_count + stage.edge_count]
-    for _ in range(1):
-        for i in range(stage.particle_count + 1):
-            stage.contact_start[i] = 0
-        for p in range(total):
-            for k in ti.static(range(4)):
-                stage.contact_start[stage.pair_particles[p][k] + 1] += 1
-        for i in range(stage.particle_count):
-            stage.contact_start[i + 1] += stage.contact_start[i]
-            stage.contact_fill[i] = stage.contact_start[i]
-        for p in range(total):
-            for k in ti.static(range(4)):
-                i = stage.pair_particles[p][k]
-                stage.contact[stage.contact_fill[i]] = 4 * p + k
-                stage.contact_fill[i] += 1
-
-
-@ti.kernel
-def _apply_contacts(stage: ti.template(), model: ti.template(), state: ti.template()):
-    """Each particle moves by the mean of its contacts' moves, gathered in contact order."""
+def _apply_contacts(stage: ti.template(), pairs: ti.template(), model: ti.template(),
+                    state: ti.template()):
+    """Each particle moves by the mean of its contacts' moves, gathered in pair order."""
     for i in range(stage.particle_count):
-        begin, end = stage.contact_start[i], stage.contact_start[i + 1]
-        if end > begin and model.particle_inv_mass[i] > 0:
+        if model.particle_inv_mass[i] > 0:
             move = ti.Vector([0.0, 0.0, 0.0])
-            for a in range(begin, end):
-                move += stage.pair_move[stage.contact[a]]
-            state.particle_position[i] += move / (end - begin)
+            contacts = 0
+            for a in range(stage.contact_start[i], stage.contact_start[i + 1]):
+                slot = pairs.contact[a]
+                if pairs.active[slot // 4]:
+                    move += pairs.move[slot]
+                    contacts += 1
+            if contacts > 0:
+                state.particle_position[i] += move / contacts
 
 
 @ti.kernel

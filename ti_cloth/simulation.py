@@ -22,7 +22,7 @@ import numpy as np
 from . import backend, limits
 from ._validate import as_array, in_range, integer, require
 from .colliders import ColliderSet
-from .self_collision import SelfCollision, SelfContact
+from .self_collision import SelfCollision, SelfContact, SelfContacts
 from .errors import SimulationDiverged, StaleSimulation
 from .forces import ForceSettings, energies
 from .handles import Handle, HandleSet
@@ -159,6 +159,8 @@ class Simulation:
         if self.colliders is not None and self.colliders.moving:
             self.colliders.place(0.0)
         self._place_handles_at_start()
+        if self.self_contact is not None:
+            self.self_contact.forget()
 
     def _place_handles_at_start(self) -> None:
         if self.handles is not None:
@@ -231,6 +233,14 @@ class Simulation:
         """Particle positions [m], (N, 3) float64 copy."""
         self._check_runtime()
         return self.state.particle_position.to_numpy().astype(np.float64)
+
+    def self_contacts(self, active: bool = True) -> SelfContacts:
+        """Self-collision's pairs after the last step: those in contact in its last pass, or
+        (active=False) every candidate pair it watches. ValueError without self-collision."""
+        self._check_runtime()
+        require(self.self_contact is not None, "self_collision", None,
+                "a SelfCollision for self_contacts()")
+        return self.self_contact.pairs(active)
 
     def velocities(self) -> np.ndarray:
         """Particle velocities [m/s], (N, 3) float64 copy."""

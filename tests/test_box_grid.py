@@ -1,0 +1,91 @@
+"""The broad phase of self-collision (box_grid.py): a query reports exactly the boxes that meet
+it, each once, in a fixed order, on every run and thread count."""
+
+import numpy as np
+import pytest
+import taichi as ti
+
+from ti_cloth import backend
+from ti_cloth.box_grid import BoxGrid, box_cell, box_cell_count, cell_box, cell_range, found_here
+
+
+@ti.kernel
+def _query(grid: ti.template(), lo: ti.types.ndarray(), hi: ti.types.ndarray(),
+           found: ti.types.ndarray()):
+    """found[q, i] += 1 for every item i the query box q reports."""
+    for q in range(lo.shape[0]):
+        qlo = ti.Vector([lo[q, 0], lo[q, 1], lo[q, 2]])
+        qhi = ti.Vector([hi[q, 0], hi[q, 1], hi[q, 2]])
+        first, last = cell_box(grid, qlo, qhi)
+        for k in range(box_cell_count(first, last)):
+            cell = box_cell(first, last, k)
+            begin, end = cell_range(grid, cell)
+            for a in range(begin, end):
+                i = grid.cell_item[a]
+                if found_here(grid, i, cell, first, qlo, qhi):
+                    found[q, i] += 1
+
+
+def reported(lo, hi, query_lo, query_hi, cell):
+    grid = BoxGrid(len(lo))
+    grid.lo.from_numpy(lo.astype(backend.numpy_real()))
+    grid.hi.from_numpy(hi.astype(backend.numpy_real()))
+    grid.build(cell)
+    found = np.zeros((len(query_lo), len(lo)), np.int32)
+    _query(grid, query_lo, query_hi, found)
+    return grid, found
+
+
+def scenes():
+    """(item lo, item hi, query lo, query hi, cell side) of four clouds."""
+    rng = np.random.default_rng(7)
+    points = rng.uniform(-1.0, 1.0, size=(400, 3))                                  # degenerate
+    sheet = np.c_[rng.uniform(0, 1, 300), np.zeros(300), rng.uniform(0, 1, 300)]
+    size = rng.uniform(0.0, 0.05, size=(300, 3))
+    apart = np.concatenate([rng.normal(scale=0.01, size=(150, 3)),
+                            1e4 + rng.normal(scale=0.01, size=(150, 3))])            # 1e4 m apart
+    flung = rng.uniform(0.0, 1.0, size=(200, 3))
+    flung_hi = flung.copy()
+    flung_hi[:60, 0] += 5.0                  # 60 boxes flung 5 m along x: over the entry budget
+    return {"points": (points, points, points - 0.15, points + 0.15, 0.3),
+            "flat sheet of boxes": (sheet, sheet + size, sheet - 0.04, sheet + 0.04, 0.08),
+            "blown apart": (apart, apart, apart - 0.01, apart + 0.01, 0.02),
+            "boxes flung across": (flung, flung_hi, flung - 0.15, flung + 0.15, 0.1)}
+
+
+@pytest.mark.parametrize("name", list(scenes()))
+def test_a_query_reports_exactly_the_boxes_that_meet_it_once(f64, name):
+    lo, hi, query_lo, query_hi, cell = scenes()[name]
+    grid, found = reported(lo, hi, query_lo, query_hi, cell)
+    expected = ((lo[None] <= query_hi[:, None]) & (query_lo[:, None] <= hi[None])).all(axis=2)
+    assert found.max() == 1, "no box reported twice"
+    np.testing.assert_array_equal(found == 1, expected)
+    assert expected.sum() > 2 * len(lo), "the queries meet boxes besides their own"
+    assert grid.cells() <= 4 * len(lo) and grid.side[None] >= cell
+
+
+def test_cells_list_their_boxes_in_increasing_index_and_rebuild_identically(f64):
+    lo, hi, query_lo, query_hi, cell = scenes()["flat sheet of boxes"]
+    grid, _ = reported(lo, hi, query_lo, query_hi, cell)
+    start, order = grid.cell_start.to_numpy(), grid.cell_item.to_numpy()
+    cells = grid.cells()
+    assert start[cells] >= len(lo) and set(order[:start[cells]]) == set(range(len(lo)))
+    for c in range(cells):
+        assert (np.diff(order[start[c]:start[c + 1]]) > 0).all()
+    again, _ = reported(lo, hi, query_lo, query_hi, cell)
+    np.testing.assert_array_equal(again.cell_item.to_numpy(), order)
+
+
+def test_one_thread_and_two_sort_the_same():
+    import ti_cloth as tc
+    lo, hi, query_lo, query_hi, cell = scenes()["flat sheet of boxes"]
+    results = []
+    try:
+        for threads in (1, 2):
+            tc.init(arch="cpu", precision="f64", threads=threads)
+            grid, found = reported(lo, hi, query_lo, query_hi, cell)
+            results.append((grid.cell_start.to_numpy(), grid.cell_item.to_numpy(), found))
+    finally:
+        tc.init(arch="cpu", precision="f64")
+    for one, two in zip(*results):
+        np.testing.assert_array_equal(one, two)

@@ -1,0 +1,177 @@
+"""A uniform grid of boxes, rebuilt when self-collision lists its pairs: the broad phase between
+the swept boxes of particles, triangles and edges (issue 18).
+
+Build (BoxGrid.build, after the owner has written each item's box into `lo` / `hi`): the
+bounding box of all boxes (each block of BLOCK items reduced by one thread, then the blocks in
+order: a max and a min are exact), cells of side >= `cell_size` over it, each item entered in
+every cell its box meets (integer counts per cell, an exclusive prefix sum, then a serial fill
+in item order), so a cell lists its items in increasing index and every query visits them in
+the same order on every run and thread count. No hashing: a cell is a cell. When the box would
+need more than CELL_BUDGET cells per item, or the entries more than ENTRY_BUDGET per item (a
+body blown apart, a particle flung far in one step), the cells grow until they do not: queries
+stay exact, only slower.
+
+Query (cell_box, box_cell_count, box_cell, cell_range, found_here): the items whose boxes meet a
+query box are in the cells the query box meets; an item met in several of them is reported from
+the first cell the two share (the componentwise max of their first cells), so exactly once.
+"""
+
+import taichi as ti
+
+from . import backend
+
+CELL_BUDGET = 4     # grid cells per item at most
+ENTRY_BUDGET = 8    # cell entries per item at most
+BLOCK = 256         # items one thread reduces
+
+
+@backend.kernel_argument
+class BoxGrid:
+    """Cells of `item_count` axis-aligned boxes. The owner writes box i into lo[i], hi[i]; after
+    build(): side [m] (>= the cell_size asked for), lower [m] (the grid's corner) and dims
+    (cells per axis); cell_start (cells + 1,) and cell_item: the items whose boxes meet cell c
+    are cell_item[cell_start[c]:cell_start[c + 1]], in increasing index."""
+
+    def __init__(self, item_count: int):
+        self.item_count = n = item_count
+        self.cell_capacity = CELL_BUDGET * max(n, 1)
+        self.entry_capacity = ENTRY_BUDGET * max(n, 1)
+        self.block_count = -(-max(n, 1) // BLOCK)
+        real = backend.real()
+        fields = backend.FieldGroup()
+        self.lo = fields.vector(3, real, max(n, 1))
+        self.hi = fields.vector(3, real, max(n, 1))
+        self.block_bounds = fields.vector(3, real, 2 * self.block_count)
+        self.lower = fields.vector(3, real, ())
+        self.upper = fields.vector(3, real, ())
+        self.side = fields.scalar(real, ())
+        self.dims = fields.vector(3, ti.i32, ())
+        self.entries = fields.scalar(ti.i32, ())
+        self.cell_start = fields.scalar(ti.i32, self.cell_capacity + 1)
+        self.cell_fill = fields.scalar(ti.i32, self.cell_capacity)
+        self.cell_item = fields.scalar(ti.i32, self.entry_capacity)
+        fields.finalize(self)
+
+    def build(self, cell_size: float) -> None:
+        """Enter the boxes now in lo / hi into cells of side >= cell_size [m] > 0."""
+        _bounds(self)
+        side = cell_size
+        while not (_layout(self, side) and _count(self) <= self.entry_capacity):
+            side *= 2.0
+        _fill(self)
+
+    def cells(self) -> int:
+        """Cells in use after the last build."""
+        d = self.dims[None]
+        return int(d[0]) * int(d[1]) * int(d[2])
+
+
+@ti.kernel
+def _bounds(grid: ti.template()):
+    for b in range(grid.block_count):
+        begin = b * BLOCK
+        lo, hi = grid.lo[begin], grid.hi[begin]
+        for i in range(begin + 1, ti.min(begin + BLOCK, grid.item_count)):
+            lo, hi = ti.min(lo, grid.lo[i]), ti.max(hi, grid.hi[i])
+        grid.block_bounds[2 * b] = lo
+        grid.block_bounds[2 * b + 1] = hi
+    for _ in range(1):
+        grid.lower[None] = grid.block_bounds[0]
+        grid.upper[None] = grid.block_bounds[1]
+        for b in range(1, grid.block_count):
+            grid.lower[None] = ti.min(grid.lower[None], grid.block_bounds[2 * b])
+            grid.upper[None] = ti.max(grid.upper[None], grid.block_bounds[2 * b + 1])
+
+
+@ti.kernel
+def _layout(grid: ti.template(), side: float) -> ti.i32:
+    """Cells of `side` over the bounds: 1 if they fit in cell_capacity (float volume: the
+    product of int dims could overflow), else 0."""
+    extent = grid.upper[None] - grid.lower[None]
+    dims = ti.max(ti.cast(ti.floor(extent / side), ti.i32) + 1, 1)
+    grid.side[None] = side
+    grid.dims[None] = dims
+    return ti.select(ti.cast(dims[0], ti.f64) * dims[1] * dims[2] <= grid.cell_capacity, 1, 0)
+
+
+@ti.kernel
+def _count(grid: ti.template()) -> ti.i32:
+    """cell_start[c + 1] = how many boxes meet cell c (integer atomics: exact); the entries."""
+    d = grid.dims[None]
+    for c in range(d[0] * d[1] * d[2] + 1):
+        grid.cell_start[c] = 0
+    grid.entries[None] = 0
+    for i in range(grid.item_count):
+        first, last = cell_box(grid, grid.lo[i], grid.hi[i])
+        for k in range(box_cell_count(first, last)):
+            ti.atomic_add(grid.cell_start[cell_index(grid, box_cell(first, last, k)) + 1], 1)
+        ti.atomic_add(grid.entries[None], box_cell_count(first, last))
+    return grid.entries[None]
+
+
+@ti.kernel
+def _fill(grid: ti.template()):
+    """Exclusive prefix sum of the counts, then each item entered in its cells in item order
+    (serial: a cell lists its items in increasing index)."""
+    d = grid.dims[None]
+    for _ in range(1):
+        for c in range(d[0] * d[1] * d[2]):
+            grid.cell_start[c + 1] += grid.cell_start[c]
+            grid.cell_fill[c] = grid.cell_start[c]
+        for i in range(grid.item_count):
+            first, last = cell_box(grid, grid.lo[i], grid.hi[i])
+            for k in range(box_cell_count(first, last)):
+                c = cell_index(grid, box_cell(first, last, k))
+                grid.cell_item[grid.cell_fill[c]] = i
+                grid.cell_fill[c] += 1
+
+
+@ti.func
+def cell_of(grid: ti.template(), x):
+    """Integer cell coordinates of point x, clamped to the grid."""
+    cell = ti.cast(ti.floor((x - grid.lower[None]) / grid.side[None]), ti.i32)
+    return ti.math.clamp(cell, 0, grid.dims[None] - 1)
+
+
+@ti.func
+def cell_index(grid: ti.template(), cell):
+    """Linear index of integer cell coordinates (x fastest)."""
+    d = grid.dims[None]
+    return cell[0] + d[0] * (cell[1] + d[1] * cell[2])
+
+
+@ti.func
+def cell_box(grid: ti.template(), lo, hi):
+    """(first, last): the inclusive integer bounds of the cells that meet the box [lo, hi],
+    clipped to the grid."""
+    return cell_of(grid, lo), cell_of(grid, hi)
+
+
+@ti.func
+def box_cell_count(first, last):
+    """How many cells the inclusive integer bounds (first, last) of cell_box span."""
+    extent = last - first + 1
+    return extent[0] * extent[1] * extent[2]
+
+
+@ti.func
+def box_cell(first, last, k):
+    """The k-th cell (x fastest) of the inclusive integer bounds (first, last)."""
+    extent = last - first + 1
+    return first + ti.Vector([k % extent[0], (k // extent[0]) % extent[1],
+                              k // (extent[0] * extent[1])])
+
+
+@ti.func
+def cell_range(grid: ti.template(), cell):
+    """(begin, end) into cell_item of the items in the cell at integer coordinates."""
+    c = cell_index(grid, cell)
+    return grid.cell_start[c], grid.cell_start[c + 1]
+
+
+@ti.func
+def found_here(grid: ti.template(), i, cell, first, lo, hi):
+    """Whether a query of the box [lo, hi], whose cells start at `first`, reports item i from
+    `cell`: i's box meets the query box and `cell` is the first cell they share."""
+    meets = (grid.lo[i] <= hi).all() and (lo <= grid.hi[i]).all()
+    return meets and (ti.max(cell_of(grid, grid.lo[i]), first) == cell).all()
