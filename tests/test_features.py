@@ -18,7 +18,7 @@ OPTIONAL = {
     "strain-limit velocity": strain_limit._follow_velocity, "tearing": tearing.tear_springs,
     "handles": handles.move_handles, "xpbd": constraints.xpbd_springs,
     "xpbd prediction": xpbd._predict, "implicit solve": implicit_euler._linearise,
-    "rk4 stages": rk4._stage, "self-collision": self_collision._count_pairs,
+    "rk4 stages": rk4._stage, "self-collision": self_collision._list_pairs,
 }
 
 

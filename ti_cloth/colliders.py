@@ -306,3 +306,18 @@ def resolve_collisions(model: ti.template(), state: ti.template(), colliders: ti
                 state.particle_position[i] = x
                 state.particle_velocity[i] = v
                 state.particle_prev_position[i] = x - v * dt
+
+
+@ti.kernel
+def project_out(model: ti.template(), state: ti.template(), colliders: ti.template()):
+    """Project every free particle out of every collider, positions only (no friction, the
+    velocities left to the caller): for stages that move particles after the collision stage
+    (self-collision) and must not push them back into a collider."""
+    for i in range(model.particle_count):
+        if model.particle_inv_mass[i] > 0:
+            x = state.particle_position[i]
+            for c in range(colliders.count):
+                d, n = signed_distance(colliders.kind[c], colliders.a[c], colliders.b[c],
+                                       colliders.radius[c], x)
+                x += ti.max(colliders.thickness[c] - d, 0.0) * n
+            state.particle_position[i] = x

@@ -49,15 +49,17 @@ from . import backend, limits
 from ._validate import count, finite_number, require
 from .forces import altitude_frame
 from .mesh import triangle_edges, unique_rows
+from .colliders import project_out
 from .box_grid import (BLOCK, BoxGrid, box_cell, box_cell_count, cell_box, cell_range,
                        found_here)
 from .proximity import segment_distance, segment_parameters, triangle_distance
 from .state import copy_positions
 from .transfer import upload
 
-PAIRS_PER_PARTICLE = 16     # candidate list room at first, per particle
+PAIRS_PER_PARTICLE = 32     # candidate list room at first, per particle
 MAX_PAIRS_PER_PARTICLE = 256
 SKIN = 1.0                  # the list's slack (skin), in thicknesses
+RESOLVED = 0.01             # a contact shallower than this (in thicknesses) ends the passes
 INSIDE = 1e-6               # a foot this far outside a triangle (in barycentric terms) is inside
 
 
@@ -66,11 +68,12 @@ class SelfCollision:
     """thickness: the distance [m] kept between a particle and any triangle it is not a corner
     of, and between edges that share no particle, > 0 (Blender's self_distance_min, 0.015 m).
     friction: Coulomb coefficient between touching layers, >= 0.
-    iterations: contact passes per step, >= 1."""
+    iterations: contact passes per step at most, >= 1; they stop once no contact is deeper
+    than 1 % of the thickness."""
 
     thickness: float = 0.005
     friction: float = 0.0
-    iterations: int = 2
+    iterations: int = 16
 
     def __post_init__(self):
         thickness = finite_number("SelfCollision.thickness", self.thickness, 0.0, strict=True,
@@ -124,7 +127,7 @@ class SelfContact:
         self.block_longest = fields.scalar(real, self.edge_block_count)
         self.longest = fields.scalar(real, ())
         self.pair_start = fields.scalar(ti.i32, len(triangles) + len(edges) + 1)
-        self.active = fields.scalar(ti.i32, ())
+        self.touching = fields.vector(2, ti.i32, ())
         self.contact_start = fields.scalar(ti.i32, n + 1)
         self.contact_fill = fields.scalar(ti.i32, n)
         fields.finalize(self)
@@ -144,7 +147,13 @@ class SelfContact:
         require(isinstance(settings, SelfCollision), "self_collision", settings,
                 "None or a SelfCollision")
         self.settings = settings
+        self.colliders = None
         self.forget()
+
+    def attach(self, colliders) -> None:
+        """The simulation's ColliderSet (or None): each contact pass ends by projecting the
+        particles out of the colliders again, so a pile on the ground is not pushed into it."""
+        self.colliders = colliders
 
     def forget(self) -> None:
         """Drop the candidate list: the next step makes a new one (after a restart)."""
@@ -165,10 +174,15 @@ class SelfContact:
             return
         copy_positions(state, self.before)
         for _ in range(self.settings.iterations):
-            if _evaluate(self, self.candidates, model, state, thickness,
-                         self.settings.friction) == 0:
+            touching, deep = _evaluate(self, self.candidates, model, state, thickness,
+                                       self.settings.friction)
+            if touching == 0:
                 break
             _apply_contacts(self, self.candidates, model, state)
+            if self.colliders is not None:
+                project_out(model, state, self.colliders)
+            if deep == 0:
+                break
         _follow(self, state, dt)
 
     def _make_list(self, model, state, step_index: int) -> None:
@@ -179,7 +193,7 @@ class SelfContact:
         cell = float(_longest_edge(self, state)) + 2.0 * near
         self.vertex_grid.build(cell)
         self.edge_grid.build(cell)
-        _count_pairs(self, self.candidates, model, state, near, self.settings.thickness)
+        _list_pairs(self, self.candidates, model, state, near, self.settings.thickness, 0)
         total = _prefix(self)
         if total > self.candidates.capacity:
             if total > MAX_PAIRS_PER_PARTICLE * self.particle_count:
@@ -190,7 +204,7 @@ class SelfContact:
                     "thickness")
             self.candidates = PairList(min(2 * total,
                                            MAX_PAIRS_PER_PARTICLE * self.particle_count))
-        _write_pairs(self, self.candidates, model, state, near, self.settings.thickness)
+        _list_pairs(self, self.candidates, model, state, near, self.settings.thickness, 1)
         _index_contacts(self, self.candidates)
         copy_positions(state, self.listed_at)
         self.listed, self.pair_total = True, total
@@ -287,15 +301,24 @@ def _moved(stage: ti.template(), state: ti.template(), i, j):
 
 
 @ti.func
+def _at(model: ti.template(), state: ti.template(), i, rest_shape):
+    """Particle i's position now (rest_shape 0) or in the rest shape (1). The distance tests
+    run in a loop over the two, so each is compiled once."""
+    x = state.particle_position[i]
+    if rest_shape:
+        x = model.particle_rest_position[i]
+    return x
+
+
+@ti.func
 def _triangle_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template(),
-                    state: ti.template(), t, near, thickness, write: ti.template()):
+                    state: ti.template(), t, near, thickness, write):
     """Vertices v whose box over the step meets triangle t's grown by `near`, nearer to t now
     than `near` + how far v moved relative to t's corners in the step, and farther than
     `thickness` from it in the rest shape (counted, or written from pair_start[t] when
     `write`), in cell order."""
     found = 0
-    x, rest, start = ti.static(state.particle_position, model.particle_rest_position,
-                               stage.step_start)
+    x, start = ti.static(state.particle_position, stage.step_start)
     tri = stage.triangles[t]
     lo = ti.min(x[tri[0]], x[tri[1]], x[tri[2]], start[tri[0]], start[tri[1]],
                 start[tri[2]]) - near
@@ -312,10 +335,16 @@ def _triangle_pairs(stage: ti.template(), pairs: ti.template(), model: ti.templa
                     continue
                 moved = ti.max(_moved(stage, state, v, tri[0]), _moved(stage, state, v, tri[1]),
                                _moved(stage, state, v, tri[2]))
-                if (triangle_distance(x[v], x[tri[0]], x[tri[1]], x[tri[2]]) < near + moved
-                        and triangle_distance(rest[v], rest[tri[0]], rest[tri[1]],
-                                              rest[tri[2]]) >= thickness):
-                    if ti.static(write):
+                keep = True
+                for shape in range(2):                   # now, then the rest shape
+                    if keep:
+                        d = triangle_distance(_at(model, state, v, shape),
+                                              _at(model, state, tri[0], shape),
+                                              _at(model, state, tri[1], shape),
+                                              _at(model, state, tri[2], shape))
+                        keep = ti.select(shape == 0, d < near + moved, d >= thickness)
+                if keep:
+                    if write:
                         slot = stage.pair_start[t] + found
                         pairs.elements[slot] = ti.Vector([v, t])
                         pairs.particles[slot] = ti.Vector([v, tri[0], tri[1], tri[2]])
@@ -325,13 +354,12 @@ def _triangle_pairs(stage: ti.template(), pairs: ti.template(), model: ti.templa
 
 @ti.func
 def _edge_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template(),
-                state: ti.template(), e, near, thickness, write: ti.template()):
+                state: ti.template(), e, near, thickness, write):
     """Edges f > e sharing no particle with e whose boxes over the step meet e's grown by
     `near`, nearer to e now than `near` + how far their ends moved relative to each other in
     the step, and farther than `thickness` in the rest shape (counted, or written from
     pair_start[T + e])."""
     found = 0
-    x, rest = ti.static(state.particle_position, model.particle_rest_position)
     ends = stage.edges[e]
     lo, hi = stage.edge_grid.lo[e] - near, stage.edge_grid.hi[e] + near
     first, last = cell_box(stage.edge_grid, lo, hi)
@@ -349,11 +377,16 @@ def _edge_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template()
                                _moved(stage, state, ends[0], other[1]),
                                _moved(stage, state, ends[1], other[0]),
                                _moved(stage, state, ends[1], other[1]))
-                if (segment_distance(x[ends[0]], x[ends[1]], x[other[0]], x[other[1]])
-                        < near + moved
-                        and segment_distance(rest[ends[0]], rest[ends[1]], rest[other[0]],
-                                             rest[other[1]]) >= thickness):
-                    if ti.static(write):
+                keep = True
+                for shape in range(2):                   # now, then the rest shape
+                    if keep:
+                        d = segment_distance(_at(model, state, ends[0], shape),
+                                             _at(model, state, ends[1], shape),
+                                             _at(model, state, other[0], shape),
+                                             _at(model, state, other[1], shape))
+                        keep = ti.select(shape == 0, d < near + moved, d >= thickness)
+                if keep:
+                    if write:
                         slot = stage.pair_start[stage.triangle_count + e] + found
                         pairs.elements[slot] = ti.Vector([e, f])
                         pairs.particles[slot] = ti.Vector([ends[0], ends[1], other[0],
@@ -363,15 +396,22 @@ def _edge_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template()
 
 
 @ti.kernel
-def _count_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template(),
-                 state: ti.template(), near: float, thickness: float):
-    """pair_start[1 + t] = the pairs of triangle t, pair_start[1 + T + e] = of edge e."""
+def _list_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template(),
+                state: ti.template(), near: float, thickness: float, write: ti.i32):
+    """Count (write = 0: pair_start[1 + t] = the pairs of triangle t, pair_start[1 + T + e] =
+    of edge e) or, after the prefix sum, write them (write = 1). One kernel for both: it is
+    the largest self-collision compiles."""
     for t in range(stage.triangle_count):
-        stage.pair_start[t + 1] = _triangle_pairs(stage, pairs, model, state, t, near,
-                                                  thickness, False)
+        if not write or stage.pair_start[t + 1] > stage.pair_start[t]:
+            found = _triangle_pairs(stage, pairs, model, state, t, near, thickness, write)
+            if not write:
+                stage.pair_start[t + 1] = found
     for e in range(stage.edge_count):
-        stage.pair_start[stage.triangle_count + e + 1] = _edge_pairs(
-            stage, pairs, model, state, e, near, thickness, False)
+        k = stage.triangle_count + e
+        if not write or stage.pair_start[k + 1] > stage.pair_start[k]:
+            found = _edge_pairs(stage, pairs, model, state, e, near, thickness, write)
+            if not write:
+                stage.pair_start[k + 1] = found
 
 
 @ti.kernel
@@ -382,18 +422,6 @@ def _prefix(stage: ti.template()) -> ti.i32:
         for k in range(stage.triangle_count + stage.edge_count):
             stage.pair_start[k + 1] += stage.pair_start[k]
     return stage.pair_start[stage.triangle_count + stage.edge_count]
-
-
-@ti.kernel
-def _write_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template(),
-                 state: ti.template(), near: float, thickness: float):
-    for t in range(stage.triangle_count):
-        if stage.pair_start[t + 1] > stage.pair_start[t]:
-            _triangle_pairs(stage, pairs, model, state, t, near, thickness, True)
-    for e in range(stage.edge_count):
-        k = stage.triangle_count + e
-        if stage.pair_start[k + 1] > stage.pair_start[k]:
-            _edge_pairs(stage, pairs, model, state, e, near, thickness, True)
 
 
 @ti.kernel
@@ -484,10 +512,12 @@ def _contact_move(stage: ti.template(), pairs: ti.template(), model: ti.template
 
 @ti.kernel
 def _evaluate(stage: ti.template(), pairs: ti.template(), model: ti.template(),
-              state: ti.template(), thickness: float, friction: float) -> ti.i32:
+              state: ti.template(), thickness: float,
+              friction: float) -> ti.types.vector(2, ti.i32):
     """Evaluate every listed pair at the current positions: active[p] and, for contacts,
-    their moves. Returns how many are in contact (an integer count: exact)."""
-    stage.active[None] = 0
+    their moves. Returns how many are in contact and how many of those deeper than RESOLVED
+    thicknesses (integer counts: exact)."""
+    stage.touching[None] = ti.Vector([0, 0])
     vertex_pairs = stage.pair_start[stage.triangle_count]
     for p in range(stage.pair_start[stage.triangle_count + stage.edge_count]):
         corners = pairs.particles[p]
@@ -506,8 +536,10 @@ def _evaluate(stage: ti.template(), pairs: ti.template(), model: ti.template(),
         pairs.active[p] = ti.select(touching, 1, 0)
         if touching:
             _contact_move(stage, pairs, model, state, p, corners, weights, n, gap, friction)
-            ti.atomic_add(stage.active[None], 1)
-    return stage.active[None]
+            ti.atomic_add(stage.touching[None][0], 1)
+            if gap < -RESOLVED * thickness:
+                ti.atomic_add(stage.touching[None][1], 1)
+    return stage.touching[None]
 
 
 @ti.kernel

@@ -108,6 +108,8 @@ class Simulation:
         self.strain_limiter = self._lent.get("strain_limiter")
         self.colliders = self._lent.get("colliders")
         self.self_contact = self._lent.get("self_contact")
+        if self.self_contact is not None:
+            self.self_contact.attach(self.colliders)
         self.forces = POOL.keep(ForceSettings(gravity=tuple(gravity), drag=drag,
                                               tearable=tearing is not None, wind=self.wind))
         self.integrator = POOL.keep(self.integrator)   # an equal one, whose kernels exist

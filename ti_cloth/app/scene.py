@@ -169,6 +169,7 @@ def load_scene(path, note=None) -> Scene:
     if contact is not None:
         options = {}
         contact.optional(options, "thickness", unit="m")
+        contact.optional(options, "friction")
         contact.optional(options, "iterations", "integer", minimum=1)
         self_collision = contact.build(SelfCollision, **options)
         contact.finish()
