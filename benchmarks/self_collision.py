@@ -1,9 +1,15 @@
-"""What self-collision costs a step: an N x N sheet pinned at two corners, falling and swinging
-above a ground plane, with and without SelfCollision, for symplectic Euler (at its automatic
-step) and xpbd (1/240 s, 10 iterations). Medians of several runs; the ratio is measured in the
-same run.
+"""What self-collision costs a step, and where the time goes.
 
-    python benchmarks/self_collision.py [--sizes 32 64 128] [--arch cpu] [--precision f32]
+Two scenes per size N x N (a 1 m sheet), each timed with and without SelfCollision after a
+warm-up that reaches the part of the motion measured (and compiles the contact kernels):
+- swing: pinned at two corners, falling and swinging above a ground plane (little contact:
+  the cost of watching), symplectic Euler at its automatic step and xpbd at 1/240 s;
+- pile: dropped flat from 0.3 m onto a small sphere on the ground, so it drapes, folds and lands
+  on itself (xpbd at 1/240 s, timed from 0.4 s, while it folds).
+Medians of several runs; the ratio is measured in the same run. With --profile, the share of
+each self-collision kernel (launches timed one by one, so the total is a little higher).
+
+    python benchmarks/self_collision.py [--sizes 32 64 128] [--thickness 0.005] [--profile]
 """
 
 import argparse
@@ -11,18 +17,32 @@ import statistics
 import time
 
 import ti_cloth as tc
+from ti_cloth import box_grid, self_collision
+
+KERNELS = ("_moved_since_listed", "_sweep_boxes", "_mean_edge", "_list_pairs", "_prefix",
+           "_index_contacts", "_evaluate", "_apply_contacts", "project_out", "_follow")
 
 
-def simulation(n, integrator, contact):
-    cloth = tc.Cloth(tc.grid_mesh(n, n, plane="xz"), tc.Material(), pinned=[0, n - 1])
+def simulation(n, scene, integrator, contact):
+    mesh = tc.grid_mesh(n, n, plane="xz")
+    ground = tc.Plane(point=(0.0, -2.0 if scene == "swing" else 0.0, 0.0), static_friction=0.4)
+    if scene == "swing":
+        cloth = tc.Cloth(mesh, tc.Material(), pinned=[0, n - 1])
+        colliders = [ground]
+    else:
+        cloth = tc.Cloth(tc.Mesh(mesh.vertices + [-0.5, 0.3, -0.5], mesh.triangles), tc.Material())
+        colliders = [ground, tc.Sphere(centre=(0.1, 0.1, 0.0), radius=0.1, static_friction=0.4)]
     return tc.Simulation(cloth, integrator=integrator,
                          dt="auto" if integrator == "symplectic_euler" else 1 / 240,
-                         colliders=[tc.Plane(point=(0.0, -2.0, 0.0))],
-                         self_collision=tc.SelfCollision(thickness=0.005) if contact else None)
+                         colliders=colliders, self_collision=contact)
 
 
-def ms_per_step(sim, steps, repeats):
-    sim.step(2)  # compile
+def warm_up_steps(sim, scene):
+    return round(0.4 / sim.dt) if scene == "pile" else 60
+
+
+def ms_per_step(sim, steps, repeats, warm_up):
+    sim.step(warm_up)
     times = []
     for _ in range(repeats):
         start = time.perf_counter()
@@ -32,24 +52,63 @@ def ms_per_step(sim, steps, repeats):
     return statistics.median(times)
 
 
+def profile(sim, steps):
+    """ms per step spent in each self-collision kernel (and the grids' builds)."""
+    spent = {}
+    originals = {}
+
+    def timed(module, name):
+        kernel = getattr(module, name)
+        originals[(module, name)] = kernel
+
+        def run(*args, **kwargs):
+            start = time.perf_counter()
+            result = kernel(*args, **kwargs)
+            spent[name] = spent.get(name, 0.0) + time.perf_counter() - start
+            return result
+        setattr(module, name, run)
+
+    for name in KERNELS:
+        timed(self_collision, name)
+    for name in ("_bounds", "_layout", "_count", "_fill"):
+        timed(box_grid, name)
+    try:
+        sim.step(steps)
+    finally:
+        for (module, name), kernel in originals.items():
+            setattr(module, name, kernel)
+    return {name: t / steps * 1e3 for name, t in sorted(spent.items(), key=lambda kv: -kv[1])}
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[32, 64, 128])
     parser.add_argument("--arch", default="cpu", choices=["cpu", "cuda", "vulkan", "gpu"])
     parser.add_argument("--precision", default="f32", choices=["f32", "f64"])
-    parser.add_argument("--steps", type=int, default=50)
+    parser.add_argument("--thickness", type=float, default=0.005)
+    parser.add_argument("--steps", type=int, default=40)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--profile", action="store_true")
     args = parser.parse_args(argv)
     tc.init(arch=args.arch, precision=args.precision)
-    print(f"arch={args.arch} precision={args.precision}, median of {args.repeats} runs x "
-          f"{args.steps} steps")
-    print(f"{'N':>5} {'integrator':>17} {'free ms/step':>13} {'self-collision ms/step':>23} "
-          f"{'ratio':>6}")
+    contact = tc.SelfCollision(thickness=args.thickness)
+    print(f"arch={args.arch} precision={args.precision} thickness={args.thickness} m, median of "
+          f"{args.repeats} runs x {args.steps} steps")
+    print(f"{'N':>5} {'scene':>6} {'integrator':>17} {'free ms/step':>13} "
+          f"{'self-collision ms/step':>23} {'ratio':>6} {'pairs/particle':>15}")
     for n in args.sizes:
-        for integrator in ("symplectic_euler", "xpbd"):
-            free = ms_per_step(simulation(n, integrator, False), args.steps, args.repeats)
-            contact = ms_per_step(simulation(n, integrator, True), args.steps, args.repeats)
-            print(f"{n:>5} {integrator:>17} {free:>13.3f} {contact:>23.3f} {contact / free:>6.1f}")
+        for scene, integrator in (("swing", "symplectic_euler"), ("swing", "xpbd"),
+                                  ("pile", "xpbd")):
+            free_sim = simulation(n, scene, integrator, None)
+            free = ms_per_step(free_sim, args.steps, args.repeats, warm_up_steps(free_sim, scene))
+            sim = simulation(n, scene, integrator, contact)
+            with_contact = ms_per_step(sim, args.steps, args.repeats, warm_up_steps(sim, scene))
+            pairs = sim.self_contact.pair_total / sim.cloth.particle_count
+            print(f"{n:>5} {scene:>6} {integrator:>17} {free:>13.3f} {with_contact:>23.3f} "
+                  f"{with_contact / free:>6.1f} {pairs:>15.2f}")
+            if args.profile:
+                shares = profile(sim, args.steps)
+                print("      " + ", ".join(f"{name} {ms:.3f}" for name, ms in shares.items()))
 
 
 if __name__ == "__main__":

@@ -1,6 +1,8 @@
 """Self-collision and cloth-on-cloth (self_collision.py), checked against independent geometry
 written here: brute-force point-triangle distances and segment-triangle intersections."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -154,6 +156,15 @@ def test_bad_settings_are_refused_by_name(kwargs, field):
         tc.SelfCollision(**kwargs)
     with pytest.raises(ValueError, match="self_collision must be None or a SelfCollision"):
         tc.Simulation(tc.string(3, 1.0), self_collision=0.01)
+
+
+def test_a_thickness_above_half_the_mean_edge_is_warned_about(f64):
+    cloth = tc.Cloth(tc.grid_mesh(41, 41, size=(1.0, 1.0)), tc.Material())   # edges 2.5-3.5 cm
+    with pytest.warns(UserWarning, match=r"SelfCollision.thickness 0.02 m is more than 0.5 x"):
+        tc.Simulation(cloth, self_collision=tc.SelfCollision(0.02))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        tc.Simulation(cloth, self_collision=tc.SelfCollision(0.01))
 
 
 def test_one_thread_and_two_and_a_rerun_give_the_same_bits():

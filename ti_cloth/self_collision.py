@@ -40,6 +40,7 @@ Strings and hair (no triangles) do not take part.
 """
 
 import hashlib
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -59,6 +60,7 @@ from .transfer import upload
 PAIRS_PER_PARTICLE = 32     # candidate list room at first, per particle
 MAX_PAIRS_PER_PARTICLE = 256
 SKIN = 1.0                  # the list's slack (skin), in thicknesses
+THICK = 0.5                 # a thickness above this (in mean rest edges) is warned about
 RESOLVED = 0.01             # a contact shallower than this (in thicknesses) ends the passes
 INSIDE = 1e-6               # a foot this far outside a triangle (in barycentric terms) is inside
 
@@ -98,6 +100,23 @@ class SelfContacts:
     edges: np.ndarray
 
 
+def warn_if_thick(settings: SelfCollision, cloth) -> None:
+    """Warn when the thickness exceeds THICK x the mean rest edge of the cloth's triangles."""
+    triangles = np.asarray(cloth.mesh.triangles).reshape(-1, 3)
+    if not len(triangles):
+        return
+    rest = cloth.particle_position
+    mean = float(np.linalg.norm(rest[triangles] - rest[np.roll(triangles, 1, axis=1)],
+                                axis=2).mean())
+    if settings.thickness > THICK * mean:
+        warnings.warn(
+            f"SelfCollision.thickness {settings.thickness:g} m is more than {THICK:g} x the "
+            f"mean rest edge ({mean:.3g} m): pairs of the mesh that are neighbours but farther "
+            "apart than the thickness at rest touch as soon as the cloth wrinkles - it "
+            "stiffens, and each step costs many contact passes. Use a thickness below "
+            f"{THICK * mean:.3g} m or a coarser mesh", stacklevel=3)
+
+
 @backend.kernel_argument
 class SelfContact:
     """The self-collision stage of one simulation: the body's triangles and edges, each
@@ -124,8 +143,9 @@ class SelfContact:
         self.edge_block_count = max(-(-len(edges) // BLOCK), 1)
         self.block_span = fields.vector(3, real, 2 * self.block_count)
         self.span = fields.vector(3, real, 2)      # the box of the displacements since listing
-        self.block_longest = fields.scalar(real, self.edge_block_count)
-        self.longest = fields.scalar(real, ())
+        self.shift = fields.vector(3, real, ())    # the middle of the displacements in the step
+        self.block_length = fields.scalar(real, self.edge_block_count)
+        self.mean_edge = fields.scalar(real, ())
         self.pair_start = fields.scalar(ti.i32, len(triangles) + len(edges) + 1)
         self.touching = fields.vector(2, ti.i32, ())
         self.contact_start = fields.scalar(ti.i32, n + 1)
@@ -190,7 +210,7 @@ class SelfContact:
         meet) and are now nearer than that plus how far they moved relative to each other."""
         near = (1.0 + SKIN) * self.settings.thickness
         _sweep_boxes(self, state)
-        cell = float(_longest_edge(self, state)) + 2.0 * near
+        cell = float(_mean_edge(self, state)) + 2.0 * near       # about a query's size
         self.vertex_grid.build(cell)
         self.edge_grid.build(cell)
         _list_pairs(self, self.candidates, model, state, near, self.settings.thickness, 0)
@@ -265,32 +285,58 @@ def _moved_since_listed(stage: ti.template(), state: ti.template()) -> ti.f64:
 
 @ti.kernel
 def _sweep_boxes(stage: ti.template(), state: ti.template()):
-    """Each particle's and each edge's box over the step (its positions at the start and now)."""
+    """Each particle's and each edge's box over the step: the box of its positions now and at
+    the step's start moved by `shift`, the middle of all particles' displacements in the step.
+    Moving every start by the same vector changes no relative motion - two elements meet at
+    some time in the step in one frame exactly when they do in the other - and it shrinks the
+    boxes of a body moving as a whole to its motion relative to itself."""
+    for b in range(stage.block_count):
+        begin = b * BLOCK
+        lo = hi = state.particle_position[begin] - stage.step_start[begin]
+        for i in range(begin + 1, ti.min(begin + BLOCK, stage.particle_count)):
+            moved = state.particle_position[i] - stage.step_start[i]
+            lo, hi = ti.min(lo, moved), ti.max(hi, moved)
+        stage.block_span[2 * b] = lo
+        stage.block_span[2 * b + 1] = hi
+    for _ in range(1):
+        lo, hi = stage.block_span[0], stage.block_span[1]
+        for b in range(1, stage.block_count):
+            lo = ti.min(lo, stage.block_span[2 * b])
+            hi = ti.max(hi, stage.block_span[2 * b + 1])
+        stage.shift[None] = 0.5 * (lo + hi)
     x = ti.static(state.particle_position)
     for i in range(stage.particle_count):
-        stage.vertex_grid.lo[i] = ti.min(x[i], stage.step_start[i])
-        stage.vertex_grid.hi[i] = ti.max(x[i], stage.step_start[i])
+        start = _start(stage, i)
+        stage.vertex_grid.lo[i] = ti.min(x[i], start)
+        stage.vertex_grid.hi[i] = ti.max(x[i], start)
     for e in range(stage.edge_count):
         a, b = stage.edges[e][0], stage.edges[e][1]
-        stage.edge_grid.lo[e] = ti.min(x[a], x[b], stage.step_start[a], stage.step_start[b])
-        stage.edge_grid.hi[e] = ti.max(x[a], x[b], stage.step_start[a], stage.step_start[b])
+        stage.edge_grid.lo[e] = ti.min(x[a], x[b], _start(stage, a), _start(stage, b))
+        stage.edge_grid.hi[e] = ti.max(x[a], x[b], _start(stage, a), _start(stage, b))
+
+
+@ti.func
+def _start(stage: ti.template(), i):
+    """Particle i's position at the step's start, moved by the step's common shift."""
+    return stage.step_start[i] + stage.shift[None]
 
 
 @ti.kernel
-def _longest_edge(stage: ti.template(), state: ti.template()) -> ti.f64:
-    """The longest edge now [m], reduced per block of BLOCK edges, then over the blocks."""
+def _mean_edge(stage: ti.template(), state: ti.template()) -> ti.f64:
+    """The mean edge length now [m]: summed per block of BLOCK edges, then over the blocks, in
+    a fixed order (the same bits on any thread count)."""
     for b in range(stage.edge_block_count):
-        longest = 0.0
+        total = 0.0
         for e in range(b * BLOCK, ti.min((b + 1) * BLOCK, stage.edge_count)):
             ends = stage.edges[e]
-            longest = ti.max(longest, (state.particle_position[ends[0]]
-                                       - state.particle_position[ends[1]]).norm())
-        stage.block_longest[b] = longest
+            total += (state.particle_position[ends[0]] - state.particle_position[ends[1]]).norm()
+        stage.block_length[b] = total
     for _ in range(1):
-        stage.longest[None] = 0.0
+        stage.mean_edge[None] = 0.0
         for b in range(stage.edge_block_count):
-            stage.longest[None] = ti.max(stage.longest[None], stage.block_longest[b])
-    return stage.longest[None]
+            stage.mean_edge[None] += stage.block_length[b]
+        stage.mean_edge[None] /= ti.max(stage.edge_count, 1)
+    return stage.mean_edge[None]
 
 
 @ti.func
@@ -298,6 +344,12 @@ def _moved(stage: ti.template(), state: ti.template(), i, j):
     """How far particles i and j moved relative to each other in this step [m]."""
     return ((state.particle_position[i] - stage.step_start[i])
             - (state.particle_position[j] - stage.step_start[j])).norm()
+
+
+@ti.func
+def _box_gap(lo, hi, other_lo, other_hi):
+    """The distance between two boxes (0 if they meet): at most that of anything inside them."""
+    return ti.max(other_lo - hi, lo - other_hi, 0.0).norm()
 
 
 @ti.func
@@ -318,12 +370,12 @@ def _triangle_pairs(stage: ti.template(), pairs: ti.template(), model: ti.templa
     `thickness` from it in the rest shape (counted, or written from pair_start[t] when
     `write`), in cell order."""
     found = 0
-    x, start = ti.static(state.particle_position, stage.step_start)
+    x = ti.static(state.particle_position)
     tri = stage.triangles[t]
-    lo = ti.min(x[tri[0]], x[tri[1]], x[tri[2]], start[tri[0]], start[tri[1]],
-                start[tri[2]]) - near
-    hi = ti.max(x[tri[0]], x[tri[1]], x[tri[2]], start[tri[0]], start[tri[1]],
-                start[tri[2]]) + near
+    s0, s1, s2 = _start(stage, tri[0]), _start(stage, tri[1]), _start(stage, tri[2])
+    now_lo, now_hi = ti.min(x[tri[0]], x[tri[1]], x[tri[2]]), ti.max(x[tri[0]], x[tri[1]], x[tri[2]])
+    lo = ti.min(now_lo, s0, s1, s2) - near
+    hi = ti.max(now_hi, s0, s1, s2) + near
     first, last = cell_box(stage.vertex_grid, lo, hi)
     for k in range(box_cell_count(first, last)):
         cell = box_cell(first, last, k)
@@ -335,7 +387,7 @@ def _triangle_pairs(stage: ti.template(), pairs: ti.template(), model: ti.templa
                     continue
                 moved = ti.max(_moved(stage, state, v, tri[0]), _moved(stage, state, v, tri[1]),
                                _moved(stage, state, v, tri[2]))
-                keep = True
+                keep = _box_gap(x[v], x[v], now_lo, now_hi) < near + moved   # a cheap bound first
                 for shape in range(2):                   # now, then the rest shape
                     if keep:
                         d = triangle_distance(_at(model, state, v, shape),
@@ -360,7 +412,9 @@ def _edge_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template()
     the step, and farther than `thickness` in the rest shape (counted, or written from
     pair_start[T + e])."""
     found = 0
+    x = ti.static(state.particle_position)
     ends = stage.edges[e]
+    now_lo, now_hi = ti.min(x[ends[0]], x[ends[1]]), ti.max(x[ends[0]], x[ends[1]])
     lo, hi = stage.edge_grid.lo[e] - near, stage.edge_grid.hi[e] + near
     first, last = cell_box(stage.edge_grid, lo, hi)
     for k in range(box_cell_count(first, last)):
@@ -377,7 +431,8 @@ def _edge_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template()
                                _moved(stage, state, ends[0], other[1]),
                                _moved(stage, state, ends[1], other[0]),
                                _moved(stage, state, ends[1], other[1]))
-                keep = True
+                keep = _box_gap(ti.min(x[other[0]], x[other[1]]), ti.max(x[other[0]], x[other[1]]),
+                                now_lo, now_hi) < near + moved           # a cheap bound first
                 for shape in range(2):                   # now, then the rest shape
                     if keep:
                         d = segment_distance(_at(model, state, ends[0], shape),

@@ -22,7 +22,7 @@ import numpy as np
 from . import backend, limits
 from ._validate import as_array, in_range, integer, require
 from .colliders import ColliderSet
-from .self_collision import SelfCollision, SelfContact, SelfContacts
+from .self_collision import SelfCollision, SelfContact, SelfContacts, warn_if_thick
 from .errors import SimulationDiverged, StaleSimulation
 from .forces import ForceSettings, energies
 from .handles import Handle, HandleSet
@@ -101,6 +101,7 @@ class Simulation:
         require(self_collision is None or isinstance(self_collision, SelfCollision),
                 "self_collision", self_collision, "None or a SelfCollision(thickness=...)")
         if self_collision is not None:
+            warn_if_thick(self_collision, cloth)
             parts["self_contact"] = (SelfContact, (self_collision, cloth))
         self._lent = self._lend(parts)
         self.model, self.state = self._lent["model"], self._lent["state"]
