@@ -71,7 +71,7 @@ def test_a_scene_hem_takes_grid_names_and_indices(tmp_path):
 
 def test_every_demo_scene_loads(tmp_path):
     scenes = sorted(DEMOS.glob("*.toml"))
-    assert len(scenes) == 10   # the nine demos and the study's standard scene
+    assert len(scenes) == 12   # the eleven demos and the study's standard scene
     for path in scenes:
         scene = load_scene(path)
         assert scene.cloth.particle_count > 1 and scene.frames >= 15, path.name

@@ -170,21 +170,21 @@ def test_a_thickness_above_half_the_mean_edge_is_warned_about(f64):
 def test_one_thread_and_two_and_a_rerun_give_the_same_bits():
     """Contacts are listed in index order and gathered per particle in list order."""
     from ti_cloth import backend
-    body = two_sheets()
+    body = two_sheets(8, height=0.05)
     runs = []
     try:
         for threads in (1, 2, 2):
             if not runs or backend.cpu_threads() != threads:
                 tc.init(arch="cpu", precision="f64", threads=threads)
             sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240,
-                                self_collision=tc.SelfCollision(THICKNESS))
-            sim.step(60)
+                                self_collision=tc.SelfCollision(THICKNESS, friction=0.3))
+            sim.step(40)
             runs.append(sim.positions())
+            assert len(sim.self_contacts().vertex_triangle) > 20, "the sheets touch"
     finally:
         tc.init(arch="cpu", precision="f64")
     np.testing.assert_array_equal(runs[0], runs[1])
     np.testing.assert_array_equal(runs[1], runs[2])
-    assert runs[0][144:, 1].max() < 0.1, "the sheet reached the other"
 
 
 @pytest.mark.slow
@@ -243,7 +243,8 @@ def test_every_pair_within_the_thickness_is_watched_and_every_contact_is_one(f64
 def test_friction_between_layers_is_coulomb_on_a_slope(f64):
     """A small sheet resting on a pinned sheet tilted 20 degrees slides 0.4 s down it by
     a t^2 / 2 with a = g (sin 20 - mu cos 20) (within 3 %: the first-order start of a step-wise
-    slide lags by one step in 96), and sticks (< 1 mm) when mu > tan 20 = 0.36."""
+    slide lags by one step in 96) at mu = 0.2, and sticks (< 1 mm) at mu = 0.6 > tan 20.
+    Without friction it would slide 0.27 m in both cases."""
     angle = np.radians(20.0)
     turn = np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0],
                      [0, 0, 1]])
@@ -255,7 +256,7 @@ def test_friction_between_layers_is_coulomb_on_a_slope(f64):
         tc.Cloth(tc.Mesh((upper.vertices + [0.6, THICKNESS, 0.125]) @ turn.T, upper.triangles),
                  tc.Material())])
     down = -turn @ [1.0, 0.0, 0.0]
-    for friction in (0.0, 0.2, 0.6):
+    for friction in (0.2, 0.6):
         sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240,
                             self_collision=tc.SelfCollision(THICKNESS, friction=friction))
         start = sim.positions()[60:].mean(axis=0)
