@@ -191,7 +191,8 @@ def test_a_thickness_above_half_the_mean_edge_is_warned_about(f64):
 
 
 def test_one_thread_and_two_and_a_rerun_give_the_same_bits():
-    """Contacts are listed in index order and gathered per particle in list order."""
+    """Grid cells are filled in index order, contacts listed in index order and gathered per
+    particle in list order: the grid, the lists and the positions repeat bit for bit."""
     from ti_cloth import backend
     body = two_sheets(8, height=0.05)
     runs = []
@@ -202,12 +203,16 @@ def test_one_thread_and_two_and_a_rerun_give_the_same_bits():
             sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240,
                                 self_collision=tc.SelfCollision(THICKNESS, friction=0.3))
             sim.step(40)
-            runs.append(sim.positions())
+            grid = sim.self_contact.grid
+            listed = sim.self_contacts(active=False)
+            runs.append((sim.positions(), grid.cell_start.to_numpy(), grid.cell_item.to_numpy(),
+                         listed.vertex_triangle, listed.edge_edge))
             assert len(sim.self_contacts().vertex_triangle) > 20, "the sheets touch"
     finally:
         tc.init(arch="cpu", precision="f64")
-    np.testing.assert_array_equal(runs[0], runs[1])
-    np.testing.assert_array_equal(runs[1], runs[2])
+    for other in runs[1:]:                   # positions, the grid's cells, the candidate lists
+        for mine, theirs in zip(runs[0], other):
+            np.testing.assert_array_equal(mine, theirs)
 
 
 @pytest.mark.slow

@@ -1,6 +1,10 @@
 """A uniform grid of boxes, rebuilt when self-collision lists its pairs: the broad phase between
 the swept boxes of particles, triangles and edges (issue 18).
 
+Items come in kinds (self-collision: particles, then edges), numbered one after the other;
+each kind has cells of its own over the same grid, so one build and one set of compiled
+kernels serve both, and a query visits only the kind it asks for.
+
 Build (BoxGrid.build, after the owner has written each item's box into `lo` / `hi`): the
 bounding box of all boxes (each block of BLOCK items reduced by one thread, then the blocks in
 order: a max and a min are exact), cells of side >= `cell_size` over it, each item entered in
@@ -11,11 +15,13 @@ need more than CELL_BUDGET cells per item, or the entries more than ENTRY_BUDGET
 body blown apart, a particle flung far in one step), the cells grow until they do not: queries
 stay exact, only slower.
 
-Query (cell_box, box_cell_count, box_cell, cell_range, found_here): the items whose boxes meet a
-query box are in the cells the query box meets; an item met in several of them is reported from
-the first cell the two share (the componentwise max of their first cells), so exactly once.
+Query (cell_box, box_cell_count, box_cell, cell_range, found_here): the items of a kind whose
+boxes meet a query box are in that kind's cells the query box meets; an item met in several of
+them is reported from the first cell the two share (the componentwise max of their first
+cells), so exactly once.
 """
 
+import numpy as np
 import taichi as ti
 
 from . import backend
@@ -27,13 +33,16 @@ BLOCK = 256         # items one thread reduces
 
 @backend.kernel_argument
 class BoxGrid:
-    """Cells of `item_count` axis-aligned boxes. The owner writes box i into lo[i], hi[i]; after
-    build(): side [m] (>= the cell_size asked for), lower [m] (the grid's corner) and dims
-    (cells per axis); cell_start (cells + 1,) and cell_item: the items whose boxes meet cell c
-    are cell_item[cell_start[c]:cell_start[c + 1]], in increasing index."""
+    """Cells of axis-aligned boxes, `counts` items of each kind (kind k's items are numbered
+    from sum(counts[:k])). The owner writes box i into lo[i], hi[i]; after build(): side [m]
+    (>= the cell_size asked for), lower [m] (the grid's corner) and dims (cells per axis);
+    cell_start and cell_item: the items of kind k whose boxes meet cell c are
+    cell_item[cell_start[k C + c]:cell_start[k C + c + 1]] (C cells), in increasing index."""
 
-    def __init__(self, item_count: int):
-        self.item_count = n = item_count
+    def __init__(self, *counts: int):
+        self.kind_count = len(counts)
+        self.kind_end = tuple(int(v) for v in np.cumsum(counts))
+        self.item_count = n = sum(counts)
         self.cell_capacity = CELL_BUDGET * max(n, 1)
         self.entry_capacity = ENTRY_BUDGET * max(n, 1)
         self.block_count = -(-max(n, 1) // BLOCK)
@@ -47,8 +56,8 @@ class BoxGrid:
         self.side = fields.scalar(real, ())
         self.dims = fields.vector(3, ti.i32, ())
         self.entries = fields.scalar(ti.i32, ())
-        self.cell_start = fields.scalar(ti.i32, self.cell_capacity + 1)
-        self.cell_fill = fields.scalar(ti.i32, self.cell_capacity)
+        self.cell_start = fields.scalar(ti.i32, self.kind_count * self.cell_capacity + 1)
+        self.cell_fill = fields.scalar(ti.i32, self.kind_count * self.cell_capacity)
         self.cell_item = fields.scalar(ti.i32, self.entry_capacity)
         fields.finalize(self)
 
@@ -96,17 +105,29 @@ def _layout(grid: ti.template(), side: float) -> ti.i32:
 
 @ti.kernel
 def _count(grid: ti.template()) -> ti.i32:
-    """cell_start[c + 1] = how many boxes meet cell c (integer atomics: exact); the entries."""
+    """cell_start[k C + c + 1] = how many boxes of kind k meet cell c (integer atomics:
+    exact); the entries."""
     d = grid.dims[None]
-    for c in range(d[0] * d[1] * d[2] + 1):
+    cells = d[0] * d[1] * d[2]
+    for c in range(grid.kind_count * cells + 1):
         grid.cell_start[c] = 0
     grid.entries[None] = 0
     for i in range(grid.item_count):
+        base = _kind(grid, i) * cells + 1
         first, last = cell_box(grid, grid.lo[i], grid.hi[i])
         for k in range(box_cell_count(first, last)):
-            ti.atomic_add(grid.cell_start[cell_index(grid, box_cell(first, last, k)) + 1], 1)
+            ti.atomic_add(grid.cell_start[base + cell_index(grid, box_cell(first, last, k))], 1)
         ti.atomic_add(grid.entries[None], box_cell_count(first, last))
     return grid.entries[None]
+
+
+@ti.func
+def _kind(grid: ti.template(), i):
+    kind = 0
+    for k in ti.static(range(grid.kind_count - 1)):
+        if i >= grid.kind_end[k]:
+            kind = k + 1
+    return kind
 
 
 @ti.kernel
@@ -114,14 +135,16 @@ def _fill(grid: ti.template()):
     """Exclusive prefix sum of the counts, then each item entered in its cells in item order
     (serial: a cell lists its items in increasing index)."""
     d = grid.dims[None]
+    cells = d[0] * d[1] * d[2]
     for _ in range(1):
-        for c in range(d[0] * d[1] * d[2]):
+        for c in range(grid.kind_count * cells):
             grid.cell_start[c + 1] += grid.cell_start[c]
             grid.cell_fill[c] = grid.cell_start[c]
         for i in range(grid.item_count):
+            base = _kind(grid, i) * cells
             first, last = cell_box(grid, grid.lo[i], grid.hi[i])
             for k in range(box_cell_count(first, last)):
-                c = cell_index(grid, box_cell(first, last, k))
+                c = base + cell_index(grid, box_cell(first, last, k))
                 grid.cell_item[grid.cell_fill[c]] = i
                 grid.cell_fill[c] += 1
 
@@ -163,9 +186,10 @@ def box_cell(first, last, k):
 
 
 @ti.func
-def cell_range(grid: ti.template(), cell):
-    """(begin, end) into cell_item of the items in the cell at integer coordinates."""
-    c = cell_index(grid, cell)
+def cell_range(grid: ti.template(), kind, cell):
+    """(begin, end) into cell_item of the items of `kind` in the cell at integer coordinates."""
+    d = grid.dims[None]
+    c = kind * d[0] * d[1] * d[2] + cell_index(grid, cell)
     return grid.cell_start[c], grid.cell_start[c + 1]
 
 

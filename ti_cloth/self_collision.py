@@ -8,9 +8,9 @@ positions at the step's start and end) meet within `near` = thickness + skin, an
 nearer than `near` plus how far they moved relative to each other in the step. That holds every
 pair within `near` now and every pair that passed through each other during the step (its
 depth on the wrong side is at most its relative motion), however fast it moved: nothing
-tunnels between list and contact. The broad phase is two uniform grids of swept boxes
-(box_grid.py), of the particles (queried by each triangle's box) and of the edges (queried by
-each edge's, f > e), each pair met once. Counted, prefix-summed and written per triangle and
+tunnels between list and contact. The broad phase is a uniform grid of swept boxes
+(box_grid.py) with cells for the particles (queried by each triangle's box) and for the edges
+(queried by each edge's, f > e), each pair met once. Counted, prefix-summed and written per triangle and
 per edge in index order: a fixed list. Pairs within `thickness` in the rest shape (neighbours
 through the mesh) are never listed.
 The list is kept while no two particles have moved more than the skin relative to each other
@@ -151,8 +151,7 @@ class SelfContact:
         self.contact_start = fields.scalar(ti.i32, n + 1)
         self.contact_fill = fields.scalar(ti.i32, n)
         fields.finalize(self)
-        self.vertex_grid = BoxGrid(n)
-        self.edge_grid = BoxGrid(len(edges))
+        self.grid = BoxGrid(n, len(edges))         # particles, then edges
         self.candidates = PairList(PAIRS_PER_PARTICLE * max(n, 1))
         self.load(settings, cloth)
         upload(((self.triangles, triangles), (self.edges, edges)))
@@ -211,8 +210,7 @@ class SelfContact:
         near = (1.0 + SKIN) * self.settings.thickness
         _sweep_boxes(self, state)
         cell = float(_mean_edge(self, state)) + 2.0 * near       # about a query's size
-        self.vertex_grid.build(cell)
-        self.edge_grid.build(cell)
+        self.grid.build(cell)
         _list_pairs(self, self.candidates, model, state, near, self.settings.thickness, 0)
         total = _prefix(self)
         if total > self.candidates.capacity:
@@ -307,12 +305,14 @@ def _sweep_boxes(stage: ti.template(), state: ti.template()):
     x = ti.static(state.particle_position)
     for i in range(stage.particle_count):
         start = _start(stage, i)
-        stage.vertex_grid.lo[i] = ti.min(x[i], start)
-        stage.vertex_grid.hi[i] = ti.max(x[i], start)
+        stage.grid.lo[i] = ti.min(x[i], start)
+        stage.grid.hi[i] = ti.max(x[i], start)
     for e in range(stage.edge_count):
         a, b = stage.edges[e][0], stage.edges[e][1]
-        stage.edge_grid.lo[e] = ti.min(x[a], x[b], _start(stage, a), _start(stage, b))
-        stage.edge_grid.hi[e] = ti.max(x[a], x[b], _start(stage, a), _start(stage, b))
+        stage.grid.lo[stage.particle_count + e] = ti.min(x[a], x[b], _start(stage, a),
+                                                         _start(stage, b))
+        stage.grid.hi[stage.particle_count + e] = ti.max(x[a], x[b], _start(stage, a),
+                                                         _start(stage, b))
 
 
 @ti.func
@@ -376,14 +376,14 @@ def _triangle_pairs(stage: ti.template(), pairs: ti.template(), model: ti.templa
     now_lo, now_hi = ti.min(x[tri[0]], x[tri[1]], x[tri[2]]), ti.max(x[tri[0]], x[tri[1]], x[tri[2]])
     lo = ti.min(now_lo, s0, s1, s2) - near
     hi = ti.max(now_hi, s0, s1, s2) + near
-    first, last = cell_box(stage.vertex_grid, lo, hi)
+    first, last = cell_box(stage.grid, lo, hi)
     for k in range(box_cell_count(first, last)):
         cell = box_cell(first, last, k)
-        begin, end = cell_range(stage.vertex_grid, cell)
+        begin, end = cell_range(stage.grid, 0, cell)
         for a in range(begin, end):
-            v = stage.vertex_grid.cell_item[a]
+            v = stage.grid.cell_item[a]
             if v != tri[0] and v != tri[1] and v != tri[2]:
-                if not found_here(stage.vertex_grid, v, cell, first, lo, hi):
+                if not found_here(stage.grid, v, cell, first, lo, hi):
                     continue
                 moved = ti.max(_moved(stage, state, v, tri[0]), _moved(stage, state, v, tri[1]),
                                _moved(stage, state, v, tri[2]))
@@ -415,17 +415,19 @@ def _edge_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template()
     x = ti.static(state.particle_position)
     ends = stage.edges[e]
     now_lo, now_hi = ti.min(x[ends[0]], x[ends[1]]), ti.max(x[ends[0]], x[ends[1]])
-    lo, hi = stage.edge_grid.lo[e] - near, stage.edge_grid.hi[e] + near
-    first, last = cell_box(stage.edge_grid, lo, hi)
+    lo = stage.grid.lo[stage.particle_count + e] - near
+    hi = stage.grid.hi[stage.particle_count + e] + near
+    first, last = cell_box(stage.grid, lo, hi)
     for k in range(box_cell_count(first, last)):
         cell = box_cell(first, last, k)
-        begin, end = cell_range(stage.edge_grid, cell)
+        begin, end = cell_range(stage.grid, 1, cell)
         for a in range(begin, end):
-            f = stage.edge_grid.cell_item[a]
+            item = stage.grid.cell_item[a]
+            f = item - stage.particle_count
             other = stage.edges[f]
             if f > e and other[0] != ends[0] and other[0] != ends[1] and other[1] != ends[0] \
                     and other[1] != ends[1]:
-                if not found_here(stage.edge_grid, f, cell, first, lo, hi):
+                if not found_here(stage.grid, item, cell, first, lo, hi):
                     continue
                 moved = ti.max(_moved(stage, state, ends[0], other[0]),
                                _moved(stage, state, ends[0], other[1]),
