@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from ti_cloth import constraints, handles, self_collision, strain_limit, tearing, wind
+from ti_cloth import constraints, contact_pairs, handles, strain_limit, tearing, wind
 from ti_cloth.colliders import resolve_collisions
 from ti_cloth.integrators import implicit_euler, rk4, xpbd
 from ti_cloth.state import copy_positions
@@ -18,7 +18,7 @@ OPTIONAL = {
     "strain-limit velocity": strain_limit._follow_velocity, "tearing": tearing.tear_springs,
     "handles": handles.move_handles, "xpbd": constraints.xpbd_springs,
     "xpbd prediction": xpbd._predict, "implicit solve": implicit_euler._linearise,
-    "rk4 stages": rk4._stage, "self-collision": self_collision._list_pairs,
+    "rk4 stages": rk4._stage, "self-collision": contact_pairs.list_pairs,
 }
 
 

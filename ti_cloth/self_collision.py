@@ -2,22 +2,8 @@
 closer than `thickness` to a triangle it is not a corner of, nor an edge closer than `thickness`
 to an edge it shares no particle with, across every body of the simulation.
 
-Candidates (a Verlet list, as molecular dynamics keeps its neighbour lists), made at a step's
-end: the vertex-triangle and edge-edge pairs whose boxes swept over the step (the box of their
-positions at the step's start and end) meet within `near` = thickness + skin, and which are now
-nearer than `near` plus how far they moved relative to each other in the step. That holds every
-pair within `near` now and every pair that passed through each other during the step (its
-depth on the wrong side is at most its relative motion), however fast it moved: nothing
-tunnels between list and contact. The broad phase is a uniform grid of swept boxes
-(box_grid.py) with cells for the particles (queried by each triangle's box) and for the edges
-(queried by each edge's, f > e), each pair met once. Counted, prefix-summed and written per triangle and
-per edge in index order: a fixed list. Pairs within `thickness` in the rest shape (neighbours
-through the mesh) are never listed.
-The list is kept while no two particles have moved more than the skin relative to each other
-since it was made - their relative motion is at most the diagonal of the bounding box of all
-displacements (an exact max/min reduction) - so a pair left out cannot come within `thickness`,
-nor pass through, before the list is made again. A body that falls as a whole keeps its list;
-one whose parts move apart fast makes one every step.
+Candidates: contact_pairs.py (a Verlet list of the pairs that may touch before it is made
+again, from a grid of swept boxes; nothing tunnels between list and contact).
 
 Each contact pass evaluates every listed pair:
 - vertex v and triangle t: v's foot on t's plane inside t, and v's height over t, measured on
@@ -48,12 +34,13 @@ import taichi as ti
 
 from . import backend, limits
 from ._validate import count, finite_number, require
+from .box_grid import BLOCK, BoxGrid
+from .colliders import project_out
+from .contact_pairs import (PairList, index_contacts, list_pairs, mean_edge, moved_since_listed,
+                            prefix_pairs, sweep_boxes)
 from .forces import altitude_frame
 from .mesh import triangle_edges, unique_rows
-from .colliders import project_out
-from .box_grid import (BLOCK, BoxGrid, box_cell, box_cell_count, cell_box, cell_range,
-                       found_here)
-from .proximity import segment_distance, segment_parameters, triangle_distance
+from .proximity import segment_parameters
 from .state import copy_positions
 from .transfer import upload
 
@@ -187,32 +174,32 @@ class SelfContact:
         if self.triangle_count == 0:
             return
         thickness = self.settings.thickness
-        if not self.listed or _moved_since_listed(self, state) > SKIN * thickness:
+        if not self.listed or moved_since_listed(self, state) > SKIN * thickness:
             self._make_list(model, state, step_index)
         if self.pair_total == 0:
             return
         copy_positions(state, self.before)
         for _ in range(self.settings.iterations):
-            touching, deep = _evaluate(self, self.candidates, model, state, thickness,
+            touching, deep = evaluate_contacts(self, self.candidates, model, state, thickness,
                                        self.settings.friction)
             if touching == 0:
                 break
-            _apply_contacts(self, self.candidates, model, state)
+            apply_contacts(self, self.candidates, model, state)
             if self.colliders is not None:
                 project_out(model, state, self.colliders)
             if deep == 0:
                 break
-        _follow(self, state, dt)
+        follow_corrections(self, state, dt)
 
     def _make_list(self, model, state, step_index: int) -> None:
         """List the pairs that met within thickness + skin during the step (their swept boxes
         meet) and are now nearer than that plus how far they moved relative to each other."""
         near = (1.0 + SKIN) * self.settings.thickness
-        _sweep_boxes(self, state)
-        cell = float(_mean_edge(self, state)) + 2.0 * near       # about a query's size
+        sweep_boxes(self, state)
+        cell = float(mean_edge(self, state)) + 2.0 * near       # about a query's size
         self.grid.build(cell)
-        _list_pairs(self, self.candidates, model, state, near, self.settings.thickness, 0)
-        total = _prefix(self)
+        list_pairs(self, self.candidates, model, state, near, self.settings.thickness, 0)
+        total = prefix_pairs(self)
         if total > self.candidates.capacity:
             if total > MAX_PAIRS_PER_PARTICLE * self.particle_count:
                 raise RuntimeError(
@@ -222,8 +209,8 @@ class SelfContact:
                     "thickness")
             self.candidates = PairList(min(2 * total,
                                            MAX_PAIRS_PER_PARTICLE * self.particle_count))
-        _list_pairs(self, self.candidates, model, state, near, self.settings.thickness, 1)
-        _index_contacts(self, self.candidates)
+        list_pairs(self, self.candidates, model, state, near, self.settings.thickness, 1)
+        index_contacts(self, self.candidates)
         copy_positions(state, self.listed_at)
         self.listed, self.pair_total = True, total
         self.vertex_pairs = int(self.pair_start[self.triangle_count])
@@ -238,268 +225,6 @@ class SelfContact:
         elements = self.candidates.elements.to_numpy()[kept]
         vertex = kept < self.vertex_pairs
         return SelfContacts(elements[vertex], elements[~vertex], self.edge_rows)
-
-
-@backend.kernel_argument
-class PairList:
-    """Room for `capacity` listed pairs: each pair's elements ((vertex, triangle) or (edge,
-    edge)), its four particles, whether it is in contact and its four particles' moves; and
-    per particle, the slots 4 p + k that move it (contact, indexed by the stage's
-    contact_start). A bigger list replaces a full one (its kernels compile again, once)."""
-
-    def __init__(self, capacity: int):
-        self.capacity = capacity
-        real = backend.real()
-        fields = backend.FieldGroup()
-        self.elements = fields.vector(2, ti.i32, capacity)
-        self.particles = fields.vector(4, ti.i32, capacity)
-        self.active = fields.scalar(ti.i32, capacity)
-        self.move = fields.vector(3, real, 4 * capacity)
-        self.contact = fields.scalar(ti.i32, 4 * capacity)
-        fields.finalize(self)
-
-
-@ti.kernel
-def _moved_since_listed(stage: ti.template(), state: ti.template()) -> ti.f64:
-    """The diagonal of the bounding box of every particle's displacement since the list was
-    made [m]: the most any two particles moved relative to each other. Each block of BLOCK
-    particles is reduced by one thread, then the blocks in order (a max and a min are exact in
-    any order; no contended atomics)."""
-    for b in range(stage.block_count):
-        begin = b * BLOCK
-        lo = hi = state.particle_position[begin] - stage.listed_at[begin]
-        for i in range(begin + 1, ti.min(begin + BLOCK, stage.particle_count)):
-            moved = state.particle_position[i] - stage.listed_at[i]
-            lo, hi = ti.min(lo, moved), ti.max(hi, moved)
-        stage.block_span[2 * b] = lo
-        stage.block_span[2 * b + 1] = hi
-    for _ in range(1):
-        stage.span[0], stage.span[1] = stage.block_span[0], stage.block_span[1]
-        for b in range(1, stage.block_count):
-            stage.span[0] = ti.min(stage.span[0], stage.block_span[2 * b])
-            stage.span[1] = ti.max(stage.span[1], stage.block_span[2 * b + 1])
-    return ti.cast((stage.span[1] - stage.span[0]).norm(), ti.f64)
-
-
-@ti.kernel
-def _sweep_boxes(stage: ti.template(), state: ti.template()):
-    """Each particle's and each edge's box over the step: the box of its positions now and at
-    the step's start moved by `shift`, the middle of all particles' displacements in the step.
-    Moving every start by the same vector changes no relative motion - two elements meet at
-    some time in the step in one frame exactly when they do in the other - and it shrinks the
-    boxes of a body moving as a whole to its motion relative to itself."""
-    for b in range(stage.block_count):
-        begin = b * BLOCK
-        lo = hi = state.particle_position[begin] - stage.step_start[begin]
-        for i in range(begin + 1, ti.min(begin + BLOCK, stage.particle_count)):
-            moved = state.particle_position[i] - stage.step_start[i]
-            lo, hi = ti.min(lo, moved), ti.max(hi, moved)
-        stage.block_span[2 * b] = lo
-        stage.block_span[2 * b + 1] = hi
-    for _ in range(1):
-        lo, hi = stage.block_span[0], stage.block_span[1]
-        for b in range(1, stage.block_count):
-            lo = ti.min(lo, stage.block_span[2 * b])
-            hi = ti.max(hi, stage.block_span[2 * b + 1])
-        stage.shift[None] = 0.5 * (lo + hi)
-    x = ti.static(state.particle_position)
-    for i in range(stage.particle_count):
-        start = _start(stage, i)
-        stage.grid.lo[i] = ti.min(x[i], start)
-        stage.grid.hi[i] = ti.max(x[i], start)
-    for e in range(stage.edge_count):
-        a, b = stage.edges[e][0], stage.edges[e][1]
-        stage.grid.lo[stage.particle_count + e] = ti.min(x[a], x[b], _start(stage, a),
-                                                         _start(stage, b))
-        stage.grid.hi[stage.particle_count + e] = ti.max(x[a], x[b], _start(stage, a),
-                                                         _start(stage, b))
-
-
-@ti.func
-def _start(stage: ti.template(), i):
-    """Particle i's position at the step's start, moved by the step's common shift."""
-    return stage.step_start[i] + stage.shift[None]
-
-
-@ti.kernel
-def _mean_edge(stage: ti.template(), state: ti.template()) -> ti.f64:
-    """The mean edge length now [m]: summed per block of BLOCK edges, then over the blocks, in
-    a fixed order (the same bits on any thread count)."""
-    for b in range(stage.edge_block_count):
-        total = 0.0
-        for e in range(b * BLOCK, ti.min((b + 1) * BLOCK, stage.edge_count)):
-            ends = stage.edges[e]
-            total += (state.particle_position[ends[0]] - state.particle_position[ends[1]]).norm()
-        stage.block_length[b] = total
-    for _ in range(1):
-        stage.mean_edge[None] = 0.0
-        for b in range(stage.edge_block_count):
-            stage.mean_edge[None] += stage.block_length[b]
-        stage.mean_edge[None] /= ti.max(stage.edge_count, 1)
-    return stage.mean_edge[None]
-
-
-@ti.func
-def _moved(stage: ti.template(), state: ti.template(), i, j):
-    """How far particles i and j moved relative to each other in this step [m]."""
-    return ((state.particle_position[i] - stage.step_start[i])
-            - (state.particle_position[j] - stage.step_start[j])).norm()
-
-
-@ti.func
-def _box_gap(lo, hi, other_lo, other_hi):
-    """The distance between two boxes (0 if they meet): at most that of anything inside them."""
-    return ti.max(other_lo - hi, lo - other_hi, 0.0).norm()
-
-
-@ti.func
-def _at(model: ti.template(), state: ti.template(), i, rest_shape):
-    """Particle i's position now (rest_shape 0) or in the rest shape (1). The distance tests
-    run in a loop over the two, so each is compiled once."""
-    x = state.particle_position[i]
-    if rest_shape:
-        x = model.particle_rest_position[i]
-    return x
-
-
-@ti.func
-def _triangle_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template(),
-                    state: ti.template(), t, near, thickness, write):
-    """Vertices v whose box over the step meets triangle t's grown by `near`, nearer to t now
-    than `near` + how far v moved relative to t's corners in the step, and farther than
-    `thickness` from it in the rest shape (counted, or written from pair_start[t] when
-    `write`), in cell order."""
-    found = 0
-    x = ti.static(state.particle_position)
-    tri = stage.triangles[t]
-    s0, s1, s2 = _start(stage, tri[0]), _start(stage, tri[1]), _start(stage, tri[2])
-    now_lo, now_hi = ti.min(x[tri[0]], x[tri[1]], x[tri[2]]), ti.max(x[tri[0]], x[tri[1]], x[tri[2]])
-    lo = ti.min(now_lo, s0, s1, s2) - near
-    hi = ti.max(now_hi, s0, s1, s2) + near
-    first, last = cell_box(stage.grid, lo, hi)
-    for k in range(box_cell_count(first, last)):
-        cell = box_cell(first, last, k)
-        begin, end = cell_range(stage.grid, 0, cell)
-        for a in range(begin, end):
-            v = stage.grid.cell_item[a]
-            if v != tri[0] and v != tri[1] and v != tri[2]:
-                if not found_here(stage.grid, v, cell, first, lo, hi):
-                    continue
-                moved = ti.max(_moved(stage, state, v, tri[0]), _moved(stage, state, v, tri[1]),
-                               _moved(stage, state, v, tri[2]))
-                keep = _box_gap(x[v], x[v], now_lo, now_hi) < near + moved   # a cheap bound first
-                for shape in range(2):                   # now, then the rest shape
-                    if keep:
-                        d = triangle_distance(_at(model, state, v, shape),
-                                              _at(model, state, tri[0], shape),
-                                              _at(model, state, tri[1], shape),
-                                              _at(model, state, tri[2], shape))
-                        keep = ti.select(shape == 0, d < near + moved, d >= thickness)
-                if keep:
-                    if write:
-                        slot = stage.pair_start[t] + found
-                        pairs.elements[slot] = ti.Vector([v, t])
-                        pairs.particles[slot] = ti.Vector([v, tri[0], tri[1], tri[2]])
-                    found += 1
-    return found
-
-
-@ti.func
-def _edge_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template(),
-                state: ti.template(), e, near, thickness, write):
-    """Edges f > e sharing no particle with e whose boxes over the step meet e's grown by
-    `near`, nearer to e now than `near` + how far their ends moved relative to each other in
-    the step, and farther than `thickness` in the rest shape (counted, or written from
-    pair_start[T + e])."""
-    found = 0
-    x = ti.static(state.particle_position)
-    ends = stage.edges[e]
-    now_lo, now_hi = ti.min(x[ends[0]], x[ends[1]]), ti.max(x[ends[0]], x[ends[1]])
-    lo = stage.grid.lo[stage.particle_count + e] - near
-    hi = stage.grid.hi[stage.particle_count + e] + near
-    first, last = cell_box(stage.grid, lo, hi)
-    for k in range(box_cell_count(first, last)):
-        cell = box_cell(first, last, k)
-        begin, end = cell_range(stage.grid, 1, cell)
-        for a in range(begin, end):
-            item = stage.grid.cell_item[a]
-            f = item - stage.particle_count
-            other = stage.edges[f]
-            if f > e and other[0] != ends[0] and other[0] != ends[1] and other[1] != ends[0] \
-                    and other[1] != ends[1]:
-                if not found_here(stage.grid, item, cell, first, lo, hi):
-                    continue
-                moved = ti.max(_moved(stage, state, ends[0], other[0]),
-                               _moved(stage, state, ends[0], other[1]),
-                               _moved(stage, state, ends[1], other[0]),
-                               _moved(stage, state, ends[1], other[1]))
-                keep = _box_gap(ti.min(x[other[0]], x[other[1]]), ti.max(x[other[0]], x[other[1]]),
-                                now_lo, now_hi) < near + moved           # a cheap bound first
-                for shape in range(2):                   # now, then the rest shape
-                    if keep:
-                        d = segment_distance(_at(model, state, ends[0], shape),
-                                             _at(model, state, ends[1], shape),
-                                             _at(model, state, other[0], shape),
-                                             _at(model, state, other[1], shape))
-                        keep = ti.select(shape == 0, d < near + moved, d >= thickness)
-                if keep:
-                    if write:
-                        slot = stage.pair_start[stage.triangle_count + e] + found
-                        pairs.elements[slot] = ti.Vector([e, f])
-                        pairs.particles[slot] = ti.Vector([ends[0], ends[1], other[0],
-                                                           other[1]])
-                    found += 1
-    return found
-
-
-@ti.kernel
-def _list_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template(),
-                state: ti.template(), near: float, thickness: float, write: ti.i32):
-    """Count (write = 0: pair_start[1 + t] = the pairs of triangle t, pair_start[1 + T + e] =
-    of edge e) or, after the prefix sum, write them (write = 1). One kernel for both: it is
-    the largest self-collision compiles."""
-    for t in range(stage.triangle_count):
-        if not write or stage.pair_start[t + 1] > stage.pair_start[t]:
-            found = _triangle_pairs(stage, pairs, model, state, t, near, thickness, write)
-            if not write:
-                stage.pair_start[t + 1] = found
-    for e in range(stage.edge_count):
-        k = stage.triangle_count + e
-        if not write or stage.pair_start[k + 1] > stage.pair_start[k]:
-            found = _edge_pairs(stage, pairs, model, state, e, near, thickness, write)
-            if not write:
-                stage.pair_start[k + 1] = found
-
-
-@ti.kernel
-def _prefix(stage: ti.template()) -> ti.i32:
-    """Inclusive prefix sum of the counts (serial): pair_start becomes offsets; the total."""
-    stage.pair_start[0] = 0
-    for _ in range(1):
-        for k in range(stage.triangle_count + stage.edge_count):
-            stage.pair_start[k + 1] += stage.pair_start[k]
-    return stage.pair_start[stage.triangle_count + stage.edge_count]
-
-
-@ti.kernel
-def _index_contacts(stage: ti.template(), pairs: ti.template()):
-    """contact[contact_start[i]:contact_start[i + 1]] = the slots 4 p + k at which pair p
-    moves particle i, in pair order (counts, prefix sum and fill all serial)."""
-    total = stage.pair_start[stage.triangle_count + stage.edge_count]
-    for _ in range(1):
-        for i in range(stage.particle_count + 1):
-            stage.contact_start[i] = 0
-        for p in range(total):
-            for k in ti.static(range(4)):
-                stage.contact_start[pairs.particles[p][k] + 1] += 1
-        for i in range(stage.particle_count):
-            stage.contact_start[i + 1] += stage.contact_start[i]
-            stage.contact_fill[i] = stage.contact_start[i]
-        for p in range(total):
-            for k in ti.static(range(4)):
-                i = pairs.particles[p][k]
-                pairs.contact[stage.contact_fill[i]] = 4 * p + k
-                stage.contact_fill[i] += 1
 
 
 @ti.func
@@ -568,7 +293,7 @@ def _contact_move(stage: ti.template(), pairs: ti.template(), model: ti.template
 
 
 @ti.kernel
-def _evaluate(stage: ti.template(), pairs: ti.template(), model: ti.template(),
+def evaluate_contacts(stage: ti.template(), pairs: ti.template(), model: ti.template(),
               state: ti.template(), thickness: float,
               friction: float) -> ti.types.vector(2, ti.i32):
     """Evaluate every listed pair at the current positions: active[p] and, for contacts,
@@ -600,7 +325,7 @@ def _evaluate(stage: ti.template(), pairs: ti.template(), model: ti.template(),
 
 
 @ti.kernel
-def _apply_contacts(stage: ti.template(), pairs: ti.template(), model: ti.template(),
+def apply_contacts(stage: ti.template(), pairs: ti.template(), model: ti.template(),
                     state: ti.template()):
     """Each particle moves by the mean of its contacts' moves, gathered in pair order."""
     for i in range(stage.particle_count):
@@ -617,7 +342,7 @@ def _apply_contacts(stage: ti.template(), pairs: ti.template(), model: ti.templa
 
 
 @ti.kernel
-def _follow(stage: ti.template(), state: ti.template(), dt: float):
+def follow_corrections(stage: ti.template(), state: ti.template(), dt: float):
     """Velocities follow the contact corrections of this stage (v += dx / h)."""
     for i in range(stage.particle_count):
         x = state.particle_position[i]
