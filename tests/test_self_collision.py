@@ -373,3 +373,23 @@ def test_two_sheets_dropped_on_a_sphere_stay_apart(f64):
           f"(with, without): {results}")
     assert results[True][0] > 0.5 * THICKNESS and results[True][1:] == (0, 0)
     assert results[False][0] < 0.5 * THICKNESS and results[False][2] > 0
+
+
+def test_torn_triangles_stop_colliding(f64):
+    """A sheet's two halves are pinned, the right one carried 0.5 m away by a handle, so the
+    middle tears (Tearing 0.3); a small sheet lying on the middle falls through the opening.
+    Were torn triangles still colliding, the stretched ones spanning the gap would hold it."""
+    mesh = tc.grid_mesh(11, 11, size=(1.0, 1.0), plane="xz")
+    x = mesh.vertices
+    left, right = np.flatnonzero(x[:, 0] < 0.45), np.flatnonzero(x[:, 0] > 0.55)
+    body = tc.Cloth.combine([tc.Cloth(mesh, tc.Material(), pinned=left),
+                             small_sheet((0.5, 0.02, 0.5))])
+    sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240, tearing=0.3,
+                        self_collision=tc.SelfCollision(THICKNESS),
+                        handles=[tc.Handle(right, lambda t: (0.5 * min(t / 0.2, 1.0), 0.0, 0.0))])
+    for _ in range(30):
+        sim.step(4)
+        torn = set(sim.torn_triangles().tolist())
+        assert not torn & set(sim.self_contacts().vertex_triangle[:, 1].tolist())
+    assert sim.torn_count > 0
+    assert sim.positions()[121:, 1].max() < -0.2, "the small sheet fell through the opening"

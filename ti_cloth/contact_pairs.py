@@ -10,7 +10,7 @@ tunnels between list and contact. The broad phase is a uniform grid of swept box
 (box_grid.py) with cells for the particles (queried by each triangle's box) and for the edges
 (queried by each edge's, f > e), each pair met once. Counted, prefix-summed and written per
 triangle and per edge in index order: a fixed list. Pairs within `thickness` in the rest shape (neighbours
-through the mesh) are never listed.
+through the mesh), and triangles and edges that lost a spring to tearing, are never listed.
 The list is kept while no two particles have moved more than the skin relative to each other
 since it was made - their relative motion is at most the diagonal of the bounding box of all
 displacements (an exact max/min reduction) - so a pair left out cannot come within `thickness`,
@@ -148,6 +148,24 @@ def _at(model: ti.template(), state: ti.template(), i, rest_shape):
 
 
 @ti.func
+def torn_triangle(stage: ti.template(), state: ti.template(), t):
+    """Whether triangle t lost one of its edge springs (tearing): it no longer collides."""
+    springs = stage.triangle_spring[t]
+    torn = False
+    for k in ti.static(range(3)):
+        if springs[k] >= 0 and state.spring_alive[springs[k]] == 0:
+            torn = True
+    return torn
+
+
+@ti.func
+def torn_edge(stage: ti.template(), state: ti.template(), e):
+    """Whether edge e's spring tore: it no longer collides."""
+    spring = stage.edge_spring[e]
+    return spring >= 0 and state.spring_alive[ti.max(spring, 0)] == 0
+
+
+@ti.func
 def _triangle_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template(),
                     state: ti.template(), t, near, thickness, write):
     """Vertices v whose box over the step meets triangle t's grown by `near`, nearer to t now
@@ -162,7 +180,10 @@ def _triangle_pairs(stage: ti.template(), pairs: ti.template(), model: ti.templa
     lo = ti.min(now_lo, s0, s1, s2) - near
     hi = ti.max(now_hi, s0, s1, s2) + near
     first, last = cell_box(stage.grid, lo, hi)
-    for k in range(box_cell_count(first, last)):
+    cells = box_cell_count(first, last)
+    if torn_triangle(stage, state, t):
+        cells = 0
+    for k in range(cells):
         cell = box_cell(first, last, k)
         begin, end = cell_range(stage.grid, 0, cell)
         for a in range(begin, end):
@@ -203,7 +224,10 @@ def _edge_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template()
     lo = stage.grid.lo[stage.particle_count + e] - near
     hi = stage.grid.hi[stage.particle_count + e] + near
     first, last = cell_box(stage.grid, lo, hi)
-    for k in range(box_cell_count(first, last)):
+    cells = box_cell_count(first, last)
+    if torn_edge(stage, state, e):
+        cells = 0
+    for k in range(cells):
         cell = box_cell(first, last, k)
         begin, end = cell_range(stage.grid, 1, cell)
         for a in range(begin, end):
@@ -211,7 +235,7 @@ def _edge_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template()
             f = item - stage.particle_count
             other = stage.edges[f]
             if f > e and other[0] != ends[0] and other[0] != ends[1] and other[1] != ends[0] \
-                    and other[1] != ends[1]:
+                    and other[1] != ends[1] and not torn_edge(stage, state, f):
                 if not found_here(stage.grid, item, cell, first, lo, hi):
                     continue
                 moved = ti.max(_moved(stage, state, ends[0], other[0]),

@@ -22,7 +22,8 @@ many contacts on one particle do not add up to an overshoot). No float atomics e
 max/min, so reruns and thread counts give the same bits. Velocities follow the positions'
 correction (v += dx / h), as after strain limiting.
 
-Strings and hair (no triangles) do not take part.
+Strings and hair (no triangles) do not take part; nor do triangles and edges that lost a spring
+to tearing (a torn sheet's pieces pass where the torn triangles were).
 """
 
 import hashlib
@@ -37,7 +38,7 @@ from ._validate import count, finite_number, require
 from .box_grid import BLOCK, BoxGrid
 from .colliders import project_out
 from .contact_pairs import (PairList, index_contacts, list_pairs, mean_edge, moved_since_listed,
-                            prefix_pairs, sweep_boxes)
+                            prefix_pairs, sweep_boxes, torn_edge, torn_triangle)
 from .forces import altitude_frame
 from .mesh import triangle_edges, unique_rows
 from .proximity import segment_parameters
@@ -87,6 +88,18 @@ class SelfContacts:
     edges: np.ndarray
 
 
+def _edge_springs(edges: np.ndarray, triangles: np.ndarray, springs: np.ndarray,
+                  n: int) -> np.ndarray:
+    """The spring along each edge (rows of sorted particle pairs), -1 where there is none, from
+    the triangles' edge springs (topology's triangle_edge_spring)."""
+    triangles = np.asarray(triangles, np.int64).reshape(-1, 3)
+    ends = triangle_edges(triangles)
+    rows = np.searchsorted(edges[:, 0] * n + edges[:, 1], ends[:, 0] * n + ends[:, 1])
+    along = np.full(len(edges), -1, np.int64)
+    np.maximum.at(along, rows, springs.reshape(-1))
+    return along
+
+
 def warn_if_thick(settings: SelfCollision, cloth) -> None:
     """Warn when the thickness exceeds THICK x the mean rest edge of the cloth's triangles."""
     triangles = np.asarray(cloth.mesh.triangles).reshape(-1, 3)
@@ -123,6 +136,8 @@ class SelfContact:
         fields = backend.FieldGroup()
         self.triangles = fields.vector(3, ti.i32, max(len(triangles), 1))
         self.edges = fields.vector(2, ti.i32, max(len(edges), 1))
+        self.triangle_spring = fields.vector(3, ti.i32, max(len(triangles), 1))
+        self.edge_spring = fields.scalar(ti.i32, max(len(edges), 1))
         self.step_start = fields.vector(3, real, n)
         self.before = fields.vector(3, real, n)
         self.listed_at = fields.vector(3, real, n)
@@ -155,6 +170,11 @@ class SelfContact:
         self.settings = settings
         self.colliders = None
         self.forget()
+        if self.triangle_count:
+            springs = np.asarray(cloth.triangle_edge_spring, np.int64).reshape(-1, 3)
+            upload(((self.triangle_spring, springs),
+                    (self.edge_spring, _edge_springs(self.edge_rows, cloth.mesh.triangles,
+                                                     springs, self.particle_count))))
 
     def attach(self, colliders) -> None:
         """The simulation's ColliderSet (or None): each contact pass ends by projecting the
@@ -307,14 +327,18 @@ def evaluate_contacts(stage: ti.template(), pairs: ti.template(), model: ti.temp
         n = ti.Vector([0.0, 0.0, 0.0])
         gap = 0.0
         weights = ti.Vector([0.0, 0.0, 0.0, 0.0])
+        elements = pairs.elements[p]
         if p < vertex_pairs:
             touching, n, gap, w = _vertex_triangle(state.particle_position, stage.step_start,
                                                    corners, thickness)
             weights = ti.Vector([1.0, -w[0], -w[1], -w[2]])
+            touching = touching and not torn_triangle(stage, state, elements[1])
         else:
             touching, n, gap, s, t = _edge_edge(state.particle_position, stage.step_start,
                                                 corners, thickness)
             weights = ti.Vector([1.0 - s, s, t - 1.0, -t])
+            touching = (touching and not torn_edge(stage, state, elements[0])
+                        and not torn_edge(stage, state, elements[1]))
         pairs.active[p] = ti.select(touching, 1, 0)
         if touching:
             _contact_move(stage, pairs, model, state, p, corners, weights, n, gap, friction)
