@@ -50,6 +50,7 @@ class BoxGrid:
         fields = backend.FieldGroup()
         self.lo = fields.vector(3, real, max(n, 1))
         self.hi = fields.vector(3, real, max(n, 1))
+        self.item_first = fields.vector(3, ti.i32, max(n, 1))
         self.block_bounds = fields.vector(3, real, 2 * self.block_count)
         self.lower = fields.vector(3, real, ())
         self.upper = fields.vector(3, real, ())
@@ -115,6 +116,7 @@ def _count(grid: ti.template()) -> ti.i32:
     for i in range(grid.item_count):
         base = _kind(grid, i) * cells + 1
         first, last = cell_box(grid, grid.lo[i], grid.hi[i])
+        grid.item_first[i] = first
         for k in range(box_cell_count(first, last)):
             ti.atomic_add(grid.cell_start[base + cell_index(grid, box_cell(first, last, k))], 1)
         ti.atomic_add(grid.entries[None], box_cell_count(first, last))
@@ -197,5 +199,7 @@ def cell_range(grid: ti.template(), kind, cell):
 def found_here(grid: ti.template(), i, cell, first, lo, hi):
     """Whether a query of the box [lo, hi], whose cells start at `first`, reports item i from
     `cell`: i's box meets the query box and `cell` is the first cell they share."""
-    meets = (grid.lo[i] <= hi).all() and (lo <= grid.hi[i]).all()
-    return meets and (ti.max(cell_of(grid, grid.lo[i]), first) == cell).all()
+    found = False
+    if (grid.lo[i] <= hi).all() and (lo <= grid.hi[i]).all():    # the cheap test first
+        found = (ti.max(grid.item_first[i], first) == cell).all()
+    return found
