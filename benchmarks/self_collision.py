@@ -19,7 +19,7 @@ import time
 import ti_cloth as tc
 from ti_cloth import box_grid, self_collision
 
-KERNELS = {self_collision: ("moved_since_listed", "sweep_boxes", "mean_edge", "list_pairs",
+KERNELS = {self_collision: ("displacement_box", "sweep_boxes", "mean_edge", "list_pairs",
                             "prefix_pairs", "index_contacts", "evaluate_contacts",
                             "apply_contacts", "project_out", "follow_corrections"),
            box_grid.BoxGrid: ("build",)}   # where the stage looks them up

@@ -45,16 +45,16 @@ class PairList:
 
 
 @ti.kernel
-def moved_since_listed(stage: ti.template(), state: ti.template()) -> ti.f64:
-    """The diagonal of the bounding box of every particle's displacement since the list was
-    made [m]: the most any two particles moved relative to each other. Each block of BLOCK
-    particles is reduced by one thread, then the blocks in order (a max and a min are exact in
-    any order; no contended atomics)."""
+def displacement_box(stage: ti.template(), state: ti.template(), since: ti.template()) -> ti.f64:
+    """span[0], span[1] = the bounding box of every particle's displacement from `since`; returns
+    its diagonal [m], the most any two particles moved relative to each other. Each block of
+    BLOCK particles is reduced by one thread, then the blocks in order (a max and a min are
+    exact in any order; no contended atomics)."""
     for b in range(stage.block_count):
         begin = b * BLOCK
-        lo = hi = state.particle_position[begin] - stage.listed_at[begin]
+        lo = hi = state.particle_position[begin] - since[begin]
         for i in range(begin + 1, ti.min(begin + BLOCK, stage.particle_count)):
-            moved = state.particle_position[i] - stage.listed_at[i]
+            moved = state.particle_position[i] - since[i]
             lo, hi = ti.min(lo, moved), ti.max(hi, moved)
         stage.block_span[2 * b] = lo
         stage.block_span[2 * b + 1] = hi
@@ -69,24 +69,13 @@ def moved_since_listed(stage: ti.template(), state: ti.template()) -> ti.f64:
 @ti.kernel
 def sweep_boxes(stage: ti.template(), state: ti.template()):
     """Each particle's and each edge's box over the step: the box of its positions now and at
-    the step's start moved by `shift`, the middle of all particles' displacements in the step.
-    Moving every start by the same vector changes no relative motion - two elements meet at
-    some time in the step in one frame exactly when they do in the other - and it shrinks the
-    boxes of a body moving as a whole to its motion relative to itself."""
-    for b in range(stage.block_count):
-        begin = b * BLOCK
-        lo = hi = state.particle_position[begin] - stage.step_start[begin]
-        for i in range(begin + 1, ti.min(begin + BLOCK, stage.particle_count)):
-            moved = state.particle_position[i] - stage.step_start[i]
-            lo, hi = ti.min(lo, moved), ti.max(hi, moved)
-        stage.block_span[2 * b] = lo
-        stage.block_span[2 * b + 1] = hi
+    the step's start moved by `shift`, the middle of all particles' displacements in the step
+    (span, from displacement_box since the step's start). Moving every start by the same
+    vector changes no relative motion - two elements meet at some time in the step in one
+    frame exactly when they do in the other - and it shrinks the boxes of a body moving as a
+    whole to its motion relative to itself."""
     for _ in range(1):
-        lo, hi = stage.block_span[0], stage.block_span[1]
-        for b in range(1, stage.block_count):
-            lo = ti.min(lo, stage.block_span[2 * b])
-            hi = ti.max(hi, stage.block_span[2 * b + 1])
-        stage.shift[None] = 0.5 * (lo + hi)
+        stage.shift[None] = 0.5 * (stage.span[0] + stage.span[1])
     x = ti.static(state.particle_position)
     for i in range(stage.particle_count):
         start = _start(stage, i)

@@ -37,7 +37,7 @@ from . import backend, limits
 from ._validate import count, finite_number, require
 from .box_grid import BLOCK, BoxGrid
 from .colliders import project_out
-from .contact_pairs import (PairList, index_contacts, list_pairs, mean_edge, moved_since_listed,
+from .contact_pairs import (PairList, displacement_box, index_contacts, list_pairs, mean_edge,
                             prefix_pairs, sweep_boxes, torn_edge, torn_triangle)
 from .forces import altitude_frame
 from .mesh import triangle_edges, unique_rows
@@ -194,14 +194,14 @@ class SelfContact:
         if self.triangle_count == 0:
             return
         thickness = self.settings.thickness
-        if not self.listed or moved_since_listed(self, state) > SKIN * thickness:
+        if not self.listed or displacement_box(self, state, self.listed_at) > SKIN * thickness:
             self._make_list(model, state, step_index)
         if self.pair_total == 0:
             return
         copy_positions(state, self.before)
         for _ in range(self.settings.iterations):
             touching, deep = evaluate_contacts(self, self.candidates, model, state, thickness,
-                                       self.settings.friction)
+                                               self.settings.friction)
             if touching == 0:
                 break
             apply_contacts(self, self.candidates, model, state)
@@ -215,6 +215,7 @@ class SelfContact:
         """List the pairs that met within thickness + skin during the step (their swept boxes
         meet) and are now nearer than that plus how far they moved relative to each other."""
         near = (1.0 + SKIN) * self.settings.thickness
+        displacement_box(self, state, self.step_start)
         sweep_boxes(self, state)
         cell = float(mean_edge(self, state)) + 2.0 * near       # about a query's size
         self.grid.build(cell)
