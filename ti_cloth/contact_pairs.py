@@ -255,7 +255,7 @@ def list_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template(),
                 state: ti.template(), near: float, thickness: float, write: ti.i32):
     """Count (write = 0: pair_start[1 + t] = the pairs of triangle t, pair_start[1 + T + e] =
     of edge e) or, after the prefix sum, write them (write = 1). One kernel for both: it is
-    the largest self-collision compiles."""
+    the largest kernel self-collision compiles."""
     for t in range(stage.triangle_count):
         if not write or stage.pair_start[t + 1] > stage.pair_start[t]:
             found = _triangle_pairs(stage, pairs, model, state, t, near, thickness, write)
