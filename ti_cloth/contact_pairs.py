@@ -9,8 +9,9 @@ depth on the wrong side is at most its relative motion), however fast it moved: 
 tunnels between list and contact. The broad phase is a uniform grid of swept boxes
 (box_grid.py) with cells for the particles (queried by each triangle's box) and for the edges
 (queried by each edge's, f > e), each pair met once. Counted, prefix-summed and written per
-triangle and per edge in index order: a fixed list. Pairs within `thickness` in the rest shape (neighbours
-through the mesh), and triangles and edges that lost a spring to tearing, are never listed.
+triangle and per edge in index order: a fixed list. Pairs within `thickness` in the rest
+shape (neighbours through the mesh), and triangles and edges that lost a spring to tearing,
+are never listed.
 The list is kept while no two particles have moved more than the skin relative to each other
 since it was made - their relative motion is at most the diagonal of the bounding box of all
 displacements (an exact max/min reduction) - so a pair left out cannot come within `thickness`,
@@ -165,7 +166,8 @@ def _triangle_pairs(stage: ti.template(), pairs: ti.template(), model: ti.templa
     x = ti.static(state.particle_position)
     tri = stage.triangles[t]
     s0, s1, s2 = _start(stage, tri[0]), _start(stage, tri[1]), _start(stage, tri[2])
-    now_lo, now_hi = ti.min(x[tri[0]], x[tri[1]], x[tri[2]]), ti.max(x[tri[0]], x[tri[1]], x[tri[2]])
+    now_lo = ti.min(x[tri[0]], x[tri[1]], x[tri[2]])
+    now_hi = ti.max(x[tri[0]], x[tri[1]], x[tri[2]])
     lo = ti.min(now_lo, s0, s1, s2) - near
     hi = ti.max(now_hi, s0, s1, s2) + near
     first, last = cell_box(stage.grid, lo, hi)
@@ -231,8 +233,8 @@ def _edge_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template()
                                _moved(stage, state, ends[0], other[1]),
                                _moved(stage, state, ends[1], other[0]),
                                _moved(stage, state, ends[1], other[1]))
-                keep = _box_gap(ti.min(x[other[0]], x[other[1]]), ti.max(x[other[0]], x[other[1]]),
-                                now_lo, now_hi) < near + moved           # a cheap bound first
+                keep = _box_gap(ti.min(x[other[0]], x[other[1]]),          # a cheap bound first
+                                ti.max(x[other[0]], x[other[1]]), now_lo, now_hi) < near + moved
                 for shape in range(2):                   # now, then the rest shape
                     if keep:
                         d = segment_distance(_at(model, state, ends[0], shape),
