@@ -7,7 +7,7 @@ import importlib
 from .backend import init
 from .bodies import hair, soft_body, string, tet_block
 from .colliders import Box, Capsule, Collider, Plane, Sphere
-from .errors import ContactMissed, SimulationDiverged, TeamStalled
+from .errors import SimulationDiverged, TeamStalled
 from .forces import ForceSettings
 from .integrators import (INTEGRATORS, PBD, RK4, XPBD, ExplicitEuler, ImplicitEuler, Integrator,
                           SymplecticEuler, Verlet)
@@ -32,7 +32,7 @@ __all__ = [
     "ImplicitEuler", "RK4", "PRESETS", "Material", "SpringKind", "SpringParams", "Mesh", "grid_mesh",
     "tet_grid_mesh", "load_mesh", "save_mesh", "Model", "Keyframes", "Oscillation", "Handle",
     "Simulation", "stable_dt", "auto_dt", "auto_substeps", "AUTO_MAX_DT", "State", "StrainLimit", "SelfCollision",
-    "SelfContacts", "ContactMissed",
+    "SelfContacts",
     "Tearing", "Cloth", "Wind", "string", "hair", "soft_body", "tet_block",
 ]
 

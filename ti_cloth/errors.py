@@ -42,8 +42,3 @@ class TeamStalled(RuntimeError):
     never arrived: the Taichi thread pool did not give every worker a thread of its own. The
     steps of that launch ran unsynchronised, so the state is not to be trusted."""
 
-
-class ContactMissed(RuntimeWarning):
-    """A step moved particles relative to each other farther than self-collision follows in one
-    step: layers may have passed through each other unseen (the message names the step and the
-    substeps that would catch it)."""
