@@ -8,7 +8,7 @@ import pytest
 
 import ti_cloth as tc
 from ti_cloth import wind as wind_module
-from ti_cloth.colliders import resolve_collisions
+from ti_cloth.collision import resolve_collisions
 from ti_cloth.constraints import relax_springs
 from ti_cloth.app.scene import load_scene
 from ti_cloth.app.scene_file import SceneError

@@ -12,7 +12,7 @@ import pytest
 
 import ti_cloth as tc
 from ti_cloth import backend
-from ti_cloth.colliders import ColliderSet
+from ti_cloth.collision import ColliderSet
 from ti_cloth.forces import ForceSettings, compute_forces
 from ti_cloth.handles import HandleSet
 from ti_cloth.integrators import Integrator, fused

@@ -16,6 +16,7 @@ from .mesh import Mesh, grid_mesh, load_mesh, save_mesh, tet_grid_mesh
 from .model import Model
 from .paths import Keyframes, Oscillation
 from .handles import Handle
+from .mesh_collider import MeshCollider
 from .simulation import Simulation
 from .stability import AUTO_MAX_DT, auto_dt, auto_substeps, stable_dt
 from .state import State
@@ -26,7 +27,7 @@ from .topology import Cloth
 from .wind import Wind
 
 __all__ = [
-    "init", "Box", "Capsule", "Collider", "Plane", "Sphere", "SimulationDiverged", "TeamStalled",
+    "init", "Box", "Capsule", "Collider", "MeshCollider", "Plane", "Sphere", "SimulationDiverged", "TeamStalled",
     "ForceSettings",
     "INTEGRATORS", "Integrator", "ExplicitEuler", "SymplecticEuler", "Verlet", "PBD", "XPBD",
     "ImplicitEuler", "RK4", "PRESETS", "Material", "SpringKind", "SpringParams", "Mesh", "grid_mesh",

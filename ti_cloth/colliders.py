@@ -1,5 +1,6 @@
 """Colliders: an infinite plane, a sphere, an axis-aligned box and a capsule, each with a
-thickness, Coulomb friction and an optional scripted path.
+thickness, Coulomb friction and an optional scripted path (a triangle mesh is one too:
+mesh_collider.py). The collision stage that applies them is collision.py.
 
 The response is applied after every step, at position level, so it is the same for every
 integrator: a particle closer than `thickness` to a shape is projected out along the shape's
@@ -18,12 +19,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 import taichi as ti
 
-from . import backend, limits
+from . import limits
 from ._validate import as_array, finite_number, in_range, require
-from .state import copy_positions
-from .transfer import upload
 
-PLANE, SPHERE, BOX, CAPSULE = 0, 1, 2, 3
+PLANE, SPHERE, BOX, CAPSULE, MESH = 0, 1, 2, 3, 4   # MESH: mesh_collider.py
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -201,123 +200,3 @@ def signed_distance(kind, a, b, radius, x):
                 if q[k] == d and n.norm() == 0:
                     n[k] = ti.select(sign[k] >= 0, 1.0, -1.0)
     return d, n
-
-
-@backend.kernel_argument
-class ColliderSet:
-    """The colliders of one simulation as Taichi fields (one row per collider), and the
-    particle positions at the start of the current step (`step_start`) the response needs."""
-
-    def __init__(self, colliders, particle_count: int):
-        real, count = backend.real(), len(colliders)
-        self.count = count
-        fields = backend.FieldGroup()
-        self.kind = fields.scalar(ti.i32, count)
-        self.a = fields.vector(3, real, count)
-        self.b = fields.vector(3, real, count)
-        self.radius = fields.scalar(real, count)
-        self.thickness = fields.scalar(real, count)
-        self.static_friction = fields.scalar(real, count)
-        self.kinetic_friction = fields.scalar(real, count)
-        self.velocity = fields.vector(3, real, count)
-        self.step_start = fields.vector(3, real, particle_count)
-        fields.finalize(self)
-        self.load(colliders, particle_count)
-
-    @staticmethod
-    def structure(colliders, particle_count: int) -> tuple:
-        """What the kernels of a ColliderSet read at compile time: sets of equal structure
-        are interchangeable once load() has put the colliders in (pool.py)."""
-        return ("ColliderSet", len(colliders), particle_count)
-
-    def load(self, colliders, particle_count: int) -> None:
-        """Upload `colliders` (as many as this set holds), placed at time 0."""
-        self.colliders = tuple(colliders)
-        for c in self.colliders:
-            require(isinstance(c, Collider) and type(c) is not Collider, "colliders", c,
-                    "Plane, Sphere, Box or Capsule objects")
-        packed = [c.packed() for c in self.colliders]
-        self.moving = any(c.path is not None for c in self.colliders)
-        self._rest = [(p[1], p[2]) for p in packed]
-        upload(((self.kind, [p[0] for p in packed]), (self.radius, [p[3] for p in packed]),
-                (self.thickness, [c.thickness for c in self.colliders]),
-                (self.static_friction, [c.static_friction for c in self.colliders]),
-                (self.kinetic_friction, [c.kinetic_friction for c in self.colliders]))
-               + self._placement(0.0, None))
-
-    def place(self, t: float, dt: float | None = None) -> None:
-        """Put every collider where its path says at time t; velocity from t - dt to t
-        (zero when dt is None: at the start)."""
-        upload(self._placement(t, dt))
-
-    def before_step(self, state, t: float) -> None:
-        """Keep the positions at the step start: the friction response needs the step's motion."""
-        copy_positions(state, self.step_start)
-
-    def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
-        """The collision stage of a step ending at time t (simulation.STEP_ORDER)."""
-        if self.moving:
-            self.place(t, dt)
-        resolve_collisions(model, state, self, dt)
-
-    def _placement(self, t: float, dt: float | None) -> tuple:
-        """(field, values) of the colliders' a, b and velocity at time t (place())."""
-        a, b, v = [], [], []
-        for c, (a0, b0) in zip(self.colliders, self._rest):
-            offset = c.offset(t)
-            a.append(a0 + offset)
-            b.append(b0 if isinstance(c, Plane) else b0 + offset)   # a plane's b is its normal
-            moving = c.path is not None and dt is not None
-            v.append((offset - c.offset(t - dt)) / dt if moving else np.zeros(3))
-        return (self.a, a), (self.b, b), (self.velocity, v)
-
-
-@ti.kernel
-def resolve_collisions(model: ti.template(), state: ti.template(), colliders: ti.template(),
-                       dt: float):
-    """Project every free particle out of every collider, in collider order, with Coulomb
-    friction on its displacement over the step (see the module doc)."""
-    for i in range(model.particle_count):
-        if model.particle_inv_mass[i] > 0:
-            x0 = colliders.step_start[i]
-            x = state.particle_position[i]
-            v = state.particle_velocity[i]
-            touched = False
-            for c in range(colliders.count):
-                d, n = signed_distance(colliders.kind[c], colliders.a[c], colliders.b[c],
-                                       colliders.radius[c], x)
-                depth = colliders.thickness[c] - d
-                if depth > 0:
-                    x += depth * n
-                    vc = colliders.velocity[c]
-                    slide = x - x0 - vc * dt
-                    tangential = slide - slide.dot(n) * n
-                    length = tangential.norm()
-                    if length <= colliders.static_friction[c] * depth:
-                        x -= tangential
-                    else:
-                        x -= tangential * ti.min(colliders.kinetic_friction[c] * depth / length, 1.0)
-                    v = (x - x0) / dt
-                    approach = (v - vc).dot(n)
-                    if approach < 0:
-                        v -= approach * n
-                    touched = True
-            if touched:
-                state.particle_position[i] = x
-                state.particle_velocity[i] = v
-                state.particle_prev_position[i] = x - v * dt
-
-
-@ti.kernel
-def project_out(model: ti.template(), state: ti.template(), colliders: ti.template()):
-    """Project every free particle out of every collider, positions only (no friction, the
-    velocities left to the caller): for stages that move particles after the collision stage
-    (self-collision) and must not push them back into a collider."""
-    for i in range(model.particle_count):
-        if model.particle_inv_mass[i] > 0:
-            x = state.particle_position[i]
-            for c in range(colliders.count):
-                d, n = signed_distance(colliders.kind[c], colliders.a[c], colliders.b[c],
-                                       colliders.radius[c], x)
-                x += ti.max(colliders.thickness[c] - d, 0.0) * n
-            state.particle_position[i] = x

@@ -36,7 +36,7 @@ import taichi as ti
 from . import backend, limits
 from ._validate import count, finite_number, require
 from .box_grid import BLOCK, BoxGrid
-from .colliders import project_out
+from .collision import project_out
 from .contact_pairs import (PairList, displacement_box, index_contacts, list_pairs, mean_edge,
                             prefix_pairs, sweep_boxes, torn_edge, torn_triangle)
 from .forces import altitude_frame

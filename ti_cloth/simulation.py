@@ -21,7 +21,7 @@ import numpy as np
 
 from . import backend, limits
 from ._validate import as_array, in_range, integer, require
-from .colliders import ColliderSet
+from .collision import ColliderSet
 from .self_collision import SelfCollision, SelfContact, SelfContacts, warn_if_thick
 from .errors import SimulationDiverged, StaleSimulation
 from .forces import ForceSettings, energies
@@ -50,8 +50,8 @@ class Simulation:
         (float) or a Tearing.
     handles: scripted particles (Handle); their particles are pinned while held (until a
         handle's release time). dt="auto" treats particles that are let go as free.
-    colliders: Plane, Sphere, Box, Capsule objects (none: the collision kernels are never
-        compiled nor launched).
+    colliders: Plane, Sphere, Box, Capsule, MeshCollider objects (none: the collision
+        kernels are never compiled nor launched).
     strain_limit: None (off: never compiled nor launched) or a StrainLimit (Provot 1995).
     position_limit: the divergence guard flags any |coordinate| beyond this [m].
 
@@ -298,6 +298,20 @@ class Simulation:
         if self.colliders is None:
             return ()
         return tuple(c.placed(self.time) for c in self.colliders.colliders)
+
+    def collider_distance(self, points) -> tuple[np.ndarray, np.ndarray]:
+        """(distance [m] from each point (N, 3) [m] to the nearest collider surface as the
+        collision stage measures it (negative inside; a shell mesh gives the unsigned
+        distance), shape (N,); that collider's outward normal, shape (N, 3)) at the current
+        time. Without colliders: infinite distances, zero normals."""
+        points = as_array("points", points, np.float64, (None, 3))
+        if self.colliders is None:
+            return np.full(len(points), np.inf), np.zeros((len(points), 3))
+        self._check_runtime()
+        distance, normal = self.colliders.distance(points)
+        nearest = np.argmin(distance, axis=1)
+        rows = np.arange(len(points))
+        return distance[rows, nearest], normal[rows, nearest]
 
     def energy(self) -> dict[str, float]:
         """{"kinetic", "gravity", "spring", "spring_stretch", "spring_shear", "spring_bend",

@@ -1,0 +1,269 @@
+"""The collision stage: a simulation's colliders (colliders.py, mesh_collider.py) as Taichi
+fields, and the kernels that keep particles out of them with the response colliders.py
+describes. A set without mesh colliders compiles none of the mesh code, one without turning
+meshes none of the turning code."""
+
+import numpy as np
+import taichi as ti
+
+from . import backend
+from ._validate import require
+from .colliders import MESH, Collider, Plane, signed_distance
+from .mesh_collider import MeshCollider
+from .sdf import layout, sample_grid
+from .state import copy_positions
+from .transfer import upload
+
+
+@backend.kernel_argument
+class ColliderSet:
+    """The colliders of one simulation as Taichi fields (one row per collider), and the
+    particle positions at the start of the current step (`step_start`) the response needs.
+    Mesh colliders add their distance grids, one after another in `samples`, and their pose:
+    `a` the mesh centre's position and `rotation` (a 3x3 matrix, row-major) now, `a_prev` and
+    `rotation_prev` at the start of the step."""
+
+    def __init__(self, colliders, particle_count: int):
+        real, count = backend.real(), len(colliders)
+        self.nodes, self.meshes, self.turning = self.structure(colliders, particle_count)[3:]
+        self.count = count
+        fields = backend.FieldGroup()
+        self.kind = fields.scalar(ti.i32, count)
+        self.a = fields.vector(3, real, count)
+        self.b = fields.vector(3, real, count)
+        self.radius = fields.scalar(real, count)
+        self.thickness = fields.scalar(real, count)
+        self.static_friction = fields.scalar(real, count)
+        self.kinetic_friction = fields.scalar(real, count)
+        self.velocity = fields.vector(3, real, count)
+        self.step_start = fields.vector(3, real, particle_count)
+        if self.meshes:
+            self.samples = fields.vector(4, real, self.nodes)
+            self.grid_start = fields.scalar(ti.i32, count)
+            self.grid_shape = fields.vector(3, ti.i32, count)
+            self.grid_origin = fields.vector(3, real, count)
+            self.grid_cell = fields.scalar(real, count)
+            self.shell = fields.scalar(ti.i32, count)
+            self.centre = fields.vector(3, real, count)
+            self.a_prev = fields.vector(3, real, count)
+            self.rotation = fields.vector(9, real, count)
+            self.rotation_prev = fields.vector(9, real, count)
+        fields.finalize(self)
+        self.load(colliders, particle_count)
+
+    @staticmethod
+    def structure(colliders, particle_count: int) -> tuple:
+        """What the kernels of a ColliderSet read at compile time: sets of equal structure
+        are interchangeable once load() has put the colliders in (pool.py). (count, particle
+        count, grid nodes of all meshes, whether any is a mesh, whether any mesh turns)."""
+        meshes = [c for c in colliders if isinstance(c, MeshCollider)]
+        nodes = sum(int(np.prod(layout(c.mesh.vertices, c.resolution, c.margin)[2]))
+                    for c in meshes)
+        return ("ColliderSet", len(colliders), particle_count, nodes, bool(meshes),
+                any(c.rotation is not None for c in meshes))
+
+    def load(self, colliders, particle_count: int) -> None:
+        """Upload `colliders` (as many as this set holds), placed at time 0."""
+        self.colliders = tuple(colliders)
+        for c in self.colliders:
+            require(isinstance(c, Collider) and type(c) is not Collider, "colliders", c,
+                    "Plane, Sphere, Box, Capsule or MeshCollider objects")
+        packed = [c.packed() for c in self.colliders]
+        self.moving = any(c.path is not None or getattr(c, "rotation", None) is not None
+                          for c in self.colliders)
+        self._rest = [(p[1], p[2]) for p in packed]
+        upload(((self.kind, [p[0] for p in packed]), (self.radius, [p[3] for p in packed]),
+                (self.thickness, [c.thickness for c in self.colliders]),
+                (self.static_friction, [c.static_friction for c in self.colliders]),
+                (self.kinetic_friction, [c.kinetic_friction for c in self.colliders]))
+               + self._grids() + self._placement(0.0, None))
+
+    def place(self, t: float, dt: float | None = None) -> None:
+        """Put every collider where its path (and rotation) says at time t; velocity and the
+        previous pose from t - dt (the same as now when dt is None: at the start)."""
+        upload(self._placement(t, dt))
+
+    def before_step(self, state, t: float) -> None:
+        """Keep the positions at the step start: the friction response needs the step's motion."""
+        copy_positions(state, self.step_start)
+
+    def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
+        """The collision stage of a step ending at time t (simulation.STEP_ORDER)."""
+        if self.moving:
+            self.place(t, dt)
+        resolve_collisions(model, state, self, dt)
+
+    def distance(self, points) -> tuple[np.ndarray, np.ndarray]:
+        """(distance [m] of each point from each collider's surface, negative inside, shape
+        (N, count); outward normal, shape (N, count, 3)) where the colliders are now. A shell
+        reports the unsigned distance."""
+        real = backend.numpy_real()
+        points = np.ascontiguousarray(points, dtype=real).reshape(-1, 3)
+        distance = np.zeros((len(points), self.count), real)
+        normal = np.zeros((len(points), self.count, 3), real)
+        if len(points):
+            measure_distances(self, points, distance, normal)
+        return distance.astype(np.float64), normal.astype(np.float64)
+
+    def _grids(self) -> tuple:
+        """(field, values) of the mesh colliders' grids; their samples are copied in here."""
+        if not self.meshes:
+            return ()
+        start, shape, origin, cell, shell, centre, samples = [], [], [], [], [], [], []
+        for c in self.colliders:
+            grid = c.grid() if isinstance(c, MeshCollider) else None
+            start.append(sum(len(s) for s in samples))
+            shape.append(grid.shape if grid else (2, 2, 2))
+            origin.append(grid.origin if grid else np.zeros(3))
+            cell.append(grid.cell if grid else 1.0)
+            shell.append(int(grid is not None and not c.solid))
+            centre.append(c.centre if grid else np.zeros(3))
+            if grid:
+                samples.append(grid.samples(c.solid))
+        self.samples.from_numpy(np.concatenate(samples).astype(backend.numpy_real()))
+        return ((self.grid_start, start), (self.grid_shape, shape), (self.grid_origin, origin),
+                (self.grid_cell, cell), (self.shell, shell), (self.centre, centre))
+
+    def _placement(self, t: float, dt: float | None) -> tuple:
+        """(field, values) of the colliders' a, b and velocity at time t, and of meshes' poses
+        now and at t - dt (place())."""
+        a, b, v, a_prev, turn, turn_prev = [], [], [], [], [], []
+        for c, (a0, b0) in zip(self.colliders, self._rest):
+            offset = c.offset(t)
+            a.append(a0 + offset)
+            b.append(b0 if isinstance(c, Plane) else b0 + offset)   # a plane's b is its normal
+            moving = c.path is not None and dt is not None
+            before = c.offset(t - dt) if moving else offset
+            v.append((offset - before) / dt if moving else np.zeros(3))
+            a_prev.append(a0 + before)
+            turning = isinstance(c, MeshCollider) and c.rotation is not None
+            turn.append((c.turn(t) if turning else np.eye(3)).ravel())
+            turn_prev.append((c.turn(t - dt) if turning and dt is not None else turn[-1]).ravel())
+        placement = (self.a, a), (self.b, b), (self.velocity, v)
+        if self.meshes:
+            placement += ((self.a_prev, a_prev), (self.rotation, turn),
+                          (self.rotation_prev, turn_prev))
+        return placement
+
+
+@ti.func
+def _matrix(rows):
+    """A 3x3 matrix from its 9 entries, row-major."""
+    return ti.Matrix([[rows[0], rows[1], rows[2]], [rows[3], rows[4], rows[5]],
+                      [rows[6], rows[7], rows[8]]])
+
+
+@ti.func
+def _mesh_distance(colliders: ti.template(), c, x, x0):
+    """Mesh collider c's (distance, normal) at x: the grid sampled at x in the mesh's rest
+    frame. A shell's sign says the side: negative when x is across the surface from where
+    the particle was at the step's start x0 (in the pose of that time)."""
+    turn = _matrix(colliders.rotation[c])
+    q = turn.transpose() @ (x - colliders.a[c]) + colliders.centre[c]
+    start, shape = colliders.grid_start[c], colliders.grid_shape[c]
+    origin, cell = colliders.grid_origin[c], colliders.grid_cell[c]
+    d, g = sample_grid(colliders.samples, start, shape, origin, cell, q)
+    if colliders.shell[c]:
+        q0 = (_matrix(colliders.rotation_prev[c]).transpose() @ (x0 - colliders.a_prev[c])
+              + colliders.centre[c])
+        _, g0 = sample_grid(colliders.samples, start, shape, origin, cell, q0)
+        if g.dot(g0) < 0:
+            d, g = -d, -g
+    n = turn @ g
+    length = n.norm()
+    if length > 0:
+        n /= length
+    else:
+        n = ti.Vector([0.0, 1.0, 0.0])
+    return d, n
+
+
+@ti.func
+def collider_distance(colliders: ti.template(), c, x, x0):
+    """Distance [m] from x to collider c's surface (negative inside or, for a shell, across
+    from x0, the particle's position at the step's start) and the outward normal."""
+    d, n = 0.0, ti.Vector([0.0, 1.0, 0.0])
+    if ti.static(colliders.meshes):
+        if colliders.kind[c] == MESH:
+            d, n = _mesh_distance(colliders, c, x, x0)
+        else:
+            d, n = signed_distance(colliders.kind[c], colliders.a[c], colliders.b[c],
+                                   colliders.radius[c], x)
+    else:
+        d, n = signed_distance(colliders.kind[c], colliders.a[c], colliders.b[c],
+                               colliders.radius[c], x)
+    return d, n
+
+
+@ti.func
+def surface_velocity(colliders: ti.template(), c, x, dt):
+    """Velocity [m/s] of collider c's surface at x over the step: the path's, and for a
+    turning mesh the motion of the surface point now at x since the step's start."""
+    v = colliders.velocity[c]
+    if ti.static(colliders.turning):
+        if colliders.kind[c] == MESH:
+            local = _matrix(colliders.rotation[c]).transpose() @ (x - colliders.a[c])
+            before = _matrix(colliders.rotation_prev[c]) @ local + colliders.a_prev[c]
+            v = (x - before) / dt
+    return v
+
+
+@ti.kernel
+def resolve_collisions(model: ti.template(), state: ti.template(), colliders: ti.template(),
+                       dt: float):
+    """Project every free particle out of every collider, in collider order, with Coulomb
+    friction on its displacement over the step relative to the surface (colliders.py)."""
+    for i in range(model.particle_count):
+        if model.particle_inv_mass[i] > 0:
+            x0 = colliders.step_start[i]
+            x = state.particle_position[i]
+            v = state.particle_velocity[i]
+            touched = False
+            for c in range(colliders.count):
+                d, n = collider_distance(colliders, c, x, x0)
+                depth = colliders.thickness[c] - d
+                if depth > 0:
+                    x += depth * n
+                    vc = surface_velocity(colliders, c, x, dt)
+                    slide = x - x0 - vc * dt
+                    tangential = slide - slide.dot(n) * n
+                    length = tangential.norm()
+                    if length <= colliders.static_friction[c] * depth:
+                        x -= tangential
+                    else:
+                        x -= tangential * ti.min(colliders.kinetic_friction[c] * depth / length, 1.0)
+                    v = (x - x0) / dt
+                    approach = (v - vc).dot(n)
+                    if approach < 0:
+                        v -= approach * n
+                    touched = True
+            if touched:
+                state.particle_position[i] = x
+                state.particle_velocity[i] = v
+                state.particle_prev_position[i] = x - v * dt
+
+
+@ti.kernel
+def project_out(model: ti.template(), state: ti.template(), colliders: ti.template()):
+    """Project every free particle out of every collider, positions only (no friction, the
+    velocities left to the caller): for stages that move particles after the collision stage
+    (self-collision) and must not push them back into a collider."""
+    for i in range(model.particle_count):
+        if model.particle_inv_mass[i] > 0:
+            x = state.particle_position[i]
+            for c in range(colliders.count):
+                d, n = collider_distance(colliders, c, x, colliders.step_start[i])
+                x += ti.max(colliders.thickness[c] - d, 0.0) * n
+            state.particle_position[i] = x
+
+
+@ti.kernel
+def measure_distances(colliders: ti.template(), points: ti.types.ndarray(),
+                      distance: ti.types.ndarray(), normal: ti.types.ndarray()):
+    """distance[p, c], normal[p, c] of points[p] from collider c (ColliderSet.distance)."""
+    for p, c in ti.ndrange(points.shape[0], colliders.count):
+        x = ti.Vector([points[p, 0], points[p, 1], points[p, 2]])
+        d, n = collider_distance(colliders, c, x, x)
+        distance[p, c] = d
+        for k in ti.static(range(3)):
+            normal[p, c, k] = n[k]
