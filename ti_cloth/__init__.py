@@ -12,7 +12,8 @@ from .forces import ForceSettings
 from .integrators import (INTEGRATORS, PBD, RK4, XPBD, ExplicitEuler, ImplicitEuler, Integrator,
                           SymplecticEuler, Verlet)
 from .material import PRESETS, Material, SpringKind, SpringParams
-from .mesh import Mesh, grid_mesh, load_mesh, save_mesh, tet_grid_mesh
+from .mesh import (Mesh, box_mesh, combine_meshes, grid_mesh, load_mesh, save_mesh,
+                   sphere_mesh, tet_grid_mesh)
 from .model import Model
 from .paths import Keyframes, Oscillation
 from .handles import Handle
@@ -31,6 +32,7 @@ __all__ = [
     "ForceSettings",
     "INTEGRATORS", "Integrator", "ExplicitEuler", "SymplecticEuler", "Verlet", "PBD", "XPBD",
     "ImplicitEuler", "RK4", "PRESETS", "Material", "SpringKind", "SpringParams", "Mesh", "grid_mesh",
+    "box_mesh", "combine_meshes", "sphere_mesh",
     "tet_grid_mesh", "load_mesh", "save_mesh", "Model", "Keyframes", "Oscillation", "Handle",
     "Simulation", "stable_dt", "auto_dt", "auto_substeps", "AUTO_MAX_DT", "State", "StrainLimit", "SelfCollision",
     "SelfContacts",

@@ -172,6 +172,67 @@ def tet_grid_mesh(cells=(4, 4, 4), size=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0))
     return Mesh(grid, surface_triangles(grid, tets), tetrahedra=tets)
 
 
+def box_mesh(lo=(-0.5, -0.5, -0.5), hi=(0.5, 0.5, 0.5)) -> Mesh:
+    """The surface of the axis-aligned box between corners `lo` and `hi` [m]: 12 triangles
+    wound outwards, each face with 4 vertices of its own (24 in all), so a renderer shades
+    the faces flat. Boxes combined (combine_meshes) make tables, shelves, steps."""
+    lo = as_array("lo", lo, np.float64, (3,))
+    hi = as_array("hi", hi, np.float64, (3,))
+    require(bool((hi > lo).all()), "hi", tuple(hi), f"greater than lo {tuple(lo)} on every axis")
+    vertices, triangles = [], []
+    for axis in range(3):
+        u, v = (axis + 1) % 3, (axis + 2) % 3
+        for side, face in ((-1, lo[axis]), (1, hi[axis])):
+            corners = np.zeros((4, 3))
+            corners[:, axis] = face
+            corners[:, u] = (lo[u], hi[u], hi[u], lo[u])
+            corners[:, v] = (lo[v], lo[v], hi[v], hi[v])
+            base = len(vertices) * 4
+            quad = [[0, 1, 2], [0, 2, 3]] if side > 0 else [[0, 2, 1], [0, 3, 2]]
+            vertices.append(corners)
+            triangles += [[base + i for i in t] for t in quad]
+    return Mesh(np.concatenate(vertices), triangles)
+
+
+def sphere_mesh(radius: float = 1.0, centre=(0.0, 0.0, 0.0), subdivisions: int = 3) -> Mesh:
+    """An icosphere of `radius` [m] around `centre` [m]: the icosahedron with each triangle cut
+    in four `subdivisions` times, its vertices pushed onto the sphere (20 x 4^subdivisions
+    triangles, wound outwards; the flat facets lie at most radius x 0.3 / 4^subdivisions
+    inside the sphere)."""
+    radius = in_range("radius", radius, limits.LENGTH)
+    centre = as_array("centre", centre, np.float64, (3,))
+    subdivisions = count("subdivisions", subdivisions, limits.SUBDIVISIONS)
+    t = (1 + 5 ** 0.5) / 2
+    vertices = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
+                         [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]])
+    triangles = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9],
+                          [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2],
+                          [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10],
+                          [8, 6, 7], [9, 8, 1]])
+    vertices = vertices / np.linalg.norm(vertices, axis=1, keepdims=True)
+    for _ in range(subdivisions):
+        edges, middle = unique_rows(triangle_edges(triangles), return_inverse=True)
+        midpoints = vertices[edges].mean(axis=1)
+        middle = middle.reshape(-1, 3) + len(vertices)        # (t0t1, t1t2, t2t0) of each
+        vertices = np.vstack([vertices, midpoints / np.linalg.norm(midpoints, axis=1,
+                                                                   keepdims=True)])
+        a, b, c = triangles.T
+        ab, bc, ca = middle.T
+        triangles = np.concatenate([np.stack(corners, axis=1) for corners in
+                                    ((a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca))])
+    return Mesh(vertices * radius + centre, triangles)
+
+
+def combine_meshes(meshes) -> Mesh:
+    """One mesh holding the vertices and triangles of `meshes`, in order."""
+    meshes = list(meshes)
+    require(len(meshes) > 0 and all(isinstance(m, Mesh) for m in meshes), "meshes", meshes,
+            "a non-empty list of Mesh objects")
+    offsets = np.cumsum([0] + [m.vertex_count for m in meshes[:-1]])
+    return Mesh(np.concatenate([m.vertices for m in meshes]),
+                np.concatenate([m.triangles + o for m, o in zip(meshes, offsets)]))
+
+
 def triangle_edges(triangles: np.ndarray) -> np.ndarray:
     """The edges (t0,t1), (t1,t2), (t2,t0) of every triangle as sorted pairs, shape (3T, 2)."""
     e = triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
@@ -239,9 +300,13 @@ def load_mesh(path) -> Mesh:
     if tetrahedra:
         points = np.asarray(data.points, np.float64)
         tets = np.concatenate(tetrahedra)
-        negative = signed_volumes(points, tets) < 0
-        tets[negative] = tets[negative][:, [0, 2, 1, 3]]
-        return Mesh(points, surface_triangles(points, tets), tetrahedra=tets)
+        try:
+            points = as_array("vertices", points, np.float64, (None, 3))
+            negative = signed_volumes(points, tets) < 0
+            tets[negative] = tets[negative][:, [0, 2, 1, 3]]
+            return Mesh(points, surface_triangles(points, tets), tetrahedra=tets)
+        except (ValueError, IndexError) as err:
+            raise ValueError(f"{path}: {err}") from None
     triangles = []
     for block in data.cells:
         if block.type == "triangle":
@@ -252,7 +317,10 @@ def load_mesh(path) -> Mesh:
     if not triangles:
         raise ValueError(f"{path}: no triangle, quad or tetra cells found (cell types: "
                          f"{[b.type for b in data.cells]})")
-    return Mesh(data.points, np.concatenate(triangles))
+    try:
+        return Mesh(data.points, np.concatenate(triangles))
+    except ValueError as err:
+        raise ValueError(f"{path}: {err}") from None
 
 
 def save_mesh(path, mesh: Mesh, vertices=None) -> None:

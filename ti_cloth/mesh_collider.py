@@ -8,6 +8,7 @@ against the motion of the surface point under the particle (a turntable carries 
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
@@ -17,7 +18,7 @@ from . import limits
 from ._validate import as_array, count, require
 from .colliders import MESH, Collider
 from .mesh import Mesh, triangle_edges, unique_rows
-from .sdf import DistanceGrid, distance_grid
+from .sdf import DistanceGrid, distance_grid, layout
 
 MARGIN = 0.1          # the grid reaches this fraction of the mesh's largest extent beyond it
 ROTATION_TOLERANCE = 1e-6
@@ -60,6 +61,12 @@ class MeshCollider(Collider):
         if self.solid is None:
             object.__setattr__(self, "solid", closed(mesh))
         self.turn(0.0)
+        cell = layout(mesh.vertices, self.resolution, self.margin)[1]
+        if not self.solid and self.thickness < cell:
+            warnings.warn(f"MeshCollider: this shell's thickness ({self.thickness:g} m) is less "
+                          f"than its distance grid's cell ({cell:.3g} m), so particles may come "
+                          f"nearer than the thickness; raise the thickness or the resolution "
+                          f"(now {self.resolution})", UserWarning, stacklevel=3)
 
     @property
     def centre(self) -> np.ndarray:

@@ -4,11 +4,12 @@ A grid of nodes spaced `cell` apart covers the mesh's bounding box and a margin.
 the distance to the nearest triangle, negative inside, and the distance's gradient (a unit
 vector). Inside is where the generalised winding number (Jacobson et al. 2013) exceeds 1/2 in
 magnitude, which stays right for meshes with holes, overlapping parts or either orientation.
-Exact distances and gradients (from the closest surface point) are computed in a band of
-`margin` around the surface with libigl (the optional extra `ti_cloth[mesh]`); beyond the band
-the distance grows by the node's Euclidean distance to the band (a bound that points away from
-the surface, so a particle deep inside still finds the way out) and the gradient is taken by
-central differences. The collision kernels sample the grid trilinearly (`sample_grid`).
+Closest surface points are found with libigl (the optional extra `ti_cloth[mesh]`) for the
+nodes within `margin` of the surface; a node beyond takes the closest point of the nearest node
+within (a distance at least the true one, exact where both share the closest point: the field
+still grows away from the surface, so a particle deep inside finds the way out). A node's
+distance and gradient follow from its closest point. The collision kernels sample the grid
+trilinearly (`sample_grid`).
 
 Grids are cached: in memory for the process, and on disk (`cache_folder()`) under a hash of the
 mesh, the resolution and the margin, written atomically; a mesh builds once per machine.
@@ -139,21 +140,21 @@ def build(vertices: np.ndarray, triangles: np.ndarray, resolution: int,
     origin, cell, shape = layout(vertices, resolution, margin)
     axes = [origin[a] + cell * np.arange(shape[a]) for a in range(3)]
     nodes = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    band = margin
     unsigned, _, closest, _ = igl.signed_distance(nodes, vertices, triangles,
                                                   sign_type=igl.SIGNED_DISTANCE_TYPE_UNSIGNED,
-                                                  lower_bound=-band, upper_bound=band)
+                                                  lower_bound=-margin, upper_bound=margin)
+    far = ~(np.abs(unsigned) < margin)       # NaN, or a bound rather than a distance
+    _, nearest = ndimage.distance_transform_edt(far.reshape(shape), return_indices=True)
+    nearest = np.ravel_multi_index(tuple(nearest.reshape(3, -1)), shape)
+    closest = np.where(far[:, None], closest[nearest], closest)
+    away = nodes - closest
+    unsigned = np.linalg.norm(away, axis=1)
     winding = igl.fast_winding_number(vertices, triangles, nodes)
     sign = np.where(np.abs(winding) > INSIDE, -1.0, 1.0)
-    far = np.isnan(unsigned)
-    beyond = ndimage.distance_transform_edt(far.reshape(shape)).ravel() * cell
-    distance = sign * np.where(far, band + beyond, np.abs(np.nan_to_num(unsigned)))
-    grid_distance = distance.reshape(shape)
+    grid_distance = (sign * unsigned).reshape(shape)
     gradient = np.stack(np.gradient(grid_distance, cell), axis=-1).reshape(-1, 3)
-    away = nodes - np.where(far[:, None], nodes, closest)
-    length = np.linalg.norm(away, axis=1)
-    exact = ~far & (length > 1e-9 * cell)
-    gradient[exact] = sign[exact, None] * away[exact] / length[exact, None]
+    exact = unsigned > 1e-9 * cell
+    gradient[exact] = sign[exact, None] * away[exact] / unsigned[exact, None]
     norm = np.linalg.norm(gradient, axis=1)
     gradient = np.where(norm[:, None] > 0, gradient / np.maximum(norm, 1e-300)[:, None],
                         (0.0, 1.0, 0.0))

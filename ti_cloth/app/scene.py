@@ -21,6 +21,7 @@ from ..handles import Handle
 from ..integrators import INTEGRATORS
 from ..material import DAMPING_MODELS, PRESETS, Material, SpringParams
 from ..mesh import PLANES, Mesh, grid_mesh, load_mesh
+from ..mesh_collider import MeshCollider
 from ..paths import INTERPOLATIONS, Keyframes, Oscillation
 from ..render.camera import Camera
 from ..render.renderer import SurfaceStyle
@@ -33,7 +34,8 @@ from ..wind import Wind
 from .scene_file import SceneError, Table, load_toml
 
 BODY_TYPES = ("grid", "mesh", "string", "hair", "tet_block")
-COLLIDER_TYPES = {"plane": Plane, "sphere": Sphere, "box": Box, "capsule": Capsule}
+COLLIDER_TYPES = {"plane": Plane, "sphere": Sphere, "box": Box, "capsule": Capsule,
+                  "mesh": MeshCollider}
 VIEWS = ("3d", "2d")
 NAME_FORBIDDEN = r"[^\w .-]"
 GUARD_SIZES = 100.0   # a run has diverged once a coordinate is this many body sizes out
@@ -192,7 +194,7 @@ def load_scene(path, note=None) -> Scene:
         handles += body_handles
         offset += cloth.particle_count
     cloth = built[0] if len(built) == 1 else root.build(Cloth.combine, built)
-    colliders = [_collider(t) for t in root.tables("colliders")]
+    colliders = [_collider(t, path.parent) for t in root.tables("colliders")]
 
     camera_table = root.table("camera")
     camera, camera_fit = _camera(camera_table) if camera_table is not None else (None, {})
@@ -357,9 +359,6 @@ def _body(table: Table, folder: Path, offset: int) -> tuple[Cloth, list[Handle]]
         cloth = table.build(Cloth, mesh, _material(table), pinned=pinned, hem=_hem(table, mesh))
     elif kind == "mesh":
         mesh = _mesh_file(table, folder)
-        scale = table.number("scale", 1.0, within=limits.SCALE)
-        translate = np.asarray(table.vector("translate", (0.0, 0.0, 0.0), unit="m"))
-        mesh = Mesh(mesh.vertices * scale + translate, mesh.triangles)
         names = {}
         cloth = table.build(Cloth, mesh, _material(table),
                             pinned=_indices(table, "pinned", mesh.vertex_count), hem=_hem(table, mesh))
@@ -410,14 +409,18 @@ def _body(table: Table, folder: Path, offset: int) -> tuple[Cloth, list[Handle]]
 
 
 def _mesh_file(table: Table, folder: Path) -> Mesh:
-    """The mesh of a `path` key, relative to the scene file's folder."""
+    """The mesh of a `path` key, relative to the scene file's folder, scaled by `scale` and
+    then moved by `translate` [m]."""
     path = folder / table.string("path")
     if not path.is_file():
         table._bad("path", str(path), "a mesh file (OBJ, PLY, STL, ... anything meshio reads)")
     try:
-        return load_mesh(path)
+        mesh = load_mesh(path)
     except ValueError as err:
         table.fail(f"{table.path('path')}: {err}")
+    scale = table.number("scale", 1.0, within=limits.SCALE)
+    translate = np.asarray(table.vector("translate", (0.0, 0.0, 0.0), unit="m"))
+    return Mesh(mesh.vertices * scale + translate, mesh.triangles)
 
 
 def _path(table: Table):
@@ -433,19 +436,32 @@ def _path(table: Table):
     return path
 
 
-def _collider(table: Table):
+def _collider(table: Table, folder: Path):
+    """One [[colliders]] table. A mesh's `path` is its file (relative to the scene file, as
+    for mesh bodies), so its motion is `motion`; other shapes move along `path`."""
     kind = table.string("type", choices=sorted(COLLIDER_TYPES))
     options = {}
     table.optional(options, "thickness", unit="m")
     table.optional(options, "static_friction")
     table.optional(options, "kinetic_friction")
-    table.optional(options, "path", lambda k: _path(table.table(k)))
-    shape = COLLIDER_TYPES[kind]
-    common = {f.name for f in fields(Collider)}
-    for f in fields(shape):
-        if f.name not in common:
-            table.optional(options, f.name, "vector" if isinstance(f.default, tuple) else "number")
-    collider = table.build(shape, **options)
+    if kind == "mesh":
+        mesh = _mesh_file(table, folder)
+        motion = {}
+        table.optional(motion, "motion", lambda k: _path(table.table(k)))
+        options |= {"path": motion["motion"]} if motion else {}
+        table.optional(options, "rotation", lambda k: _path(table.table(k)))
+        table.optional(options, "resolution", "integer", within=limits.SDF_RESOLUTION)
+        table.optional(options, "solid", "boolean")
+        collider = table.build(MeshCollider, mesh, **options)
+    else:
+        table.optional(options, "path", lambda k: _path(table.table(k)))
+        shape = COLLIDER_TYPES[kind]
+        common = {f.name for f in fields(Collider)}
+        for f in fields(shape):
+            if f.name not in common:
+                table.optional(options, f.name,
+                               "vector" if isinstance(f.default, tuple) else "number")
+        collider = table.build(shape, **options)
     table.finish()
     return collider
 

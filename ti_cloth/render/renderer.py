@@ -22,6 +22,7 @@ from .. import limits
 from .._validate import as_array, finite_number, in_range, integer, require
 from ..backend import taichi_dtype
 from ..colliders import BOX, CAPSULE, SPHERE, Box, Capsule, Plane, Sphere
+from ..mesh_collider import MeshCollider
 from ..material import SpringKind
 from ..mesh import vertex_triangles
 from . import raster, shapes
@@ -115,6 +116,9 @@ class SurfaceStyle:
         for name in ("wireframe", "particles", "line_width"):
             in_range(f"SurfaceStyle.{name}", getattr(self, name), limits.LINE_WIDTH)
         require(self.line_width > 0, "SurfaceStyle.line_width", self.line_width, "> 0 pixels")
+
+
+COLLIDER_STYLE = SurfaceStyle(checker=0.0)   # mesh colliders: plain, in COLLIDER_COLOUR
 
 
 class _Topology:
@@ -332,6 +336,9 @@ class Renderer:
                 self.draw_box(c.lo, c.hi)
             elif isinstance(c, Capsule):
                 self.draw_capsule(c.a, c.b, c.radius)
+            elif isinstance(c, MeshCollider):
+                self.draw_mesh(c.mesh.vertices, c.mesh.triangles, colours=COLLIDER_COLOUR,
+                               style=COLLIDER_STYLE)
 
     def draw_plane(self, point=(0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0), *,
                    colour=(0.86, 0.87, 0.89), checker: float = 0.25, contrast: float = 0.12,

@@ -1,0 +1,185 @@
+"""Mesh colliders (mesh_collider.py, sdf.py, collision.py) against independent geometry: an
+icosphere mesh against the analytic Sphere, a table of boxes tested point by point, a bowl's
+radius, a platform's path and a turntable's angle."""
+
+import math
+import os
+
+import numpy as np
+import pytest
+
+import ti_cloth as tc
+from helpers import report
+from ti_cloth import sdf
+
+THICKNESS = 0.01
+
+
+def far_particle():
+    return tc.Cloth.from_particles([[50.0, 50.0, 50.0]], [0.01], np.zeros((0, 2), int))
+
+
+def sheet(n, size, height, centre=(0.0, 0.0)):
+    """An n x n horizontal cloth of side `size` [m] at `height` [m] centred over `centre` (x, z)."""
+    origin = (centre[0] - size / 2, height, centre[1] - size / 2)
+    return tc.Cloth(tc.grid_mesh(n, n, size=(size, size), plane="xz", origin=origin),
+                    tc.Material())
+
+
+def test_an_icosphere_mesh_measures_what_the_analytic_sphere_does(f64):
+    """Distances and normals sampled from the mesh's grid against |x - c| - R: within half a
+    cell in the band the grid is exact in (in fact within the facets' depth plus trilinear
+    interpolation's (h^2 / 8) x trace of the Hessian, 2 / r), the sign right everywhere beyond a cell of the surface, the
+    normals radial to a few degrees."""
+    radius, centre = 0.3, np.array([0.0, 0.5, 0.0])
+    collider = tc.MeshCollider(tc.sphere_mesh(radius, centre, subdivisions=4), resolution=48)
+    sim = tc.Simulation(far_particle(), colliders=[collider])
+    cell = collider.grid().cell
+    points = centre + np.random.default_rng(1).uniform(-0.45, 0.45, (6000, 3))
+    d, n = sim.collider_distance(points)
+    offset = points - centre
+    exact = np.linalg.norm(offset, axis=1) - radius
+    band = np.abs(exact) < collider.margin - 2 * cell
+    error = np.abs(d - exact)[band]
+    facets = radius * 0.3 / 4**4
+    bound = facets + cell**2 / (4 * (radius - collider.margin))
+    radial = offset / np.linalg.norm(offset, axis=1, keepdims=True)
+    angle = np.degrees(np.arccos(np.clip(np.sum(n * radial, axis=1), -1, 1)))[band]
+    report("largest distance error in the band, bound, half a cell [m]; largest normal angle",
+           (error.max(), bound, cell / 2, angle.max()), "")
+    assert band.sum() > 400
+    assert error.max() < bound < cell / 2
+    outside_a_cell = np.abs(exact) > cell
+    assert np.array_equal(np.sign(d[outside_a_cell]), np.sign(exact[outside_a_cell]))
+    assert angle.max() < 3.0
+
+
+@pytest.mark.slow
+def test_a_cloth_draped_on_the_icosphere_ends_where_it_does_on_the_sphere(f64):
+    radius, centre = 0.3, (0.0, 0.5, 0.0)
+    mesh = tc.MeshCollider(tc.sphere_mesh(radius, centre, subdivisions=4), resolution=48,
+                           thickness=THICKNESS, static_friction=0.4)
+    sphere = tc.Sphere(centre=centre, radius=radius, thickness=THICKNESS, static_friction=0.4)
+    final = {}
+    for name, collider in (("sphere", sphere), ("mesh", mesh)):
+        sim = tc.Simulation(sheet(12, 1.0, 0.85), integrator="xpbd", dt=1 / 120, drag=1.0,
+                            colliders=[collider])
+        sim.step(240)
+        final[name] = sim.positions()
+    apart = np.linalg.norm(final["mesh"] - final["sphere"], axis=1).max()
+    report("largest distance between the drapes, a cell [m]", (apart, mesh.grid().cell), "")
+    assert final["mesh"][:, 1].min() < 0.4                 # it drapes, not still flat
+    assert apart < mesh.grid().cell
+
+
+TABLE_BOXES = [((-0.4, 0.70, -0.3), (0.4, 0.75, 0.3))] + [
+    ((x - 0.025, 0.0, z - 0.025), (x + 0.025, 0.70, z + 0.025))
+    for x in (-0.35, 0.35) for z in (-0.25, 0.25)]
+
+
+def inside_boxes(points, boxes, by=0.0):
+    """Which points lie inside any of the boxes grown by `by` [m] (an independent inside test)."""
+    inside = np.zeros(len(points), bool)
+    for lo, hi in boxes:
+        inside |= np.all((points > np.subtract(lo, by)) & (points < np.add(hi, by)), axis=1)
+    return inside
+
+
+@pytest.mark.slow
+def test_a_cloth_dropped_on_a_table_mesh_never_enters_it_and_rests_on_it(f64):
+    """A 1 m cloth falls 25 cm onto a table made of five boxes (a 5 cm top on four legs) and
+    hangs over its edges. After every step no particle is inside a box, nor closer to one than
+    the thickness less half a cell (the grid rounds the table's edges by about that). After
+    3 s it is at rest, lying on the top: the lowest particles over it at the thickness exactly
+    (trilinear interpolation is exact for the top's planar distance), the rest in low
+    wrinkles. Without the collider the cloth falls into the table."""
+    table = tc.combine_meshes([tc.box_mesh(lo, hi) for lo, hi in TABLE_BOXES])
+    collider = tc.MeshCollider(table, thickness=THICKNESS, static_friction=0.3)
+    cell = collider.grid().cell
+    runs = {}
+    for colliders, steps in (([collider], 720), ([], 120)):
+        sim = tc.Simulation(sheet(14, 1.0, 1.0), integrator="xpbd", dt=1 / 240, drag=1.0,
+                            colliders=colliders)
+        inside = near = 0
+        for _ in range(steps):
+            sim.step(1)
+            x = sim.positions()
+            inside += inside_boxes(x, TABLE_BOXES).sum()
+            near += inside_boxes(x, TABLE_BOXES, THICKNESS - cell / 2).sum()
+        runs[bool(colliders)] = inside, near, sim
+    inside, near, sim = runs[True]
+    x, v = sim.positions(), sim.velocities()
+    over_top = (np.abs(x[:, 0]) < 0.35) & (np.abs(x[:, 2]) < 0.25)
+    speed = np.sqrt(np.mean(np.sum(v**2, axis=1)))
+    report("inside, too near (all steps); over the top: lowest, highest; rms speed; inside "
+           "without", (inside, near, x[over_top, 1].min(), x[over_top, 1].max(), speed,
+                       runs[False][0]), (0, 0, 0.75 + THICKNESS, "< 0.78", "< 0.02", "> 0"))
+    assert inside == 0 and near == 0
+    assert abs(x[over_top, 1].min() - (0.75 + THICKNESS)) < 1e-9
+    assert x[over_top, 1].max() < 0.75 + THICKNESS + 0.02
+    assert speed < 0.02
+    assert x[:, 1].min() < 0.6                              # it hangs over the edges
+    assert runs[False][0] > 0
+
+
+def bowl(radius, centre):
+    """The lower half of an icosphere: an open bowl (its rim is a boundary)."""
+    sphere = tc.sphere_mesh(radius, centre, subdivisions=3)
+    lower = np.all(sphere.vertices[sphere.triangles][:, :, 1] <= centre[1] + 1e-9, axis=1)
+    return tc.Mesh(sphere.vertices, sphere.triangles[lower])
+
+
+@pytest.mark.slow
+def test_cloth_falls_into_an_open_bowl_and_stays_inside_its_shell(f64):
+    """An open hemisphere (not watertight: a shell) catches a cloth dropped into it: the cloth
+    ends down in the bowl, touching the shell, and no particle below the rim ever gets farther
+    from the centre than the radius less the thickness, give or take the facets' depth and the
+    trilinear error h^2 / (4 r).
+    Taken as a solid instead, the winding number fills the bowl to its rim while the nearest
+    surface is the bowl's bottom: the cloth is pushed through the bottom and falls away."""
+    radius, centre, thickness = 0.3, np.array([0.0, 0.5, 0.0]), 0.02
+    mesh = bowl(radius, centre)
+    shell = tc.MeshCollider(mesh, thickness=thickness, static_friction=0.2, resolution=48)
+    assert shell.solid is False
+    cell = shell.grid().cell
+    lowest, highest, farthest = {}, {}, {}
+    for collider in (shell, tc.MeshCollider(mesh, thickness=thickness, solid=True,
+                                            resolution=48)):
+        sim = tc.Simulation(sheet(8, 0.3, 0.6), integrator="xpbd", dt=1 / 240, drag=0.5,
+                            colliders=[collider])
+        farthest[collider.solid] = 0.0
+        for _ in range(60):
+            sim.step(6)
+            x = sim.positions()
+            in_bowl = x[:, 1] < centre[1]
+            farthest[collider.solid] = max(farthest[collider.solid], np.linalg.norm(
+                x[in_bowl] - centre, axis=1).max(initial=0.0))
+        lowest[collider.solid] = x[:, 1].min()
+        highest[collider.solid] = x[:, 1].max()
+    bound = radius - thickness + radius * 0.3 / 4**3 + cell**2 / (4 * (radius - thickness))
+    report("farthest from the centre (shell), bound; highest, lowest (shell); lowest (solid)",
+           (farthest[False], bound, highest[False], lowest[False], lowest[True]),
+           (f"{radius - thickness} (touching)", "", f"< {centre[1]} (rim)", "", "fell through"))
+    assert radius - thickness - cell < farthest[False] <= bound
+    assert highest[False] < centre[1] - 0.2 * radius            # all of it down in the bowl
+    assert lowest[True] < centre[1] - radius
+
+
+def test_the_winding_number_keeps_the_inside_of_a_sphere_with_holes(f64):
+    """A sphere with a tenth of its triangles removed, taken as solid: points inside have
+    negative distances and points outside positive ones, as for the closed sphere, except
+    within a hole's width of a hole (there the winding number passes 1/2)."""
+    radius, centre = 0.3, np.zeros(3)
+    sphere = tc.sphere_mesh(radius, centre, subdivisions=3)
+    holed = tc.Mesh(sphere.vertices, sphere.triangles[np.arange(sphere.triangle_count) % 10 != 0])
+    collider = tc.MeshCollider(holed, solid=True, resolution=32)
+    assert tc.MeshCollider(holed).solid is False
+    sim = tc.Simulation(far_particle(), colliders=[collider])
+    points = np.random.default_rng(2).uniform(-0.45, 0.45, (3000, 3))
+    exact = np.linalg.norm(points, axis=1) - radius
+    edges = sphere.vertices[sphere.edges()]
+    hole = np.linalg.norm(edges[:, 0] - edges[:, 1], axis=1).max()
+    clear = np.abs(exact) > max(collider.grid().cell, hole)    # near a hole w is near 1/2
+    d, _ = sim.collider_distance(points)
+    report("points with the wrong sign", int((np.sign(d) != np.sign(exact))[clear].sum()), 0)
+    assert np.array_equal(np.sign(d[clear]), np.sign(exact[clear]))
