@@ -13,9 +13,15 @@ Where a test of an integrator goes:
   tearing, divergence, determinism).
 """
 
+import os
+import tempfile
+
 import pytest
 
 from helpers import use
+
+# mesh colliders cache their distance grids on disk: the tests' go to a folder of their own
+os.environ["TI_CLOTH_CACHE"] = tempfile.mkdtemp(prefix="ti_cloth_test_cache_")
 
 
 def pytest_collection_modifyitems(items):

@@ -173,7 +173,9 @@ def test_the_winding_number_keeps_the_inside_of_a_sphere_with_holes(f64):
     sphere = tc.sphere_mesh(radius, centre, subdivisions=3)
     holed = tc.Mesh(sphere.vertices, sphere.triangles[np.arange(sphere.triangle_count) % 10 != 0])
     collider = tc.MeshCollider(holed, solid=True, resolution=32)
-    assert tc.MeshCollider(holed).solid is False
+    with pytest.warns(UserWarning, match=r"shell's thickness \(0 m\) is less than its "
+                      r"distance grid's cell"):
+        assert tc.MeshCollider(holed).solid is False            # open: a shell by default
     sim = tc.Simulation(far_particle(), colliders=[collider])
     points = np.random.default_rng(2).uniform(-0.45, 0.45, (3000, 3))
     exact = np.linalg.norm(points, axis=1) - radius
@@ -183,3 +185,184 @@ def test_the_winding_number_keeps_the_inside_of_a_sphere_with_holes(f64):
     d, _ = sim.collider_distance(points)
     report("points with the wrong sign", int((np.sign(d) != np.sign(exact))[clear].sum()), 0)
     assert np.array_equal(np.sign(d[clear]), np.sign(exact[clear]))
+
+
+def held_then(times, values):
+    """A smooth path holding its first value until times[0] and its last after times[-1]
+    (velocity continuous, so friction can carry a body along without slipping at the start)."""
+    times = [0.0, *times, times[-1] + 0.5]
+    values = [values[0], *values, values[-1]]
+    return tc.Keyframes(times, values, interpolation="smooth")
+
+
+def platform_sim(collider_options, patch_centre):
+    """A 0.2 m cloth patch lying on a 1 m square slab (top at y = 0.1) at `patch_centre`."""
+    slab = tc.box_mesh((-0.5, 0.0, -0.5), (0.5, 0.1, 0.5))
+    collider = tc.MeshCollider(slab, thickness=THICKNESS, static_friction=1.0, resolution=32,
+                               **collider_options)
+    cloth = sheet(6, 0.2, 0.1 + THICKNESS, patch_centre)
+    return tc.Simulation(cloth, integrator="xpbd", dt=1 / 240, colliders=[collider]), cloth
+
+
+def test_a_moving_mesh_collider_carries_the_cloth_resting_on_it(f64):
+    """A slab slides 0.4 m along x and rises 0.1 m (a smooth path); the patch on it, held by
+    static friction, moves with it: every particle ends displaced by the path's displacement."""
+    path = held_then([0.2, 1.2], [(0.0, 0.0, 0.0), (0.4, 0.1, 0.0)])
+    sim, cloth = platform_sim({"path": path}, (0.0, 0.0))
+    sim.step(round(1.7 * 240))
+    moved = sim.positions() - cloth.particle_position
+    report("displacement of the patch (min, max) vs the path's", (moved.min(axis=0).tolist(),
+           moved.max(axis=0).tolist()), path(sim.time).tolist())
+    assert np.abs(moved - path(sim.time)).max() < 2e-3
+
+
+def test_a_turning_mesh_collider_carries_the_cloth_round(f64):
+    """A turntable (the slab turning a quarter turn about y through its centre, smoothly, in
+    2 s) carries a patch lying 0.25 m off its axis round with it: the patch ends where the
+    rotation takes its start, every particle within millimetres. Friction measures the slide
+    against the turning surface point under each particle: with the table's bare translation
+    (zero here) the patch would stay behind."""
+    angle = math.pi / 2
+    rotation = held_then([0.2, 2.2], [(0.0, 0.0, 0.0), (0.0, angle, 0.0)])
+    sim, cloth = platform_sim({"rotation": rotation}, (0.25, 0.0))
+    sim.step(round(2.7 * 240))
+    turn = np.array([[math.cos(angle), 0, math.sin(angle)], [0, 1, 0],
+                     [-math.sin(angle), 0, math.cos(angle)]])
+    expected = cloth.particle_position @ turn.T
+    off = np.linalg.norm(sim.positions() - expected, axis=1)
+    report("farthest from the turned start [m]", off.max(), "< 3e-3")
+    assert off.max() < 3e-3
+    placed, = sim.collider_shapes()                           # drawn turned as well
+    np.testing.assert_allclose(placed.mesh.vertices, tc.box_mesh(
+        (-0.5, 0.0, -0.5), (0.5, 0.1, 0.5)).vertices @ turn.T, atol=1e-12)
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda: tc.MeshCollider(tc.Mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [])),
+     "MeshCollider.mesh must be a Mesh with at least one triangle"),
+    (lambda: tc.MeshCollider(tc.Mesh([[1, 1, 1]] * 3, [[0, 1, 2]])), "not all at one point"),
+    (lambda: tc.MeshCollider(tc.box_mesh(), resolution=4), "MeshCollider.resolution"),
+    (lambda: tc.MeshCollider(tc.box_mesh(), rotation=lambda t: np.eye(3) * 2),
+     r"MeshCollider.rotation\(0.0\) must be a rotation matrix"),
+    (lambda: tc.MeshCollider(tc.box_mesh(), rotation=lambda t: (1.0, 2.0)),
+     r"MeshCollider.rotation\(0.0\) must be a rotation vector"),
+    (lambda: tc.MeshCollider(tc.box_mesh(), solid="yes"), "MeshCollider.solid"),
+    (lambda: tc.MeshCollider(tc.box_mesh(), thickness=-1.0), "MeshCollider.thickness"),
+])
+def test_mesh_colliders_reject_bad_input_by_name(make, message):
+    with pytest.raises(ValueError, match=message):
+        make()
+
+
+@pytest.mark.parametrize("content, error", [
+    ("v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n", "vertices.* must be finite"),
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\n", "no triangle, quad or tetra cells"),
+    ("\x00\x01garbage\xff" * 20, "not a mesh meshio can read"),
+])
+def test_a_bad_mesh_file_is_refused_naming_the_file(tmp_path, content, error):
+    path = tmp_path / "broken_table.obj"
+    path.write_bytes(content.encode("latin-1"))
+    with pytest.raises(ValueError, match=f"broken_table.obj.*{error}"):
+        tc.load_mesh(path)
+    with pytest.raises(FileNotFoundError, match="missing_table.obj"):
+        tc.load_mesh(tmp_path / "missing_table.obj")
+
+
+SCENE = """
+[simulation]
+integrator = "xpbd"
+substeps = 4
+fps = 30
+duration = 0.1
+
+[[bodies]]
+type = "grid"
+rows = 4
+cols = 4
+plane = "xz"
+origin = [-0.2, 0.5, -0.2]
+size = [0.4, 0.4]
+
+[[colliders]]
+type = "mesh"
+path = "{path}"
+scale = 2.0
+translate = [0.0, 0.1, 0.0]
+thickness = 0.02
+static_friction = 0.5
+resolution = 16
+motion = {{ type = "keyframes", times = [0.0, 1.0], values = [[0, 0, 0], [0.5, 0, 0]] }}
+rotation = {{ type = "keyframes", times = [0.0, 1.0], values = [[0, 0, 0], [0, 1.0, 0]] }}
+"""
+
+
+def test_a_scene_file_loads_a_moving_turning_mesh_collider_relative_to_itself(f64, tmp_path):
+    from ti_cloth.app.scene_file import SceneError
+    box = tc.box_mesh((-0.1, 0.0, -0.1), (0.1, 0.1, 0.1))
+    tc.save_mesh(tmp_path / "assets" / "block.obj", box)
+    scene_path = tmp_path / "block.toml"
+    scene_path.write_text(SCENE.format(path="assets/block.obj"))
+    collider, = tc.load_scene(scene_path).colliders
+    assert isinstance(collider, tc.MeshCollider)
+    np.testing.assert_allclose(collider.mesh.vertices, box.vertices * 2.0 + [0.0, 0.1, 0.0])
+    assert (collider.thickness, collider.static_friction, collider.resolution) == (0.02, 0.5, 16)
+    np.testing.assert_allclose(collider.offset(0.5), [0.25, 0.0, 0.0])
+    np.testing.assert_allclose(collider.turn(0.5)[0], [math.cos(0.5), 0, math.sin(0.5)])
+    scene_path.write_text(SCENE.format(path="assets/no_such_block.obj"))
+    with pytest.raises(SceneError, match="no_such_block.obj"):
+        tc.load_scene(scene_path)
+
+
+def test_a_grid_is_built_once_then_read_from_the_disk_cache(tmp_path, monkeypatch):
+    """The first request builds and writes sdf-<hash>.npz (atomically: no temporary left);
+    a later process (the memory cache emptied) reads it back equal, without building; another
+    resolution is another grid."""
+    monkeypatch.setenv("TI_CLOTH_CACHE", str(tmp_path))
+    sdf.clear_memory_cache()
+    mesh = tc.sphere_mesh(0.2, subdivisions=2)
+    built = sdf.distance_grid(mesh.vertices, mesh.triangles, 16, 0.05)
+    files = sorted(p.name for p in tmp_path.iterdir())
+    assert len(files) == 1 and files[0].startswith("sdf-") and files[0].endswith(".npz")
+    sdf.clear_memory_cache()
+
+    def no_build(*args):
+        raise AssertionError("built again")
+    monkeypatch.setattr(sdf, "build", no_build)
+    again = sdf.distance_grid(mesh.vertices, mesh.triangles, 16, 0.05)
+    np.testing.assert_array_equal(again.distance, built.distance)
+    np.testing.assert_array_equal(again.gradient, built.gradient)
+    assert again.cell == built.cell and np.array_equal(again.origin, built.origin)
+    with pytest.raises(AssertionError, match="built again"):
+        sdf.distance_grid(mesh.vertices, mesh.triangles, 17, 0.05)
+
+
+def test_the_renderer_draws_a_mesh_collider_where_it_has_turned(f32):
+    """Seen from straight above, a 0.6 m square slab covers 0.6 m of the image's width; turned
+    45 degrees about y it covers its diagonal, 0.6 x sqrt(2)."""
+    from ti_cloth.render import Camera, Renderer
+    slab = tc.box_mesh((-0.3, 0.0, -0.3), (0.3, 0.05, 0.3))
+    camera = Camera(position=(0.0, 3.0, 0.0), target=(0.0, 0.0, 0.0), up=(0.0, 0.0, -1.0),
+                    orthographic=True, height=1.2)
+    widths = []
+    for angle in (0.0, math.pi / 4):
+        collider = tc.MeshCollider(slab, rotation=lambda t, a=angle: (0.0, a, 0.0), resolution=8)
+        sim = tc.Simulation(far_particle(), colliders=[collider])
+        with Renderer(120, 120, camera, supersample=1) as renderer:
+            renderer.begin()
+            background = renderer.end().astype(int)
+            renderer.begin()
+            renderer.draw_colliders(sim)
+            image = renderer.end().astype(int)
+        drawn = np.abs(image - background).sum(axis=2) > 30
+        columns = np.flatnonzero(drawn.any(axis=0))
+        widths.append((columns[-1] - columns[0] + 1) * 1.2 / 120)
+    report("drawn widths [m]", widths, [0.6, 0.6 * math.sqrt(2)])
+    assert abs(widths[0] - 0.6) <= 0.02 and abs(widths[1] - 0.6 * math.sqrt(2)) <= 0.02
+
+
+def test_a_set_without_meshes_holds_and_compiles_no_mesh_code(f64):
+    plain = tc.Simulation(far_particle(), colliders=[tc.Plane()])
+    assert not plain.colliders.meshes and not hasattr(plain.colliders, "samples")
+    still = tc.Simulation(far_particle(), colliders=[tc.MeshCollider(tc.box_mesh(),
+                                                                     resolution=8)])
+    assert still.colliders.meshes and not still.colliders.turning

@@ -193,17 +193,23 @@ def test_a_thickness_above_half_the_mean_edge_is_warned_about(f64):
 def test_one_thread_and_all_cores_and_a_rerun_give_the_same_bits():
     """Grid cells are filled in index order, contacts listed in index order and gathered per
     particle in list order: the grid, the lists and the positions repeat bit for bit on one
-    thread and on every core (two on CI), and on a rerun. The default runtime comes back after
+    thread and on every core (two on CI), and on a rerun; with them a turning mesh collider
+    (a ball under the lower sheet lifting the upper one). The default runtime comes back after
     the one-thread run and serves the other two (one re-initialisation fewer: each drops every
     kernel this worker compiled)."""
     from ti_cloth import backend
     body = two_sheets(8, height=0.05)
+    ball = tc.MeshCollider(tc.sphere_mesh(0.15, (0.5, -0.12, 0.5), subdivisions=2),
+                           thickness=THICKNESS, static_friction=0.5, resolution=24,
+                           rotation=lambda t: (0.0, 2.0 * t, 0.0))
 
     def run():
-        sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240,
+        sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240, colliders=[ball],
                             self_collision=tc.SelfCollision(THICKNESS, friction=0.3))
         sim.step(40)
         assert len(sim.self_contacts().vertex_triangle) > 20, "the sheets touch"
+        lifted = np.linalg.norm(sim.positions() - [0.5, -0.12, 0.5], axis=1) - 0.15
+        assert np.abs(lifted).min() < 2 * THICKNESS, "the ball holds the upper sheet up"
         grid, listed = sim.self_contact.grid, sim.self_contacts(active=False)
         return (sim.positions(), grid.cell_start.to_numpy(), grid.cell_item.to_numpy(),
                 listed.vertex_triangle, listed.edge_edge)

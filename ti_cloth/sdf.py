@@ -87,6 +87,11 @@ def distance_grid(vertices: np.ndarray, triangles: np.ndarray, resolution: int,
 _in_memory: OrderedDict[str, DistanceGrid] = OrderedDict()
 
 
+def clear_memory_cache() -> None:
+    """Forget the grids held in memory (the disk cache stays): the next request reads or builds."""
+    _in_memory.clear()
+
+
 def grid_key(vertices: np.ndarray, triangles: np.ndarray, resolution: int, margin: float) -> str:
     """Hex digest naming a grid: the format, the mesh's bytes, the resolution and margin."""
     digest = hashlib.sha256(f"{FORMAT}:{resolution}:{float(margin)!r}:".encode())

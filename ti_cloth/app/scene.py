@@ -413,7 +413,8 @@ def _mesh_file(table: Table, folder: Path) -> Mesh:
     then moved by `translate` [m]."""
     path = folder / table.string("path")
     if not path.is_file():
-        table._bad("path", str(path), "a mesh file (OBJ, PLY, STL, ... anything meshio reads)")
+        table.fail(f"{table.path('path')}: no mesh file at {path} (OBJ, PLY, STL, ... anything "
+                   "meshio reads, relative to the scene file)")
     try:
         mesh = load_mesh(path)
     except ValueError as err:
