@@ -3,7 +3,6 @@ icosphere mesh against the analytic Sphere, a table of boxes tested point by poi
 radius, a platform's path and a turntable's angle."""
 
 import math
-import os
 
 import numpy as np
 import pytest
