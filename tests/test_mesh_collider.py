@@ -3,6 +3,7 @@ icosphere mesh against the analytic Sphere, a table of boxes tested point by poi
 radius, a platform's path and a turntable's angle."""
 
 import math
+import sys
 
 import numpy as np
 import pytest
@@ -200,7 +201,7 @@ def platform_sim(collider_options, patch_centre):
     collider = tc.MeshCollider(slab, thickness=THICKNESS, static_friction=1.0, resolution=32,
                                **collider_options)
     cloth = sheet(6, 0.2, 0.1 + THICKNESS, patch_centre)
-    return tc.Simulation(cloth, integrator="xpbd", dt=1 / 240, colliders=[collider]), cloth
+    return tc.Simulation(cloth, integrator="xpbd", dt=1 / 120, colliders=[collider]), cloth
 
 
 def test_a_moving_mesh_collider_carries_the_cloth_resting_on_it(f64):
@@ -208,7 +209,7 @@ def test_a_moving_mesh_collider_carries_the_cloth_resting_on_it(f64):
     static friction, moves with it: every particle ends displaced by the path's displacement."""
     path = held_then([0.2, 1.2], [(0.0, 0.0, 0.0), (0.4, 0.1, 0.0)])
     sim, cloth = platform_sim({"path": path}, (0.0, 0.0))
-    sim.step(round(1.7 * 240))
+    sim.step(round(1.7 * 120))
     moved = sim.positions() - cloth.particle_position
     report("displacement of the patch (min, max) vs the path's", (moved.min(axis=0).tolist(),
            moved.max(axis=0).tolist()), path(sim.time).tolist())
@@ -224,7 +225,7 @@ def test_a_turning_mesh_collider_carries_the_cloth_round(f64):
     angle = math.pi / 2
     rotation = held_then([0.2, 2.2], [(0.0, 0.0, 0.0), (0.0, angle, 0.0)])
     sim, cloth = platform_sim({"rotation": rotation}, (0.25, 0.0))
-    sim.step(round(2.7 * 240))
+    sim.step(round(2.7 * 120))
     turn = np.array([[math.cos(angle), 0, math.sin(angle)], [0, 1, 0],
                      [-math.sin(angle), 0, math.cos(angle)]])
     expected = cloth.particle_position @ turn.T
@@ -365,3 +366,12 @@ def test_a_set_without_meshes_holds_and_compiles_no_mesh_code(f64):
     still = tc.Simulation(far_particle(), colliders=[tc.MeshCollider(tc.box_mesh(),
                                                                      resolution=8)])
     assert still.colliders.meshes and not still.colliders.turning
+
+
+def test_without_libigl_the_error_says_how_to_install_it(monkeypatch, tmp_path):
+    monkeypatch.setitem(sys.modules, "igl", None)             # as if not installed
+    monkeypatch.setenv("TI_CLOTH_CACHE", str(tmp_path))
+    sdf.clear_memory_cache()
+    mesh = tc.sphere_mesh(0.1, subdivisions=1)
+    with pytest.raises(ImportError, match=r"pip install 'ti_cloth\[mesh\]'"):
+        sdf.distance_grid(mesh.vertices, mesh.triangles, 8, 0.01)

@@ -1,6 +1,7 @@
 """Scene files: every key checked by name, scenes build the simulation the API would, and only
 what a scene lists is compiled."""
 
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -71,7 +72,7 @@ def test_a_scene_hem_takes_grid_names_and_indices(tmp_path):
 
 def test_every_demo_scene_loads(tmp_path):
     scenes = sorted(DEMOS.glob("*.toml"))
-    assert len(scenes) == 12   # the eleven demos and the study's standard scene
+    assert len(scenes) == 14   # the thirteen demos and the study's standard scene
     for path in scenes:
         scene = load_scene(path)
         assert scene.cloth.particle_count > 1 and scene.frames >= 15, path.name
@@ -217,8 +218,11 @@ def test_the_readme_scene_reference_is_a_valid_scene(tmp_path, f64):
     and step, so the documentation cannot drift from the reader."""
     readme = (Path(__file__).parents[1] / "README.md").read_text()
     block = readme.split("```toml\n", 1)[1].split("```", 1)[0]
+    (tmp_path / "assets").mkdir()
+    shutil.copy(Path(__file__).parents[1] / "demos" / "assets" / "table.obj", tmp_path / "assets")
     scene = load_scene(write(tmp_path, block))
     assert scene.name == "flag" and scene.wind is not None and len(scene.handles) == 1
+    assert isinstance(scene.colliders[-1], tc.MeshCollider) and scene.colliders[-1].solid
     assert scene.strain_limit is not None and scene.tearing == 0.3
     scene.build().step(2)
 
