@@ -18,37 +18,51 @@ def particle(height, velocity=(0.0, 0.0, 0.0)):
 
 
 @pytest.mark.parametrize("integrator", sorted(tc.INTEGRATORS))
-def test_falling_particle_stops_on_the_ground_with_restitution_zero(f64, integrator):
+@pytest.mark.parametrize("shape", ["plane", "mesh"])
+def test_falling_particle_stops_on_the_ground_with_restitution_zero(f64, integrator, shape):
+    """On a plane exactly; on a slab mesh collider (top at y = 0) to the float32 rounding of
+    its stored distances (1e-7 m here)."""
     thickness = 0.01
-    ground = tc.Plane(point=(0.0, 0.0, 0.0), thickness=thickness)
+    ground = (tc.Plane(point=(0.0, 0.0, 0.0), thickness=thickness) if shape == "plane" else
+              tc.MeshCollider(tc.box_mesh((-1.0, -0.1, -1.0), (1.0, 0.0, 1.0)),
+                              thickness=thickness, resolution=16))
+    exact = 1e-12 if shape == "plane" else 1e-7
     sim = tc.Simulation(particle(1.0), integrator=integrator, dt=1e-3, colliders=[ground])
     heights = []
     for _ in range(60):
         sim.step(25)
         heights.append(sim.positions()[0, 1])
     report("final height, velocity", (heights[-1], sim.velocities()[0].tolist()), (thickness, 0.0))
-    assert min(heights) >= thickness - 1e-12                    # never below, after any step
-    assert abs(heights[-1] - thickness) < 1e-12 and np.abs(sim.velocities()).max() < 1e-9
+    assert min(heights) >= thickness - exact                    # never below, after any step
+    assert abs(heights[-1] - thickness) < exact and np.abs(sim.velocities()).max() < 1e-9
     impact = math.sqrt(2 * (1.0 - thickness) / 9.81)            # s; then it stays put
     landed = [h for k, h in enumerate(heights) if (k + 1) * 0.025 > impact + 0.01]
-    assert np.allclose(landed, thickness, atol=1e-12)
+    assert np.allclose(landed, thickness, atol=exact)
 
 
-def slope_cloth(angle, mu, integrator="symplectic_euler"):
-    """A 6 x 6, 0.5 m cloth lying on a plane through the origin tilted by `angle` about z."""
+def slope_cloth(angle, mu, integrator="symplectic_euler", shape="plane"):
+    """A 6 x 6, 0.5 m cloth lying on a plane through the origin tilted by `angle` about z; or
+    (shape "mesh") on the top of an 8 m x 1 m x 2 m block mesh centred on the origin, turned by
+    `angle` (its top's distance is linear a few cells deep, so the grid holds it exactly)."""
     normal = np.array([-math.sin(angle), math.cos(angle), 0.0])
     downhill = np.array([-math.cos(angle), -math.sin(angle), 0.0])
     across = np.array([0.0, 0.0, 1.0])
     mesh = tc.grid_mesh(6, 6, size=(0.5, 0.5), plane="xz", origin=(-0.25, 0.0, -0.25))
     u, w = mesh.vertices[:, 0], mesh.vertices[:, 2]
     thickness = 0.005
-    x = np.outer(-u, downhill) + np.outer(w, across) + thickness * normal
+    surface = 0.5 if shape == "mesh" else 0.0                   # the block's half height
+    x = np.outer(-u, downhill) + np.outer(w, across) + (surface + thickness) * normal
     material = tc.Material(density=0.2, stretch=tc.SpringParams(200.0, 0.2),
                            shear=tc.SpringParams(20.0, 0.02), bend=tc.SpringParams(1.0, 0.001))
     cloth = tc.Cloth(tc.Mesh(x, mesh.triangles, grid_shape=(6, 6)), material)
-    plane = tc.Plane(normal=tuple(normal), thickness=thickness, static_friction=mu)
+    if shape == "mesh":
+        collider = tc.MeshCollider(tc.box_mesh((-4.0, -0.5, -1.0), (4.0, 0.5, 1.0)),
+                                   rotation=lambda t: (0.0, 0.0, angle), resolution=64,
+                                   thickness=thickness, static_friction=mu)
+    else:
+        collider = tc.Plane(normal=tuple(normal), thickness=thickness, static_friction=mu)
     dt = 1e-3 if integrator == "pbd" else 2e-4          # pbd has no step limit; the others do
-    return tc.Simulation(cloth, integrator=integrator, dt=dt, colliders=[plane]), downhill
+    return tc.Simulation(cloth, integrator=integrator, dt=dt, colliders=[collider]), downhill
 
 
 @pytest.mark.parametrize("integrator", ["symplectic_euler", "verlet", "pbd"])
@@ -62,9 +76,11 @@ def test_static_friction_holds_a_cloth_on_a_slope_below_tan_mu(f64, integrator):
     assert creep < 1e-3
 
 
-def test_cloth_slides_down_a_slope_above_tan_mu_as_coulomb_says(f64):
+@pytest.mark.parametrize("shape", ["plane", "mesh"])
+def test_cloth_slides_down_a_slope_above_tan_mu_as_coulomb_says(f64, shape):
+    """On a plane, and on a block mesh collider turned to the slope: the same law holds."""
     mu, angle = 0.5, math.atan(0.6)
-    sim, downhill = slope_cloth(angle, mu)
+    sim, downhill = slope_cloth(angle, mu, shape=shape)
     x0 = sim.positions()
     sim.step(10_000)                                             # 2 s
     slid = float(np.mean((sim.positions() - x0) @ downhill))

@@ -76,12 +76,14 @@ class ColliderSet:
                 (self.thickness, [c.thickness for c in self.colliders]),
                 (self.static_friction, [c.static_friction for c in self.colliders]),
                 (self.kinetic_friction, [c.kinetic_friction for c in self.colliders]))
-               + self._grids() + self._placement(0.0, None))
+               + self._grids())
+        self._turns = {}
+        self.place(0.0)
 
     def place(self, t: float, dt: float | None = None) -> None:
         """Put every collider where its path (and rotation) says at time t; velocity and the
         previous pose from t - dt (the same as now when dt is None: at the start)."""
-        upload(self._placement(t, dt))
+        write_placement(self, self._placement(t, dt))
 
     def before_step(self, state, t: float) -> None:
         """Keep the positions at the step start: the friction response needs the step's motion."""
@@ -124,26 +126,52 @@ class ColliderSet:
         return ((self.grid_start, start), (self.grid_shape, shape), (self.grid_origin, origin),
                 (self.grid_cell, cell), (self.shell, shell), (self.centre, centre))
 
-    def _placement(self, t: float, dt: float | None) -> tuple:
-        """(field, values) of the colliders' a, b and velocity at time t, and of meshes' poses
-        now and at t - dt (place())."""
-        a, b, v, a_prev, turn, turn_prev = [], [], [], [], [], []
-        for c, (a0, b0) in zip(self.colliders, self._rest):
-            offset = c.offset(t)
-            a.append(a0 + offset)
-            b.append(b0 if isinstance(c, Plane) else b0 + offset)   # a plane's b is its normal
-            moving = c.path is not None and dt is not None
-            before = c.offset(t - dt) if moving else offset
-            v.append((offset - before) / dt if moving else np.zeros(3))
-            a_prev.append(a0 + before)
-            turning = isinstance(c, MeshCollider) and c.rotation is not None
-            turn.append((c.turn(t) if turning else np.eye(3)).ravel())
-            turn_prev.append((c.turn(t - dt) if turning and dt is not None else turn[-1]).ravel())
-        placement = (self.a, a), (self.b, b), (self.velocity, v)
-        if self.meshes:
-            placement += ((self.a_prev, a_prev), (self.rotation, turn),
-                          (self.rotation_prev, turn_prev))
-        return placement
+    def _placement(self, t: float, dt: float | None) -> np.ndarray:
+        """Per collider (rows): a, b, velocity, and for meshes a_prev, rotation and
+        rotation_prev (row-major), at time t and t - dt (place(); write_placement's layout)."""
+        rows = np.zeros((self.count, PLACEMENT), backend.numpy_real())
+        for c, (collider, (a0, b0)) in enumerate(zip(self.colliders, self._rest)):
+            offset = collider.offset(t)
+            moving = collider.path is not None and dt is not None
+            before = collider.offset(t - dt) if moving else offset
+            rows[c, 0:3] = a0 + offset
+            rows[c, 3:6] = b0 if isinstance(collider, Plane) else b0 + offset   # a plane's normal
+            rows[c, 6:9] = (offset - before) / dt if moving else 0.0
+            rows[c, 9:12] = a0 + before
+            turning = isinstance(collider, MeshCollider) and collider.rotation is not None
+            now = self._turn(c, t) if turning else np.eye(3)
+            rows[c, 12:21] = now.ravel()
+            rows[c, 21:30] = (self._turn(c, t - dt) if turning and dt is not None else now).ravel()
+        return rows
+
+    def _turn(self, c: int, t: float) -> np.ndarray:
+        """Collider c's rotation at time t; the last few are remembered (a step's end is the
+        next step's start)."""
+        turns = self._turns.setdefault(c, {})
+        if t not in turns:
+            turns[t] = self.colliders[c].turn(t)
+            if len(turns) > 3:
+                turns.pop(next(iter(turns)))
+        return turns[t]
+
+
+PLACEMENT = 30     # numbers per collider in a placement row (ColliderSet._placement)
+
+
+@ti.kernel
+def write_placement(colliders: ti.template(), rows: ti.types.ndarray()):
+    """Copy ColliderSet._placement's rows into the colliders' fields (one launch per step)."""
+    for c in range(colliders.count):
+        for k in ti.static(range(3)):
+            colliders.a[c][k] = rows[c, k]
+            colliders.b[c][k] = rows[c, 3 + k]
+            colliders.velocity[c][k] = rows[c, 6 + k]
+        if ti.static(colliders.meshes):
+            for k in ti.static(range(3)):
+                colliders.a_prev[c][k] = rows[c, 9 + k]
+            for k in ti.static(range(9)):
+                colliders.rotation[c][k] = rows[c, 12 + k]
+                colliders.rotation_prev[c][k] = rows[c, 21 + k]
 
 
 @ti.func
