@@ -13,6 +13,7 @@ Where a test of an integrator goes:
   tearing, divergence, determinism).
 """
 
+import inspect
 import os
 import tempfile
 
@@ -28,9 +29,17 @@ def pytest_collection_modifyitems(items):
     """Tests marked slow first (in their order), so that with one worker per core (xdist)
     the longest ones do not start last and leave a core idle at the end; then those in f64,
     then those in f32: switching precision re-initialises Taichi, which drops every kernel the
-    worker compiled, so the switches are kept few."""
-    items.sort(key=lambda item: (item.get_closest_marker("slow") is None,
+    worker compiled, so the switches are kept few. Tests that call tc.init themselves (a
+    thread count, a precision or a fresh runtime of their own) go last, so the tests after
+    them do not compile everything again."""
+    items.sort(key=lambda item: (reinitialises(item), item.get_closest_marker("slow") is None,
                                  "f32" in getattr(item, "fixturenames", ())))
+
+
+def reinitialises(item) -> bool:
+    """Whether the test's own code calls tc.init."""
+    function = getattr(item, "function", None)
+    return function is not None and "tc.init(" in inspect.getsource(function)
 
 
 @pytest.fixture
