@@ -25,7 +25,8 @@ class ColliderSet:
 
     def __init__(self, colliders, particle_count: int):
         real, count = backend.real(), len(colliders)
-        self.nodes, self.meshes, self.turning = self.structure(colliders, particle_count)[3:]
+        self.nodes, self.meshes, self.turning, self.shells = self.structure(colliders,
+                                                                            particle_count)[3:]
         self.count = count
         fields = backend.FieldGroup()
         self.kind = fields.scalar(ti.i32, count)
@@ -55,12 +56,13 @@ class ColliderSet:
     def structure(colliders, particle_count: int) -> tuple:
         """What the kernels of a ColliderSet read at compile time: sets of equal structure
         are interchangeable once load() has put the colliders in (pool.py). (count, particle
-        count, grid nodes of all meshes, whether any is a mesh, whether any mesh turns)."""
+        count, grid nodes of all meshes, whether any is a mesh, whether any mesh turns,
+        whether any mesh is a shell)."""
         meshes = [c for c in colliders if isinstance(c, MeshCollider)]
         nodes = sum(int(np.prod(layout(c.mesh.vertices, c.resolution, c.margin)[2]))
                     for c in meshes)
         return ("ColliderSet", len(colliders), particle_count, nodes, bool(meshes),
-                any(c.rotation is not None for c in meshes))
+                any(c.rotation is not None for c in meshes), any(not c.solid for c in meshes))
 
     def load(self, colliders, particle_count: int) -> None:
         """Upload `colliders` (as many as this set holds), placed at time 0."""
@@ -191,12 +193,13 @@ def _mesh_distance(colliders: ti.template(), c, x, x0):
     start, shape = colliders.grid_start[c], colliders.grid_shape[c]
     origin, cell = colliders.grid_origin[c], colliders.grid_cell[c]
     d, g = sample_grid(colliders.samples, start, shape, origin, cell, q)
-    if colliders.shell[c]:
-        q0 = (_matrix(colliders.rotation_prev[c]).transpose() @ (x0 - colliders.a_prev[c])
-              + colliders.centre[c])
-        _, g0 = sample_grid(colliders.samples, start, shape, origin, cell, q0)
-        if g.dot(g0) < 0:
-            d, g = -d, -g
+    if ti.static(colliders.shells):
+        if colliders.shell[c]:
+            q0 = (_matrix(colliders.rotation_prev[c]).transpose() @ (x0 - colliders.a_prev[c])
+                  + colliders.centre[c])
+            _, g0 = sample_grid(colliders.samples, start, shape, origin, cell, q0)
+            if g.dot(g0) < 0:
+                d, g = -d, -g
     n = turn @ g
     length = n.norm()
     if length > 0:
