@@ -149,6 +149,10 @@ def build(vertices: np.ndarray, triangles: np.ndarray, resolution: int,
                                                   sign_type=igl.SIGNED_DISTANCE_TYPE_UNSIGNED,
                                                   lower_bound=-margin, upper_bound=margin)
     far = ~(np.abs(unsigned) < margin)       # NaN, or a bound rather than a distance
+    if far.all():                            # no node near the surface (a coarse grid)
+        unsigned, _, closest, _ = igl.signed_distance(
+            nodes, vertices, triangles, sign_type=igl.SIGNED_DISTANCE_TYPE_UNSIGNED)
+        far[:] = False
     _, nearest = ndimage.distance_transform_edt(far.reshape(shape), return_indices=True)
     nearest = np.ravel_multi_index(tuple(nearest.reshape(3, -1)), shape)
     closest = np.where(far[:, None], closest[nearest], closest)
@@ -157,9 +161,11 @@ def build(vertices: np.ndarray, triangles: np.ndarray, resolution: int,
     winding = igl.fast_winding_number(vertices, triangles, nodes)
     sign = np.where(np.abs(winding) > INSIDE, -1.0, 1.0)
     grid_distance = (sign * unsigned).reshape(shape)
-    gradient = np.stack(np.gradient(grid_distance, cell), axis=-1).reshape(-1, 3)
-    exact = unsigned > 1e-9 * cell
-    gradient[exact] = sign[exact, None] * away[exact] / unsigned[exact, None]
+    exact = unsigned > 1e-9 * cell             # else the node is on the surface: no direction
+    gradient = sign[:, None] * away / np.where(exact, unsigned, 1.0)[:, None]
+    if not exact.all():
+        differences = np.stack(np.gradient(grid_distance, cell), axis=-1).reshape(-1, 3)
+        gradient[~exact] = differences[~exact]
     norm = np.linalg.norm(gradient, axis=1)
     gradient = np.where(norm[:, None] > 0, gradient / np.maximum(norm, 1e-300)[:, None],
                         (0.0, 1.0, 0.0))
