@@ -49,6 +49,23 @@ def test_run_writes_the_requested_frames_and_a_gif(scene, tmp_path, capsys):
     assert "3 frames of 'tiny'" in capsys.readouterr().out
 
 
+def test_run_exports_the_formats_of_the_flag_or_the_scene(scene, tmp_path, capsys):
+    """--export obj,npz writes an OBJ per frame and the npz beside the PNGs; without the flag
+    the scene's [output] formats decide (here "pc2")."""
+    out = tmp_path / "out"
+    assert cli.main(["run", str(scene), "--out", str(out), "--frames", "2", "--no-progress",
+                     "--export", "obj,npz"]) == 0
+    assert sorted(p.name for p in out.glob("tiny_*")) == ["tiny_body0_00000.obj",
+                                                          "tiny_body0_00001.obj"]
+    assert (out / "tiny.npz").is_file() and "+ 3 geometry files" in capsys.readouterr().out
+    scene.write_text(SCENE.replace("supersample = 1", 'supersample = 1\nformats = ["png", "pc2"]'))
+    assert cli.main(["run", str(scene), "--out", str(out), "--frames", "2", "--no-progress"]) == 0
+    assert (out / "tiny_body0.pc2").is_file() and (out / "tiny_body0_rest.obj").is_file()
+    scene.write_text(SCENE.replace("supersample = 1", 'supersample = 1\nformats = ["png", "fbx"]'))
+    assert cli.main(["run", str(scene), "--no-progress"]) == 2
+    assert 'output.formats must be a list of "png" (always)' in capsys.readouterr().err
+
+
 def test_bad_scene_exits_2_naming_the_key(tmp_path, capsys):
     bad = tmp_path / "bad.toml"
     bad.write_text(SCENE.replace("rows = 5", "rows = 5\nrowz = 5"))
@@ -57,7 +74,8 @@ def test_bad_scene_exits_2_naming_the_key(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("argv", [["run"], ["run", "x.toml", "--frames", "0"], ["run", "x.toml", "--bogus"],
-                                  ["run", "x.toml", "--arch", "tpu"], ["frobnicate"]])
+                                  ["run", "x.toml", "--arch", "tpu"], ["frobnicate"],
+                                  ["run", "x.toml", "--export", "obj,fbx"]])
 def test_arguments_are_parsed_strictly(argv):
     with pytest.raises(SystemExit) as err:
         cli.main(argv)

@@ -16,6 +16,7 @@ from .mesh import (Mesh, box_mesh, combine_meshes, grid_mesh, load_mesh, save_me
                    sphere_mesh, tet_grid_mesh)
 from .model import Model
 from .paths import Keyframes, Oscillation
+from .export import Exporter
 from .handles import Handle
 from .mesh_collider import MeshCollider
 from .simulation import Simulation
@@ -28,7 +29,7 @@ from .topology import Cloth
 from .wind import Wind
 
 __all__ = [
-    "init", "Box", "Capsule", "Collider", "MeshCollider", "Plane", "Sphere", "SimulationDiverged", "TeamStalled",
+    "init", "Box", "Capsule", "Collider", "Exporter", "MeshCollider", "Plane", "Sphere", "SimulationDiverged", "TeamStalled",
     "ForceSettings",
     "INTEGRATORS", "Integrator", "ExplicitEuler", "SymplecticEuler", "Verlet", "PBD", "XPBD",
     "ImplicitEuler", "RK4", "PRESETS", "Material", "SpringKind", "SpringParams", "Mesh", "grid_mesh",

@@ -11,6 +11,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from .. import backend
+from ..export import FORMATS
 
 TEST_FRAMES, TEST_SIZE = 4, (160, 96)
 
@@ -29,10 +30,21 @@ def _run_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--precision", choices=sorted(backend.PRECISIONS),
                         help="float precision (default: the scene's, else f32)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--export", type=_formats, metavar="FORMATS",
+                        help=f"geometry to write with the frames, comma-separated: "
+                             f"{','.join(FORMATS)} (default: the scene's [output] formats)")
+
+
+def _formats(text: str) -> tuple[str, ...]:
+    formats = tuple(f.strip() for f in text.split(",") if f.strip())
+    unknown = [f for f in formats if f not in FORMATS]
+    if unknown or not formats:
+        raise argparse.ArgumentTypeError(f"must list some of {','.join(FORMATS)}, got {text!r}")
+    return formats
 
 
 def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progress=True,
-        test=False, mp4=None) -> tuple[int, list[Path]]:
+        test=False, mp4=None, export=None) -> tuple[int, list[Path]]:
     """Load, initialise, run and report; returns (exit code, frame paths). Exit codes: 0 done,
     1 diverged, 2 a scene the run refuses (the message names the key), 128 + signal when
     stopped by Ctrl-C (130) or SIGTERM (143)."""
@@ -52,6 +64,8 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
                 output = replace(output, width=TEST_SIZE[0], height=TEST_SIZE[1], supersample=1)
             if mp4 is not None:
                 output = replace(output, mp4=mp4)
+            if export is not None:
+                output = replace(output, export=export)
             work = scene.work(frames)
             if work.seconds > LONG_RUN_SECONDS:
                 print(f"note: '{scene.name}' is a long run: {work.describe()}", file=sys.stderr)
@@ -66,7 +80,8 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
     folder = result.frames[0].parent if result.frames else (out or scene.output.folder)
     summary = (f"{len(result.frames)} frames of '{scene.name}' in {result.wall_seconds:.1f} s "
                f"({result.steps} steps, dt = {result.dt:.3g} s) -> "
-               f"{folder}/ {' '.join(p.name for p in result.outputs)}")
+               f"{folder}/ {' '.join(p.name for p in result.outputs)}"
+               + (f" + {len(result.exports)} geometry files" if result.exports else ""))
     if result.interrupted:
         print(f"interrupted: {summary}", file=sys.stderr)
         return 128 + result.stop_signal, result.frames
@@ -167,7 +182,7 @@ def main(argv=None) -> int:
                      precisions=args.precisions, iterations=args.iterations, duration=args.duration,
                      arch=args.arch, plot=not args.no_plot, progress=not args.no_progress)
     code, _ = run(args.scene, out=args.out, frames=args.frames, arch=args.arch,
-                  precision=args.precision, progress=not args.no_progress)
+                  precision=args.precision, progress=not args.no_progress, export=args.export)
     return code
 
 
@@ -185,7 +200,7 @@ def demo_main(scene_path, argv=None, description: str | None = None) -> list[Pat
     args = parser.parse_args(argv)
     code, frames = run(scene_path, out=args.out_dir, frames=args.frames, arch=args.arch,
                        precision=args.precision, progress=not args.no_progress, test=args.test,
-                       mp4=args.mp4 or None)
+                       mp4=args.mp4 or None, export=args.export)
     if code:
         raise SystemExit(code)
     return frames

@@ -9,12 +9,13 @@ exist, with stop signals held until they are written.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import SimulationDiverged
+from ..export import Exporter
 from ..render import Camera, FrameSequence, Renderer
 from ..render.springs2d import FRONT, SpringView
 from . import signals
@@ -25,13 +26,14 @@ class RunResult:
     """What a run wrote and why it stopped."""
 
     frames: list[Path]
-    outputs: list[Path]
+    outputs: list[Path]               # GIF, MP4
     steps: int
     dt: float
     wall_seconds: float
     interrupted: bool = False
     diverged: SimulationDiverged | None = None
     stop_signal: int | None = None   # the signal that interrupted the run (SIGINT, SIGTERM)
+    exports: list[Path] = field(default_factory=list)   # geometry files (export.Exporter)
 
     @property
     def complete(self) -> bool:
@@ -63,19 +65,23 @@ def _frame_painter(scene, sim, out):
 
 
 def run_scene(scene, *, folder=None, frames: int | None = None, progress: bool = True,
-              output=None) -> RunResult:
+              output=None, export=None) -> RunResult:
     """Simulate and render `frames` frames (default: the scene's duration x fps) into `folder`
     (default: the output's folder). output: an app.scene.Output replacing the scene's (size,
-    formats, style). Call ti_cloth.init first. Returns a RunResult; Ctrl-C, SIGTERM (in the
-    main thread) or a SimulationDiverged end the run early, in any phase, with every finished
-    frame kept and the GIF/MP4 assembled from them."""
+    formats, style). export: geometry formats (ti_cloth.export.FORMATS) written with each
+    frame (default: the output's). Call ti_cloth.init first. Returns a RunResult; Ctrl-C,
+    SIGTERM (in the main thread) or a SimulationDiverged end the run early, in any phase, with
+    every finished frame kept and the GIF/MP4 and point caches assembled from them."""
     from tqdm import tqdm
 
     substeps = scene.resolved_substeps()
     frames = scene.frames if frames is None else frames
     out = scene.output if output is None else output
-    sequence = FrameSequence(folder or out.folder, fps=scene.fps, gif=out.gif, mp4=out.mp4, name=scene.name,
+    folder = folder or out.folder
+    sequence = FrameSequence(folder, fps=scene.fps, gif=out.gif, mp4=out.mp4, name=scene.name,
                              gif_width=min(out.gif_width, out.width))
+    exporter = Exporter(folder, out.export if export is None else export, name=scene.name,
+                        cloth=scene.cloth, fps=scene.fps)
     start = time.perf_counter()
     sim, stop, diverged = None, None, None
     bar = tqdm(total=frames, unit="frame", disable=not progress, dynamic_ncols=True)
@@ -87,6 +93,7 @@ def run_scene(scene, *, folder=None, frames: int | None = None, progress: bool =
                 if frame:
                     sim.step(substeps)
                 sequence.write(paint())
+                exporter.write(sim)
                 elapsed = time.perf_counter() - start
                 bar.set_postfix_str(f"t={sim.time:.3f} s, "
                                     f"{sim.step_count / max(elapsed, 1e-9):,.0f} steps/s")
@@ -99,9 +106,10 @@ def run_scene(scene, *, folder=None, frames: int | None = None, progress: bool =
             bar.close()
     with signals.stop_signals_held() as held:
         outputs = sequence.close()
+        exports = exporter.close()
     if stop is None and held:
         stop = signals.Stopped(held[0])
-    return RunResult(frames=sequence.paths, outputs=outputs,
+    return RunResult(frames=sequence.paths, outputs=outputs, exports=exports,
                      steps=sim.step_count if sim is not None else 0,
                      dt=sim.dt if sim is not None else scene.frame_dt / substeps,
                      wall_seconds=time.perf_counter() - start, interrupted=stop is not None,

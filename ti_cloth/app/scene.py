@@ -21,6 +21,7 @@ from ..handles import Handle
 from ..integrators import INTEGRATORS
 from ..material import DAMPING_MODELS, PRESETS, Material, SpringParams
 from ..mesh import PLANES, Mesh, grid_mesh, load_mesh
+from ..export import FORMATS
 from ..mesh_collider import MeshCollider
 from ..paths import INTERPOLATIONS, Keyframes, Oscillation
 from ..render.camera import Camera
@@ -55,6 +56,7 @@ class Output:
     view: str = "3d"
     ground: float | None = None
     style: SurfaceStyle = field(default_factory=SurfaceStyle)
+    export: tuple = ()          # geometry formats (export.FORMATS) written beside the frames
 
 
 @dataclass
@@ -499,8 +501,10 @@ def _camera(table: Table):
 
 def _output(table: Table, name: str, colliders) -> Output:
     formats = table.value("formats", ["png", "gif"])
-    if not isinstance(formats, list) or not set(formats) <= {"png", "gif", "mp4"} or "png" not in formats:
-        table._bad("formats", formats, 'a list of "png" (always) and any of "gif", "mp4"')
+    if (not isinstance(formats, list) or not set(formats) <= {"png", "gif", "mp4", *FORMATS}
+            or "png" not in formats):
+        table._bad("formats", formats, 'a list of "png" (always) and any of "gif", "mp4", '
+                   + ", ".join(f'"{f}"' for f in FORMATS))
     ground = table.value("ground", "auto")
     if ground == "auto":
         planes = [c for c in colliders if isinstance(c, Plane) and c.normal == (0.0, 1.0, 0.0)]
@@ -520,7 +524,7 @@ def _output(table: Table, name: str, colliders) -> Output:
     if not folder or "\0" in folder:
         table._bad("folder", folder, "a folder path")
     output = Output(folder=Path(folder), gif="gif" in formats, mp4="mp4" in formats,
-                    ground=ground, **options)
+                    ground=ground, export=tuple(f for f in FORMATS if f in formats), **options)
     samples = output.width * output.height * output.supersample**2
     if samples > limits.SAMPLES:
         table._bad("width", output.width, f"such that width x height x supersample^2 "

@@ -1,0 +1,74 @@
+"""Geometry export (export.py): OBJ and PLY read back through meshio, PC2 parsed back, npz,
+ghosts left out, torn triangles dropped per frame, the scene key and command-line flag."""
+
+import meshio
+import numpy as np
+import pytest
+
+import ti_cloth as tc
+from helpers import report
+from ti_cloth.export import read_pc2
+
+
+def torn_sheet():
+    """A 6 x 6 sheet held at its left edge while a handle drags its right edge away fast: it
+    tears within a few frames."""
+    mesh = tc.grid_mesh(6, 6, size=(0.5, 0.5))
+    left = np.flatnonzero(mesh.vertices[:, 0] == 0.0)
+    right = np.flatnonzero(np.isclose(mesh.vertices[:, 0], 0.5))
+    cloth = tc.Cloth(mesh, tc.Material(), pinned=left)
+    pull = tc.Handle(right, lambda t: (2.0 * t, 0.0, 0.0))
+    return tc.Simulation(cloth, integrator="xpbd", dt=1 / 240, tearing=0.3, handles=[pull]), cloth
+
+
+def test_obj_ply_pc2_and_npz_hold_each_frame_as_the_simulation_had_it(f64, tmp_path):
+    sim, cloth = torn_sheet()
+    frames, positions, faces = 6, [], []
+    with tc.Exporter(tmp_path, ["obj", "ply", "pc2", "npz"], name="sheet", cloth=cloth,
+                     fps=30) as export:
+        for frame in range(frames):
+            if frame:
+                sim.step(8)
+            export.write(sim)
+            positions.append(sim.positions())
+            torn = set(sim.torn_triangles().tolist())
+            faces.append([tuple(t) for k, t in enumerate(cloth.mesh.triangles.tolist())
+                          if k not in torn])
+    report("triangles shown per frame", [len(f) for f in faces], "fewer once it tears")
+    assert len(faces[0]) == cloth.mesh.triangle_count and len(faces[-1]) < len(faces[0])
+    for frame in range(frames):
+        for ext in ("obj", "ply"):
+            read = meshio.read(tmp_path / f"sheet_body0_{frame:05d}.{ext}")
+            np.testing.assert_allclose(read.points, positions[frame], rtol=0, atol=1e-12)
+            assert [tuple(t) for t in read.cells_dict["triangle"].tolist()] == faces[frame]
+    header, cached = read_pc2(tmp_path / "sheet_body0.pc2")
+    assert header == {"points": cloth.particle_count, "start": 0.0, "rate": 1.0, "samples": frames}
+    np.testing.assert_array_equal(cached, np.asarray(positions, np.float32))
+    rest = meshio.read(tmp_path / "sheet_body0_rest.obj")
+    np.testing.assert_allclose(rest.points, cloth.particle_position, atol=1e-12)
+    assert len(rest.cells_dict["triangle"]) == cloth.mesh.triangle_count
+    saved = np.load(tmp_path / "sheet.npz")
+    np.testing.assert_array_equal(saved["positions"], np.asarray(positions))
+    np.testing.assert_allclose(saved["time"], np.arange(frames) * 8 / 240, atol=1e-12)
+    assert not list(tmp_path.glob(".*tmp*"))
+
+
+def test_ghost_particles_are_never_exported_and_strands_are_lines(f64, tmp_path):
+    hair = tc.hair(4, 3, 0.2, ghosts=True)
+    assert hair.ghost.any()
+    sim = tc.Simulation(hair, integrator="implicit_euler", dt=1e-3)
+    with tc.Exporter(tmp_path, ["ply", "pc2", "npz"], name="hair", cloth=hair, fps=30) as export:
+        export.write(sim)
+    shown = np.flatnonzero(~hair.ghost)
+    read = meshio.read(tmp_path / "hair_body0_00000.ply")
+    np.testing.assert_allclose(read.points, sim.positions()[shown], atol=1e-12)
+    segments = shown[read.cells_dict["line"]]
+    stretch = {tuple(s) for s in np.sort(hair.spring_indices[hair.spring_kind == tc.SpringKind.STRETCH], axis=1)}
+    assert {tuple(s) for s in np.sort(segments, axis=1)} <= stretch and len(segments) == 4 * 3
+    assert read_pc2(tmp_path / "hair_body0.pc2")[0]["points"] == len(shown)
+    np.testing.assert_array_equal(np.load(tmp_path / "hair.npz")["particle"], shown)
+
+
+def test_bad_formats_are_refused_by_name(tmp_path):
+    with pytest.raises(ValueError, match="export format must be one of"):
+        tc.Exporter(tmp_path, ["obj", "fbx"], name="x", cloth=tc.string(4, 1.0), fps=30)
