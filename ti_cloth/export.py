@@ -47,6 +47,7 @@ class Exporter:
         self.fps = finite_number("fps", fps, 0.0, strict=True, unit="frames/s")
         self.cloth = cloth
         self.bodies = [_Body(cloth, b) for b in range(len(cloth.body_offsets) - 1)]
+        self._shown = np.concatenate([body.points for body in self.bodies])   # npz order
         self.frames = 0
         self.paths: list[Path] = []
         self.folder.mkdir(parents=True, exist_ok=True)
@@ -86,9 +87,8 @@ class Exporter:
             if "pc2" in self.formats:
                 self._caches[body.name].append(x[body.points])
         if "npz" in self.formats:
-            shown = np.concatenate([body.points for body in self.bodies])
-            self._samples["positions"].append(x[shown])
-            self._samples["velocities"].append(sim.velocities()[shown])
+            self._samples["positions"].append(x[self._shown])
+            self._samples["velocities"].append(sim.velocities()[self._shown])
             self._samples["time"].append(sim.time)
         self.frames += 1
         self.paths += written
@@ -101,13 +101,12 @@ class Exporter:
         self._caches = {}
         if "npz" in self.formats and self._samples["time"]:
             path = self.folder / f"{self.name}.npz"
-            points = [(body.points, b) for b, body in enumerate(self.bodies)]
             with atomic_path(path) as tmp:
                 np.savez(tmp, positions=np.stack(self._samples["positions"]),
                          velocities=np.stack(self._samples["velocities"]),
-                         time=np.asarray(self._samples["time"]),
-                         particle=np.concatenate([p for p, _ in points]),
-                         body=np.concatenate([np.full(len(p), b) for p, b in points]))
+                         time=np.asarray(self._samples["time"]), particle=self._shown,
+                         body=np.concatenate([np.full(len(body.points), b)
+                                              for b, body in enumerate(self.bodies)]))
             self.paths.append(path)
             self._samples = {key: [] for key in self._samples}
         return self.paths
