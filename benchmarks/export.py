@@ -3,7 +3,7 @@
 An N x N sheet (xpbd, 1/240 s, 4 steps a frame): ms per frame of Exporter.write for each
 format alone (median of several rounds of frames), and of the frame's steps.
 
-    python benchmarks/export.py [--sizes 64 128] [--frames 20] [--repeats 5]
+    python benchmarks/export.py [--sizes 64 128] [--frames 20] [--repeats 5]   # usd: pip install ".[usd]"
 """
 
 import argparse

@@ -1,5 +1,5 @@
-"""Geometry export (export.py): OBJ and PLY read back through meshio, PC2 parsed back, npz,
-ghosts left out, torn triangles dropped per frame, the scene key and command-line flag."""
+"""Geometry export (export.py): OBJ and PLY read back through meshio, USD through pxr, PC2
+parsed back, npz; ghosts left out, torn triangles dropped per frame."""
 
 import meshio
 import numpy as np
@@ -24,7 +24,7 @@ def torn_sheet():
 def test_obj_ply_pc2_and_npz_hold_each_frame_as_the_simulation_had_it(f64, tmp_path):
     sim, cloth = torn_sheet()
     frames, positions, faces = 6, [], []
-    with tc.Exporter(tmp_path, ["obj", "ply", "pc2", "npz"], name="sheet", cloth=cloth,
+    with tc.Exporter(tmp_path, ["obj", "ply", "pc2", "npz", "usd"], name="sheet", cloth=cloth,
                      fps=30) as export:
         for frame in range(frames):
             if frame:
@@ -51,13 +51,25 @@ def test_obj_ply_pc2_and_npz_hold_each_frame_as_the_simulation_had_it(f64, tmp_p
     np.testing.assert_array_equal(saved["positions"], np.asarray(positions))
     np.testing.assert_allclose(saved["time"], np.arange(frames) * 8 / 240, atol=1e-12)
     assert not list(tmp_path.glob(".*tmp*"))
+    from pxr import Usd, UsdGeom
+    stage = Usd.Stage.Open(str(tmp_path / "sheet.usdc"))
+    assert (stage.GetTimeCodesPerSecond(), stage.GetFramesPerSecond()) == (30, 30)
+    assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (0, frames - 1)
+    assert UsdGeom.GetStageUpAxis(stage) == "Y" and UsdGeom.GetStageMetersPerUnit(stage) == 1.0
+    mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/sheet/body0"))
+    for frame in range(frames):
+        np.testing.assert_array_equal(np.asarray(mesh.GetPointsAttr().Get(frame)),
+                                      np.asarray(positions[frame], np.float32))
+        indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(frame)).reshape(-1, 3)
+        assert [tuple(t) for t in indices.tolist()] == faces[frame]
 
 
 def test_ghost_particles_are_never_exported_and_strands_are_lines(f64, tmp_path):
     hair = tc.hair(4, 3, 0.2, ghosts=True)
     assert hair.ghost.any()
     sim = tc.Simulation(hair, integrator="implicit_euler", dt=1e-3)
-    with tc.Exporter(tmp_path, ["ply", "pc2", "npz"], name="hair", cloth=hair, fps=30) as export:
+    with tc.Exporter(tmp_path, ["ply", "pc2", "npz", "usd"], name="hair", cloth=hair, fps=30,
+                     usd_suffix=".usda") as export:
         export.write(sim)
     shown = np.flatnonzero(~hair.ghost)
     read = meshio.read(tmp_path / "hair_body0_00000.ply")
@@ -67,6 +79,12 @@ def test_ghost_particles_are_never_exported_and_strands_are_lines(f64, tmp_path)
     assert {tuple(s) for s in np.sort(segments, axis=1)} <= stretch and len(segments) == 4 * 3
     assert read_pc2(tmp_path / "hair_body0.pc2")[0]["points"] == len(shown)
     np.testing.assert_array_equal(np.load(tmp_path / "hair.npz")["particle"], shown)
+    from pxr import Usd, UsdGeom
+    stage = Usd.Stage.Open(str(tmp_path / "hair.usda"))
+    curves = UsdGeom.BasisCurves(stage.GetPrimAtPath("/hair/body0"))
+    assert list(curves.GetCurveVertexCountsAttr().Get()) == [2] * len(segments)
+    np.testing.assert_array_equal(np.asarray(curves.GetPointsAttr().Get(0)),
+                                  sim.positions()[segments.ravel()].astype(np.float32))
 
 
 def test_bad_formats_are_refused_by_name(tmp_path):

@@ -1,6 +1,7 @@
-"""Geometry out of a run, frame by frame, for Blender, Houdini and numpy: OBJ / PLY files per
-frame and body (through meshio), a PC2 point cache per body with its rest-pose OBJ (Blender's
-Mesh Cache modifier), and an npz of positions and velocities.
+"""Geometry out of a run, frame by frame, for Blender, Houdini, Omniverse and numpy: OBJ / PLY
+files per frame and body (through meshio), a PC2 point cache per body with its rest-pose OBJ
+(Blender's Mesh Cache modifier), one USD stage (Pixar's usd-core, the optional extra `[usd]`)
+and an npz of positions and velocities.
 
     with tc.Exporter("out", ["obj", "pc2"], name="drape", fps=30, cloth=cloth) as export:
         for frame in range(frames):
@@ -26,7 +27,7 @@ from ._validate import finite_number, require
 from .files import atomic_path, temporary_name
 from .material import SpringKind
 
-FORMATS = ("obj", "ply", "pc2", "npz")
+FORMATS = ("obj", "ply", "pc2", "npz", "usd")
 PC2_HEADER = struct.Struct("<12siiffi")   # "POINTCACHE2\0", version 1, points, start, rate, samples
 
 
@@ -36,10 +37,16 @@ class Exporter:
     pc2: `<name>_<body>.pc2` (float32 points per frame, start frame 0, one sample per frame)
         and `<name>_<body>_rest.obj`, its rest pose with the same vertices in the same order;
     npz: `<name>.npz` with `positions` and `velocities` (frames, points, 3) [m, m/s], `time`
-        (frames,) [s], and per point its `particle` index in the Cloth and its `body`.
+        (frames,) [s], and per point its `particle` index in the Cloth and its `body`;
+    usd: `<name>.usdc` (or `.usda` with usd_suffix=".usda"), one stage: each body a
+        UsdGeom.Mesh (strings and hair: UsdGeom.BasisCurves, linear) under /<name>/body<b>
+        with its points time-sampled per frame (time code = frame) and, for a mesh that tears,
+        its faces too; time codes per second = frames per second = fps, start and end time
+        codes, up axis Y, metres per unit 1.
     Bodies are named body0, body1, ... in the order the Cloth joined them."""
 
-    def __init__(self, folder, formats, *, name: str, cloth, fps: float):
+    def __init__(self, folder, formats, *, name: str, cloth, fps: float,
+                 usd_suffix: str = ".usdc"):
         formats = [formats] if isinstance(formats, str) else list(formats)
         for f in formats:
             require(f in FORMATS, "export format", f, f"one of {FORMATS}")
@@ -63,6 +70,9 @@ class Exporter:
                 self.paths.append(rest)
                 self._caches[body.name] = _PointCache(self.folder / f"{name}_{body.name}.pc2",
                                                       len(body.points))
+        require(usd_suffix in (".usdc", ".usda"), "usd_suffix", usd_suffix, '".usdc" or ".usda"')
+        self._stage = (_UsdStage(self.folder / f"{name}{usd_suffix}", name, self.bodies, self.fps)
+                       if "usd" in formats else None)
 
     def __enter__(self) -> Exporter:
         return self
@@ -86,6 +96,8 @@ class Exporter:
                     written.append(path)
             if "pc2" in self.formats:
                 self._caches[body.name].append(x[body.points])
+            if self._stage is not None:
+                self._stage.add(body, self.frames, x[body.points], torn[body.triangle_index])
         if "npz" in self.formats:
             self._samples["positions"].append(x[self._shown])
             self._samples["velocities"].append(sim.velocities()[self._shown])
@@ -99,6 +111,9 @@ class Exporter:
         for cache in self._caches.values():
             self.paths.append(cache.close())
         self._caches = {}
+        if self._stage is not None:
+            self.paths.append(self._stage.save(self.frames))
+            self._stage = None
         if "npz" in self.formats and self._samples["time"]:
             path = self.folder / f"{self.name}.npz"
             with atomic_path(path) as tmp:
@@ -165,6 +180,75 @@ class _PointCache:
         self.file.write(PC2_HEADER.pack(b"POINTCACHE2\0", 1, self.points, 0.0, 1.0, self.samples))
         self.file.close()
         self.tmp.replace(self.path)
+        return self.path
+
+
+class _UsdStage:
+    """One USD stage in memory, a prim per body, time samples added frame by frame; saved
+    (atomically) by save()."""
+
+    def __init__(self, path: Path, name: str, bodies, fps: float):
+        try:
+            from pxr import Sdf, Usd, UsdGeom
+        except ImportError as err:
+            raise ImportError("USD export needs Pixar's usd-core: pip install 'ti_cloth[usd]'") from err
+        self.path, self.UsdGeom, self.Sdf = path, UsdGeom, Sdf
+        self.stage = Usd.Stage.CreateInMemory()
+        self.stage.SetTimeCodesPerSecond(fps)
+        self.stage.SetFramesPerSecond(fps)
+        self.stage.SetStartTimeCode(0)
+        UsdGeom.SetStageUpAxis(self.stage, UsdGeom.Tokens.y)
+        UsdGeom.SetStageMetersPerUnit(self.stage, 1.0)
+        root = "/" + (Sdf.Path.IsValidIdentifier(name) and name or "scene")
+        self.stage.SetDefaultPrim(UsdGeom.Xform.Define(self.stage, root).GetPrim())
+        self.prims, self.torn_before = {}, {}
+        for body in bodies:
+            prim_path = f"{root}/{body.name}"
+            if len(body.triangles):
+                mesh = UsdGeom.Mesh.Define(self.stage, prim_path)
+                mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+                mesh.CreateDoubleSidedAttr(True)
+                self._faces(mesh, body.triangles, None)
+            else:
+                mesh = UsdGeom.BasisCurves.Define(self.stage, prim_path)
+                mesh.CreateTypeAttr(UsdGeom.Tokens.linear)
+                mesh.CreateCurveVertexCountsAttr([2] * len(body.segments))
+                mesh.CreateWidthsAttr([0.002])
+                mesh.SetWidthsInterpolation(UsdGeom.Tokens.constant)
+            self.prims[body.name] = mesh
+            self.torn_before[body.name] = np.zeros(len(body.triangle_index), bool)
+
+    def _faces(self, mesh, triangles: np.ndarray, time) -> None:
+        counts = [3] * len(triangles)
+        indices = np.asarray(triangles, np.int32).ravel().tolist()
+        if time is None:
+            mesh.CreateFaceVertexCountsAttr(counts)
+            mesh.CreateFaceVertexIndicesAttr(indices)
+        else:
+            mesh.GetFaceVertexCountsAttr().Set(counts, time)
+            mesh.GetFaceVertexIndicesAttr().Set(indices, time)
+
+    def add(self, body, frame: int, points: np.ndarray, torn: np.ndarray) -> None:
+        """The body's points (and, when its torn triangles changed, its faces) at `frame`."""
+        from pxr import Vt
+
+        prim = self.prims[body.name]
+        if len(body.triangles):
+            if (torn != self.torn_before[body.name]).any():
+                if not self.torn_before[body.name].any():      # the intact faces until now
+                    self._faces(prim, body.triangles, 0)
+                self._faces(prim, body.triangles[~torn], frame)
+                self.torn_before[body.name] = torn.copy()
+            positions = points
+        else:
+            positions = points[body.segments.ravel()]          # two points per segment
+        prim.GetPointsAttr().Set(Vt.Vec3fArray.FromNumpy(np.asarray(positions, np.float32)),
+                                 frame)
+
+    def save(self, frames: int) -> Path:
+        self.stage.SetEndTimeCode(max(frames - 1, 0))
+        with atomic_path(self.path) as tmp:
+            self.stage.Export(str(tmp))
         return self.path
 
 
