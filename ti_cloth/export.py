@@ -50,6 +50,7 @@ class Exporter:
         formats = [formats] if isinstance(formats, str) else list(formats)
         for f in formats:
             require(f in FORMATS, "export format", f, f"one of {FORMATS}")
+        require(usd_suffix in (".usdc", ".usda"), "usd_suffix", usd_suffix, '".usdc" or ".usda"')
         self.folder, self.formats, self.name = Path(folder), formats, name
         self.fps = finite_number("fps", fps, 0.0, strict=True, unit="frames/s")
         self.cloth = cloth
@@ -70,7 +71,6 @@ class Exporter:
                 self.paths.append(rest)
                 self._caches[body.name] = _PointCache(self.folder / f"{name}_{body.name}.pc2",
                                                       len(body.points))
-        require(usd_suffix in (".usdc", ".usda"), "usd_suffix", usd_suffix, '".usdc" or ".usda"')
         self._stage = (_UsdStage(self.folder / f"{name}{usd_suffix}", name, self.bodies, self.fps)
                        if "usd" in formats else None)
 
@@ -107,7 +107,8 @@ class Exporter:
         return written
 
     def close(self) -> list[Path]:
-        """Finish the PC2 caches and write the npz; returns every file this exporter wrote."""
+        """Finish the PC2 caches, write the USD stage and the npz; returns every file this
+        exporter wrote."""
         for cache in self._caches.values():
             self.paths.append(cache.close())
         self._caches = {}
