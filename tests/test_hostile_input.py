@@ -3,6 +3,7 @@ key or argument, before anything is allocated or run (limits.py holds the ranges
 that would hide a blow-up or outlive their process say so. The property-based version of
 these cases is test_fuzz.py."""
 
+import gc
 import re
 import signal
 from pathlib import Path
@@ -16,6 +17,7 @@ from ti_cloth.app import signals
 from ti_cloth.app.scene import load_scene
 from ti_cloth.app.scene_file import SceneError
 from ti_cloth.errors import StaleSimulation
+from ti_cloth.render import Camera, Renderer
 from ti_cloth.render.image import FrameSequence
 
 BASE = """
@@ -245,6 +247,40 @@ def test_step_counts_are_checked_and_a_simulation_after_a_second_init_raises(f64
     fresh = tc.Simulation(sheet(), dt=1e-3)
     fresh.step(2)
     assert np.isfinite(fresh.positions()).all()
+
+
+def test_init_closes_the_renderers_of_the_runtime_it_ends(f64):
+    """A Renderer's Taichi ndarrays freed after a second init asked the new runtime to delete
+    them, and it freed its own live ndarray at the same address (a demo test's worker crashed
+    in CI; here a renderer of the new runtime lost its buffer). Now init closes live renderers
+    and collects dead ones first: the old renderers' buffers go with their runtime."""
+    camera = Camera(position=(0.5, 1.0, 2.0), target=(0.5, 0.0, 0.0), fov=60.0)
+    cloth = sheet()
+
+    def frame(renderer):
+        renderer.begin()
+        renderer.draw_mesh(cloth.particle_position, cloth.mesh.triangles)
+        return renderer.end()
+
+    kept = Renderer(48, 32, camera)
+    expected = frame(kept)
+    gc.disable()                  # dead renderers stay uncollected until after the init
+    try:
+        for _ in range(8):
+            dead = Renderer(48, 32, camera)
+            dead.itself = dead     # a reference cycle: only the cycle collector frees it
+            frame(dead)
+        del dead
+        tc.init(precision="f32")
+        fresh = [Renderer(48, 32, camera) for _ in range(8)]
+        gc.collect()
+        for renderer in fresh:
+            assert np.array_equal(frame(renderer), expected)
+    finally:
+        gc.enable()
+        tc.init(precision="f64")
+    with pytest.raises(ValueError, match="renderer"):
+        kept.begin()
 
 
 def test_tearing_does_not_hide_a_step_ten_times_too_large(f64):

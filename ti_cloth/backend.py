@@ -9,6 +9,7 @@ Calling `init` again resets Taichi: fields and simulations created before become
 
 from __future__ import annotations
 
+import gc
 import os
 import weakref
 from dataclasses import dataclass
@@ -58,12 +59,36 @@ def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None,
                    default_ip=ti.i32, random_seed=0, debug=debug, log_level=ti.WARN)
     if threads is not None:
         options["cpu_max_num_threads"] = threads
+    for user in list(_closed_by_init):
+        user.close()
+    _closed_by_init.clear()
+    gc.collect()          # dead objects holding ndarrays go while their runtime still exists
     ti.init(**options)
     global _generation, _tree_count
     _generation += 1
     _tree_count = 0
     _config = BackendConfig(arch=arch, precision=precision, threads=threads)
     return _config
+
+
+def ensure(arch: str = "cpu", precision: str = "f32", threads: int | None = None) -> BackendConfig:
+    """`init` unless the runtime already runs with exactly these settings, which then keeps
+    its compiled kernels, pooled simulations and open renderers."""
+    if _config == BackendConfig(arch=arch, precision=precision, threads=threads):
+        return _config
+    return init(arch=arch, precision=precision, threads=threads)
+
+
+# Objects holding Taichi ndarrays. An ndarray freed after `init` asks the *new* runtime to
+# delete it, and the new runtime may hold a live ndarray at the same address: it frees that one
+# (a later launch reads freed memory). So `init` closes these first (their ndarrays go with the
+# runtime they belong to), after collecting dead ones.
+_closed_by_init: weakref.WeakSet = weakref.WeakSet()
+
+
+def close_at_init(user) -> None:
+    """Have `user.close()` release its Taichi ndarrays when `init` next ends this runtime."""
+    _closed_by_init.add(user)
 
 
 def generation() -> int:

@@ -69,7 +69,7 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
             work = scene.work(frames)
             if work.seconds > LONG_RUN_SECONDS:
                 print(f"note: '{scene.name}' is a long run: {work.describe()}", file=sys.stderr)
-            backend.init(arch=arch, precision=precision or scene.precision)
+            backend.ensure(arch=arch, precision=precision or scene.precision)
     except (SceneError, FileNotFoundError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2, []

@@ -115,7 +115,7 @@ def reference_trajectory(scene, duration: float | None = None, arch: str = "cpu"
     """rk4 in f64 from the largest frame_dt / 2^k below half its stable step, halved until the
     positions at every sample change by less than tolerance x cloth size (at most
     MAX_REFERENCE_HALVINGS halvings; then RuntimeError names the change reached)."""
-    backend.init(arch=arch, precision="f64")
+    backend.ensure(arch=arch, precision="f64")
     times = sample_times(scene, duration)
     size = scene.size
     limit = 0.5 * stable_dt(scene.cloth, "rk4", scene.drag)
@@ -318,7 +318,7 @@ def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("
     bar = tqdm(total=len(precisions) * runs_per_precision, unit="run", disable=not progress,
                dynamic_ncols=True)
     for precision in precisions:
-        backend.init(arch=arch, precision=precision)
+        backend.ensure(arch=arch, precision=precision)
         for name, count, integrator in _configurations(integrators, iterations):
             sim = scene.build(integrator=integrator, dt=dts[-1])
             sim.step(1)     # compile outside the timing

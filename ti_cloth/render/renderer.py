@@ -18,7 +18,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 import taichi as ti
 
-from .. import limits
+from .. import backend, limits
 from .._validate import as_array, finite_number, in_range, integer, require
 from ..backend import taichi_dtype
 from ..colliders import BOX, CAPSULE, SPHERE, Box, Capsule, Plane, Sphere
@@ -167,6 +167,7 @@ class Renderer:
         self._topologies: dict[int, tuple] = {}
         self._cam = None
         self._open = True
+        backend.close_at_init(self)
 
     def __enter__(self) -> Renderer:
         return self
@@ -207,7 +208,8 @@ class Renderer:
         return from_taichi(self._image)
 
     def close(self) -> None:
-        """Release the buffers; the renderer cannot be used after."""
+        """Release the buffers; the renderer cannot be used after. ti_cloth.init calls it:
+        the buffers belong to the runtime init ends."""
         self._scratch.clear()
         self._topologies.clear()
         self._samples = self._image = self._cam = None
