@@ -7,7 +7,7 @@ import importlib
 from .backend import init
 from .bodies import hair, soft_body, string, tet_block
 from .colliders import Box, Capsule, Collider, Plane, Sphere
-from .errors import SimulationDiverged, TeamStalled
+from .errors import SimulationDiverged, StateMismatch, TeamStalled
 from .forces import ForceSettings
 from .integrators import (INTEGRATORS, PBD, RK4, XPBD, ExplicitEuler, ImplicitEuler, Integrator,
                           SymplecticEuler, Verlet)

@@ -42,3 +42,8 @@ class TeamStalled(RuntimeError):
     never arrived: the Taichi thread pool did not give every worker a thread of its own. The
     steps of that launch ran unsynchronised, so the state is not to be trusted."""
 
+
+
+class StateMismatch(ValueError):
+    """A saved state (Simulation.load_state, a resumed run) that this simulation cannot take:
+    not a state file, another state format, or saved by a different simulation."""

@@ -12,23 +12,35 @@ Only what a body shows is written: ghost particles (hair) never are, and a torn 
 leaves the frame's OBJ / PLY from the frame it tore in (a PC2 cache keeps the rest topology).
 Bodies without triangles (strings, hair) are written as line segments (their stretch
 springs) in PLY, as points in OBJ (meshio's OBJ has no lines) and in full in the PC2 and npz.
-Every file is written under a temporary name and renamed, so a run stopped by Ctrl-C, SIGTERM
-or a divergence keeps every finished frame, and its PC2 caches hold those frames.
+OBJ / PLY files are written as frames come; the PC2 caches, the npz and the USD stage are
+assembled by close() from a journal the frames are appended to (`.<name>.journal`, fixed-size
+records), so a run stopped by Ctrl-C, SIGTERM or a divergence still gets them with every
+finished frame, and a run killed outright (SIGKILL, power loss) resumes from a saved state
+(`first_frame`) with the journal's earlier frames. Every file is written under a temporary
+name and renamed.
 """
 
 from __future__ import annotations
 
+import json
+import re
 import struct
 from pathlib import Path
 
 import numpy as np
 
+from . import backend
 from ._validate import finite_number, require
-from .files import atomic_path, temporary_name
+from .errors import StateMismatch
+from .files import atomic_path
 from .material import SpringKind
 
 FORMATS = ("obj", "ply", "pc2", "npz", "usd")
+STREAMS = ("pc2", "npz", "usd")            # assembled at close from the journal
 PC2_HEADER = struct.Struct("<12siiffi")   # "POINTCACHE2\0", version 1, points, start, rate, samples
+JOURNAL_MAGIC = b"TICLOTHJ"
+MESHIO_STAMP = re.compile(rb"Created by meshio [^,\r\n]*(, [^\r\n]*)")   # group 1: the time
+HEADER_BYTES = 512        # where OBJ's and PLY's header comment is
 
 
 class Exporter:
@@ -43,10 +55,13 @@ class Exporter:
         with its points time-sampled per frame (time code = frame) and, for a mesh that tears,
         its faces too; time codes per second = frames per second = fps, start and end time
         codes, up axis Y, metres per unit 1.
-    Bodies are named body0, body1, ... in the order the Cloth joined them."""
+    Bodies are named body0, body1, ... in the order the Cloth joined them.
+    first_frame: the frame the first write() is (a resumed run: the files of the frames
+        before it stay, and the journal keeps exactly those frames; StateMismatch if it holds
+        fewer or another layout)."""
 
     def __init__(self, folder, formats, *, name: str, cloth, fps: float,
-                 usd_suffix: str = ".usdc"):
+                 usd_suffix: str = ".usdc", first_frame: int = 0):
         formats = [formats] if isinstance(formats, str) else list(formats)
         for f in formats:
             require(f in FORMATS, "export format", f, f"one of {FORMATS}")
@@ -56,23 +71,35 @@ class Exporter:
         self.cloth = cloth
         self.bodies = [_Body(cloth, b) for b in range(len(cloth.body_offsets) - 1)]
         self._shown = np.concatenate([body.points for body in self.bodies])   # npz order
-        self.frames = 0
+        ends = np.cumsum([len(body.points) for body in self.bodies])
+        self._slices = [slice(end - len(body.points), end) for body, end in zip(self.bodies, ends)]
+        self.usd_path = self.folder / f"{name}{usd_suffix}"
+        self.frames = first_frame
         self.paths: list[Path] = []
         self.folder.mkdir(parents=True, exist_ok=True)
-        for ext in {"obj", "ply"} & set(formats):      # frames of an earlier, longer run
-            for stale in self.folder.glob(f"{name}_body*_[0-9][0-9][0-9][0-9][0-9].{ext}"):
-                stale.unlink()
-        self._caches = {}
-        self._samples = {"positions": [], "velocities": [], "time": []}
+        for ext in {"obj", "ply"} & set(formats):
+            for path in self.folder.glob(f"{name}_body*_[0-9][0-9][0-9][0-9][0-9].{ext}"):
+                if int(path.stem[-5:]) < first_frame:
+                    self.paths.append(path)
+                else:                              # an earlier run's: written again, or stale
+                    path.unlink()
         if "pc2" in formats:
             for body in self.bodies:
                 rest = self.folder / f"{name}_{body.name}_rest.obj"
                 _write_mesh(rest, cloth.particle_position[body.points], body.triangles, ())
                 self.paths.append(rest)
-                self._caches[body.name] = _PointCache(self.folder / f"{name}_{body.name}.pc2",
-                                                      len(body.points))
-        self._stage = (_UsdStage(self.folder / f"{name}{usd_suffix}", name, self.bodies, self.fps)
-                       if "usd" in formats else None)
+        streams = set(STREAMS) & set(formats)
+        self._journal = None
+        if streams:
+            if "usd" in streams:
+                _UsdStage.check_available()
+            record = [("time", "<f8"), ("positions", backend.numpy_real(), (len(self._shown), 3))]
+            if "npz" in streams:
+                record.append(("velocities", backend.numpy_real(), (len(self._shown), 3)))
+            if "usd" in streams and cloth.mesh.triangle_count:
+                record.append(("torn", "u1", (cloth.mesh.triangle_count,)))
+            self._journal = _Journal(self.folder / f".{name}.journal", np.dtype(record),
+                                     first_frame)
 
     def __enter__(self) -> Exporter:
         return self
@@ -94,38 +121,99 @@ class Exporter:
                     _write_mesh(path, x[body.points], body.triangles[~torn[body.triangle_index]],
                                 body.segments[alive[body.segment_index]] if ext == "ply" else ())
                     written.append(path)
-            if "pc2" in self.formats:
-                self._caches[body.name].append(x[body.points])
-            if self._stage is not None:
-                self._stage.add(body, self.frames, x[body.points], torn[body.triangle_index])
-        if "npz" in self.formats:
-            self._samples["positions"].append(x[self._shown])
-            self._samples["velocities"].append(sim.velocities()[self._shown])
-            self._samples["time"].append(sim.time)
+        if self._journal is not None:
+            record = np.zeros((), self._journal.dtype)
+            record["time"] = sim.time
+            record["positions"] = x[self._shown]
+            if "velocities" in record.dtype.names:
+                record["velocities"] = sim.velocities()[self._shown]
+            if "torn" in record.dtype.names:
+                record["torn"] = torn
+            self._journal.append(record)
         self.frames += 1
         self.paths += written
         return written
 
-    def close(self) -> list[Path]:
-        """Finish the PC2 caches, write the USD stage and the npz; returns every file this
-        exporter wrote."""
-        for cache in self._caches.values():
-            self.paths.append(cache.close())
-        self._caches = {}
-        if self._stage is not None:
-            self.paths.append(self._stage.save(self.frames))
-            self._stage = None
-        if "npz" in self.formats and self._samples["time"]:
-            path = self.folder / f"{self.name}.npz"
-            with atomic_path(path) as tmp:
-                np.savez(tmp, positions=np.stack(self._samples["positions"]),
-                         velocities=np.stack(self._samples["velocities"]),
-                         time=np.asarray(self._samples["time"]), particle=self._shown,
-                         body=np.concatenate([np.full(len(body.points), b)
-                                              for b, body in enumerate(self.bodies)]))
-            self.paths.append(path)
-            self._samples = {key: [] for key in self._samples}
+    def close(self, keep_journal: bool = False) -> list[Path]:
+        """Assemble the PC2 caches, the npz and the USD stage from the frames written (this
+        run's and, resumed, the earlier ones); returns every file of the run. The journal is
+        deleted, unless `keep_journal` (a stopped run that may be resumed)."""
+        if self._journal is None:
+            return self.paths
+        records = self._journal.records()
+        if len(records):
+            positions = records["positions"]
+            if "pc2" in self.formats:
+                for body, points in zip(self.bodies, self._slices):
+                    self.paths.append(_write_pc2(self.folder / f"{self.name}_{body.name}.pc2",
+                                                 positions[:, points]))
+            if "npz" in self.formats:
+                self.paths.append(self._write_npz(records))
+            if "usd" in self.formats:
+                stage = _UsdStage(self.usd_path, self.name, self.bodies, self.fps)
+                no_tears = np.zeros(self.cloth.mesh.triangle_count, bool)
+                for frame, record in enumerate(records):
+                    torn = record["torn"] if "torn" in records.dtype.names else no_tears
+                    for body, points in zip(self.bodies, self._slices):
+                        stage.add(body, frame, record["positions"][points].astype(np.float64),
+                                  torn[body.triangle_index].astype(bool))
+                self.paths.append(stage.save(len(records)))
+        self._journal.close(remove=not keep_journal)
+        self._journal = None
         return self.paths
+
+    def _write_npz(self, records) -> Path:
+        path = self.folder / f"{self.name}.npz"
+        with atomic_path(path) as tmp:
+            np.savez(tmp, positions=records["positions"].astype(np.float64),
+                     velocities=records["velocities"].astype(np.float64),
+                     time=np.array(records["time"]), particle=self._shown,
+                     body=np.concatenate([np.full(len(body.points), b)
+                                          for b, body in enumerate(self.bodies)]))
+        return path
+
+
+class _Journal:
+    """Records of a fixed numpy dtype, one per frame, appended unbuffered to `path` after a
+    header naming the dtype. Opened at `first` > 0 it keeps the first `first` records of the
+    file there (StateMismatch if it holds fewer or another dtype) and appends after them."""
+
+    def __init__(self, path: Path, dtype: np.dtype, first: int):
+        self.path, self.dtype = path, dtype
+        layout = json.dumps(dtype.descr).encode()
+        header = JOURNAL_MAGIC + struct.pack("<I", len(layout)) + layout
+        self.start = len(header)
+        if first == 0:
+            self.file = open(path, "wb", buffering=0)
+            self.file.write(header)
+            return
+        if not path.is_file():
+            raise StateMismatch(f"no export journal {path} to resume from: the earlier frames' "
+                                "PC2 / npz / USD data is gone; run again without resuming")
+        self.file = open(path, "r+b", buffering=0)
+        if self.file.read(len(header)) != header:
+            self.file.close()
+            raise StateMismatch(f"the export journal {path} was written for other formats or "
+                                "bodies; run again without resuming")
+        held = (path.stat().st_size - self.start) // dtype.itemsize
+        if held < first:
+            self.file.close()
+            raise StateMismatch(f"the export journal {path} holds {held} frames, the saved "
+                                f"state needs {first}; run again without resuming")
+        self.file.truncate(self.start + first * dtype.itemsize)
+        self.file.seek(0, 2)
+
+    def append(self, record: np.ndarray) -> None:
+        self.file.write(record.tobytes())
+
+    def records(self) -> np.ndarray:
+        """Every record in the file, in order."""
+        return np.fromfile(self.path, self.dtype, offset=self.start)
+
+    def close(self, remove: bool) -> None:
+        self.file.close()
+        if remove:
+            self.path.unlink(missing_ok=True)
 
 
 class _Body:
@@ -150,7 +238,9 @@ class _Body:
 
 
 def _write_mesh(path: Path, points: np.ndarray, triangles: np.ndarray, segments) -> None:
-    """An OBJ / PLY of `points` with `triangles` and (PLY) line `segments`, atomically."""
+    """An OBJ / PLY of `points` with `triangles` and (PLY) line `segments`, atomically. The
+    time meshio stamps in its header comment is taken out: the same frame gives the same bytes
+    (a resumed run's files equal those of a run never stopped)."""
     import meshio
 
     cells = []
@@ -160,39 +250,40 @@ def _write_mesh(path: Path, points: np.ndarray, triangles: np.ndarray, segments)
         cells.append(("line", np.asarray(segments, np.int32)))
     with atomic_path(path) as tmp:
         meshio.write_points_cells(tmp, np.asarray(points, np.float64), cells)
+        with open(tmp, "r+b") as file:
+            head = file.read(HEADER_BYTES)
+            stamp = MESHIO_STAMP.search(head)
+            if stamp:
+                rest = file.read()
+                file.seek(stamp.start(1))
+                file.write(head[stamp.end(1):] + rest)
+                file.truncate()
 
 
-class _PointCache:
-    """A PC2 file written as frames come, under a temporary name; close() sets the sample count
-    in the header and renames it."""
-
-    def __init__(self, path: Path, points: int):
-        self.path, self.points, self.samples = path, points, 0
-        self.tmp = temporary_name(path)
-        self.file = open(self.tmp, "wb")
-        self.file.write(PC2_HEADER.pack(b"POINTCACHE2\0", 1, points, 0.0, 1.0, 0))
-
-    def append(self, positions: np.ndarray) -> None:
-        self.file.write(np.ascontiguousarray(positions, "<f4").tobytes())
-        self.samples += 1
-
-    def close(self) -> Path:
-        self.file.seek(0)
-        self.file.write(PC2_HEADER.pack(b"POINTCACHE2\0", 1, self.points, 0.0, 1.0, self.samples))
-        self.file.close()
-        self.tmp.replace(self.path)
-        return self.path
+def _write_pc2(path: Path, positions: np.ndarray) -> Path:
+    """A PC2 point cache of positions (samples, points, 3), one sample per frame, atomically."""
+    samples, points = positions.shape[:2]
+    with atomic_path(path) as tmp, open(tmp, "wb") as file:
+        file.write(PC2_HEADER.pack(b"POINTCACHE2\0", 1, points, 0.0, 1.0, samples))
+        file.write(np.ascontiguousarray(positions, "<f4").tobytes())
+    return path
 
 
 class _UsdStage:
     """One USD stage in memory, a prim per body, time samples added frame by frame; saved
     (atomically) by save()."""
 
-    def __init__(self, path: Path, name: str, bodies, fps: float):
+    @staticmethod
+    def check_available() -> None:
+        """ImportError, saying how to install it, without usd-core."""
         try:
-            from pxr import Sdf, Usd, UsdGeom
+            import pxr  # noqa: F401
         except ImportError as err:
             raise ImportError("USD export needs Pixar's usd-core: pip install 'ti_cloth[usd]'") from err
+
+    def __init__(self, path: Path, name: str, bodies, fps: float):
+        from pxr import Sdf, Usd, UsdGeom
+
         self.path, self.UsdGeom, self.Sdf = path, UsdGeom, Sdf
         self.stage = Usd.Stage.CreateInMemory()
         self.stage.SetTimeCodesPerSecond(fps)

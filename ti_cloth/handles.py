@@ -132,6 +132,12 @@ class HandleSet:
         self._hold(still)
         model.set_pinned(self.pinned())
 
+    def hold_at(self, model, t: float, dt: float) -> None:
+        """The handles holding after the step ending at t [s] (a loaded state's time) hold;
+        the rest have let go (model.set_pinned)."""
+        self._hold([h for h in self.handles if h.holds_after(t, dt)])
+        model.set_pinned(self.pinned())
+
     def _move(self, state, previous: np.ndarray, target: np.ndarray, dt: float) -> None:
         real = backend.numpy_real()
         move_handles(state, self.index, previous.astype(real), target.astype(real), dt)

@@ -47,6 +47,7 @@ FPS = Range(1.0, 1000.0, "frames/s", "frame rate")
 DURATION = Range(1e-3, 3600.0, "s", "scene duration")
 TIME = Range(0.0, 1e6, "s", "handle release time")
 SUBSTEPS = Range(1, 100_000, "", "steps per frame")
+FRAMES = Range(1, 3_600_000, "", "frames (checkpoint_every)")
 ITERATIONS = Range(1, 10_000, "", "pbd/xpbd passes, strain-limit passes, implicit CG iterations")
 THREADS = Range(1, 1024, "", "CPU threads (init(threads=...))")
 GRID_SIDE = Range(2, 10_000, "", "grid rows, cols")
@@ -81,6 +82,7 @@ MEMORY_SHARE = 0.75            # refuse a body needing more than this share of p
 # implicit Euler at 128 x 128 run about 1.5e7 per second on two cores), for "this run is long".
 SPRING_STEPS_PER_SECOND = 1e7
 LONG_RUN_SECONDS = 60.0
+CHECKPOINT_SECONDS = 5.0       # a run saves its state about this often (of estimated work)
 LARGE_BODY = 1_000_000         # springs: the stable-step analysis (modes.py) takes seconds
 
 

@@ -186,6 +186,37 @@ class SelfContact:
         self.listed = False
         self.pair_total = self.vertex_pairs = 0
 
+    def saved(self) -> dict:
+        """The candidate list and where it was made: a list made at another step would order
+        the per-particle sums differently (different bits)."""
+        total = self.pair_total
+        return {"listed": np.array(self.listed), "pair_total": np.array(total),
+                "vertex_pairs": np.array(self.vertex_pairs),
+                "capacity": np.array(self.candidates.capacity),
+                "listed_at": self.listed_at.to_numpy(), "pair_start": self.pair_start.to_numpy(),
+                "contact_start": self.contact_start.to_numpy(),
+                "elements": self.candidates.elements.to_numpy()[:total],
+                "particles": self.candidates.particles.to_numpy()[:total],
+                "active": self.candidates.active.to_numpy()[:total],
+                "contact": self.candidates.contact.to_numpy()[:4 * total]}
+
+    def restore(self, arrays: dict) -> None:
+        """Load what saved() returned (for this body)."""
+        capacity = int(arrays["capacity"])
+        if capacity != self.candidates.capacity:
+            self.candidates = PairList(capacity)
+        self.listed_at.from_numpy(arrays["listed_at"])
+        self.pair_start.from_numpy(arrays["pair_start"])
+        self.contact_start.from_numpy(arrays["contact_start"])
+        total = int(arrays["pair_total"])
+        for name, width in (("elements", 1), ("particles", 1), ("active", 1), ("contact", 4)):
+            field = getattr(self.candidates, name)
+            full = field.to_numpy()
+            full[:width * total] = arrays[name]
+            field.from_numpy(full)
+        self.listed, self.pair_total = bool(arrays["listed"]), total
+        self.vertex_pairs = int(arrays["vertex_pairs"])
+
     def before_step(self, state, t: float) -> None:
         copy_positions(state, self.step_start)
 

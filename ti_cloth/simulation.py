@@ -16,10 +16,11 @@ one launch (tested to give the same bits as a launch per step).
 
 
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 
-from . import backend, limits
+from . import backend, limits, saved_state
 from ._validate import as_array, in_range, integer, require
 from .collision import ColliderSet
 from .self_collision import SelfCollision, SelfContact, SelfContacts, warn_if_thick
@@ -88,6 +89,9 @@ class Simulation:
         require(isinstance(colliders, (list, tuple)), "colliders", colliders,
                 "a list of colliders (colliders=[Plane(...)])")
         colliders = tuple(colliders)
+        # what decides the motion besides the integrator and dt (fingerprint)
+        self._inputs = (cloth, tuple(gravity), drag, wind, tearing, handles, colliders,
+                        strain_limit, position_limit, self_collision)
         parts = {"model": (Model, (cloth, pinned)),
                  "state": (State, (cloth.particle_count, cloth.spring_count, position_limit,
                                    cloth.altitude_count))}
@@ -168,6 +172,43 @@ class Simulation:
     def _place_handles_at_start(self) -> None:
         if self.handles is not None:
             self.handles.place_at_start(self.model, self.state, self.dt)
+
+    def fingerprint(self) -> str:
+        """Hex digest of everything that decides this simulation's motion (saved_state.py):
+        a saved state is loaded only into a simulation with the same fingerprint."""
+        return saved_state.fingerprint(backend.config().precision, self.integrator.name,
+                                       self.integrator.options(), self.dt, *self._inputs)
+
+    def save_state(self, path) -> Path:
+        """Write everything this simulation needs to continue bit for bit from here to `path`
+        (an npz, written atomically): positions, velocities, previous positions, forces of
+        the last evaluation, spring alive flags and tear steps, the step count and
+        self-collision's candidate list. Handles, colliders and the wind follow from the time.
+        Returns the path."""
+        self._check_runtime()
+        require(self._diverged is None, "simulation", "diverged",
+                "a simulation that has not diverged (its state is not finite)")
+        arrays = {f"state.{k}": v for k, v in self.state.saved().items()}
+        if self.self_contact is not None:
+            arrays.update({f"self_contact.{k}": v for k, v in self.self_contact.saved().items()})
+        return saved_state.write(path, self.fingerprint(),
+                                 {"step_count": self.step_count, "dt": self.dt}, arrays)
+
+    def load_state(self, path) -> None:
+        """Continue from the state save_state wrote to `path`: the next step is the one after
+        it, with the same bits as in the run that saved it. Raises errors.StateMismatch for a
+        file of another state format or from a different simulation (fingerprint)."""
+        self._check_runtime()
+        header, arrays = saved_state.read(path, self.fingerprint())
+        self.state.restore(_prefixed(arrays, "state."))
+        if self.self_contact is not None:
+            self.self_contact.restore(_prefixed(arrays, "self_contact."))
+        self.step_count = int(header["step_count"])
+        self._diverged = None
+        if self.handles is not None:
+            self.handles.hold_at(self.model, self.time, self.dt)
+        if self.colliders is not None and self.colliders.moving:
+            self.colliders.place(self.time, self.dt if self.step_count else None)
 
     @property
     def time(self) -> float:
@@ -326,3 +367,8 @@ class Simulation:
     def __repr__(self) -> str:
         return (f"Simulation({self.cloth!r}, integrator={self.integrator!r}, dt={self.dt}, "
                 f"time={self.time:.6g})")
+
+
+def _prefixed(arrays: dict, prefix: str) -> dict:
+    """The entries of `arrays` whose keys start with `prefix`, without it."""
+    return {k[len(prefix):]: v for k, v in arrays.items() if k.startswith(prefix)}

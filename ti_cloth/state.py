@@ -1,6 +1,7 @@
 """State: the time-varying part of a simulation, as struct-of-arrays Taichi fields."""
 
 
+import numpy as np
 import taichi as ti
 
 from . import backend
@@ -72,6 +73,23 @@ class State:
         if key not in self._workspaces:
             self._workspaces[key] = make()
         return self._workspaces[key]
+
+    # what a step reads from the steps before it (Simulation.save_state)
+    SAVED = ("particle_position", "particle_velocity", "particle_prev_position", "particle_force",
+             "spring_force", "spring_alive", "spring_torn_step", "altitude_force",
+             "first_bad_step")
+
+    def saved(self) -> dict:
+        """The fields of SAVED as numpy arrays, and whether the history is valid."""
+        arrays = {name: getattr(self, name).to_numpy() for name in self.SAVED}
+        arrays["prev_valid"] = np.array(self.prev_valid)
+        return arrays
+
+    def restore(self, arrays: dict) -> None:
+        """Load what saved() returned (from a State of this structure and precision)."""
+        for name in self.SAVED:
+            getattr(self, name).from_numpy(arrays[name])
+        self.prev_valid = bool(arrays["prev_valid"])
 
     def reset(self, rest_position) -> None:
         """Positions (and history) = rest_position, at rest, every spring intact, no bad step

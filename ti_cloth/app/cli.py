@@ -33,6 +33,12 @@ def _run_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--export", type=_formats, metavar="FORMATS",
                         help=f"geometry to write with the frames, comma-separated: "
                              f"{','.join(FORMATS)} (default: the scene's [output] formats)")
+    parser.add_argument("--resume", action="store_true",
+                        help="continue from the state saved in the output folder by an earlier, "
+                             "stopped run of the same scene (same frames as a run never stopped)")
+    parser.add_argument("--checkpoint-every", type=_positive, metavar="K",
+                        help="save the state every K frames (default: the scene's, else about "
+                             "5 s of work)")
 
 
 def _formats(text: str) -> tuple[str, ...]:
@@ -44,10 +50,12 @@ def _formats(text: str) -> tuple[str, ...]:
 
 
 def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progress=True,
-        test=False, mp4=None, export=None) -> tuple[int, list[Path]]:
+        test=False, mp4=None, export=None, resume=False,
+        checkpoint_every=None) -> tuple[int, list[Path]]:
     """Load, initialise, run and report; returns (exit code, frame paths). Exit codes: 0 done,
-    1 diverged, 2 a scene the run refuses (the message names the key), 128 + signal when
-    stopped by Ctrl-C (130) or SIGTERM (143)."""
+    1 diverged, 2 a scene the run refuses (the message names the key) or a state it cannot
+    resume from, 128 + signal when stopped by Ctrl-C (130) or SIGTERM (143)."""
+    from ..errors import StateMismatch
     from . import signals
     from ..limits import LONG_RUN_SECONDS
     from .runner import run_scene
@@ -66,6 +74,8 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
                 output = replace(output, mp4=mp4)
             if export is not None:
                 output = replace(output, export=export)
+            if checkpoint_every is not None:
+                output = replace(output, checkpoint_every=checkpoint_every)
             work = scene.work(frames)
             if work.seconds > LONG_RUN_SECONDS:
                 print(f"note: '{scene.name}' is a long run: {work.describe()}", file=sys.stderr)
@@ -76,9 +86,17 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
     except KeyboardInterrupt as stop:
         print("interrupted before the first frame", file=sys.stderr)
         return signals.exit_code(stop), []
-    result = run_scene(scene, folder=out, frames=frames, progress=progress, output=output)
+    try:
+        result = run_scene(scene, folder=out, frames=frames, progress=progress, output=output,
+                           resume=resume)
+    except (FileNotFoundError, StateMismatch) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2, []
     folder = result.frames[0].parent if result.frames else (out or scene.output.folder)
-    summary = (f"{len(result.frames)} frames of '{scene.name}' in {result.wall_seconds:.1f} s "
+    resumed = ("" if result.resumed_from is None
+               else f"resumed at frame {result.resumed_from}: ")
+    summary = (f"{resumed}{len(result.frames)} frames of '{scene.name}' in "
+               f"{result.wall_seconds:.1f} s "
                f"({result.steps} steps, dt = {result.dt:.3g} s) -> "
                f"{folder}/ {' '.join(p.name for p in result.outputs)}"
                + (f" + {len(result.exports)} geometry files" if result.exports else ""))
@@ -182,7 +200,8 @@ def main(argv=None) -> int:
                      precisions=args.precisions, iterations=args.iterations, duration=args.duration,
                      arch=args.arch, plot=not args.no_plot, progress=not args.no_progress)
     code, _ = run(args.scene, out=args.out, frames=args.frames, arch=args.arch,
-                  precision=args.precision, progress=not args.no_progress, export=args.export)
+                  precision=args.precision, progress=not args.no_progress, export=args.export,
+                  resume=args.resume, checkpoint_every=args.checkpoint_every)
     return code
 
 
@@ -200,7 +219,8 @@ def demo_main(scene_path, argv=None, description: str | None = None) -> list[Pat
     args = parser.parse_args(argv)
     code, frames = run(scene_path, out=args.out_dir, frames=args.frames, arch=args.arch,
                        precision=args.precision, progress=not args.no_progress, test=args.test,
-                       mp4=args.mp4 or None, export=args.export)
+                       mp4=args.mp4 or None, export=args.export, resume=args.resume,
+                       checkpoint_every=args.checkpoint_every)
     if code:
         raise SystemExit(code)
     return frames

@@ -4,6 +4,12 @@ Frame 0 is the initial state; frame k is the state after k x substeps steps. Eve
 written atomically as soon as it is rendered, so a run stopped by Ctrl-C, SIGTERM (signals.py)
 or a divergence keeps every finished frame; the GIF/MP4 are assembled from whatever frames
 exist, with stop signals held until they are written.
+
+Every `checkpoint_every` frames (and at the last) the simulation's state is saved beside the
+frames (`<name>.state.npz`, Simulation.save_state, atomically), after that frame's image and
+geometry. A run resumed from it (resume=True) loads the state, keeps the frames before it and
+the geometry journal's records of them, and writes the rest: the same bytes as a run never
+stopped (rendering and export are functions of the state).
 """
 
 from __future__ import annotations
@@ -14,9 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import SimulationDiverged
+from .. import limits
+from ..errors import SimulationDiverged, StateMismatch
 from ..export import Exporter
 from ..render import Camera, FrameSequence, Renderer
+from ..render.image import frame_path
 from ..render.springs2d import FRONT, SpringView
 from . import signals
 
@@ -34,6 +42,7 @@ class RunResult:
     diverged: SimulationDiverged | None = None
     stop_signal: int | None = None   # the signal that interrupted the run (SIGINT, SIGTERM)
     exports: list[Path] = field(default_factory=list)   # geometry files (export.Exporter)
+    resumed_from: int | None = None   # the first frame this run wrote, when it was resumed
 
     @property
     def complete(self) -> bool:
@@ -64,54 +73,98 @@ def _frame_painter(scene, sim, out):
     return paint
 
 
+def state_path(folder, name: str) -> Path:
+    """Where a run of scene `name` into `folder` saves its state."""
+    return Path(folder) / f"{name}.state.npz"
+
+
+def checkpoint_interval(scene, output) -> int:
+    """Frames between saved states: the output's checkpoint_every, else about
+    limits.CHECKPOINT_SECONDS of estimated work."""
+    if output.checkpoint_every is not None:
+        return output.checkpoint_every
+    return max(1, round(limits.CHECKPOINT_SECONDS / max(scene.work(1).seconds, 1e-9)))
+
+
 def run_scene(scene, *, folder=None, frames: int | None = None, progress: bool = True,
-              output=None, export=None) -> RunResult:
+              output=None, export=None, resume: bool = False) -> RunResult:
     """Simulate and render `frames` frames (default: the scene's duration x fps) into `folder`
     (default: the output's folder). output: an app.scene.Output replacing the scene's (size,
-    formats, style). export: geometry formats (ti_cloth.export.FORMATS) written with each
-    frame (default: the output's). Call ti_cloth.init first. Returns a RunResult; Ctrl-C,
-    SIGTERM (in the main thread) or a SimulationDiverged end the run early, in any phase, with
-    every finished frame kept and the GIF/MP4 and point caches assembled from them."""
+    formats, style, checkpoint_every). export: geometry formats (ti_cloth.export.FORMATS)
+    written with each frame (default: the output's). resume: continue from the state saved in
+    `folder` (FileNotFoundError without one, errors.StateMismatch for another scene's). Call
+    ti_cloth.init first. Returns a RunResult; Ctrl-C, SIGTERM (in the main thread) or a
+    SimulationDiverged end the run early, in any phase, with every finished frame kept and the
+    GIF/MP4 and point caches assembled from them."""
     from tqdm import tqdm
 
     substeps = scene.resolved_substeps()
     frames = scene.frames if frames is None else frames
     out = scene.output if output is None else output
-    folder = folder or out.folder
-    sequence = FrameSequence(folder, fps=scene.fps, gif=out.gif, mp4=out.mp4, name=scene.name,
-                             gif_width=min(out.gif_width, out.width))
-    exporter = Exporter(folder, out.export if export is None else export, name=scene.name,
-                        cloth=scene.cloth, fps=scene.fps)
+    folder = Path(folder or out.folder)
+    saved = state_path(folder, scene.name)
+    every = checkpoint_interval(scene, out)
     start = time.perf_counter()
-    sim, stop, diverged = None, None, None
-    bar = tqdm(total=frames, unit="frame", disable=not progress, dynamic_ncols=True)
+    sim, sequence, exporter, first = None, None, None, 0
+    stop, diverged = None, None
     with signals.stop_signals_raise():
         try:
             sim = scene.build(dt=scene.frame_dt / substeps)
+            if resume:
+                first = _resume(sim, saved, substeps)
+                if first >= frames:                 # it had finished: nothing to write
+                    return RunResult(frames=[frame_path(folder, k) for k in range(frames)],
+                                     outputs=[], steps=sim.step_count, dt=sim.dt,
+                                     wall_seconds=time.perf_counter() - start,
+                                     resumed_from=first)
+            sequence = FrameSequence(folder, fps=scene.fps, gif=out.gif, mp4=out.mp4,
+                                     name=scene.name, gif_width=min(out.gif_width, out.width),
+                                     first=first)
+            exporter = Exporter(folder, out.export if export is None else export,
+                                name=scene.name, cloth=scene.cloth, fps=scene.fps,
+                                first_frame=first)
             paint = _frame_painter(scene, sim, out)
-            for frame in range(frames):
-                if frame:
-                    sim.step(substeps)
-                sequence.write(paint())
-                exporter.write(sim)
-                elapsed = time.perf_counter() - start
-                bar.set_postfix_str(f"t={sim.time:.3f} s, "
-                                    f"{sim.step_count / max(elapsed, 1e-9):,.0f} steps/s")
-                bar.update()
+            bar = tqdm(total=frames, initial=min(first, frames), unit="frame",
+                       disable=not progress, dynamic_ncols=True)
+            try:
+                for frame in range(first, frames):
+                    if frame:
+                        sim.step(substeps)
+                    sequence.write(paint())
+                    exporter.write(sim)
+                    if (frame and frame % every == 0) or frame == frames - 1:
+                        sim.save_state(saved)
+                    elapsed = time.perf_counter() - start
+                    bar.set_postfix_str(f"t={sim.time:.3f} s, "
+                                        f"{sim.step_count / max(elapsed, 1e-9):,.0f} steps/s")
+                    bar.update()
+            finally:
+                bar.close()
         except KeyboardInterrupt as err:
             stop = err
         except SimulationDiverged as err:
             diverged = err
-        finally:
-            bar.close()
     with signals.stop_signals_held() as held:
-        outputs = sequence.close()
-        exports = exporter.close()
+        outputs = sequence.close() if sequence is not None else []
+        complete = stop is None and diverged is None and not held
+        exports = exporter.close(keep_journal=not complete) if exporter is not None else []
     if stop is None and held:
         stop = signals.Stopped(held[0])
-    return RunResult(frames=sequence.paths, outputs=outputs, exports=exports,
-                     steps=sim.step_count if sim is not None else 0,
+    return RunResult(frames=sequence.paths if sequence is not None else [], outputs=outputs,
+                     exports=exports, steps=sim.step_count if sim is not None else 0,
                      dt=sim.dt if sim is not None else scene.frame_dt / substeps,
                      wall_seconds=time.perf_counter() - start, interrupted=stop is not None,
-                     diverged=diverged,
+                     diverged=diverged, resumed_from=first if resume else None,
                      stop_signal=None if stop is None else signals.signal_number(stop))
+
+
+def _resume(sim, saved: Path, substeps: int) -> int:
+    """Load the state saved at `saved` into `sim`; returns the next frame to write."""
+    if not saved.is_file():
+        raise FileNotFoundError(f"no saved state to resume from: {saved} (a run saves one every "
+                                "checkpoint_every frames; run without resuming)")
+    sim.load_state(saved)
+    if sim.step_count % substeps:
+        raise StateMismatch(f"{saved} was saved at step {sim.step_count}, not at the end of a "
+                            f"frame of {substeps} steps; run without resuming")
+    return sim.step_count // substeps + 1

@@ -57,6 +57,7 @@ class Output:
     ground: float | None = None
     style: SurfaceStyle = field(default_factory=SurfaceStyle)
     export: tuple = ()          # geometry formats (export.FORMATS) written beside the frames
+    checkpoint_every: int | None = None   # frames between saved states (None: runner decides)
 
 
 @dataclass
@@ -520,6 +521,7 @@ def _output(table: Table, name: str, colliders) -> Output:
                         ("supersample", limits.SUPERSAMPLE), ("gif_width", limits.IMAGE_SIDE)):
         table.optional(options, key, "integer", within=within)
     table.optional(options, "view", "string", choices=VIEWS)
+    table.optional(options, "checkpoint_every", "integer", within=limits.FRAMES)
     folder = table.string("folder", f"renders/{name}")
     if not folder or "\0" in folder:
         table._bad("folder", folder, "a folder path")

@@ -90,20 +90,27 @@ class FrameSequence:
     """Numbered PNG frames in `folder` (frame_00000.png, ...), each written atomically as it
     comes, then assembled by `close` into `<name>.gif` and/or `<name>.mp4`. Frames left in the
     folder by an earlier, longer run, and temporary files of a killed one, are removed when the
-    sequence starts."""
+    sequence starts. first: the frame the first write() is (a resumed run): frames 0 to
+    first - 1 must be in the folder already and are kept (FileNotFoundError naming a missing
+    one); later ones are removed (they are written again)."""
 
     def __init__(self, folder, *, fps: float = 30.0, gif: bool = True, mp4: bool = False,
-                 name: str | None = None, gif_width: int | None = None):
+                 name: str | None = None, gif_width: int | None = None, first: int = 0):
         self.folder = Path(folder)
         self.fps = finite_number("fps", fps, 0.0, strict=True, unit="frames/s")
         if mp4 and importlib.util.find_spec("imageio_ffmpeg") is None:
             raise ImportError(f"mp4=True needs the optional package imageio-ffmpeg: {MP4_HINT}")
         self.gif, self.mp4, self.gif_width = gif, mp4, gif_width
         self.name = name or self.folder.name
-        self.paths: list[Path] = []
+        self.paths = [frame_path(self.folder, k) for k in range(first)]
+        for path in self.paths:
+            if not path.is_file():
+                raise FileNotFoundError(f"frame {path} is missing: the run cannot be resumed "
+                                        "there; run it again from the start")
         self.folder.mkdir(parents=True, exist_ok=True)
         for stale in self.folder.glob("frame_[0-9][0-9][0-9][0-9][0-9].png"):
-            stale.unlink()
+            if int(stale.stem[-5:]) >= first:
+                stale.unlink()
         remove_temporaries(self.folder)
 
     def write(self, image: np.ndarray) -> Path:

@@ -1,0 +1,112 @@
+"""Saved states (Simulation.save_state / load_state): the files, and the fingerprint naming the
+simulation a state belongs to.
+
+A state file is an npz holding the arrays a simulation needs to continue bit for bit and a
+JSON header: the state format, the fingerprint and the counters. The fingerprint is a hash of
+everything that decides the motion: the bodies (every array of the Cloth), the integrator and
+its options, dt, gravity, drag, wind, tearing, strain limiting, self-collision, handles,
+colliders (meshes included) and the precision. A path given as a Python function counts by its
+name and code (not the values its closure captured).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .errors import StateMismatch
+from .files import atomic_path
+
+FORMAT = 1      # bump when what a state holds or means changes: older files are refused
+
+
+def fingerprint(*parts) -> str:
+    """Hex digest of `parts`, walked by value (module doc)."""
+    digest = hashlib.sha256()
+    for part in parts:
+        _feed(digest, part)
+    return digest.hexdigest()[:32]
+
+
+def _feed(digest, value) -> None:
+    tag = type(value).__qualname__
+    if value is None or isinstance(value, (bool, int, float, str, bytes, enum.Enum)):
+        digest.update(f"{tag}:{value!r};".encode())
+    elif isinstance(value, np.generic):
+        _feed(digest, value.item())
+    elif isinstance(value, np.ndarray):
+        array = np.ascontiguousarray(value)
+        digest.update(f"array:{array.dtype.str}:{array.shape};".encode())
+        digest.update(array.tobytes())
+    elif isinstance(value, (list, tuple)):
+        digest.update(f"{tag}[{len(value)}];".encode())
+        for item in value:
+            _feed(digest, item)
+    elif isinstance(value, dict):
+        digest.update(f"dict[{len(value)}];".encode())
+        for key in sorted(value, key=str):
+            _feed(digest, str(key))
+            _feed(digest, value[key])
+    elif dataclasses.is_dataclass(value):
+        digest.update(f"{tag}{{".encode())
+        for field in dataclasses.fields(value):
+            _feed(digest, field.name)
+            _feed(digest, getattr(value, field.name))
+    elif hasattr(value, "__code__"):
+        digest.update(f"function:{value.__module__}.{value.__qualname__};".encode())
+        _feed_code(digest, value.__code__)
+    elif hasattr(value, "__dict__"):
+        digest.update(f"{tag}{{".encode())
+        for key in sorted(k for k in vars(value) if not k.startswith("_")):
+            _feed(digest, key)
+            _feed(digest, getattr(value, key))
+    else:
+        digest.update(f"{tag}:{value!r};".encode())
+
+
+def _feed_code(digest, code) -> None:
+    digest.update(code.co_code)
+    _feed(digest, code.co_names)
+    for const in code.co_consts:
+        if hasattr(const, "co_code"):
+            _feed_code(digest, const)
+        else:
+            _feed(digest, repr(const))
+
+
+def write(path, fingerprint_: str, header: dict, arrays: dict[str, np.ndarray]) -> Path:
+    """Write a state file atomically: `arrays` and `header` (JSON values) with the format and
+    the fingerprint."""
+    path = Path(path)
+    header = {"format": FORMAT, "fingerprint": fingerprint_, **header}
+    with atomic_path(path) as tmp, open(tmp, "wb") as file:
+        np.savez(file, header=np.array(json.dumps(header)), **arrays)
+    return path
+
+
+def read(path, fingerprint_: str) -> tuple[dict, dict[str, np.ndarray]]:
+    """(header, arrays) of the state file at `path`. Raises FileNotFoundError, or StateMismatch
+    when it is not a state file, holds another format or belongs to another simulation."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"saved state not found: {path}")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            header = json.loads(str(data["header"]))
+            arrays = {key: data[key] for key in data.files if key != "header"}
+    except (OSError, ValueError, KeyError) as err:
+        raise StateMismatch(f"{path} is not a ti_cloth saved state ({err})") from None
+    if header.get("format") != FORMAT:
+        raise StateMismatch(f"{path} holds a state of format {header.get('format')!r}; this "
+                            f"ti_cloth reads format {FORMAT} only: run the simulation again")
+    if header.get("fingerprint") != fingerprint_:
+        raise StateMismatch(
+            f"{path} was saved by a different simulation (fingerprint "
+            f"{header.get('fingerprint')}, this one {fingerprint_}): its bodies, integrator, "
+            "step, forces, handles, colliders or precision differ; run it from the start")
+    return header, arrays
