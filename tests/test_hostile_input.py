@@ -53,6 +53,7 @@ SCENE_MISTAKES = [
     (dict(output="supersample = 1000"), "output.supersample"),
     (dict(output="ground = nan"), "output.ground"),
     (dict(output='folder = ""'), "output.folder"),
+    (dict(output="checkpoint_every = 0"), "output.checkpoint_every"),
     (dict(output="style = { wireframe = 1e300 }"), "SurfaceStyle.wireframe"),
     (dict(forces="wind = { velocity = [1, 0, 0], seed = -1 }"), "forces.wind.seed"),
     (dict(forces="wind = { velocity = [1, 0, 0] }", body="string"), "forces.wind"),
