@@ -29,7 +29,8 @@ from .topology import Cloth
 from .wind import Wind
 
 __all__ = [
-    "init", "Box", "Capsule", "Collider", "Exporter", "MeshCollider", "Plane", "Sphere", "SimulationDiverged", "TeamStalled",
+    "init", "Box", "Capsule", "Collider", "Exporter", "MeshCollider", "Plane", "Sphere", "SimulationDiverged", "StateMismatch",
+    "TeamStalled",
     "ForceSettings",
     "INTEGRATORS", "Integrator", "ExplicitEuler", "SymplecticEuler", "Verlet", "PBD", "XPBD",
     "ImplicitEuler", "RK4", "PRESETS", "Material", "SpringKind", "SpringParams", "Mesh", "grid_mesh",

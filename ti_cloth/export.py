@@ -142,25 +142,31 @@ class Exporter:
             return self.paths
         records = self._journal.records()
         if len(records):
-            positions = records["positions"]
-            if "pc2" in self.formats:
-                for body, points in zip(self.bodies, self._slices):
-                    self.paths.append(_write_pc2(self.folder / f"{self.name}_{body.name}.pc2",
-                                                 positions[:, points]))
-            if "npz" in self.formats:
-                self.paths.append(self._write_npz(records))
-            if "usd" in self.formats:
-                stage = _UsdStage(self.usd_path, self.name, self.bodies, self.fps)
-                no_tears = np.zeros(self.cloth.mesh.triangle_count, bool)
-                for frame, record in enumerate(records):
-                    torn = record["torn"] if "torn" in records.dtype.names else no_tears
-                    for body, points in zip(self.bodies, self._slices):
-                        stage.add(body, frame, record["positions"][points].astype(np.float64),
-                                  torn[body.triangle_index].astype(bool))
-                self.paths.append(stage.save(len(records)))
+            self.paths += self._assemble(records)
+        del records                              # the mapping, before the file goes
         self._journal.close(remove=not keep_journal)
         self._journal = None
         return self.paths
+
+    def _assemble(self, records) -> list[Path]:
+        """The PC2 caches, npz and USD stage of the journal's records."""
+        paths = []
+        if "pc2" in self.formats:
+            for body, points in zip(self.bodies, self._slices):
+                paths.append(_write_pc2(self.folder / f"{self.name}_{body.name}.pc2",
+                                        records["positions"][:, points]))
+        if "npz" in self.formats:
+            paths.append(self._write_npz(records))
+        if "usd" in self.formats:
+            stage = _UsdStage(self.usd_path, self.name, self.bodies, self.fps)
+            no_tears = np.zeros(self.cloth.mesh.triangle_count, bool)
+            for frame, record in enumerate(records):
+                torn = record["torn"] if "torn" in records.dtype.names else no_tears
+                for body, points in zip(self.bodies, self._slices):
+                    stage.add(body, frame, record["positions"][points],
+                              torn[body.triangle_index].astype(bool))
+            paths.append(stage.save(len(records)))
+        return paths
 
     def _write_npz(self, records) -> Path:
         path = self.folder / f"{self.name}.npz"
@@ -207,8 +213,10 @@ class _Journal:
         self.file.write(record.tobytes())
 
     def records(self) -> np.ndarray:
-        """Every record in the file, in order."""
-        return np.fromfile(self.path, self.dtype, offset=self.start)
+        """Every record in the file, in order (mapped, not read into memory)."""
+        if self.path.stat().st_size <= self.start:
+            return np.zeros(0, self.dtype)
+        return np.memmap(self.path, self.dtype, mode="r", offset=self.start)
 
     def close(self, remove: bool) -> None:
         self.file.close()
@@ -334,7 +342,7 @@ class _UsdStage:
             positions = points
         else:
             positions = points[body.segments.ravel()]          # two points per segment
-        prim.GetPointsAttr().Set(Vt.Vec3fArray.FromNumpy(np.asarray(positions, np.float32)),
+        prim.GetPointsAttr().Set(Vt.Vec3fArray.FromNumpy(np.array(positions, np.float32)),
                                  frame)
 
     def save(self, frames: int) -> Path:
