@@ -41,6 +41,27 @@ def _run_arguments(parser: argparse.ArgumentParser) -> None:
                              "5 s of work)")
 
 
+def _fraction(text: str) -> float:
+    value = float(text)
+    if not 0 < value < float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a number > 0, got {text}")
+    return value
+
+
+_seconds = _fraction
+
+
+def _sweep_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument("--jobs", type=_positive, metavar="N",
+                       help="run the configurations on N local processes (cores / N Taichi "
+                            "threads each)")
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="run them on the Dask cluster whose scheduler is at ADDRESS "
+                            "(tcp://host:8786; pip install 'ti_cloth[dask]')")
+
+
 def _formats(text: str) -> tuple[str, ...]:
     formats = tuple(f.strip() for f in text.split(",") if f.strip())
     unknown = [f for f in formats if f not in FORMATS]
@@ -110,8 +131,31 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
     return 0, result.frames
 
 
+def _workers(jobs: int | None, scheduler: str | None):
+    """Where a study's configurations run: here (None), `jobs` local processes, or the Dask
+    cluster at `scheduler`."""
+    from contextlib import nullcontext
+
+    from . import sweep
+
+    if scheduler is not None:
+        return sweep.dask_cluster(scheduler)
+    if jobs is not None and jobs > 1:
+        return sweep.local_jobs(jobs)
+    return nullcontext(None)
+
+
+def _report_failures(result) -> None:
+    for label, (error, recovered) in result.incidents.items():
+        print(f"warning: {label}: its worker failed ({error}); the retry "
+              f"{'finished' if recovered else 'failed too'}", file=sys.stderr)
+    for label, error in result.failed.items():
+        print(f"warning: {label} is missing: {error}", file=sys.stderr)
+
+
 def study(scene_path, *, out=None, integrators=None, dts=None, precisions=("f64", "f32"),
-          iterations=None, duration=None, arch="cpu", plot=True, progress=True) -> int:
+          iterations=None, duration=None, arch="cpu", plot=True, progress=True, jobs=None,
+          scheduler=None) -> int:
     """Run the speed/accuracy study of a scene and write study.csv, study.md, study.png."""
     from . import signals
     from . import study as study_module
@@ -127,21 +171,58 @@ def study(scene_path, *, out=None, integrators=None, dts=None, precisions=("f64"
     options = {k: v for k, v in options.items() if v is not None}
     start = time.perf_counter()
     try:
-        with signals.stop_signals_raise():
+        with signals.stop_signals_raise(), _workers(jobs, scheduler) as workers:
             result = study_module.run_study(scene, precisions=tuple(precisions), duration=duration,
-                                            arch=arch, progress=progress, **options)
+                                            arch=arch, progress=progress, workers=workers,
+                                            **options)
         with signals.stop_signals_held():
             written = result.write(out or Path("renders") / f"study_{scene.name}", plot=plot)
-    except (ValueError, RuntimeError, ImportError) as err:
+    except (ValueError, RuntimeError, ImportError, ConnectionError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as stop:
         print("interrupted: the study wrote nothing (its table needs every run)", file=sys.stderr)
         return signals.exit_code(stop)
     print(result.markdown())
+    _report_failures(result)
     print(f"{len(result.runs)} runs in {time.perf_counter() - start:.0f} s -> "
           f"{' '.join(str(p) for p in written)}")
     return 0
+
+
+def advise(scene_path, *, tolerance: float, metric="max_error", window=None, out=None,
+           integrators=None, precisions=("f64", "f32"), iterations=None, arch="cpu",
+           progress=True, jobs=None, scheduler=None) -> int:
+    """Pick the cheapest integrator, step and precision for a tolerance; write advise.md and
+    advise.csv; print the candidates and a [simulation] block."""
+    from . import advisor, signals
+    from .scene import load_scene
+    from .scene_file import SceneError
+
+    try:
+        scene = load_scene(scene_path)
+    except (SceneError, FileNotFoundError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    options = {"integrators": integrators, "iterations": iterations}
+    options = {k: v for k, v in options.items() if v is not None}
+    try:
+        with signals.stop_signals_raise(), _workers(jobs, scheduler) as workers:
+            advice = advisor.advise(scene, tolerance, metric=metric, window=window,
+                                    precisions=tuple(precisions), arch=arch, progress=progress,
+                                    workers=workers, **options)
+        with signals.stop_signals_held():
+            written = advice.write(out or Path("renders") / f"advise_{scene.name}", scene.frame_dt)
+    except (ValueError, RuntimeError, ImportError, ConnectionError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt as stop:
+        print("interrupted: no advice (it needs every pilot run)", file=sys.stderr)
+        return signals.exit_code(stop)
+    print(advice.markdown(scene.frame_dt))
+    _report_failures(advice.study)
+    print(f"-> {' '.join(str(p) for p in written)}")
+    return 0 if advice.choice is not None else 1
 
 
 def info() -> int:
@@ -188,7 +269,25 @@ def main(argv=None) -> int:
     study_parser.add_argument("--duration", type=float, help="simulated seconds (default: the scene's)")
     study_parser.add_argument("--arch", choices=sorted(backend.ARCHS), default="cpu")
     study_parser.add_argument("--no-plot", action="store_true", help="skip study.png (no matplotlib)")
-    study_parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _sweep_arguments(study_parser)
+    advise_parser = commands.add_parser("advise", help="the cheapest integrator, step and "
+                                        "precision whose error meets a tolerance (a pilot study)")
+    advise_parser.add_argument("scene", type=Path, help="scene file (TOML)")
+    advise_parser.add_argument("--tolerance", type=_fraction, required=True,
+                               help="largest error accepted, a fraction of the cloth size")
+    advise_parser.add_argument("--metric", choices=("max_error", "rms_error"), default="max_error",
+                               help="max (default) or RMS position error over the cloth size")
+    advise_parser.add_argument("--window", type=_seconds, metavar="S",
+                               help="advise on the first S seconds (default: the whole scene)")
+    advise_parser.add_argument("--out", type=Path, help="output folder (default renders/advise_<name>)")
+    advise_parser.add_argument("--integrators", nargs="+", metavar="NAME",
+                               help="candidates (default: all)")
+    advise_parser.add_argument("--precisions", nargs="+", choices=sorted(backend.PRECISIONS),
+                               default=["f64", "f32"])
+    advise_parser.add_argument("--iterations", nargs="+", type=_positive, metavar="N",
+                               help="pbd/xpbd passes per step to try (default 4 16)")
+    advise_parser.add_argument("--arch", choices=sorted(backend.ARCHS), default="cpu")
+    _sweep_arguments(advise_parser)
     commands.add_parser("info", help="versions, architecture and threads")
     args = parser.parse_args(argv)
     if args.command == "info":
@@ -198,7 +297,13 @@ def main(argv=None) -> int:
             parser.error(f"--duration must be > 0, got {args.duration}")
         return study(args.scene, out=args.out, integrators=args.integrators, dts=args.dts,
                      precisions=args.precisions, iterations=args.iterations, duration=args.duration,
-                     arch=args.arch, plot=not args.no_plot, progress=not args.no_progress)
+                     arch=args.arch, plot=not args.no_plot, progress=not args.no_progress,
+                     jobs=args.jobs, scheduler=args.scheduler)
+    if args.command == "advise":
+        return advise(args.scene, tolerance=args.tolerance, metric=args.metric, window=args.window,
+                      out=args.out, integrators=args.integrators, precisions=args.precisions,
+                      iterations=args.iterations, arch=args.arch, progress=not args.no_progress,
+                      jobs=args.jobs, scheduler=args.scheduler)
     code, _ = run(args.scene, out=args.out, frames=args.frames, arch=args.arch,
                   precision=args.precision, progress=not args.no_progress, export=args.export,
                   resume=args.resume, checkpoint_every=args.checkpoint_every)

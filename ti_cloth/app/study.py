@@ -8,8 +8,10 @@ where each one blows up, for one scene.
 Every run starts the scene from rest and samples positions at each frame time; errors are
 against the reference at the same times, as a fraction of the cloth size (the diagonal of its
 rest bounding box). Cost is wall time per simulated second of the stepping alone (kernels are
-compiled before timing; one Simulation per integrator and precision is restarted for each dt).
-Precisions are run one after the other because switching re-initialises Taichi.
+compiled before timing; one Simulation per integrator and precision is restarted for each dt),
+the median of `repeats` timings. Each configuration (precision, integrator, iterations) is one
+task: run here one after the other, or on local processes or a Dask cluster (sweep.py; the
+timings are then taken with other tasks running, and the result says so).
 """
 
 from __future__ import annotations
@@ -17,6 +19,8 @@ from __future__ import annotations
 import csv
 import io
 import math
+import statistics
+import threading
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -28,6 +32,7 @@ from ..errors import SimulationDiverged
 from ..files import atomic_path
 from ..integrators import INTEGRATORS, make_integrator
 from ..stability import stable_dt
+from .sweep import Failure, Workers, run_tasks
 
 REFERENCE_TOLERANCE = 1e-9     # halving the reference step changes positions by less than this x size
 MAX_REFERENCE_HALVINGS = 8
@@ -164,11 +169,17 @@ def default_dts(scene, integrators) -> list[float]:
 
 @dataclass
 class StudyResult:
-    """The reference and every run; write() produces the CSV, the markdown table and the plot."""
+    """The reference and every run; write() produces the CSV, the markdown table and the plot.
+    timing: how the costs were measured ("serial", or what ran at once); failed: the
+    configurations whose task did not finish, {label: error}; incidents: those whose worker
+    failed once, {label: (error, recovered by the retry)}."""
 
     scene_name: str
     reference: Reference
     runs: list[Run] = field(default_factory=list)
+    timing: str = "serial"
+    failed: dict[str, str] = field(default_factory=dict)
+    incidents: dict[str, tuple[str, bool]] = field(default_factory=dict)
 
     def largest_stable_dt(self) -> dict[str, float]:
         """Per configuration (label): the largest dt of the sweep such that it and every
@@ -198,7 +209,10 @@ class StudyResult:
         ref = self.reference
         lines = [f"Scene `{self.scene_name}`: error against rk4/f64 at dt = {ref.dt:.3g} s "
                  f"(halving changed positions by {ref.change:.1e} of the {ref.size:.3g} m cloth), "
-                 f"{len(ref.times)} samples over {ref.times[-1]:.3g} s.", "",
+                 f"{len(ref.times)} samples over {ref.times[-1]:.3g} s."
+                 + ("" if self.timing == "serial" else
+                    f" Costs measured with other runs at once ({self.timing}): compare them "
+                    "with each other, not with a serial study."), "",
                  "| integrator | precision | dt [s] | max error | RMS error | energy drift | "
                  "max strain | cost [s/s] | Pareto |",
                  "|---|---|---|---|---|---|---|---|---|"]
@@ -212,6 +226,13 @@ class StudyResult:
                            f"{run.max_strain:.3f} | {run.cost:.3g} |")
             lines.append(f"| {name} | {run.precision} | {run.dt:.3g} | {metrics} "
                          f"{'yes' if id(run) in front else ''} |")
+        for label, error in self.failed.items():
+            lines.append(f"| {label} | failed: {error} | | | | | | | |")
+        if self.incidents:
+            lines.append("")
+        lines += [f"{label}: its worker failed ({error}); "
+                  + ("the retry finished." if recovered else "the retry failed too.")
+                  for label, (error, recovered) in self.incidents.items()]
         lines += ["", "| configuration | largest stable dt in the sweep [s] | predicted [s] |", "|---|---|---|"]
         predicted = {r.label: r.predicted_stable_dt for r in self.runs}
         for label, dt in self.largest_stable_dt().items():
@@ -280,28 +301,78 @@ def pareto_front(runs) -> list[Run]:
 
 
 def _configurations(integrators, iterations):
+    """(name, iterations or None) of every configuration of the sweep, in order."""
     for name in integrators:
         if name not in INTEGRATORS:
             raise ValueError(f"integrators: {name!r} is not one of {sorted(INTEGRATORS)}")
         if INTEGRATORS[name].position_based:
             for count in iterations:
-                yield name, count, INTEGRATORS[name](iterations=count)
+                yield name, count
         else:
-            yield name, None, make_integrator(name)
+            yield name, None
+
+
+@dataclass(frozen=True)
+class Configuration:
+    """One task of a study: every dt of one integrator (with `iterations` passes for pbd /
+    xpbd) in one precision, against `reference`; `threads`: Taichi's CPU threads (None: all)."""
+
+    scene: object
+    reference: Reference
+    precision: str
+    integrator: str
+    iterations: int | None
+    dts: tuple
+    substeps: tuple
+    arch: str
+    threads: int | None
+    repeats: int
+
+    @property
+    def label(self) -> str:
+        name = self.integrator if self.iterations is None else f"{self.integrator}({self.iterations})"
+        return f"{name} {self.precision}"
+
+
+_ONE_AT_A_TIME = threading.Lock()    # Taichi runs one task at a time in a process
+
+
+def measure_configuration(task: Configuration) -> list[Run]:
+    """The runs of one configuration (a Simulation built once, restarted for each dt): the
+    task a worker process runs."""
+    with _ONE_AT_A_TIME:
+        backend.ensure(arch=task.arch, precision=task.precision, threads=task.threads)
+        integrator = (INTEGRATORS[task.integrator](iterations=task.iterations)
+                      if task.iterations is not None else make_integrator(task.integrator))
+        sim = task.scene.build(integrator=integrator, dt=task.dts[-1])
+        sim.step(1)     # compile outside the timing
+        predicted = sim.stable_dt()
+        runs = []
+        for dt, n in zip(task.dts, task.substeps):
+            sim.restart(dt)
+            runs.append(_measure(task, sim, n, predicted))
+        return runs
 
 
 def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("f64", "f32"),
               iterations=DEFAULT_ITERATIONS, duration: float | None = None, arch: str = "cpu",
-              reference: Reference | None = None, progress: bool = True) -> StudyResult:
+              reference: Reference | None = None, repeats: int = 1,
+              workers: Workers | None = None, progress: bool = True) -> StudyResult:
     """Sweep integrator x dt x precision (x iterations for pbd/xpbd) on `scene` (a Scene from
     load_scene). dts: steps [s], each frame_dt / an integer (default: default_dts). duration:
-    simulated seconds (default the scene's). Leaves Taichi initialised with the last precision.
+    simulated seconds (default the scene's). repeats: timings per run (cost: their median).
+    workers: where the configurations run (sweep.local_jobs, sweep.dask_cluster, or
+    sweep.Workers around any concurrent.futures.Executor; default: here, one after the
+    other). Rows come in configuration order whichever finishes first. Leaves Taichi
+    initialised with the last precision run here.
     """
     from tqdm import tqdm
 
     for p in precisions:
         if p not in backend.PRECISIONS:
             raise ValueError(f"precisions: {p!r} is not one of {sorted(backend.PRECISIONS)}")
+    if not (isinstance(repeats, int) and repeats >= 1):
+        raise ValueError(f"repeats must be an integer >= 1, got {repeats!r}")
     integrators = tuple(integrators)
     dts = sorted(default_dts(scene, integrators) if dts is None else dts, reverse=True)
     substeps = []
@@ -311,39 +382,47 @@ def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("
             raise ValueError(f"dts: {dt!r} does not divide the frame step {scene.frame_dt:.6g} s; "
                              "use frame_dt / n for integers n")
         substeps.append(round(ratio))
+    configurations = list(_configurations(integrators, iterations))
     if reference is None:
         reference = reference_trajectory(scene, duration, arch)
-    result = StudyResult(scene.name, reference)
-    runs_per_precision = len(list(_configurations(integrators, iterations))) * len(dts)
-    bar = tqdm(total=len(precisions) * runs_per_precision, unit="run", disable=not progress,
-               dynamic_ncols=True)
-    for precision in precisions:
-        backend.ensure(arch=arch, precision=precision)
-        for name, count, integrator in _configurations(integrators, iterations):
-            sim = scene.build(integrator=integrator, dt=dts[-1])
-            sim.step(1)     # compile outside the timing
-            predicted = sim.stable_dt()
-            for dt, n in zip(dts, substeps):
-                bar.set_description(f"{name} {precision} dt={dt:.2g}")
-                sim.restart(dt)
-                result.runs.append(_measure(scene, sim, reference, name, precision, count, n, predicted))
-                bar.update()
+    tasks = [Configuration(scene, reference, precision, name, count, tuple(dts), tuple(substeps),
+                           arch, workers.threads if workers is not None else None, repeats)
+             for precision in precisions for name, count in configurations]
+    bar = tqdm(total=len(tasks) * len(dts), unit="run", disable=not progress, dynamic_ncols=True)
+    results, incidents = run_tasks(measure_configuration, tasks, workers,
+                                   lambda i: bar.update(len(dts)))
     bar.close()
+    result = StudyResult(scene.name, reference,
+                         timing="serial" if workers is None else workers.timing)
+    for task, runs in zip(tasks, results):
+        if isinstance(runs, Failure):
+            result.failed[task.label] = runs.error
+        else:
+            result.runs += runs
+    for incident in incidents:
+        result.incidents[tasks[incident.task].label] = (incident.error, incident.recovered)
     return result
 
 
-def _measure(scene, sim, reference, name, precision, iterations, substeps, predicted) -> Run:
+def _measure(task: Configuration, sim, substeps: int, predicted: float) -> Run:
     nan = float("nan")
+    reference = task.reference
     try:
         positions, energies, wall = _trajectory(sim, reference.times, substeps)
+        walls = [wall]
+        for _ in range(task.repeats - 1):
+            sim.restart()
+            walls.append(_trajectory(sim, reference.times, substeps)[2])
     except SimulationDiverged as err:
-        return Run(name, precision, iterations, sim.dt, sim.step_count, nan, nan, True, err.step,
-                   nan, nan, nan, nan, predicted)
+        return Run(task.integrator, task.precision, task.iterations, sim.dt, sim.step_count, nan,
+                   nan, True, err.step, nan, nan, nan, nan, predicted)
+    wall = statistics.median(walls)
     error = np.linalg.norm(positions - reference.positions, axis=2) / reference.size
     energy_error = np.abs(energies - reference.energies) / reference.energy_scale
     blown = np.flatnonzero(energy_error > ENERGY_BLOWUP)
     diverged_step = int(round(reference.times[blown[0]] / sim.dt)) if len(blown) else -1
     simulated = reference.times[-1]
-    return Run(name, precision, iterations, sim.dt, sim.step_count, wall, wall / simulated,
-               len(blown) > 0, diverged_step, float(error.max()), float(np.sqrt(np.mean(error ** 2))),
-               float(energy_error.max()), _max_strain(scene.cloth, positions), predicted)
+    return Run(task.integrator, task.precision, task.iterations, sim.dt, sim.step_count, wall,
+               wall / simulated, len(blown) > 0, diverged_step, float(error.max()),
+               float(np.sqrt(np.mean(error ** 2))), float(energy_error.max()),
+               _max_strain(task.scene.cloth, positions), predicted)

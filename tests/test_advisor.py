@@ -1,0 +1,171 @@
+"""The advisor (app/advisor.py) and sweeps on local processes and a Dask cluster (app/sweep.py):
+the choice, re-run, meets the tolerance at no more than 1.5 x the cost of the cheapest passing
+configuration of an independent sweep; an impossible tolerance is said so; studies on 2 local
+processes and on a real distributed.LocalCluster give the serial study's rows; a dead worker's
+task is retried, Ctrl-C leaves no process behind, a silent scheduler is named."""
+
+import csv
+import multiprocessing
+import os
+import signal
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+import ti_cloth as tc
+from helpers import report
+from ti_cloth.app import advisor, cli, study, sweep
+
+STRING = """
+[scene]
+name = "swinging_string"
+[simulation]
+fps = 30
+duration = 0.2
+precision = "f64"
+[[bodies]]
+type = "string"
+n = 6
+length = 0.5
+mass = 0.05
+fixed = "start"
+stretch = { k = 50.0, kd = 0.01 }
+"""
+CANDIDATES = dict(integrators=["symplectic_euler", "rk4", "xpbd"], precisions=["f64"],
+                  iterations=[4])
+
+
+@pytest.fixture
+def scene_path(tmp_path):
+    path = tmp_path / "string.toml"
+    path.write_text(STRING)
+    return path
+
+
+def test_the_choice_rerun_meets_the_tolerance_near_the_cheapest_passing_cost(f64, scene_path):
+    scene = tc.load_scene(scene_path)
+    dts = [scene.frame_dt / n for n in (1, 2, 4, 8, 16, 32)]
+    tolerance = 1e-3
+    advice = advisor.advise(scene, tolerance, dts=dts, repeats=5, progress=False, **CANDIDATES)
+    assert advice.choice is not None
+    passing = [r for r in advice.study.runs if r.max_error <= tolerance and not r.diverged]
+    assert 0 < len(passing) < len(advice.study.runs)           # a real choice to make
+    pick = advice.choice
+    rerun = study.run_study(scene, integrators=[pick.integrator], dts=[pick.dt],
+                            precisions=[pick.precision], iterations=[pick.iterations or 4],
+                            reference=advice.study.reference, repeats=5, progress=False).runs[0]
+    sweep_again = study.run_study(scene, dts=dts, reference=advice.study.reference, repeats=5,
+                                  progress=False, **CANDIDATES)
+    cheapest = min((r for r in sweep_again.runs if advisor.meets(r, "max_error", tolerance)),
+                   key=lambda r: r.cost)
+    report("choice: error, cost / cheapest passing cost", (rerun.max_error, rerun.cost / cheapest.cost),
+           f"<= {tolerance}, <= 1.5")
+    assert rerun.max_error <= tolerance and not rerun.diverged
+    assert rerun.cost <= 1.5 * cheapest.cost
+    block = advice.simulation_block(scene.frame_dt)
+    assert f'precision = "{pick.precision}"' in block
+    assert f"substeps = {round(scene.frame_dt / pick.dt)} " in block
+
+
+def test_an_impossible_tolerance_is_said_so_with_the_closest(f64, scene_path, tmp_path, capsys):
+    out = tmp_path / "advice"
+    code = cli.main(["advise", str(scene_path), "--tolerance", "1e-14", "--integrators",
+                     "symplectic_euler", "rk4", "--precisions", "f64", "--out", str(out),
+                     "--no-progress"])
+    printed = capsys.readouterr().out
+    assert code == 1 and "no candidate meets max_error <= 1e-14" in printed
+    rows = list(csv.DictReader((out / "advise.csv").open()))
+    assert rows and not any(row["chosen"] == "True" for row in rows)
+    closest = min((r for r in rows if r["diverged"] == "False"), key=lambda r: float(r["max_error"]))
+    assert f"the closest is {closest['integrator']}" in printed      # rk4 at its smallest dt
+    assert "[simulation]" not in (out / "advise.md").read_text()
+
+
+def study_rows(folder: Path) -> list[dict]:
+    """study.csv without its timings."""
+    rows = list(csv.DictReader((folder / "study.csv").open()))
+    return [{k: v for k, v in row.items() if k not in ("wall_seconds", "cost")} for row in rows]
+
+
+@pytest.mark.slow
+def test_studies_on_local_jobs_and_a_dask_cluster_give_the_serial_rows(scene_path, tmp_path,
+                                                                        capsys):
+    from distributed import LocalCluster
+
+    arguments = ["study", str(scene_path), "--integrators", "symplectic_euler", "rk4", "xpbd",
+                 "--iterations", "4", "--precisions", "f64", "--no-plot", "--no-progress"]
+    assert cli.main([*arguments, "--out", str(tmp_path / "serial")]) == 0
+    assert cli.main([*arguments, "--out", str(tmp_path / "jobs"), "--jobs", "2"]) == 0
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address=None) as cluster:
+        assert cli.main([*arguments, "--out", str(tmp_path / "dask"), "--scheduler",
+                         cluster.scheduler_address]) == 0
+    serial = study_rows(tmp_path / "serial")
+    assert len(serial) == 3 * len({row["dt"] for row in serial})
+    assert study_rows(tmp_path / "jobs") == serial
+    assert study_rows(tmp_path / "dask") == serial
+    assert "2 jobs at once" in (tmp_path / "jobs" / "study.md").read_text()
+    assert "Dask cluster at tcp://127.0.0.1" in (tmp_path / "dask" / "study.md").read_text()
+    assert "warning" not in capsys.readouterr().err
+
+
+def die_once(task):
+    """The toy task: task (i, marker file); i == 1 kills its process the first time."""
+    i, marker = task
+    if i == 1 and not os.path.exists(marker):
+        Path(marker).touch()
+        os.kill(os.getpid(), signal.SIGKILL)
+    return i * i
+
+
+def always_die(task):
+    i, _ = task
+    if i == 2:
+        os.kill(os.getpid(), signal.SIGKILL)
+    return i * i
+
+
+def slow(task):
+    time.sleep(30)
+    return task
+
+
+def test_a_killed_worker_is_retried_once_then_reported_by_task(tmp_path):
+    tasks = [(i, str(tmp_path / "died")) for i in range(4)]
+    with sweep.local_jobs(2) as workers:
+        results, incidents = sweep.run_tasks(die_once, tasks, workers)
+    assert results == [0, 1, 4, 9]                  # the lost tasks ran again
+    assert 1 in [i.task for i in incidents] and all(i.recovered for i in incidents)
+    assert all("BrokenProcessPool" in i.error for i in incidents)
+    with sweep.local_jobs(2) as workers:
+        results, incidents = sweep.run_tasks(always_die, tasks, workers)
+    assert results[:2] + results[3:] == [0, 1, 9] and isinstance(results[2], sweep.Failure)
+    assert [i.task for i in incidents if not i.recovered] == [2]    # only the one at fault
+
+
+def test_ctrl_c_leaves_no_worker_process():
+    """Ctrl-C while two 30 s tasks run: the workers are terminated at once, not left computing
+    (or waited for)."""
+    start = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        with sweep.local_jobs(2) as workers:
+            workers.executor.submit(abs, 1).result()           # the pool is up
+            children = multiprocessing.active_children()
+            assert children
+            threading.Timer(1.0, os.kill, (os.getpid(), signal.SIGINT)).start()
+            sweep.run_tasks(slow, [1, 2], workers)
+    deadline = time.monotonic() + 10
+    while any(c.is_alive() for c in children) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not any(c.is_alive() for c in children)
+    assert time.monotonic() - start < 25
+
+
+def test_a_scheduler_that_does_not_answer_is_named_within_seconds():
+    start = time.monotonic()
+    with pytest.raises(ConnectionError, match="no Dask scheduler answered at tcp://127.0.0.1:9"):
+        with sweep.dask_cluster("tcp://127.0.0.1:9", timeout=2.0):
+            pass
+    assert time.monotonic() - start < 20

@@ -1,0 +1,170 @@
+"""The advisor: from measuring the speed/accuracy trade to making it.
+
+    advice = advise(scene, tolerance=1e-3)          # a pilot study of the scene (study.py)
+    advice.choice                                   # the cheapest run within the tolerance
+    advice.write("renders/advise_cloth")            # advise.md, advise.csv
+
+The pilot study sweeps the candidates (integrator x dt x precision x iterations) over the
+scene's first `window` seconds against the rk4/f64 reference. A candidate passes when it did
+not diverge and its error (`metric`: max or RMS position error over the cloth size, as the
+study reports them) is within the tolerance; the choice is the passing one with the least
+measured cost (wall seconds per simulated second, the median of `repeats` timings). When none
+passes, the advice says so and names the closest.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from ..files import atomic_path
+from .study import DEFAULT_INTEGRATORS, DEFAULT_ITERATIONS, Run, StudyResult, run_study
+
+METRICS = ("max_error", "rms_error")
+REPEATS = 3          # timings per pilot run: the choice rests on costs
+AROUND = 3           # candidates shown either side of the choice
+
+
+@dataclass(frozen=True)
+class Advice:
+    """What the advisor found: `choice` (None when no run meets the tolerance), `closest` (the
+    run with the least error, for when none does) and the pilot `study`."""
+
+    scene_name: str
+    tolerance: float
+    metric: str
+    window: float
+    choice: Run | None
+    closest: Run | None
+    study: StudyResult
+
+    def passes(self, run: Run) -> bool:
+        return meets(run, self.metric, self.tolerance)
+
+    def ranked(self) -> list[Run]:
+        """Every run that did not diverge, cheapest first."""
+        return sorted((r for r in self.study.runs if not r.diverged), key=lambda r: r.cost)
+
+    def nearby(self) -> list[Run]:
+        """The runs around the choice (or the closest) in cost order."""
+        ranked = self.ranked()
+        anchor = self.choice or self.closest
+        if anchor is None:
+            return []
+        at = next(k for k, r in enumerate(ranked) if r is anchor)
+        return ranked[max(0, at - AROUND):at + AROUND + 1]
+
+    def summary(self) -> str:
+        """One sentence: what was chosen and why."""
+        passing = sum(self.passes(r) for r in self.study.runs)
+        runs = len(self.study.runs)
+        if self.choice is None:
+            closest = (f"; the closest is {describe(self.closest)} at {self.metric} "
+                       f"{getattr(self.closest, self.metric):.2e}" if self.closest else "")
+            return (f"no candidate meets {self.metric} <= {self.tolerance:g} over the first "
+                    f"{self.window:g} s ({runs} runs){closest}")
+        c = self.choice
+        return (f"{describe(c)}: {self.metric} {getattr(c, self.metric):.2e} <= "
+                f"{self.tolerance:g} at {c.cost:.3g} s per simulated second, the cheapest of "
+                f"{passing} of {runs} runs that meet it over the first {self.window:g} s")
+
+    def simulation_block(self, frame_dt: float) -> str:
+        """A [simulation] table of the choice, ready to paste into the scene file."""
+        c = self.choice
+        if c is None:
+            return ""
+        integrator = (f'"{c.integrator}"' if c.iterations is None else
+                      f'{{ name = "{c.integrator}", iterations = {c.iterations} }}')
+        return ("[simulation]\n"
+                f"integrator = {integrator}\n"
+                f"substeps = {round(frame_dt / c.dt)}             # dt = {c.dt:.6g} s\n"
+                f'precision = "{c.precision}"\n')
+
+    def markdown(self, frame_dt: float) -> str:
+        lines = [f"Advice for `{self.scene_name}`: {self.metric} <= {self.tolerance:g} over the "
+                 f"first {self.window:g} s.", "", self.summary() + ".", ""]
+        block = self.simulation_block(frame_dt)
+        if block:
+            lines += ["```toml", block.rstrip("\n"), "```", ""]
+        lines += ["| integrator | precision | dt [s] | max error | RMS error | cost [s/s] | meets | |",
+                  "|---|---|---|---|---|---|---|---|"]
+        for run in self.nearby():
+            mark = "chosen" if run is self.choice else "closest" if run is self.closest else ""
+            lines.append(f"| {describe_integrator(run)} | {run.precision} | {run.dt:.3g} | "
+                         f"{run.max_error:.2e} | {run.rms_error:.2e} | {run.cost:.3g} | "
+                         f"{'yes' if self.passes(run) else 'no'} | {mark} |")
+        if self.study.timing != "serial":
+            lines += ["", f"Costs measured with other runs at once ({self.study.timing})."]
+        return "\n".join(lines) + "\n"
+
+    def csv_text(self) -> str:
+        """Every run of the pilot, in cost order, with whether it meets the tolerance and
+        which one was chosen."""
+        out = io.StringIO()
+        runs = self.ranked() + [r for r in self.study.runs if r.diverged]
+        names = list(asdict(runs[0])) + ["meets", "chosen"] if runs else []
+        writer = csv.DictWriter(out, fieldnames=names, lineterminator="\n")
+        writer.writeheader()
+        for run in runs:
+            writer.writerow(asdict(run) | {"meets": self.passes(run), "chosen": run is self.choice})
+        return out.getvalue()
+
+    def write(self, folder, frame_dt: float) -> list[Path]:
+        """advise.md and advise.csv in `folder`, each written atomically."""
+        folder = Path(folder)
+        written = []
+        for name, text in (("advise.md", self.markdown(frame_dt)), ("advise.csv", self.csv_text())):
+            with atomic_path(folder / name) as tmp:
+                tmp.write_text(text)
+            written.append(folder / name)
+        return written
+
+
+def meets(run: Run, metric: str, tolerance: float) -> bool:
+    """Whether `run` did not diverge and its `metric` is within `tolerance` (NaN is not)."""
+    return not run.diverged and getattr(run, metric) <= tolerance
+
+
+def describe_integrator(run: Run) -> str:
+    return run.integrator if run.iterations is None else f"{run.integrator} ({run.iterations} it)"
+
+
+def describe(run: Run) -> str:
+    return f"{describe_integrator(run)} {run.precision} at dt = {run.dt:.3g} s"
+
+
+def choose(runs, metric: str, tolerance: float) -> tuple[Run | None, Run | None]:
+    """(the cheapest run meeting the tolerance or None, the run of least error or None)."""
+    passing = [r for r in runs if meets(r, metric, tolerance)]
+    finite = [r for r in runs if not r.diverged and math.isfinite(getattr(r, metric))]
+    choice = min(passing, key=lambda r: r.cost, default=None)
+    closest = min(finite, key=lambda r: (getattr(r, metric), r.cost), default=None)
+    return choice, closest
+
+
+def advise(scene, tolerance: float, *, metric: str = "max_error", window: float | None = None,
+           precisions=("f64", "f32"), integrators=DEFAULT_INTEGRATORS,
+           iterations=DEFAULT_ITERATIONS, dts=None, arch: str = "cpu", repeats: int = REPEATS,
+           workers=None, progress: bool = True) -> Advice:
+    """The cheapest (integrator, dt, precision, iterations) whose `metric` stays within
+    `tolerance` (a fraction of the cloth size) over the first `window` seconds (default: the
+    scene's duration), from a pilot study (run_study: `dts`, `workers` as there)."""
+    if metric not in METRICS:
+        raise ValueError(f"metric must be one of {METRICS}, got {metric!r}")
+    if not (isinstance(tolerance, (int, float)) and not isinstance(tolerance, bool)
+            and 0 < tolerance < math.inf):
+        raise ValueError(f"tolerance must be a number > 0 (a fraction of the cloth size), "
+                         f"got {tolerance!r}")
+    duration = scene.frames / scene.fps
+    if window is not None and not (isinstance(window, (int, float)) and 0 < window <= duration):
+        raise ValueError(f"window must be in (0, {duration:g}] s (the scene's duration), "
+                         f"got {window!r}")
+    pilot = run_study(scene, integrators=integrators, dts=dts, precisions=precisions,
+                      iterations=iterations, duration=window, arch=arch, repeats=repeats,
+                      workers=workers, progress=progress)
+    choice, closest = choose(pilot.runs, metric, tolerance)
+    return Advice(scene.name, float(tolerance), metric, float(pilot.reference.times[-1]),
+                  choice, closest, pilot)
