@@ -5,6 +5,7 @@ processes and on a real distributed.LocalCluster give the serial study's rows; a
 task is retried, Ctrl-C leaves no process behind, a silent scheduler is named."""
 
 import csv
+import json
 import multiprocessing
 import os
 import signal
@@ -81,6 +82,31 @@ def test_an_impossible_tolerance_is_said_so_with_the_closest(f64, scene_path, tm
     closest = min((r for r in rows if r["diverged"] == "False"), key=lambda r: float(r["max_error"]))
     assert f"the closest is {closest['integrator']}" in printed      # rk4 at its smallest dt
     assert "[simulation]" not in (out / "advise.md").read_text()
+
+
+def test_integrator_auto_runs_the_advisor_once_and_says_what_it_chose(f64, tmp_path, capsys):
+    """integrator = "auto" with tolerance: the first run advises (and caches the choice beside
+    its frames), the second reads the cache; both run the chosen integrator and step; another
+    tolerance is advised anew."""
+    scene = tmp_path / "auto.toml"
+    scene.write_text(STRING.replace('precision = "f64"', 'precision = "f64"\nintegrator = "auto"\n'
+                                    'tolerance = 1e-3\nintegrators = ["symplectic_euler", "rk4"]')
+                     + "[output]\nwidth = 64\nheight = 48\nsupersample = 1\n")
+    arguments = ["run", str(scene), "--out", str(tmp_path / "out"), "--frames", "2", "--no-progress"]
+    assert cli.main(arguments) == 0
+    first = capsys.readouterr()
+    cache = tmp_path / "out" / "swinging_string.advice.json"
+    chosen = json.loads(cache.read_text())
+    assert f"integrator auto: {chosen['integrator']} f64" in first.err and "cached" not in first.err
+    dt = tc.load_scene(scene).frame_dt / chosen["substeps"]
+    assert f"dt = {dt:.3g} s" in first.out
+    assert cli.main(arguments) == 0
+    second = capsys.readouterr()
+    assert f"(cached in {cache})" in second.err and f"dt = {dt:.3g} s" in second.out
+    scene.write_text(scene.read_text().replace("tolerance = 1e-3", "tolerance = 1e-2"))
+    assert cli.main(arguments) == 0
+    assert "cached" not in capsys.readouterr().err
+    assert json.loads(cache.read_text())["key"] != chosen["key"]
 
 
 def study_rows(folder: Path) -> list[dict]:

@@ -16,11 +16,15 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from ..files import atomic_path
+from ..integrators import INTEGRATORS, make_integrator
+from ..saved_state import fingerprint
+from .scene_file import SceneError
 from .study import DEFAULT_INTEGRATORS, DEFAULT_ITERATIONS, Run, StudyResult, run_study
 
 METRICS = ("max_error", "rms_error")
@@ -168,3 +172,53 @@ def advise(scene, tolerance: float, *, metric: str = "max_error", window: float 
     choice, closest = choose(pilot.runs, metric, tolerance)
     return Advice(scene.name, float(tolerance), metric, float(pilot.reference.times[-1]),
                   choice, closest, pilot)
+
+
+# What decides a scene's motion besides its integrator, step and precision (the advice's key)
+MOTION_FIELDS = ("cloth", "fps", "gravity", "drag", "wind", "tearing", "strain_limit",
+                 "self_collision", "handles", "colliders")
+
+
+def resolve(scene, folder, *, arch: str = "cpu", progress: bool = True):
+    """(the scene with integrator = "auto" made concrete, a sentence saying what was chosen
+    and why). The choice comes from `<name>.advice.json` in `folder` when that was made for
+    this scene and request (a hash of both), else from advise() and is cached there.
+    SceneError when no candidate meets the tolerance."""
+    request = scene.advice
+    key = fingerprint(FORMAT, request, *(getattr(scene, name) for name in MOTION_FIELDS))
+    path = Path(folder) / f"{scene.name}.advice.json"
+    cached = _read_cache(path, key)
+    if cached is None:
+        advice = advise(scene, request.tolerance, metric=request.metric, window=request.window,
+                        precisions=request.precisions,
+                        integrators=request.integrators or DEFAULT_INTEGRATORS, arch=arch,
+                        progress=progress)
+        if advice.choice is None:
+            raise SceneError(f"{scene.source}: integrator = \"auto\": {advice.summary()}; accept "
+                             "a larger tolerance or other integrators")
+        c = advice.choice
+        cached = {"key": key, "integrator": c.integrator, "iterations": c.iterations,
+                  "substeps": round(scene.frame_dt / c.dt), "precision": c.precision,
+                  "why": advice.summary()}
+        with atomic_path(path) as tmp:
+            tmp.write_text(json.dumps(cached, indent=1))
+        note = cached["why"]
+    else:
+        note = f"{cached['why']} (cached in {path})"
+    name, iterations = cached["integrator"], cached["iterations"]
+    integrator = (INTEGRATORS[name](iterations=iterations) if iterations is not None
+                  else make_integrator(name))
+    resolved = replace(scene, integrator=integrator, substeps=cached["substeps"],
+                       precision=cached["precision"], advice=None)
+    return resolved, note
+
+
+FORMAT = 1     # of the cached advice: bump when its meaning changes
+
+
+def _read_cache(path: Path, key: str) -> dict | None:
+    try:
+        cached = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    return cached if isinstance(cached, dict) and cached.get("key") == key else None

@@ -97,6 +97,11 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
                 output = replace(output, export=export)
             if checkpoint_every is not None:
                 output = replace(output, checkpoint_every=checkpoint_every)
+            if scene.automatic:
+                from .advisor import resolve
+
+                scene, why = resolve(scene, out or output.folder, arch=arch, progress=progress)
+                print(f"integrator auto: {why}", file=sys.stderr)
             work = scene.work(frames)
             if work.seconds > LONG_RUN_SECONDS:
                 print(f"note: '{scene.name}' is a long run: {work.describe()}", file=sys.stderr)

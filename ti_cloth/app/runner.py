@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import limits
+from .. import backend, limits
 from ..errors import SimulationDiverged, StateMismatch
 from ..export import Exporter
 from ..render import Camera, FrameSequence, Renderer
@@ -91,13 +91,21 @@ def run_scene(scene, *, folder=None, frames: int | None = None, progress: bool =
     """Simulate and render `frames` frames (default: the scene's duration x fps) into `folder`
     (default: the output's folder). output: an app.scene.Output replacing the scene's (size,
     formats, style, checkpoint_every). export: geometry formats (ti_cloth.export.FORMATS)
-    written with each frame (default: the output's). resume: continue from the state saved in
-    `folder` (FileNotFoundError without one, errors.StateMismatch for another scene's). Call
+    written with each frame (default: the output's). A scene with integrator = "auto" is
+    resolved first (advisor.resolve: its cached advice, or a pilot study), and run in the
+    precision it chose. resume: continue from the state saved in `folder`
+    (FileNotFoundError without one, errors.StateMismatch for another scene's). Call
     ti_cloth.init first. Returns a RunResult; Ctrl-C, SIGTERM (in the main thread) or a
     SimulationDiverged end the run early, in any phase, with every finished frame kept and the
     GIF/MP4 and point caches assembled from them."""
     from tqdm import tqdm
 
+    if scene.automatic:
+        from .advisor import resolve
+
+        arch = backend.config().arch
+        scene, _ = resolve(scene, folder or scene.output.folder, arch=arch, progress=progress)
+        backend.ensure(arch=arch, precision=scene.precision)
     substeps = scene.resolved_substeps()
     frames = scene.frames if frames is None else frames
     out = scene.output if output is None else output

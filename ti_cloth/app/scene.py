@@ -9,7 +9,7 @@ from __future__ import annotations
 import inspect
 import math
 import re
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +40,7 @@ COLLIDER_TYPES = {"plane": Plane, "sphere": Sphere, "box": Box, "capsule": Capsu
 VIEWS = ("3d", "2d")
 NAME_FORBIDDEN = r"[^\w .-]"
 GUARD_SIZES = 100.0   # a run has diverged once a coordinate is this many body sizes out
+ADVICE_WINDOW = 1.0   # s: integrator = "auto" advises on at most this much of the scene by default
 
 
 @dataclass
@@ -58,6 +59,19 @@ class Output:
     style: SurfaceStyle = field(default_factory=SurfaceStyle)
     export: tuple = ()          # geometry formats (export.FORMATS) written beside the frames
     checkpoint_every: int | None = None   # frames between saved states (None: runner decides)
+
+
+@dataclass(frozen=True)
+class AdviceRequest:
+    """integrator = "auto" in [simulation]: the largest error accepted (`tolerance`, a fraction
+    of the cloth size, in `metric`), over the first `window` seconds, among `integrators`
+    (None: all) and `precisions`."""
+
+    tolerance: float
+    metric: str
+    window: float
+    integrators: tuple | None
+    precisions: tuple
 
 
 @dataclass
@@ -84,6 +98,13 @@ class Scene:
     camera: Camera | None
     camera_fit: dict
     output: Output
+    advice: AdviceRequest | None = None   # integrator = "auto": what the advisor is asked
+
+    @property
+    def automatic(self) -> bool:
+        """integrator = "auto": the advisor picks the integrator, step and precision before a
+        run (app/advisor.py: resolve)."""
+        return self.advice is not None
 
     @property
     def size(self) -> float:
@@ -97,6 +118,9 @@ class Scene:
 
     def resolved_substeps(self) -> int:
         """Steps per frame; "auto": stability.auto_substeps (dt <= min(stable_dt / 2, 1/240 s))."""
+        if self.automatic:
+            raise SceneError(f"{self.source}: integrator = \"auto\" is chosen by the advisor "
+                             "first (ti_cloth.app.advisor.resolve)")
         if self.substeps != "auto":
             return self.substeps
         try:
@@ -143,7 +167,8 @@ def load_scene(path, note=None) -> Scene:
     meta.finish()
 
     sim = root.table("simulation") or Table({}, "simulation", str(path))
-    integrator = _integrator(sim)
+    automatic = sim.value("integrator", None) == "auto"
+    integrator = "auto" if automatic else _integrator(sim)
     fps = sim.number("fps", 30.0, within=limits.FPS)
     frames = round(sim.number("duration", 3.0, within=limits.DURATION) * fps)
     substeps = sim.value("substeps", "auto")
@@ -157,8 +182,15 @@ def load_scene(path, note=None) -> Scene:
         if substeps > limits.SUBSTEPS.high:
             sim._bad("dt", dt, f">= {1.0 / fps / limits.SUBSTEPS.high:.3g} s at fps = {fps:g} "
                      f"(at most {limits.SUBSTEPS.high:_} steps per frame)")
+    advice = _advice_request(sim, fps, frames) if automatic else None
     precision = sim.string("precision", _default(backend.init, "precision"),
                            sorted(backend.PRECISIONS))
+    if automatic:
+        if sim.has("substeps") or sim.has("dt"):
+            sim.fail("simulation: integrator = \"auto\" picks the step too; leave out "
+                     "substeps and dt")
+        advice = replace(advice, precisions=(precision,) if sim.has("precision")
+                         else tuple(sorted(backend.PRECISIONS, reverse=True)))
     tearing = sim.number("tearing", 0.0, 0.0, strict=True) if sim.has("tearing") else None
     limit = sim.table("strain_limit")
     strain_limit = None
@@ -208,12 +240,32 @@ def load_scene(path, note=None) -> Scene:
                   precision=precision, gravity=gravity, drag=drag, wind=wind, tearing=tearing,
                   strain_limit=strain_limit, self_collision=self_collision, handles=handles,
                   colliders=colliders, camera=camera,
-                  camera_fit=camera_fit, output=output)
+                  camera_fit=camera_fit, output=output, advice=advice)
     if note is not None and cloth.spring_count > limits.LARGE_BODY:
         note(f"'{name}' has {cloth.particle_count:,} particles and {cloth.spring_count:,} "
              "springs: finding its stable step takes a while")
     _check_runnable(scene, root)
     return scene
+
+
+def _advice_request(sim: Table, fps: float, frames: int) -> AdviceRequest:
+    """The [simulation] keys of integrator = "auto": tolerance (required), metric, window,
+    integrators (the candidates)."""
+    if not sim.has("tolerance"):
+        sim.fail('simulation: integrator = "auto" needs tolerance = the largest error accepted '
+                 "(a fraction of the cloth size, e.g. 1e-3)")
+    tolerance = sim.number("tolerance", minimum=0.0, strict=True)
+    metric = sim.string("metric", "max_error", ("max_error", "rms_error"))
+    duration = frames / fps
+    window = sim.number("window", min(ADVICE_WINDOW, duration), minimum=0.0, strict=True, unit="s")
+    if window > duration:
+        sim._bad("window", window, f"<= the duration, {duration:g} s")
+    candidates = sim.value("integrators", None)
+    if candidates is not None and (not isinstance(candidates, list) or not candidates
+                                   or not set(candidates) <= set(INTEGRATORS)):
+        sim._bad("integrators", candidates, f"a list of some of {sorted(INTEGRATORS)}")
+    return AdviceRequest(tolerance, metric, window,
+                         tuple(candidates) if candidates is not None else None, ())
 
 
 def _name(meta: Table, stem: str) -> str:
@@ -236,6 +288,8 @@ def _check_runnable(scene: Scene, root: Table) -> None:
     if scene.wind is not None and scene.cloth.mesh.triangle_count == 0:
         root.fail("forces.wind: wind acts on triangles, and these bodies have none (strings and "
                   "hair: use forces.drag)")
+    if scene.automatic:
+        return                     # the step is the advisor's: checked when it has chosen
     substeps = scene.resolved_substeps()
     if substeps > limits.SUBSTEPS.high:
         root.fail(f"simulation.substeps = \"auto\" needs {substeps:_} steps per frame (a stable "
