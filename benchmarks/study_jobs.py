@@ -38,7 +38,7 @@ def main(argv=None):
             result = study.run_study(scene, reference=reference, progress=False)
         else:
             with sweep.local_jobs(jobs) as workers:
-                result = study.run_study(scene, reference=reference, workers=workers,
+                result = study.run_study(scene, reference=reference, executor=workers,
                                          progress=False)
         wall = time.perf_counter() - start
         base = base or wall

@@ -164,7 +164,6 @@ duration = 0.7
 substeps = 4
 precision = "f64"
 tearing = 0.5
-self_collision = { thickness = 0.01 }
 [forces]
 wind = { velocity = [0.5, 0, 0], turbulence = 0.3 }
 [[bodies]]

@@ -152,10 +152,10 @@ def choose(runs, metric: str, tolerance: float) -> tuple[Run | None, Run | None]
 def advise(scene, tolerance: float, *, metric: str = "max_error", window: float | None = None,
            precisions=("f64", "f32"), integrators=DEFAULT_INTEGRATORS,
            iterations=DEFAULT_ITERATIONS, dts=None, arch: str = "cpu", repeats: int = REPEATS,
-           workers=None, progress: bool = True) -> Advice:
+           executor=None, progress: bool = True) -> Advice:
     """The cheapest (integrator, dt, precision, iterations) whose `metric` stays within
     `tolerance` (a fraction of the cloth size) over the first `window` seconds (default: the
-    scene's duration), from a pilot study (run_study: `dts`, `workers` as there)."""
+    scene's duration), from a pilot study (run_study: `dts`, `executor` as there)."""
     if metric not in METRICS:
         raise ValueError(f"metric must be one of {METRICS}, got {metric!r}")
     if not (isinstance(tolerance, (int, float)) and not isinstance(tolerance, bool)
@@ -168,7 +168,7 @@ def advise(scene, tolerance: float, *, metric: str = "max_error", window: float 
                          f"got {window!r}")
     pilot = run_study(scene, integrators=integrators, dts=dts, precisions=precisions,
                       iterations=iterations, duration=window, arch=arch, repeats=repeats,
-                      workers=workers, progress=progress)
+                      executor=executor, progress=progress)
     choice, closest = choose(pilot.runs, metric, tolerance)
     return Advice(scene.name, float(tolerance), metric, float(pilot.reference.times[-1]),
                   choice, closest, pilot)

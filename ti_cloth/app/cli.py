@@ -178,7 +178,7 @@ def study(scene_path, *, out=None, integrators=None, dts=None, precisions=("f64"
     try:
         with signals.stop_signals_raise(), _workers(jobs, scheduler) as workers:
             result = study_module.run_study(scene, precisions=tuple(precisions), duration=duration,
-                                            arch=arch, progress=progress, workers=workers,
+                                            arch=arch, progress=progress, executor=workers,
                                             **options)
         with signals.stop_signals_held():
             written = result.write(out or Path("renders") / f"study_{scene.name}", plot=plot)
@@ -215,7 +215,7 @@ def advise(scene_path, *, tolerance: float, metric="max_error", window=None, out
         with signals.stop_signals_raise(), _workers(jobs, scheduler) as workers:
             advice = advisor.advise(scene, tolerance, metric=metric, window=window,
                                     precisions=tuple(precisions), arch=arch, progress=progress,
-                                    workers=workers, **options)
+                                    executor=workers, **options)
         with signals.stop_signals_held():
             written = advice.write(out or Path("renders") / f"advise_{scene.name}", scene.frame_dt)
     except (ValueError, RuntimeError, ImportError, ConnectionError) as err:

@@ -32,7 +32,7 @@ from ..errors import SimulationDiverged
 from ..files import atomic_path
 from ..integrators import INTEGRATORS, make_integrator
 from ..stability import stable_dt
-from .sweep import Failure, Workers, run_tasks
+from .sweep import Failure, as_workers, run_tasks
 
 REFERENCE_TOLERANCE = 1e-9     # halving the reference step changes positions by less than this x size
 MAX_REFERENCE_HALVINGS = 8
@@ -357,12 +357,12 @@ def measure_configuration(task: Configuration) -> list[Run]:
 def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("f64", "f32"),
               iterations=DEFAULT_ITERATIONS, duration: float | None = None, arch: str = "cpu",
               reference: Reference | None = None, repeats: int = 1,
-              workers: Workers | None = None, progress: bool = True) -> StudyResult:
+              executor=None, progress: bool = True) -> StudyResult:
     """Sweep integrator x dt x precision (x iterations for pbd/xpbd) on `scene` (a Scene from
     load_scene). dts: steps [s], each frame_dt / an integer (default: default_dts). duration:
     simulated seconds (default the scene's). repeats: timings per run (cost: their median).
-    workers: where the configurations run (sweep.local_jobs, sweep.dask_cluster, or
-    sweep.Workers around any concurrent.futures.Executor; default: here, one after the
+    executor: where the configurations run: any concurrent.futures.Executor, or the
+    sweep.Workers of sweep.local_jobs / sweep.dask_cluster (default: here, one after the
     other). Rows come in configuration order whichever finishes first. Leaves Taichi
     initialised with the last precision run here.
     """
@@ -383,6 +383,7 @@ def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("
                              "use frame_dt / n for integers n")
         substeps.append(round(ratio))
     configurations = list(_configurations(integrators, iterations))
+    workers = as_workers(executor)
     if reference is None:
         reference = reference_trajectory(scene, duration, arch)
     tasks = [Configuration(scene, reference, precision, name, count, tuple(dts), tuple(substeps),

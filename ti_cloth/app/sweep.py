@@ -79,6 +79,22 @@ class _LocalJobs(Workers):
             child.terminate()
 
 
+def as_workers(executor) -> Workers | None:
+    """None, Workers, or any concurrent.futures.Executor (its timings labelled as taken with
+    other tasks at once) as Workers."""
+    if executor is None or isinstance(executor, Workers):
+        return executor
+    if not isinstance(executor, Executor):
+        raise TypeError(f"executor must be a concurrent.futures.Executor or sweep.Workers, "
+                        f"got {executor!r}")
+    return Workers(executor, f"{type(executor).__name__}, tasks at once")
+
+
+class _DaskWorkers(Workers):
+    def stop(self) -> None:
+        self.executor.shutdown(wait=False)      # Dask's: cancels what runs and waits
+
+
 @contextmanager
 def local_jobs(jobs: int):
     """Workers on `jobs` spawned processes, each task using cores / jobs Taichi threads."""
@@ -106,7 +122,7 @@ def dask_cluster(address: str, timeout: float = SCHEDULER_TIMEOUT):
                               "and workers with `dask worker <address> --nthreads 1`") from None
     try:
         count = len(client.scheduler_info().get("workers", {}))
-        yield Workers(client.get_executor(), f"Dask cluster at {address}, {count} workers")
+        yield _DaskWorkers(client.get_executor(), f"Dask cluster at {address}, {count} workers")
     finally:
         client.close()
 
