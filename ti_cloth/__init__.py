@@ -46,8 +46,8 @@ APP_MODULES = ("scene", "scene_file", "runner", "study", "cli")   # were ti_clot
 
 
 def __getattr__(name):
-    """The application layer (ti_cloth.app) pulls in the renderer, so load_scene, run_scene
-    and its modules (ti_cloth.study, ...; they lived here before ti_cloth.app) are imported
+    """The application layer (ti_cloth.app) pulls in the renderer, so load_scene, run_scene,
+    advise and its modules (ti_cloth.study, ...; they lived here before ti_cloth.app) are imported
     only when used."""
     if name == "load_scene":
         from .app.scene import load_scene
@@ -55,6 +55,9 @@ def __getattr__(name):
     if name == "run_scene":
         from .app.runner import run_scene
         return run_scene
+    if name == "advise":
+        from .app.advisor import advise
+        return advise
     if name in APP_MODULES:
         return importlib.import_module(f".app.{name}", __name__)
     raise AttributeError(f"module 'ti_cloth' has no attribute {name!r}")

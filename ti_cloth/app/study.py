@@ -270,7 +270,9 @@ class StudyResult:
         ax.set_yscale("log")
         ax.set_xlabel("cost: wall seconds per simulated second")
         ax.set_ylabel("max position error / cloth size")
-        ax.set_title(f"{self.scene_name}: error against cost (diverged runs left out)")
+        ax.set_title(f"{self.scene_name}: error against cost (diverged runs left out)"
+                     + ("" if self.timing == "serial" else f"\ncosts timed with {self.timing}"),
+                     fontsize=10 if self.timing != "serial" else None)
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7, ncol=2)
         fig.tight_layout()
@@ -352,6 +354,14 @@ def measure_configuration(task: Configuration) -> list[Run]:
             sim.restart(dt)
             runs.append(_measure(task, sim, n, predicted))
         return runs
+
+
+def retime(scene, run: Run, reference: Reference, repeats: int, arch: str = "cpu") -> Run:
+    """`run` measured again here, its cost the median of `repeats` timings (its errors come
+    out the same: the same bits)."""
+    task = Configuration(scene, reference, run.precision, run.integrator, run.iterations,
+                         (run.dt,), (round(scene.frame_dt / run.dt),), arch, None, repeats)
+    return measure_configuration(task)[0]
 
 
 def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("f64", "f32"),
