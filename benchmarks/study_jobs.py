@@ -17,7 +17,9 @@ from ti_cloth.app import study, sweep
 
 
 def rows(result):
-    return [{k: v for k, v in asdict(r).items() if k not in ("wall_seconds", "cost")}
+    """The runs without their timings, as text (NaN, the metrics of a diverged run, equals
+    itself there)."""
+    return [{k: repr(v) for k, v in asdict(r).items() if k not in ("wall_seconds", "cost")}
             for r in result.runs]
 
 

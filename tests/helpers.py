@@ -11,6 +11,23 @@ from ti_cloth import backend
 from ti_cloth.render import write_png
 
 
+# A 6-particle string swinging from one end for 0.2 s: the study's and advisor's small scene
+SWINGING_STRING = """
+[scene]
+name = "swinging_string"
+[simulation]
+fps = 30
+duration = 0.2
+[[bodies]]
+type = "string"
+n = 6
+length = 0.5
+mass = 0.05
+fixed = "start"
+stretch = { k = 50.0, kd = 0.01 }
+"""
+
+
 def use(precision: str) -> None:
     """Taichi on the CPU in `precision`, re-initialised only when the precision changes."""
     if backend._config is None or backend._config.precision != precision:

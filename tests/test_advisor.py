@@ -16,24 +16,10 @@ from pathlib import Path
 import pytest
 
 import ti_cloth as tc
-from helpers import report
+from helpers import SWINGING_STRING, report
 from ti_cloth.app import advisor, cli, study, sweep
 
-STRING = """
-[scene]
-name = "swinging_string"
-[simulation]
-fps = 30
-duration = 0.2
-precision = "f64"
-[[bodies]]
-type = "string"
-n = 6
-length = 0.5
-mass = 0.05
-fixed = "start"
-stretch = { k = 50.0, kd = 0.01 }
-"""
+STRING = SWINGING_STRING.replace("duration = 0.2", 'duration = 0.2\nprecision = "f64"')
 CANDIDATES = dict(integrators=["symplectic_euler", "rk4", "xpbd"], precisions=["f64"],
                   iterations=[4])
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from helpers import report
+from helpers import SWINGING_STRING, report
 from ti_cloth import study
 from ti_cloth.app.cli import main
 
@@ -25,20 +25,7 @@ length = 0.5
 fixed = "none"
 """
 
-SWINGING_STRING = """
-[scene]
-name = "swinging_string"
-[simulation]
-fps = 30
-duration = 0.2
-[[bodies]]
-type = "string"
-n = 6
-length = 0.5
-mass = 0.05
-fixed = "start"
-stretch = { k = 50.0, kd = 0.01 }
-"""
+
 
 
 def scene_file(tmp_path, text):

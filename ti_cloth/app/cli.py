@@ -158,12 +158,11 @@ def _report_failures(result) -> None:
         print(f"warning: {label} is missing: {error}", file=sys.stderr)
 
 
-def study(scene_path, *, out=None, integrators=None, dts=None, precisions=("f64", "f32"),
-          iterations=None, duration=None, arch="cpu", plot=True, progress=True, jobs=None,
-          scheduler=None) -> int:
-    """Run the speed/accuracy study of a scene and write study.csv, study.md, study.png."""
+def _sweep(scene_path, jobs, scheduler, compute, write, lost: str):
+    """Load a scene, compute(scene, workers) on the workers of --jobs / --scheduler, then
+    write(scene, result) with stop signals held. Returns (exit code to stop with or None,
+    scene, result, written paths)."""
     from . import signals
-    from . import study as study_module
     from .scene import load_scene
     from .scene_file import SceneError
 
@@ -171,25 +170,42 @@ def study(scene_path, *, out=None, integrators=None, dts=None, precisions=("f64"
         scene = load_scene(scene_path)
     except (SceneError, FileNotFoundError) as err:
         print(f"error: {err}", file=sys.stderr)
-        return 2
+        return 2, None, None, []
+    try:
+        with signals.stop_signals_raise(), _workers(jobs, scheduler) as workers:
+            result = compute(scene, workers)
+        with signals.stop_signals_held():
+            written = write(scene, result)
+    except (ValueError, RuntimeError, ImportError, ConnectionError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2, None, None, []
+    except KeyboardInterrupt as stop:
+        print(f"interrupted: {lost}", file=sys.stderr)
+        return signals.exit_code(stop), None, None, []
+    _report_failures(getattr(result, "study", result))
+    return None, scene, result, written
+
+
+def study(scene_path, *, out=None, integrators=None, dts=None, precisions=("f64", "f32"),
+          iterations=None, duration=None, arch="cpu", plot=True, progress=True, jobs=None,
+          scheduler=None) -> int:
+    """Run the speed/accuracy study of a scene and write study.csv, study.md, study.png."""
+    from . import study as study_module
+
     options = {"integrators": integrators, "dts": dts, "iterations": iterations}
     options = {k: v for k, v in options.items() if v is not None}
     start = time.perf_counter()
-    try:
-        with signals.stop_signals_raise(), _workers(jobs, scheduler) as workers:
-            result = study_module.run_study(scene, precisions=tuple(precisions), duration=duration,
-                                            arch=arch, progress=progress, executor=workers,
-                                            **options)
-        with signals.stop_signals_held():
-            written = result.write(out or Path("renders") / f"study_{scene.name}", plot=plot)
-    except (ValueError, RuntimeError, ImportError, ConnectionError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt as stop:
-        print("interrupted: the study wrote nothing (its table needs every run)", file=sys.stderr)
-        return signals.exit_code(stop)
+    code, _, result, written = _sweep(
+        scene_path, jobs, scheduler,
+        lambda scene, workers: study_module.run_study(
+            scene, precisions=tuple(precisions), duration=duration, arch=arch,
+            progress=progress, executor=workers, **options),
+        lambda scene, result: result.write(out or Path("renders") / f"study_{scene.name}",
+                                           plot=plot),
+        "the study wrote nothing (its table needs every run)")
+    if code is not None:
+        return code
     print(result.markdown())
-    _report_failures(result)
     print(f"{len(result.runs)} runs in {time.perf_counter() - start:.0f} s -> "
           f"{' '.join(str(p) for p in written)}")
     return 0
@@ -199,33 +215,23 @@ def advise(scene_path, *, tolerance: float, metric="max_error", window=None, out
            integrators=None, precisions=("f64", "f32"), iterations=None, arch="cpu",
            progress=True, jobs=None, scheduler=None) -> int:
     """Pick the cheapest integrator, step and precision for a tolerance; write advise.md and
-    advise.csv; print the candidates and a [simulation] block."""
-    from . import advisor, signals
-    from .scene import load_scene
-    from .scene_file import SceneError
+    advise.csv; print the candidates and a [simulation] block. Exit code 1 when no candidate
+    meets the tolerance."""
+    from . import advisor
 
-    try:
-        scene = load_scene(scene_path)
-    except (SceneError, FileNotFoundError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
     options = {"integrators": integrators, "iterations": iterations}
     options = {k: v for k, v in options.items() if v is not None}
-    try:
-        with signals.stop_signals_raise(), _workers(jobs, scheduler) as workers:
-            advice = advisor.advise(scene, tolerance, metric=metric, window=window,
-                                    precisions=tuple(precisions), arch=arch, progress=progress,
-                                    executor=workers, **options)
-        with signals.stop_signals_held():
-            written = advice.write(out or Path("renders") / f"advise_{scene.name}", scene.frame_dt)
-    except (ValueError, RuntimeError, ImportError, ConnectionError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt as stop:
-        print("interrupted: no advice (it needs every pilot run)", file=sys.stderr)
-        return signals.exit_code(stop)
+    code, scene, advice, written = _sweep(
+        scene_path, jobs, scheduler,
+        lambda scene, workers: advisor.advise(
+            scene, tolerance, metric=metric, window=window, precisions=tuple(precisions),
+            arch=arch, progress=progress, executor=workers, **options),
+        lambda scene, advice: advice.write(out or Path("renders") / f"advise_{scene.name}",
+                                           scene.frame_dt),
+        "no advice (it needs every pilot run)")
+    if code is not None:
+        return code
     print(advice.markdown(scene.frame_dt))
-    _report_failures(advice.study)
     print(f"-> {' '.join(str(p) for p in written)}")
     return 0 if advice.choice is not None else 1
 
