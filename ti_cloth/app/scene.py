@@ -288,9 +288,7 @@ def _check_runnable(scene: Scene, root: Table) -> None:
     if scene.wind is not None and scene.cloth.mesh.triangle_count == 0:
         root.fail("forces.wind: wind acts on triangles, and these bodies have none (strings and "
                   "hair: use forces.drag)")
-    if scene.automatic:
-        return                     # the step is the advisor's: checked when it has chosen
-    substeps = scene.resolved_substeps()
+    substeps = 1 if scene.automatic else scene.resolved_substeps()   # "auto": the advisor's
     if substeps > limits.SUBSTEPS.high:
         root.fail(f"simulation.substeps = \"auto\" needs {substeps:_} steps per frame (a stable "
                   f"step of {scene.frame_dt / substeps:.3g} s for these springs and masses), more "
