@@ -13,6 +13,10 @@ from ti_cloth.app.scene import Scene
 from ti_cloth.render import image
 from ti_cloth.simulation import Simulation
 
+# the runs here initialise Taichi in their scenes' precision, f32: among the f32 tests
+# (conftest), they do not switch a worker out of f64 and back
+pytestmark = pytest.mark.usefixtures("f32")
+
 SCENE = """
 [scene]
 name = "tiny"

@@ -7,6 +7,10 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
+# the runs here initialise Taichi in their scenes' precision, f32: among the f32 tests
+# (conftest), they do not switch a worker out of f64 and back
+pytestmark = pytest.mark.usefixtures("f32")
+
 DEMOS = sorted((Path(__file__).parents[1] / "demos").glob("*.py"))
 EXPECTED = {"hanging_cloth", "curtain_hem", "flag_in_wind", "tearing", "verlet_pbd_cloth",
             "string_wall", "hair", "soft_block", "stuyck_explicit", "cloth_pile", "two_layers", "tablecloth", "turntable"}
