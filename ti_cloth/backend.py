@@ -9,7 +9,6 @@ Calling `init` again resets Taichi: fields and simulations created before become
 
 from __future__ import annotations
 
-import gc
 import os
 import weakref
 from dataclasses import dataclass
@@ -59,10 +58,9 @@ def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None,
                    default_ip=ti.i32, random_seed=0, debug=debug, log_level=ti.WARN)
     if threads is not None:
         options["cpu_max_num_threads"] = threads
-    for user in list(_closed_by_init):
+    for user in list(_closed_by_init):    # dead ones too, until the cycle collector runs
         user.close()
     _closed_by_init.clear()
-    gc.collect()          # dead objects holding ndarrays go while their runtime still exists
     ti.init(**options)
     global _generation, _tree_count
     _generation += 1
@@ -81,8 +79,9 @@ def ensure(arch: str = "cpu", precision: str = "f32", threads: int | None = None
 
 # Objects holding Taichi ndarrays. An ndarray freed after `init` asks the *new* runtime to
 # delete it, and the new runtime may hold a live ndarray at the same address: it frees that one
-# (a later launch reads freed memory). So `init` closes these first (their ndarrays go with the
-# runtime they belong to), after collecting dead ones.
+# (a later launch reads freed memory). So `init` closes these first, the unreachable ones not
+# yet collected included (a weak set keeps them until then): their ndarrays go with the
+# runtime they belong to.
 _closed_by_init: weakref.WeakSet = weakref.WeakSet()
 
 
