@@ -399,10 +399,10 @@ def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("
     tasks = [Configuration(scene, reference, precision, name, count, tuple(dts), tuple(substeps),
                            arch, workers.threads if workers is not None else None, repeats)
              for precision in precisions for name, count in configurations]
-    bar = tqdm(total=len(tasks) * len(dts), unit="run", disable=not progress, dynamic_ncols=True)
-    results, incidents = run_tasks(measure_configuration, tasks, workers,
-                                   lambda i: bar.update(len(dts)))
-    bar.close()
+    with tqdm(total=len(tasks) * len(dts), unit="run", disable=not progress,
+              dynamic_ncols=True) as bar:        # closed on Ctrl-C too
+        results, incidents = run_tasks(measure_configuration, tasks, workers,
+                                       lambda i: bar.update(len(dts)))
     result = StudyResult(scene.name, reference,
                          timing="serial" if workers is None else workers.timing)
     for task, runs in zip(tasks, results):
