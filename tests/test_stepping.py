@@ -1,7 +1,8 @@
-"""Launch plans (fused.py): one parallel launch per step, many steps per launch on one worker
-and many steps per launch shared by a team of CPU workers, with the two-phase spring force
-(evaluate once, gather with signs), must all give the same bits, and the divergence guard must
-name the same step whichever plan ran."""
+"""Launch plans: one launch per stage of a step (fused.py's parallel step, GPUs' plan), many
+steps per launch on one worker and many steps per launch shared by a team of CPU workers
+(stepping.py), with the two-phase spring force (evaluate once, gather with signs), must all
+give the same bits, with every stage a team launch runs (strain limiting, colliders standing
+and scripted, tearing), and the divergence guard must name the same step whichever plan ran."""
 
 import importlib.util
 from pathlib import Path
@@ -11,11 +12,12 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from ti_cloth import backend
+from ti_cloth import backend, collision
 from ti_cloth.collision import ColliderSet
 from ti_cloth.forces import ForceSettings, compute_forces
 from ti_cloth.handles import HandleSet
-from ti_cloth.integrators import Integrator, fused
+from ti_cloth import stepping, team
+from ti_cloth.integrators import Integrator
 from ti_cloth.model import Model
 from ti_cloth.simulation import STEP_ORDER
 from ti_cloth.strain_limit import StrainLimiter
@@ -29,7 +31,7 @@ def sheet(n=6, damping="axial"):
     return cloth, centre + 1.3 * (cloth.particle_position - centre)   # start stretched: it moves
 
 
-PLANS = ["launch per step", "one worker", "team"]
+PLANS = ["launch per stage", "one worker", "team"]
 
 
 @pytest.fixture
@@ -41,15 +43,19 @@ def threads(f64):
 
 def run(sim, plan, steps, monkeypatch, per_launch=100):
     """`steps` steps in the given plan; many-steps plans launch per_launch steps at a time."""
-    if plan == "launch per step":
-        for _ in range(steps):
-            sim.step(1)
+    if plan == "launch per stage":
+        teamed, sim._many_per_launch = sim._many_per_launch, False
+        try:
+            for _ in range(steps):
+                sim.step(1)
+        finally:
+            sim._many_per_launch = teamed
         return
     many = sim._many_steps
     if plan == "team":       # two workers, whatever the cores, on the threads of the fixture
-        monkeypatch.setattr(many, "team", fused.Team(2, many.solo.arrived))
-    monkeypatch.setattr(fused, "TEAM_MIN_SPRING_STEPS", 0 if plan == "team" else 1 << 62)
-    monkeypatch.setattr(many, "steps_per_launch", per_launch)
+        monkeypatch.setattr(many, "team", team.Team(2, team.Barrier()))
+    monkeypatch.setattr(stepping, "TEAM_MIN_SPRING_STEPS", 0 if plan == "team" else 1 << 62)
+    monkeypatch.setattr(stepping, "MAX_STEPS_PER_LAUNCH", per_launch)
     sim.step(steps)
 
 
@@ -61,84 +67,127 @@ def braced_strands():
     return body, start
 
 
-@pytest.mark.parametrize("integrator, body, tearing",
-                         [(i, "sheet", t) for t in (None, 0.2) for i in FUSED]
-                         + [("symplectic_euler", "braced strands", None)])
-def test_every_launch_plan_takes_the_same_steps(threads, integrator, tearing, body, monkeypatch):
+def contact_scene(moving: bool):
+    """A plane 3 cm under the sheet and a sphere 1 cm under one of its particles (swept
+    sideways along a path when `moving`), with friction: the sheet thrown at them (THROW)
+    reaches both within the runs."""
+    path = (lambda t: (2.0 * t, 0.0, 0.0)) if moving else None
+    return [tc.Plane(point=(0.0, 0.0, -0.03), normal=(0.0, 0.0, 1.0), thickness=0.005,
+                     static_friction=0.4),
+            tc.Sphere(centre=(0.37, 0.37, -0.26), radius=0.25, thickness=0.005,
+                      static_friction=0.2, path=path)]
+
+
+THROW = (0.0, 0.0, -8.0)   # m/s, the sheet's start velocity
+
+
+FEATURES = {"none": {}, "tearing": dict(tearing=0.2), "strain limit": dict(strain_limit=tc.StrainLimit(0.05)),
+            "colliders": dict(colliders=contact_scene(False)),
+            "moving colliders": dict(colliders=contact_scene(True)),
+            "everything": dict(tearing=0.4, strain_limit=tc.StrainLimit(0.05),
+                               colliders=contact_scene(True))}
+EXACT = ("explicit_euler", "symplectic_euler", "xpbd")
+
+
+@pytest.mark.parametrize("integrator, body, feature",
+                         [(i, "sheet", f) for f in ("none", "tearing") for i in FUSED]
+                         + [(i, "sheet", f) for f in FEATURES for i in ("symplectic_euler", "xpbd")]
+                         + [("pbd", "sheet", "everything"), ("verlet", "sheet", "colliders"),
+                            ("symplectic_euler", "braced strands", "none"),
+                            ("xpbd", "braced strands", "none")])
+def test_every_launch_plan_takes_the_same_steps(threads, integrator, feature, body, monkeypatch):
     """The same bits in every plan, for a sheet and for strands whose altitude springs are
-    evaluated per element and gathered per corner (a team of two shares both)."""
+    evaluated per element and gathered per corner (a team of two shares both), with each
+    stage a team launch runs."""
     cloth, start = sheet() if body == "sheet" else braced_strands()
     runs = []
-    dt = 2e-5 if body == "sheet" else 0.5 * tc.stable_dt(cloth, integrator, 0.3)
-    sim = tc.Simulation(cloth, integrator=integrator, dt=dt, drag=0.3, tearing=tearing)
+    kwargs = FEATURES[feature]
+    position_based = integrator in ("pbd", "xpbd")
+    dt = (1 / 480 if position_based else 2e-5 if body == "sheet"
+          else 0.5 * tc.stable_dt(cloth, integrator, 0.3))
+    steps = 2 * 100 + 7 if not position_based else 2 * 20 + 7
+    sim = tc.Simulation(cloth, integrator=integrator, dt=dt, drag=0.3, **kwargs)
+    assert sim._many_steps is not None
     for plan in PLANS:                                    # restart: the same start, kernels kept
         sim.restart()
         sim.set_positions(start)
-        run(sim, plan, 2 * 100 + 7, monkeypatch)          # three launches, the last partial
+        sim.set_velocities(np.tile(THROW, (cloth.particle_count, 1)))
+        run(sim, plan, steps, monkeypatch, per_launch=100 if not position_based else 20)
         runs.append((sim.positions(), sim.velocities(), sim.torn_springs(), sim.step_count))
     x0, v0, torn0, n0 = runs[0]
     moved = np.abs(x0 - start).max()
-    if integrator != "verlet":
+    if "colliders" in kwargs:
+        distance, _ = sim.collider_distance(x0)
+        touching = int((distance < 0.0055).sum())
+        assert touching > 0, "the sheet reached a collider"
+    if integrator in EXACT and body == "sheet":
         np.testing.assert_array_equal(runs[1][0], runs[2][0])    # one worker == a team of two
     for plan, (x, v, torn, n) in zip(PLANS[1:], runs[1:]):
-        print(f"{integrator}, tearing {tearing}, {plan}: moved {moved:.3g} m, torn {len(torn)} "
-              f"springs, max |dx| against a launch per step {np.abs(x - x0).max()}")
-        assert moved > 1e-3 and n == n0 == 207 and np.array_equal(torn, torn0)
-        if integrator == "verlet" or body == "braced strands":
-            # Taichi's fast math lets LLVM contract Verlet's three-term update (and the cross
-            # and dot products of an altitude spring) differently in different kernels:
-            # rounding differences (1e-16 m a step on this 1 m sheet), accumulated over the
-            # steps and amplified where springs snap (up to 2e-12 m seen), far below the
-            # millimetres any change of method or step would make. The team and the one
-            # worker run the same kernel: thread counts never change the bits.
+        print(f"{integrator}, {feature}, {plan}: moved {moved:.3g} m, torn {len(torn)} "
+              f"springs, max |dx| against a launch per stage {np.abs(x - x0).max()}")
+        assert moved > 1e-3 and n == n0 == steps and np.array_equal(torn, torn0)
+        if integrator not in EXACT or body == "braced strands":
+            # Taichi's fast math lets LLVM contract Verlet's three-term update (pbd predicts
+            # with it too), and the cross and dot products of an altitude spring, differently
+            # in different kernels: rounding differences (1e-16 m a step on this 1 m sheet),
+            # accumulated over the steps and amplified where springs snap or particles meet
+            # a collider (up to 2e-12 m seen), far below the millimetres any change of method
+            # or step would make. Where kernels compile alike (the other cases), a team of two
+            # gives one worker's bits: thread counts never change them.
             assert np.abs(x - x0).max() <= 1e-10
         else:
             assert np.array_equal(x, x0) and np.array_equal(v, v0)
-    if tearing is not None:
+    if feature == "tearing":
         assert len(torn0) > 0, "the 30 % stretch tears springs at a 20 % tear strain"
 
 
 def test_a_team_shares_big_launches_and_one_worker_takes_small_ones(threads):
     cloth, _ = sheet()
-    sim = tc.Simulation(cloth, dt=2e-5)
-    many, model = sim._many_steps, sim.model
-    small = fused.TEAM_MIN_SPRING_STEPS // model.spring_count
-    assert many.team.workers == min(backend.cpu_threads(), backend.cpu_cores())
-    assert many.solo.workers == 1
-    assert many.team_for(model, small) is many.solo
-    assert many.team_for(model, small + 1) is many.team
-    assert many.steps_per_launch == fused.MAX_STEPS_PER_LAUNCH
-    big = fused.SPRING_STEPS_PER_LAUNCH // 10
-    assert fused.ManySteps(SimpleNamespace(spring_count=big, altitude_count=0)).steps_per_launch == 10
+    for integrator in ("symplectic_euler", tc.XPBD(iterations=5)):
+        sim = tc.Simulation(cloth, integrator=integrator, dt=2e-5)
+        many, model, work = sim._many_steps, sim.model, sim.integrator.step_work(sim.model)
+        small = stepping.TEAM_MIN_SPRING_STEPS // work
+        assert many.team.workers == min(backend.cpu_threads(), backend.cpu_cores())
+        assert many.solo.workers == 1
+        assert many.team_for(sim.integrator, model, small) is many.solo
+        assert many.team_for(sim.integrator, model, small + 1) is many.team
+        assert many.steps_per_launch(sim.integrator, model) == stepping.MAX_STEPS_PER_LAUNCH
+    assert work == 7 * cloth.spring_count          # iterations + prediction and velocities
+    big = SimpleNamespace(spring_count=stepping.SPRING_STEPS_PER_LAUNCH // 10, altitude_count=0)
+    assert many.steps_per_launch(tc.SymplecticEuler(), big) == 10
+    moving = tc.Simulation(cloth, dt=1e-4, colliders=contact_scene(True))._many_steps
+    assert moving.steps_per_launch(tc.SymplecticEuler(), model) == collision.SCHEDULE_STEPS
 
 
 def test_a_team_has_no_more_workers_than_cores(threads, monkeypatch):
     """More pool threads than cores (threads= beyond the machine) must not make spinning
     workers wait for descheduled ones: one worker per core, here one, so no team."""
     monkeypatch.setattr(backend, "cpu_cores", lambda: 1)
-    many = fused.ManySteps(SimpleNamespace(spring_count=100, altitude_count=0))
+    many = stepping.ManySteps(stepping.TeamStages())
     assert backend.cpu_threads() >= 2 and many.team is many.solo
 
 
 def test_a_team_without_threads_for_every_worker_raises_instead_of_hanging(threads, monkeypatch):
     cloth, start = sheet()
     sim = tc.Simulation(cloth, dt=2e-5)
-    monkeypatch.setattr(fused, "BARRIER_SPINS", 1 << 16)     # read when the kernel compiles
+    monkeypatch.setattr(team, "BARRIER_SPINS", 1 << 16)     # read when the kernel compiles
     many = sim._many_steps
-    many.team = fused.Team(backend.cpu_threads() + 1, many.solo.arrived)
-    monkeypatch.setattr(fused, "TEAM_MIN_SPRING_STEPS", 0)
+    many.team = team.Team(backend.cpu_threads() + 1, team.Barrier())
+    monkeypatch.setattr(stepping, "TEAM_MIN_SPRING_STEPS", 0)
     sim.set_positions(start)
     with pytest.raises(tc.TeamStalled, match="workers"):
         sim.step(50)
 
 
-def test_features_between_steps_take_one_launch_per_step(f64):
+def test_features_set_between_steps_take_one_launch_per_stage(f64):
     cloth, _ = sheet()
     assert tc.Simulation(cloth, dt=1e-4)._many_steps is not None
+    for kwargs in (dict(colliders=[tc.Plane(point=(0.0, -1.0, 0.0), normal=(0.0, 1.0, 0.0))]),
+                   dict(strain_limit=tc.StrainLimit(0.1)), dict(tearing=0.5)):
+        assert tc.Simulation(cloth, dt=1e-4, **kwargs)._many_steps is not None, kwargs
     for kwargs in (dict(wind=tc.Wind(velocity=(1.0, 0.0, 0.0))),
-                   dict(colliders=[tc.Plane(point=(0.0, -1.0, 0.0), normal=(0.0, 1.0, 0.0))]),
-                   dict(strain_limit=tc.StrainLimit(0.1)),
-                   dict(handles=[tc.Handle([0], lambda t: (0.0, 0.0, 0.0))])):
+                   dict(handles=[tc.Handle([0], lambda t: (0.0, 0.0, 0.0))]),
+                   dict(self_collision=tc.SelfCollision(thickness=0.01))):
         assert tc.Simulation(cloth, dt=1e-4, **kwargs)._many_steps is None, kwargs
     assert tc.Simulation(cloth, integrator="rk4", dt=1e-4)._many_steps is None
 
@@ -160,8 +209,8 @@ def record_stages(monkeypatch):
 @pytest.mark.parametrize("features", [
     ("strain_limit", "colliders", "handles", "tearing"), ("colliders", "tearing"), ("handles",), ()])
 def test_a_step_runs_its_stages_in_step_order(f64, monkeypatch, features):
-    """One launch per step: the integrator, then exactly the stages the scene has, in
-    STEP_ORDER; the many-steps plan fuses the stages of FUSED_STAGES, which keep that order."""
+    """One launch per stage: the integrator, then exactly the stages the scene has, in
+    STEP_ORDER; the many-steps plan runs the stages of TEAM_STAGES, which keep that order."""
     cloth, _ = sheet()
     options = {"strain_limit": dict(strain_limit=tc.StrainLimit(0.1)),
                "colliders": dict(colliders=[tc.Plane(point=(0.0, -1.0, 0.0))]),
@@ -175,9 +224,9 @@ def test_a_step_runs_its_stages_in_step_order(f64, monkeypatch, features):
     expected = tuple(name for name in STEP_ORDER if name == "integrator" or name in features)
     assert sim.stages == expected
     assert calls == list(expected) * 3
-    assert fused.FUSED_STAGES == tuple(n for n in STEP_ORDER if n in fused.FUSED_STAGES)
-    assert fused.FUSED_STAGES[0] == "integrator"
-    assert (sim._many_steps is not None) == (set(expected) <= set(fused.FUSED_STAGES))
+    assert stepping.TEAM_STAGES == tuple(n for n in STEP_ORDER if n in stepping.TEAM_STAGES)
+    assert stepping.TEAM_STAGES[0] == "integrator"
+    assert (sim._many_steps is not None) == (set(expected) <= set(stepping.TEAM_STAGES))
 
 
 @pytest.mark.parametrize("integrator", FUSED)

@@ -15,6 +15,10 @@ from .state import copy_positions
 from .transfer import upload
 
 
+PLACEMENT = 30       # numbers per collider in a placement row (ColliderSet._placement)
+SCHEDULE_STEPS = 64  # placements a many-steps launch may read (stepping.py)
+
+
 @backend.kernel_argument
 class ColliderSet:
     """The colliders of one simulation as Taichi fields (one row per collider), and the
@@ -38,6 +42,7 @@ class ColliderSet:
         self.kinetic_friction = fields.scalar(real, count)
         self.velocity = fields.vector(3, real, count)
         self.step_start = fields.vector(3, real, particle_count)
+        self.scheduled = fields.vector(PLACEMENT, real, SCHEDULE_STEPS * count)
         if self.meshes:
             self.samples = fields.vector(4, real, self.nodes)
             self.grid_start = fields.scalar(ti.i32, count)
@@ -86,6 +91,20 @@ class ColliderSet:
         """Put every collider where its path (and rotation) says at time t; velocity and the
         previous pose from t - dt (the same as now when dt is None: at the start)."""
         write_placement(self, self._placement(t, dt))
+
+    def schedule(self, first: int, count: int, dt: float) -> None:
+        """Write the placements at the ends of steps first .. first + count - 1 (count at
+        most SCHEDULE_STEPS) for a many-steps launch (place_scheduled)."""
+        rows = np.stack([self._placement((first + k + 1) * dt, dt) for k in range(count)])
+        table = np.zeros((SCHEDULE_STEPS * self.count, PLACEMENT), backend.numpy_real())
+        table[:count * self.count] = rows.reshape(-1, PLACEMENT)
+        self.scheduled.from_numpy(table)
+
+    @ti.func
+    def place_scheduled(self, k):
+        """Put the colliders where schedule() said for the k-th step of the launch."""
+        for c in range(self.count):
+            place_collider(self, c, self.scheduled[k * self.count + c])
 
     def before_step(self, state, t: float) -> None:
         """Keep the positions at the step start: the friction response needs the step's motion."""
@@ -157,23 +176,29 @@ class ColliderSet:
         return turns[t]
 
 
-PLACEMENT = 30     # numbers per collider in a placement row (ColliderSet._placement)
+
+
+@ti.func
+def place_collider(colliders: ti.template(), c, row):
+    """Collider c's pose from a placement row (ColliderSet._placement's layout)."""
+    for k in ti.static(range(3)):
+        colliders.a[c][k] = row[k]
+        colliders.b[c][k] = row[3 + k]
+        colliders.velocity[c][k] = row[6 + k]
+    if ti.static(colliders.meshes):
+        for k in ti.static(range(3)):
+            colliders.a_prev[c][k] = row[9 + k]
+        for k in ti.static(range(9)):
+            colliders.rotation[c][k] = row[12 + k]
+            colliders.rotation_prev[c][k] = row[21 + k]
 
 
 @ti.kernel
 def write_placement(colliders: ti.template(), rows: ti.types.ndarray()):
     """Copy ColliderSet._placement's rows into the colliders' fields (one launch per step)."""
     for c in range(colliders.count):
-        for k in ti.static(range(3)):
-            colliders.a[c][k] = rows[c, k]
-            colliders.b[c][k] = rows[c, 3 + k]
-            colliders.velocity[c][k] = rows[c, 6 + k]
-        if ti.static(colliders.meshes):
-            for k in ti.static(range(3)):
-                colliders.a_prev[c][k] = rows[c, 9 + k]
-            for k in ti.static(range(9)):
-                colliders.rotation[c][k] = rows[c, 12 + k]
-                colliders.rotation_prev[c][k] = rows[c, 21 + k]
+        row = ti.Vector([rows[c, k] for k in ti.static(range(PLACEMENT))])
+        place_collider(colliders, c, row)
 
 
 @ti.func
@@ -239,39 +264,46 @@ def surface_velocity(colliders: ti.template(), c, x, dt):
     return v
 
 
+@ti.func
+def resolve_particle(model: ti.template(), state: ti.template(), colliders: ti.template(), i,
+                     dt):
+    """Project particle i (if free) out of every collider, in collider order, with Coulomb
+    friction on its displacement over the step relative to the surface (colliders.py)."""
+    if model.particle_inv_mass[i] > 0:
+        x0 = colliders.step_start[i]
+        x = state.particle_position[i]
+        v = state.particle_velocity[i]
+        touched = False
+        for c in range(colliders.count):
+            d, n = collider_distance(colliders, c, x, x0)
+            depth = colliders.thickness[c] - d
+            if depth > 0:
+                x += depth * n
+                vc = surface_velocity(colliders, c, x, dt)
+                slide = x - x0 - vc * dt
+                tangential = slide - slide.dot(n) * n
+                length = tangential.norm()
+                if length <= colliders.static_friction[c] * depth:
+                    x -= tangential
+                else:
+                    x -= tangential * ti.min(colliders.kinetic_friction[c] * depth / length, 1.0)
+                v = (x - x0) / dt
+                approach = (v - vc).dot(n)
+                if approach < 0:
+                    v -= approach * n
+                touched = True
+        if touched:
+            state.particle_position[i] = x
+            state.particle_velocity[i] = v
+            state.particle_prev_position[i] = x - v * dt
+
+
 @ti.kernel
 def resolve_collisions(model: ti.template(), state: ti.template(), colliders: ti.template(),
                        dt: float):
-    """Project every free particle out of every collider, in collider order, with Coulomb
-    friction on its displacement over the step relative to the surface (colliders.py)."""
+    """resolve_particle for every particle."""
     for i in range(model.particle_count):
-        if model.particle_inv_mass[i] > 0:
-            x0 = colliders.step_start[i]
-            x = state.particle_position[i]
-            v = state.particle_velocity[i]
-            touched = False
-            for c in range(colliders.count):
-                d, n = collider_distance(colliders, c, x, x0)
-                depth = colliders.thickness[c] - d
-                if depth > 0:
-                    x += depth * n
-                    vc = surface_velocity(colliders, c, x, dt)
-                    slide = x - x0 - vc * dt
-                    tangential = slide - slide.dot(n) * n
-                    length = tangential.norm()
-                    if length <= colliders.static_friction[c] * depth:
-                        x -= tangential
-                    else:
-                        x -= tangential * ti.min(colliders.kinetic_friction[c] * depth / length, 1.0)
-                    v = (x - x0) / dt
-                    approach = (v - vc).dot(n)
-                    if approach < 0:
-                        v -= approach * n
-                    touched = True
-            if touched:
-                state.particle_position[i] = x
-                state.particle_velocity[i] = v
-                state.particle_prev_position[i] = x - v * dt
+        resolve_particle(model, state, colliders, i, dt)
 
 
 @ti.kernel

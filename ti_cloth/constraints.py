@@ -15,6 +15,7 @@ import taichi as ti
 
 from . import backend
 from .forces import altitude_gradient
+from .team import SOLO
 
 SERIAL_SPRING_LIMIT = 50_000   # serial sweeps faster at 24k springs, parallel ones at 97k
 
@@ -23,6 +24,16 @@ def serial_is_faster(model) -> bool:
     """Whether this model's sweeps run faster serially in one launch (CPU, few springs)."""
     return (backend.config().arch == "cpu"
             and model.spring_count + model.altitude_count <= SERIAL_SPRING_LIMIT)
+
+
+@backend.kernel_argument
+class SweepOrder:
+    """A model's spring and altitude-spring colourings, as one kernel argument (the team
+    steps of position-based integrators read them)."""
+
+    def __init__(self, model):
+        self.colours = model.spring_colouring()
+        self.altitude_colours = model.altitude_colouring()
 
 
 @ti.func
@@ -68,6 +79,29 @@ def _relax_altitude(model: ti.template(), state: ti.template(), a, stiffness):
             state.particle_position[corner[c]] += scale * weight[c] * g[c] * n
 
 
+@ti.func
+def relax_pass(model: ti.template(), state: ti.template(), colours: ti.template(),
+               altitude_colours: ti.template(), stiffness, altitude_stiffness,
+               tearable: ti.template(), max_strain, stretched_only: ti.template(),
+               team: ti.template(), worker):
+    """Worker `worker`'s share of one relaxation pass (relax_springs), colour by colour: the
+    springs of a colour share no particle, so the team's workers project their slices of it
+    at once and meet before the next colour."""
+    for c in range(colours.count):
+        begin, end = team.share_range(colours.start[c], colours.start[c + 1], worker)
+        for t in range(begin, end):
+            _relax(model, state, colours.order[t], stiffness, tearable, max_strain,
+                   stretched_only)
+        team.meet(worker)
+    if ti.static(model.altitude_count > 0 and not stretched_only):
+        for c in range(altitude_colours.count):
+            begin, end = team.share_range(altitude_colours.start[c],
+                                          altitude_colours.start[c + 1], worker)
+            for t in range(begin, end):
+                _relax_altitude(model, state, altitude_colours.order[t], altitude_stiffness)
+            team.meet(worker)
+
+
 @ti.kernel
 def relax_springs(model: ti.template(), state: ti.template(), colours: ti.template(),
                   altitude_colours: ti.template(), stiffness: ti.math.vec3,
@@ -88,15 +122,8 @@ def relax_springs(model: ti.template(), state: ti.template(), colours: ti.templa
     if ti.static(serial):
         for _ in range(1):
             for _pass in range(passes):
-                for c in range(colours.count):
-                    for t in range(colours.start[c], colours.start[c + 1]):
-                        _relax(model, state, colours.order[t], stiffness, tearable, max_strain,
-                               stretched_only)
-                if ti.static(model.altitude_count > 0 and not stretched_only):
-                    for c in range(altitude_colours.count):
-                        for t in range(altitude_colours.start[c], altitude_colours.start[c + 1]):
-                            _relax_altitude(model, state, altitude_colours.order[t],
-                                            altitude_stiffness)
+                relax_pass(model, state, colours, altitude_colours, stiffness, altitude_stiffness,
+                           tearable, max_strain, stretched_only, SOLO, 0)
     else:
         for c in ti.static(range(colours.count)):
             for t in range(colours.offsets[c], colours.offsets[c + 1]):
@@ -154,6 +181,27 @@ def _xpbd_altitude(model: ti.template(), state: ti.template(), a, multiplier: ti
             state.particle_position[corner[c]] += weight[c] * dlambda * g[c] * n
 
 
+@ti.func
+def xpbd_pass(model: ti.template(), state: ti.template(), colours: ti.template(),
+              altitude_colours: ti.template(), multiplier: ti.template(),
+              altitude_multiplier: ti.template(), dt, tearable: ti.template(),
+              team: ti.template(), worker):
+    """Worker `worker`'s share of one XPBD pass (xpbd_springs), colour by colour, meeting
+    the team after each colour."""
+    for c in range(colours.count):
+        begin, end = team.share_range(colours.start[c], colours.start[c + 1], worker)
+        for t in range(begin, end):
+            _xpbd(model, state, colours.order[t], multiplier, dt, tearable)
+        team.meet(worker)
+    if ti.static(model.altitude_count > 0):
+        for c in range(altitude_colours.count):
+            begin, end = team.share_range(altitude_colours.start[c],
+                                          altitude_colours.start[c + 1], worker)
+            for t in range(begin, end):
+                _xpbd_altitude(model, state, altitude_colours.order[t], altitude_multiplier, dt)
+            team.meet(worker)
+
+
 @ti.kernel
 def xpbd_springs(model: ti.template(), state: ti.template(), colours: ti.template(),
                  altitude_colours: ti.template(), multiplier: ti.template(),
@@ -174,14 +222,8 @@ def xpbd_springs(model: ti.template(), state: ti.template(), colours: ti.templat
     if ti.static(serial):
         for _ in range(1):
             for _pass in range(passes):
-                for c in range(colours.count):
-                    for t in range(colours.start[c], colours.start[c + 1]):
-                        _xpbd(model, state, colours.order[t], multiplier, dt, tearable)
-                if ti.static(model.altitude_count > 0):
-                    for c in range(altitude_colours.count):
-                        for t in range(altitude_colours.start[c], altitude_colours.start[c + 1]):
-                            _xpbd_altitude(model, state, altitude_colours.order[t],
-                                           altitude_multiplier, dt)
+                xpbd_pass(model, state, colours, altitude_colours, multiplier, altitude_multiplier,
+                          dt, tearable, SOLO, 0)
     else:
         for c in ti.static(range(colours.count)):
             for t in range(colours.offsets[c], colours.offsets[c + 1]):
@@ -207,6 +249,17 @@ def _damp(model: ti.template(), state: ti.template(), s, dt, tearable: ti.templa
         state.particle_velocity[q] += wq / (wp + wq) * dv
 
 
+@ti.func
+def damp_pass(model: ti.template(), state: ti.template(), colours: ti.template(), dt,
+              tearable: ti.template(), team: ti.template(), worker):
+    """Worker `worker`'s share of one damping pass (damp_springs), colour by colour."""
+    for c in range(colours.count):
+        begin, end = team.share_range(colours.start[c], colours.start[c + 1], worker)
+        for t in range(begin, end):
+            _damp(model, state, colours.order[t], dt, tearable)
+        team.meet(worker)
+
+
 @ti.kernel
 def damp_springs(model: ti.template(), state: ti.template(), colours: ti.template(),
                  altitude_colours: ti.template(), dt: float, tearable: ti.template(),
@@ -222,9 +275,7 @@ def damp_springs(model: ti.template(), state: ti.template(), colours: ti.templat
     if ti.static(serial):
         for _ in range(1):
             for _pass in range(passes):
-                for c in range(colours.count):
-                    for t in range(colours.start[c], colours.start[c + 1]):
-                        _damp(model, state, colours.order[t], dt, tearable)
+                damp_pass(model, state, colours, dt, tearable, SOLO, 0)
     else:
         for c in ti.static(range(colours.count)):
             for t in range(colours.offsets[c], colours.offsets[c + 1]):

@@ -9,9 +9,9 @@ One step, in this order (STEP_ORDER), the same in every launch plan:
 
 Each stage after the integrator is an object with after_step(model, state, t, dt, step_index)
 (t: the time at the step's end), compiled and launched only when the simulation has it; the
-colliders, self-collision and the wind also have before_step(state, t) (t: the step's start). On the CPU, a
-fused integrator whose stages are all among integrators.fused.FUSED_STAGES runs many steps in
-one launch (tested to give the same bits as a launch per step).
+colliders, self-collision and the wind also have before_step(state, t) (t: the step's start). On the CPU, an
+integrator with a team step whose stages are all among stepping.TEAM_STAGES runs many steps in
+one launch (stepping.py; tested against a launch per stage).
 """
 
 
@@ -20,14 +20,14 @@ from pathlib import Path
 
 import numpy as np
 
-from . import backend, limits, saved_state
+from . import backend, limits, saved_state, stepping
 from ._validate import as_array, in_range, integer, require
 from .collision import ColliderSet
 from .self_collision import SelfCollision, SelfContact, SelfContacts, warn_if_thick
 from .errors import SimulationDiverged, StaleSimulation
 from .forces import ForceSettings, energies
 from .handles import Handle, HandleSet
-from .integrators import fused, make_integrator
+from .integrators import make_integrator
 from .model import Model
 from .pool import POOL
 from .stability import auto_dt, stable_dt
@@ -132,12 +132,11 @@ class Simulation:
         self.step_count = 0
         self._diverged: SimulationDiverged | None = None
         self._place_handles_at_start()
-        # Many steps per launch on the CPU when every stage is fused; made on the first
-        # step(n > 1), so a simulation stepped one at a time allocates nothing (and kept with
-        # the lent objects).
-        self._many_per_launch = (self.integrator.fused and backend.config().arch == "cpu"
+        # Many steps per launch on the CPU when every stage runs in a team launch; made on
+        # first use (kept with the lent objects).
+        self._many_per_launch = (self.integrator.teamed and backend.config().arch == "cpu"
                                  and self.wind is None
-                                 and set(self.stages) <= set(fused.FUSED_STAGES))
+                                 and set(self.stages) <= set(stepping.TEAM_STAGES))
 
     def _lend(self, parts: dict) -> dict:
         """The objects this simulation passes to kernels, {name: cls(*args)}, lent by the pool
@@ -223,10 +222,10 @@ class Simulation:
         integer("n", n, 0, limits.STEPS.high - self.step_count)
         if self._diverged is not None:
             raise self._diverged
-        if self._many_per_launch and n > 1:
+        if self._many_per_launch and (n > 1 or not self.integrator.fused):
             self.step_count += self._many_steps.run(
                 self.integrator, self.model, self.state, self.forces, self.dt, self.step_count, n,
-                self.tearing.strain if self.tearing is not None else 0.0)
+                self.tearing, self.strain_limiter.limit if self.strain_limiter else None)
             n = 0
         for _ in range(n):
             self._step_once()
@@ -265,13 +264,17 @@ class Simulation:
             stage.after_step(self.model, self.state, self.time, self.dt, self.step_count - 1)
 
     @property
-    def _many_steps(self) -> fused.ManySteps | None:
-        """The plan that runs step(n > 1) in few launches, or None when steps go one by one."""
+    def _many_steps(self) -> stepping.ManySteps | None:
+        """The plan that runs steps in few launches (step(n > 1), and every step of an
+        integrator that is not fused), or None when steps go launch by launch."""
         if not self._many_per_launch:
             return None
-        if "many_steps" not in self._lent:
-            self._lent["many_steps"] = fused.ManySteps(self.model)
-        return self._lent["many_steps"]
+        key = ("many_steps", self.tearing is not None)
+        if key not in self._lent:
+            self._lent[key] = stepping.ManySteps(stepping.TeamStages(
+                self.strain_limiter, self.colliders, self.tearing is not None,
+                self.model.spring_colouring() if self.strain_limiter is not None else None))
+        return self._lent[key]
 
     def positions(self) -> np.ndarray:
         """Particle positions [m], (N, 3) float64 copy."""

@@ -1,11 +1,11 @@
 """What every integrator offers: a name, its order of accuracy, its stability rule and one verb,
 step()."""
 
-from __future__ import annotations
-
 import math
 from typing import ClassVar
 
+
+import taichi as ti
 
 from .. import backend
 from ..modes import stiffest_mode
@@ -33,12 +33,32 @@ class Integrator:
     position_based: ClassVar[bool] = False  # True: springs are constraints projected on positions
     step_limited: ClassVar[bool] = True     # False: stable at any step (stable_dt is inf)
     fused: ClassVar[bool] = False           # True: defines move(), fused.py runs the step
+    teamed: ClassVar[bool] = False          # True: defines team_step(), for stepping.py
     records_history: ClassVar[bool] = False  # True: a step leaves x_n in particle_prev_position
 
     def step(self, model, state, dt: float, forces, step_index: int) -> None:
         if not self.fused:
             raise NotImplementedError
         fused.step_once(self, model, state, forces, dt, step_index)
+
+    @ti.func
+    def team_step(self, model: ti.template(), state: ti.template(), forces: ti.template(),
+                  work: ti.template(), team: ti.template(), worker, dt, step, start):
+        """Worker `worker`'s share of one step in a many-steps launch (stepping.py), ending at
+        a barrier after which every particle has its new position and velocity; `work` is
+        workspace()'s object. A fused integrator's is fused.team_step."""
+        fused.team_step(self, model, state, forces, team, worker, dt, step, start)
+
+    def workspace(self, model, state):
+        """The working storage team_step reads (a kernel argument; the State when none)."""
+        return state
+
+    def step_work(self, model) -> int:
+        """A step's work in spring evaluations, for sizing launches (stepping.py)."""
+        return fused.spring_work(model)
+
+    def after_launch(self, work) -> None:
+        """Read back what a many-steps launch left for reports (the last solve's figures)."""
 
     def stable_step(self, cloth, drag: float, pinned) -> float:
         """Largest stable step [s] predicted for `cloth` with uniform drag [1/s] and `pinned`

@@ -7,20 +7,26 @@ import taichi as ti
 
 from .. import limits
 from .._validate import count, finite_number, require
-from ..constraints import relax_springs, sweep
-from ..forces import compute_forces
+from ..constraints import SweepOrder, relax_pass, relax_springs, sweep
+from ..forces import compute_forces, gather_force
 from ..material import SpringKind
 from ..state import store_particle
+from . import fused
 from .base import Integrator
 from .verlet import verlet_update
 
 
+@ti.func
+def velocity_from_positions(state: ti.template(), i, dt, step):
+    """v_{n+1} = (x_{n+1} - x_n) / h for particle i, with x_n in particle_prev_position."""
+    x = state.particle_position[i]
+    store_particle(state, i, x, (x - state.particle_prev_position[i]) / dt, step)
+
+
 @ti.kernel
 def update_velocity(model: ti.template(), state: ti.template(), dt: float, step: ti.i32):
-    """v_{n+1} = (x_{n+1} - x_n) / h, with x_n in particle_prev_position."""
     for i in range(model.particle_count):
-        x = state.particle_position[i]
-        store_particle(state, i, x, (x - state.particle_prev_position[i]) / dt, step)
+        velocity_from_positions(state, i, dt, step)
 
 
 @ti.kernel
@@ -58,6 +64,8 @@ class PBD(Integrator):
     order = 1
     position_based = True
     step_limited = False
+    teamed = True
+    records_history = True
 
     def __init__(self, *, iterations: int = 2, damping: float = 0.0, stiffness=None):
         self.iterations = count("PBD.iterations", iterations, limits.ITERATIONS)
@@ -73,16 +81,43 @@ class PBD(Integrator):
             name: finite_number(f"PBD.stiffness[{name!r}]", value, 0.0) for name, value in stiffness.items()}
         for name, value in self.stiffness.items():
             require(value <= 1.0, f"PBD.stiffness[{name!r}]", value, "a fraction in [0, 1]")
+        self.kind_stiffness = tuple(self.stiffness[k.name.lower()] for k in SpringKind)
 
     def options(self):
         return {"iterations": self.iterations, "damping": self.damping, "stiffness": self.stiffness}
+
+    def workspace(self, model, state):
+        return self.buffers(state, lambda: SweepOrder(model))
+
+    def step_work(self, model):
+        return (self.iterations + 2) * fused.spring_work(model)
+
+    @ti.func
+    def team_step(self, model: ti.template(), state: ti.template(), forces: ti.template(),
+                  work: ti.template(), team: ti.template(), worker, dt, step, start):
+        """step()'s kernels as phases of one worker's share (work: the SweepOrder),
+        meeting the team between them and after every colour of a pass."""
+        p_begin, p_end = team.share(model.particle_count, worker)
+        for i in range(p_begin, p_end):
+            f = gather_force(model, state, forces, i, False)
+            state.particle_force[i] = f
+            verlet_update(state, i, model.particle_inv_mass[i] * f, dt, self.damping, start, step)
+        if ti.static(model.spring_count + model.altitude_count > 0):
+            team.meet(worker)
+            stiffness = ti.Vector(self.kind_stiffness)
+            for _ in range(self.iterations):
+                relax_pass(model, state, work.colours, work.altitude_colours, stiffness,
+                           self.stiffness["altitude"], forces.tearable, 0.0, False, team, worker)
+        for i in range(p_begin, p_end):
+            velocity_from_positions(state, i, dt, step)
+        team.meet(worker)
 
     def step(self, model, state, dt, forces, step_index):
         compute_forces(model, state, forces, springs=False)   # external forces only
         _predict(model, state, dt, self.damping, not state.prev_valid, step_index)
         state.prev_valid = True
         if model.spring_count + model.altitude_count:
-            stiffness = ti.math.vec3(*(self.stiffness[k.name.lower()] for k in SpringKind))
+            stiffness = ti.math.vec3(*self.kind_stiffness)
             sweep(relax_springs, model, state, self.iterations, stiffness,
                   self.stiffness["altitude"], forces.tearable, 0.0, False)
         update_velocity(model, state, dt, step_index)

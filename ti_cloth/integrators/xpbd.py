@@ -6,30 +6,40 @@ import taichi as ti
 
 from .. import backend, limits
 from .._validate import count
-from ..constraints import damp_springs, sweep, xpbd_springs
-from ..forces import compute_forces
+from ..constraints import damp_pass, damp_springs, sweep, xpbd_pass, xpbd_springs
+from ..forces import compute_forces, gather_force
+from . import fused
 from .base import Integrator
-from .pbd import update_velocity
+from .pbd import update_velocity, velocity_from_positions
+
+
+@ti.func
+def _predict_particle(model: ti.template(), state: ti.template(), i, dt):
+    """x~ = x_n + h (v_n + h M^-1 f_ext); x_n is kept in particle_prev_position."""
+    x = state.particle_position[i]
+    v = state.particle_velocity[i] + dt * model.particle_inv_mass[i] * state.particle_force[i]
+    state.particle_prev_position[i] = x
+    state.particle_position[i] = x + dt * v
 
 
 @ti.kernel
 def _predict(model: ti.template(), state: ti.template(), dt: float):
-    """x~ = x_n + h (v_n + h M^-1 f_ext); x_n is kept in particle_prev_position."""
     for i in range(model.particle_count):
-        x = state.particle_position[i]
-        v = state.particle_velocity[i] + dt * model.particle_inv_mass[i] * state.particle_force[i]
-        state.particle_prev_position[i] = x
-        state.particle_position[i] = x + dt * v
+        _predict_particle(model, state, i, dt)
 
 
+@backend.kernel_argument
 class _Multipliers:
-    """One Lagrange multiplier per spring and per altitude spring [N s^2], reset every step."""
+    """One Lagrange multiplier per spring and per altitude spring [N s^2], reset every step,
+    and the model's colourings (read by the team step)."""
 
-    def __init__(self, spring_count: int, altitude_count: int):
+    def __init__(self, model):
         fields = backend.FieldGroup()
-        self.value = fields.scalar(backend.real(), max(spring_count, 1))
-        self.altitude = fields.scalar(backend.real(), max(altitude_count, 1))
+        self.value = fields.scalar(backend.real(), max(model.spring_count, 1))
+        self.altitude = fields.scalar(backend.real(), max(model.altitude_count, 1))
         fields.finalize(self)
+        self.colours = model.spring_colouring()
+        self.altitude_colours = model.altitude_colouring()
 
 
 class XPBD(Integrator):
@@ -53,6 +63,7 @@ class XPBD(Integrator):
     order = 1
     position_based = True
     step_limited = False
+    teamed = True
 
     def __init__(self, *, iterations: int = 10):
         self.iterations = count("XPBD.iterations", iterations, limits.ITERATIONS)
@@ -60,12 +71,44 @@ class XPBD(Integrator):
     def options(self):
         return {"iterations": self.iterations}
 
+    def workspace(self, model, state):
+        return self.buffers(state, lambda: _Multipliers(model))
+
+    def step_work(self, model):
+        return (self.iterations + 2) * fused.spring_work(model)
+
+    @ti.func
+    def team_step(self, model: ti.template(), state: ti.template(), forces: ti.template(),
+                  work: ti.template(), team: ti.template(), worker, dt, step, start):
+        """step()'s kernels as phases of one worker's share, meeting the team between them
+        (and after every colour of a pass)."""
+        p_begin, p_end = team.share(model.particle_count, worker)
+        for i in range(p_begin, p_end):
+            state.particle_force[i] = gather_force(model, state, forces, i, False)
+            _predict_particle(model, state, i, dt)
+        if ti.static(model.spring_count + model.altitude_count > 0):
+            s_begin, s_end = team.share(model.spring_count, worker)
+            for s in range(s_begin, s_end):
+                work.value[s] = 0.0
+            a_begin, a_end = team.share(model.altitude_count, worker)
+            for a in range(a_begin, a_end):
+                work.altitude[a] = 0.0
+            team.meet(worker)
+            for _ in range(self.iterations):
+                xpbd_pass(model, state, work.colours, work.altitude_colours, work.value,
+                          work.altitude, dt, forces.tearable, team, worker)
+        for i in range(p_begin, p_end):
+            velocity_from_positions(state, i, dt, step)
+        if ti.static(model.spring_count > 0 and model.relative_damping):
+            team.meet(worker)
+            damp_pass(model, state, work.colours, dt, forces.tearable, team, worker)
+        team.meet(worker)
+
     def step(self, model, state, dt, forces, step_index):
         compute_forces(model, state, forces, springs=False)   # external forces only
         _predict(model, state, dt)
         if model.spring_count + model.altitude_count:
-            multipliers = self.buffers(state, lambda: _Multipliers(model.spring_count,
-                                                                   model.altitude_count))
+            multipliers = self.workspace(model, state)
             multipliers.value.fill(0)
             multipliers.altitude.fill(0)
             sweep(xpbd_springs, model, state, self.iterations, multipliers.value,

@@ -1,0 +1,104 @@
+"""Steps per second of every integrator through Simulation.step, on a free cloth and on the
+same cloth with a ground plane and a sphere collider (issue 22's table), each measurement in
+a fresh process so that one process's luck (how the OS placed its threads) does not decide it.
+
+The scene: an N x N sheet (1 m, stretch + shear + bend springs, default Material), two corners
+pinned, hanging in gravity over a sphere (r = 0.2 m) resting on a plane. Steps: 1/240 s for
+the integrators without a step limit (pbd, xpbd with 10 passes, implicit Euler), half the
+predicted stable step for the others (stability.auto_dt). Each process runs --repeats calls of
+step(n) with n steps taking about --seconds, after a warm-up, and reports the median; the
+table gives min / median / max over --processes processes, and the ratio of medians.
+
+    python benchmarks/solvers.py [--sizes 64 128] [--integrators ...] [--processes 3]
+        [--threads 2] [--arch cpu]
+"""
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import time
+
+import ti_cloth as tc
+
+LONG_STEP = 1 / 240
+UNLIMITED = ("pbd", "xpbd", "implicit_euler")
+
+
+def scene(n: int, integrator: str, colliders: bool) -> tc.Simulation:
+    cloth = tc.Cloth(tc.grid_mesh(n, n, plane="xz"), tc.Material(), pinned=[0, n - 1])
+    shapes = [tc.Plane(point=(0, -0.6, 0), normal=(0, 1, 0), thickness=0.002, static_friction=0.3),
+              tc.Sphere(centre=(0.5, -0.4, 0.5), radius=0.2, thickness=0.002,
+                        static_friction=0.3)] if colliders else []
+    return tc.Simulation(cloth, integrator=integrator, colliders=shapes,
+                         dt=LONG_STEP if integrator in UNLIMITED else "auto")
+
+
+def measure(n: int, integrator: str, colliders: bool, seconds: float, repeats: int) -> float:
+    """Median steps/s of `repeats` calls of about `seconds` each."""
+    sim = scene(n, integrator, colliders)
+    sim.step(2)
+    steps, elapsed = 2, 0.0
+    while elapsed < seconds / 4:
+        steps *= 2
+        start = time.perf_counter()
+        sim.step(steps)
+        sim.state.first_bad_step[None]
+        elapsed = time.perf_counter() - start
+    steps = max(2, int(steps * seconds / elapsed))
+    rates = []
+    for _ in range(repeats):
+        sim.restart()
+        start = time.perf_counter()
+        sim.step(steps)
+        sim.state.first_bad_step[None]
+        rates.append(steps / (time.perf_counter() - start))
+    return statistics.median(rates)
+
+
+def child(args) -> None:
+    tc.init(arch=args.arch, precision="f32", threads=args.threads)
+    rates = {f"{n} {name} {int(c)}": measure(n, name, c, args.seconds, args.repeats)
+             for n in args.sizes for name in args.integrators for c in (False, True)}
+    print(json.dumps(rates))
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[64, 128])
+    parser.add_argument("--integrators", nargs="+", default=list(tc.INTEGRATORS))
+    parser.add_argument("--processes", type=int, default=3)
+    parser.add_argument("--threads", type=int, default=None)
+    parser.add_argument("--arch", default="cpu")
+    parser.add_argument("--seconds", type=float, default=0.5)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.child:
+        return child(args)
+    runs = []
+    command = [sys.executable, __file__, "--child", "--arch", args.arch, "--seconds",
+               str(args.seconds), "--repeats", str(args.repeats), "--sizes",
+               *map(str, args.sizes), "--integrators", *args.integrators]
+    if args.threads:
+        command += ["--threads", str(args.threads)]
+    for _ in range(args.processes):
+        out = subprocess.run(command, check=True, capture_output=True, text=True).stdout
+        runs.append(json.loads(out.strip().splitlines()[-1]))
+    print(f"arch={args.arch} f32 threads={args.threads or 'all'}: steps/s, min / median / max "
+          f"over {args.processes} processes (each the median of {args.repeats} calls)")
+    print(f"| N | integrator | free | with plane + sphere | ratio of medians |")
+    print("|---|---|---|---|---|")
+    for n in args.sizes:
+        for name in args.integrators:
+            cells, medians = [], []
+            for c in (0, 1):
+                rates = sorted(run[f"{n} {name} {c}"] for run in runs)
+                medians.append(statistics.median(rates))
+                cells.append(f"{rates[0]:,.0f} / {medians[-1]:,.0f} / {rates[-1]:,.0f}")
+            print(f"| {n}² | {name} | {cells[0]} | {cells[1]} | {medians[1] / medians[0]:.2f} |")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,194 @@
+"""Many steps per launch on the CPU: the plan Simulation.step takes there for every integrator
+that defines a team step (Integrator.teamed), with the stages of TEAM_STAGES inside the launch.
+
+On the 2-core CPU these figures were measured on (benchmarks/README.md), a launch costs 10 to
+25 us and every parallel loop another 15 to 50 us (the thread pool waking, up to milliseconds
+after the machine idled), while a 32 x 32 cloth's step is about 30 us of arithmetic; a step of
+xpbd is 2 + 17 x iterations loops, one per colour. So a run of steps is one launch, shared by
+a Team (team.py): one worker runs every loop serially for launches of little work, a worker
+per core otherwise, each owning fixed slices and meeting the others at barriers. A step is,
+per worker:
+
+    stage starts (the colliders keep the positions at the step start)
+    ->  the integrator's team step (Integrator.team_step: its phases and barriers)
+    ->  strain limiting (relaxation passes, colour by colour)
+    ->  colliders (scripted ones placed from a schedule written before the launch)
+    ->  tearing
+
+the order of simulation.STEP_ORDER. Handles and the wind are set between steps from Python,
+so a simulation with either steps one launch per stage (GPUs always do).
+
+Every worker evaluates each spring and particle with the same formula and in the same order
+as a launch per stage, and sums in fixed blocks, so thread counts never change a bit; plans
+agree with a launch per stage to the bit where the same kernel code compiles the same way
+(tests/test_stepping.py says where fast math contracts differently).
+"""
+
+
+import taichi as ti
+
+from . import backend
+from .errors import TeamStalled
+from .state import NO_BAD_STEP
+from .team import BARRIER_SPINS, TASK_SPACING, Barrier, Team
+from .tearing import tear_overstretched
+from .collision import SCHEDULE_STEPS, resolve_particle
+from .constraints import relax_pass
+
+TEAM_STAGES = ("integrator", "strain_limit", "colliders", "tearing")   # in STEP_ORDER
+MAX_STEPS_PER_LAUNCH = 4096    # bounds one launch (Ctrl-C and the divergence check wait for it)
+SPRING_STEPS_PER_LAUNCH = 25_000_000   # about 0.1 s of one core's work: fewer steps for big cloths
+TEAM_MIN_SPRING_STEPS = 1_000_000   # less work per launch runs on one worker (launch_plans.py)
+
+
+@backend.kernel_argument
+class TeamStages:
+    """The stages after the integrator that run inside a many-steps launch (None: absent,
+    compiled out). colours: the model's spring colouring (strain limiting's passes)."""
+
+    def __init__(self, strain_limiter=None, colliders=None, tearable=False, colours=None):
+        self.strain_limiter = strain_limiter
+        self.colliders = colliders
+        self.tearable = tearable
+        self.colours = colours
+        self.limits_strain = strain_limiter is not None    # read at compile time
+        self.collides = colliders is not None
+
+    @ti.func
+    def begin(self, model: ti.template(), state: ti.template(), worker_begin, worker_end):
+        """At a step's start, on the worker's particles (before the integrator writes any)."""
+        if ti.static(self.collides):
+            for i in range(worker_begin, worker_end):
+                self.colliders.step_start[i] = state.particle_position[i]
+
+    @ti.func
+    def after(self, model: ti.template(), state: ti.template(), team: ti.template(), worker,
+              p_begin, p_end, s_begin, s_end, step, k, dt, tear_strain, strain_max, strain_passes,
+              strain_kinds, moving):
+        """The stages of a step ending after the integrator's last barrier (k: the step's
+        index in this launch)."""
+        if ti.static(self.limits_strain):
+            limiter = self.strain_limiter
+            for i in range(p_begin, p_end):
+                limiter.before[i] = state.particle_position[i]
+            team.meet(worker)
+            for _ in range(strain_passes):
+                relax_pass(model, state, self.colours, self.colours, strain_kinds, 0.0,
+                           limiter.tearable, strain_max, True, team, worker)
+            for i in range(p_begin, p_end):
+                state.particle_velocity[i] += (state.particle_position[i] - limiter.before[i]) / dt
+            team.meet(worker)
+        if ti.static(self.collides):
+            if moving != 0:
+                if worker == 0:
+                    self.colliders.place_scheduled(k)
+                team.meet(worker)
+            for i in range(p_begin, p_end):
+                resolve_particle(model, state, self.colliders, i, dt)
+            team.meet(worker)
+        if ti.static(self.tearable):
+            tear_overstretched(model, state, tear_strain, step, s_begin, s_end)
+            team.meet(worker)
+
+
+@ti.func
+def _run(integrator: ti.template(), model: ti.template(), state: ti.template(),
+         forces: ti.template(), work: ti.template(), stages: ti.template(), team: ti.template(),
+         worker, dt, first, count, start, tear_strain, strain_max, strain_passes, strain_kinds,
+         moving):
+    """Worker `worker`'s share of steps first .. first + count - 1."""
+    team.start(worker)
+    p_begin, p_end = team.share(model.particle_count, worker)
+    s_begin, s_end = team.share(model.spring_count, worker)
+    for k in range(count):
+        stages.begin(model, state, p_begin, p_end)
+        integrator.team_step(model, state, forces, work, team, worker, dt, first + k,
+                             ti.i32(start != 0 and k == 0))
+        stages.after(model, state, team, worker, p_begin, p_end, s_begin, s_end, first + k, k,
+                     dt, tear_strain, strain_max, strain_passes, strain_kinds, moving)
+
+
+@ti.kernel
+def advance_many(integrator: ti.template(), model: ti.template(), state: ti.template(),
+                 forces: ti.template(), work: ti.template(), stages: ti.template(),
+                 team: ti.template(), dt: float, first: ti.i32, count: ti.i32, start: ti.i32,
+                 tear_strain: float, strain_max: float, strain_passes: ti.i32,
+                 strain_kinds: ti.math.vec3, moving: ti.i32):
+    """Steps first .. first + count - 1 in one launch, shared by `team` (start: 1 when the
+    state has no history yet)."""
+    if ti.static(team.workers == 1):
+        ti.loop_config(serialize=True)
+        for worker in range(1):
+            _run(integrator, model, state, forces, work, stages, team, worker, dt, first, count,
+                 start, tear_strain, strain_max, strain_passes, strain_kinds, moving)
+    else:
+        team.barrier.arrived[None] = 0
+        for index in range(team.workers * TASK_SPACING):   # one task per worker
+            if index % TASK_SPACING == 0:
+                _run(integrator, model, state, forces, work, stages, team, index // TASK_SPACING,
+                     dt, first, count, start, tear_strain, strain_max, strain_passes,
+                     strain_kinds, moving)
+
+
+class ManySteps:
+    """Runs many steps of a teamed integrator on the CPU in few launches.
+
+    stages: the TeamStages of the simulation (its Model's lent set). A launch holds at most
+    MAX_STEPS_PER_LAUNCH steps, fewer for big cloths (SPRING_STEPS_PER_LAUNCH of the
+    integrator's step_work), and SCHEDULE_STEPS when a collider moves along a path. A launch
+    with less work than TEAM_MIN_SPRING_STEPS runs on one worker, a bigger one on a team of a
+    worker per Taichi CPU thread (at most one per core).
+    """
+
+    def __init__(self, stages: TeamStages):
+        self.stages = stages
+        barrier = Barrier()
+        # A worker per pool thread, but no more than the cores: a worker waiting at a barrier
+        # for one that has no core to run on spins away its time slice.
+        workers = min(backend.cpu_threads(), backend.cpu_cores())
+        self.solo = Team(1)
+        self.team = Team(workers, barrier) if workers > 1 else self.solo
+
+    def steps_per_launch(self, integrator, model) -> int:
+        """How many steps one launch of `integrator` on `model` holds at most."""
+        most = MAX_STEPS_PER_LAUNCH
+        colliders = self.stages.colliders
+        if colliders is not None and colliders.moving:
+            most = SCHEDULE_STEPS
+        return max(1, min(most, SPRING_STEPS_PER_LAUNCH // max(integrator.step_work(model), 1)))
+
+    def team_for(self, integrator, model, steps: int) -> Team:
+        """The team that runs a launch of `steps` steps."""
+        work = steps * integrator.step_work(model)
+        return self.team if work >= TEAM_MIN_SPRING_STEPS else self.solo
+
+    def run(self, integrator, model, state, forces, dt: float, first: int, count: int,
+            tearing=None, strain_limit=None) -> int:
+        """Up to `count` steps; stops after the launch in which a step diverged. Returns how
+        many steps ran. Raises TeamStalled if a barrier gave up on a worker (the state is then
+        unusable)."""
+        work = integrator.workspace(model, state)
+        colliders = self.stages.colliders
+        moving = colliders is not None and colliders.moving
+        kinds = (strain_limit.kind_mask() if strain_limit is not None else ti.math.vec3(0.0))
+        done = 0
+        while done < count and state.first_bad_step[None] == NO_BAD_STEP:
+            chunk = min(self.steps_per_launch(integrator, model), count - done)
+            team = self.team_for(integrator, model, chunk)
+            if moving:
+                colliders.schedule(first + done, chunk, dt)
+            advance_many(integrator, model, state, forces, work, self.stages, team, dt,
+                         first + done, chunk, not state.prev_valid,
+                         tearing.strain if tearing is not None else 0.0,
+                         strain_limit.max_strain if strain_limit is not None else 0.0,
+                         strain_limit.passes if strain_limit is not None else 0, kinds,
+                         int(moving))
+            if team.stalled():
+                raise TeamStalled(
+                    f"a barrier of steps {first + done}..{first + done + chunk - 1} waited "
+                    f"{BARRIER_SPINS} polls for one of {team.workers} workers; Taichi must give "
+                    f"each worker its own CPU thread (ti_cloth.init(threads=1) avoids teams)")
+            state.prev_valid = integrator.records_history
+            integrator.after_launch(work)
+            done += chunk
+        return done
