@@ -88,7 +88,7 @@ def main(argv=None):
         runs.append(json.loads(out.strip().splitlines()[-1]))
     print(f"arch={args.arch} f32 threads={args.threads or 'all'}: steps/s, min / median / max "
           f"over {args.processes} processes (each the median of {args.repeats} calls)")
-    print(f"| N | integrator | free | with plane + sphere | ratio of medians |")
+    print("| N | integrator | free | with plane + sphere | ratio of medians |")
     print("|---|---|---|---|---|")
     for n in args.sizes:
         for name in args.integrators:

@@ -37,21 +37,23 @@ class SweepOrder:
 
 
 @ti.func
-def _relax(model: ti.template(), state: ti.template(), s, stiffness, tearable: ti.template(),
-           max_strain, stretched_only: ti.template()):
+def _relax(model: ti.template(), state: ti.template(), colours: ti.template(), t, stiffness,
+           tearable: ti.template(), max_strain, stretched_only: ti.template()):
+    """Project the spring at position t of the colour order (SpringColouring's packed
+    values)."""
     alive = True
     if ti.static(tearable):
-        alive = state.spring_alive[s] != 0
-    p, q = model.spring_indices[s][0], model.spring_indices[s][1]
+        alive = state.spring_alive[colours.order[t]] != 0
+    p, q = colours.ends[t][0], colours.ends[t][1]
     wp, wq = model.particle_inv_mass[p], model.particle_inv_mass[q]
     d = state.particle_position[q] - state.particle_position[p]
     length = d.norm()
-    target = (1.0 + max_strain) * model.spring_rest_length[s]
+    target = (1.0 + max_strain) * colours.rest[t]
     if ti.static(stretched_only):
         alive = alive and length > target
     if alive and wp + wq > 0 and length > 0:
         delta = (length - target) / length
-        dx = stiffness[model.spring_kind[s]] * delta * d
+        dx = stiffness[colours.kind[t]] * delta * d
         state.particle_position[p] += wp / (wp + wq) * dx
         state.particle_position[q] -= wq / (wp + wq) * dx
 
@@ -90,7 +92,7 @@ def relax_pass(model: ti.template(), state: ti.template(), colours: ti.template(
     for c in range(colours.count):
         begin, end = team.share_range(colours.start[c], colours.start[c + 1], worker)
         for t in range(begin, end):
-            _relax(model, state, colours.order[t], stiffness, tearable, max_strain,
+            _relax(model, state, colours, t, stiffness, tearable, max_strain,
                    stretched_only)
         team.meet(worker)
     if ti.static(model.altitude_count > 0 and not stretched_only):
@@ -127,7 +129,7 @@ def relax_springs(model: ti.template(), state: ti.template(), colours: ti.templa
     else:
         for c in ti.static(range(colours.count)):
             for t in range(colours.offsets[c], colours.offsets[c + 1]):
-                _relax(model, state, colours.order[t], stiffness, tearable, max_strain,
+                _relax(model, state, colours, t, stiffness, tearable, max_strain,
                        stretched_only)
         if ti.static(model.altitude_count > 0 and not stretched_only):
             for c in ti.static(range(altitude_colours.count)):
@@ -136,26 +138,28 @@ def relax_springs(model: ti.template(), state: ti.template(), colours: ti.templa
 
 
 @ti.func
-def _xpbd(model: ti.template(), state: ti.template(), s, multiplier: ti.template(), dt,
-          tearable: ti.template()):
-    alive = model.spring_stiffness[s] > 0
+def _xpbd(model: ti.template(), state: ti.template(), colours: ti.template(), t,
+          multiplier: ti.template(), dt, tearable: ti.template()):
+    """The XPBD update of the spring at position t of the colour order, whose multiplier
+    is multiplier[t]."""
+    alive = colours.stiffness[t] > 0
     if ti.static(tearable):
-        alive = alive and state.spring_alive[s] != 0
-    p, q = model.spring_indices[s][0], model.spring_indices[s][1]
+        alive = alive and state.spring_alive[colours.order[t]] != 0
+    p, q = colours.ends[t][0], colours.ends[t][1]
     wp, wq = model.particle_inv_mass[p], model.particle_inv_mass[q]
     d = state.particle_position[p] - state.particle_position[q]
     length = d.norm()
     if alive and wp + wq > 0 and length > 0:
         n = d / length
-        k = model.spring_stiffness[s]
+        k = colours.stiffness[t]
         compliance = 1.0 / (k * dt * dt)
-        gamma = 0.0 if ti.static(model.relative_damping) else model.spring_damping[s] / (k * dt)
+        gamma = 0.0 if ti.static(model.relative_damping) else colours.damping[t] / (k * dt)
         motion = (state.particle_position[p] - state.particle_prev_position[p]
                   - state.particle_position[q] + state.particle_prev_position[q])
-        dlambda = ((-(length - model.spring_rest_length[s]) - compliance * multiplier[s]
+        dlambda = ((-(length - colours.rest[t]) - compliance * multiplier[t]
                     - gamma * n.dot(motion))
                    / ((1.0 + gamma) * (wp + wq) + compliance))
-        multiplier[s] += dlambda
+        multiplier[t] += dlambda
         state.particle_position[p] += wp * dlambda * n
         state.particle_position[q] -= wq * dlambda * n
 
@@ -191,7 +195,7 @@ def xpbd_pass(model: ti.template(), state: ti.template(), colours: ti.template()
     for c in range(colours.count):
         begin, end = team.share_range(colours.start[c], colours.start[c + 1], worker)
         for t in range(begin, end):
-            _xpbd(model, state, colours.order[t], multiplier, dt, tearable)
+            _xpbd(model, state, colours, t, multiplier, dt, tearable)
         team.meet(worker)
     if ti.static(model.altitude_count > 0):
         for c in range(altitude_colours.count):
@@ -227,7 +231,7 @@ def xpbd_springs(model: ti.template(), state: ti.template(), colours: ti.templat
     else:
         for c in ti.static(range(colours.count)):
             for t in range(colours.offsets[c], colours.offsets[c + 1]):
-                _xpbd(model, state, colours.order[t], multiplier, dt, tearable)
+                _xpbd(model, state, colours, t, multiplier, dt, tearable)
         if ti.static(model.altitude_count > 0):
             for c in ti.static(range(altitude_colours.count)):
                 for t in range(altitude_colours.offsets[c], altitude_colours.offsets[c + 1]):
@@ -236,14 +240,15 @@ def xpbd_springs(model: ti.template(), state: ti.template(), colours: ti.templat
 
 
 @ti.func
-def _damp(model: ti.template(), state: ti.template(), s, dt, tearable: ti.template()):
-    alive = model.spring_damping[s] > 0
+def _damp(model: ti.template(), state: ti.template(), colours: ti.template(), t, dt,
+          tearable: ti.template()):
+    alive = colours.damping[t] > 0
     if ti.static(tearable):
-        alive = alive and state.spring_alive[s] != 0
-    p, q = model.spring_indices[s][0], model.spring_indices[s][1]
+        alive = alive and state.spring_alive[colours.order[t]] != 0
+    p, q = colours.ends[t][0], colours.ends[t][1]
     wp, wq = model.particle_inv_mass[p], model.particle_inv_mass[q]
     if alive and wp + wq > 0:
-        rate = dt * model.spring_damping[s] * (wp + wq)
+        rate = dt * colours.damping[t] * (wp + wq)
         dv = (state.particle_velocity[p] - state.particle_velocity[q]) * (rate / (1.0 + rate))
         state.particle_velocity[p] -= wp / (wp + wq) * dv
         state.particle_velocity[q] += wq / (wp + wq) * dv
@@ -256,7 +261,7 @@ def damp_pass(model: ti.template(), state: ti.template(), colours: ti.template()
     for c in range(colours.count):
         begin, end = team.share_range(colours.start[c], colours.start[c + 1], worker)
         for t in range(begin, end):
-            _damp(model, state, colours.order[t], dt, tearable)
+            _damp(model, state, colours, t, dt, tearable)
         team.meet(worker)
 
 
@@ -279,7 +284,7 @@ def damp_springs(model: ti.template(), state: ti.template(), colours: ti.templat
     else:
         for c in ti.static(range(colours.count)):
             for t in range(colours.offsets[c], colours.offsets[c + 1]):
-                _damp(model, state, colours.order[t], dt, tearable)
+                _damp(model, state, colours, t, dt, tearable)
 
 
 def sweep(kernel, model, state, passes: int, *args) -> None:

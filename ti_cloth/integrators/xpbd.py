@@ -30,7 +30,8 @@ def _predict(model: ti.template(), state: ti.template(), dt: float):
 
 @backend.kernel_argument
 class _Multipliers:
-    """One Lagrange multiplier per spring and per altitude spring [N s^2], reset every step,
+    """One Lagrange multiplier per spring (in colour order) and per altitude spring [N s^2],
+    reset every step,
     and the model's colourings (read by the team step)."""
 
     def __init__(self, model):
