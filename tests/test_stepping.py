@@ -86,15 +86,17 @@ FEATURES = {"none": {}, "tearing": dict(tearing=0.2), "strain limit": dict(strai
             "moving colliders": dict(colliders=contact_scene(True)),
             "everything": dict(tearing=0.4, strain_limit=tc.StrainLimit(0.05),
                                colliders=contact_scene(True))}
-EXACT = ("explicit_euler", "symplectic_euler", "xpbd")
+EXACT = ("explicit_euler", "symplectic_euler", "xpbd", "implicit_euler")
 
 
 @pytest.mark.parametrize("integrator, body, feature",
                          [(i, "sheet", f) for f in ("none", "tearing") for i in FUSED]
-                         + [(i, "sheet", f) for f in FEATURES for i in ("symplectic_euler", "xpbd")]
+                         + [(i, "sheet", f) for f in FEATURES
+                            for i in ("symplectic_euler", "xpbd", "implicit_euler")]
                          + [("pbd", "sheet", "everything"), ("verlet", "sheet", "colliders"),
                             ("symplectic_euler", "braced strands", "none"),
-                            ("xpbd", "braced strands", "none")])
+                            ("xpbd", "braced strands", "none"),
+                            ("implicit_euler", "braced strands", "none")])
 def test_every_launch_plan_takes_the_same_steps(threads, integrator, feature, body, monkeypatch):
     """The same bits in every plan, for a sheet and for strands whose altitude springs are
     evaluated per element and gathered per corner (a team of two shares both), with each
@@ -102,7 +104,7 @@ def test_every_launch_plan_takes_the_same_steps(threads, integrator, feature, bo
     cloth, start = sheet() if body == "sheet" else braced_strands()
     runs = []
     kwargs = FEATURES[feature]
-    position_based = integrator in ("pbd", "xpbd")
+    position_based = integrator in ("pbd", "xpbd", "implicit_euler")   # any step: 1/480 s
     dt = (1 / 480 if position_based else 2e-5 if body == "sheet"
           else 0.5 * tc.stable_dt(cloth, integrator, 0.3))
     steps = 2 * 100 + 7 if not position_based else 2 * 20 + 7

@@ -116,13 +116,14 @@ def advance_many(integrator: ti.template(), model: ti.template(), state: ti.temp
                  strain_kinds: ti.math.vec3, moving: ti.i32):
     """Steps first .. first + count - 1 in one launch, shared by `team` (start: 1 when the
     state has no history yet)."""
-    if ti.static(team.workers == 1):
+    if ti.static(team.workers == 1 and not integrator.sums_in_step):
         ti.loop_config(serialize=True)
         for worker in range(1):
             _run(integrator, model, state, forces, work, stages, team, worker, dt, first, count,
                  start, tear_strain, strain_max, strain_passes, strain_kinds, moving)
     else:
-        team.barrier.arrived[None] = 0
+        if ti.static(team.workers > 1):
+            team.barrier.arrived[None] = 0
         for index in range(team.workers * TASK_SPACING):   # one task per worker
             if index % TASK_SPACING == 0:
                 _run(integrator, model, state, forces, work, stages, team, index // TASK_SPACING,

@@ -34,6 +34,10 @@ class Integrator:
     step_limited: ClassVar[bool] = True     # False: stable at any step (stable_dt is inf)
     fused: ClassVar[bool] = False           # True: defines move(), fused.py runs the step
     teamed: ClassVar[bool] = False          # True: defines team_step(), for stepping.py
+    # True: team_step sums over particles. LLVM vectorises (and so reorders) those sums
+    # differently when the step runs on the launching thread, so a launch of one worker runs
+    # as a pool task, compiled as a team's is: one worker and a team give the same bits.
+    sums_in_step: ClassVar[bool] = False
     records_history: ClassVar[bool] = False  # True: a step leaves x_n in particle_prev_position
 
     def step(self, model, state, dt: float, forces, step_index: int) -> None:

@@ -27,11 +27,14 @@ import taichi as ti
 
 from .. import backend, limits
 from .._validate import count, finite_number, require
-from ..forces import altitude_gradient, compute_forces
+from ..forces import (altitude_gradient, compute_forces, evaluate_altitudes, evaluate_springs,
+                      gather_force)
 from ..state import store_particle
+from . import fused
 from .base import Integrator
 
 BLOCK = 64                      # particles per partial sum of a dot product
+TYPICAL_ITERATIONS = 20         # CG iterations a step is assumed to take (sizing launches)
 PAP, RZ, RR, BB, BETA = range(5)  # slots of the workspace's scalar field
 
 
@@ -52,11 +55,16 @@ class _Workspace:
         self.diagonal = fields.vector(3, real, n)
         self.spring_normal = fields.vector(3, real, max(spring_count, 1))
         self.spring_lateral = fields.scalar(real, max(spring_count, 1))
+        # h^2 K + h D of each spring, once per end in the model's adjacency order (symmetric:
+        # xx, yy, zz, xy, xz, yz), so A p reads them front to back
+        self.adjacency_block = fields.vector(6, real, max(2 * spring_count, 1))
         self.altitude_normal = fields.vector(3, real, max(altitude_count, 1))
         self.altitude_weight = fields.scalar(real, max(4 * altitude_count, 1))   # g, per corner
         self.altitude_projection = fields.scalar(real, max(altitude_count, 1))   # G . (v or p)
         self.partial = fields.vector(2, real, self.block_count)
+        self.partial_pap = fields.scalar(real, self.block_count)
         self.scalar = fields.scalar(real, 5)
+        self.iterations = fields.scalar(ti.i32, ())
         fields.finalize(self)
 
 
@@ -68,19 +76,36 @@ def _stiffness_times(k, n, c, d):
 
 
 @ti.func
-def _damping_times(kd, n, d, relative: ti.template()):
-    """The spring's -df_i/dv_i applied to d."""
-    result = kd * n.dot(d) * n
+def _spring_block(k, kd, n, c, dt, relative: ti.template()):
+    """h^2 k (n n^T + c (I - n n^T)) + h D, D = kd n n^T (axial) or kd I (relative): the
+    spring's block of A, symmetric, as (xx, yy, zz, xy, xz, yz)."""
+    stiff = dt * dt * k
+    damp = dt * kd
+    lateral = stiff * c
+    along = stiff - lateral
+    if ti.static(not relative):
+        along += damp
+    diagonal = lateral + along * n * n
     if ti.static(relative):
-        result = kd * d
-    return result
+        diagonal += damp
+    return ti.Vector([diagonal[0], diagonal[1], diagonal[2], along * n[0] * n[1],
+                      along * n[0] * n[2], along * n[1] * n[2]])
 
 
 @ti.func
-def _project_altitudes(model: ti.template(), ws: ti.template(), vectors: ti.template()):
-    """altitude_projection[a] = G_a . vectors = n . sum_c g_c vectors[corner c] (compiled
-    out for a body without altitude springs)."""
-    for a in range(model.altitude_count):
+def _block_times(m, d):
+    """The symmetric 3x3 block m (xx, yy, zz, xy, xz, yz) times d."""
+    return ti.Vector([m[0] * d[0] + m[3] * d[1] + m[4] * d[2],
+                      m[3] * d[0] + m[1] * d[1] + m[5] * d[2],
+                      m[4] * d[0] + m[5] * d[1] + m[2] * d[2]])
+
+
+@ti.func
+def _project_altitudes(model: ti.template(), ws: ti.template(), vectors: ti.template(), begin,
+                       end):
+    """altitude_projection[a] = G_a . vectors = n . sum_c g_c vectors[corner c], for altitude
+    springs begin .. end - 1."""
+    for a in range(begin, end):
         corner = model.altitude_indices[a]
         total = 0.0
         for c in ti.static(range(4)):
@@ -104,11 +129,12 @@ def _altitudes_times(model: ti.template(), ws: ti.template(), i, dt):
 
 
 @ti.func
-def _total(ws: ti.template()):
-    """Sum of the per-block partial sums, in block order (deterministic)."""
-    total = ti.Vector([0.0, 0.0])
+def _total(ws: ti.template(), partial: ti.template(), zero):
+    """Sum of the per-block partial sums `partial`, in block order (deterministic), from
+    `zero` (0.0 or a zero vector, its type)."""
+    total = zero
     for block in range(ws.block_count):
-        total += ws.partial[block]
+        total += partial[block]
     return total
 
 
@@ -117,13 +143,11 @@ def _block_range(block, count):
     return block * BLOCK, ti.min((block + 1) * BLOCK, count)
 
 
-@ti.kernel
-def _linearise(model: ti.template(), state: ti.template(), ws: ti.template(), dt: float,
-               drag: float, tearable: ti.template()):
-    """Springs: direction and clamped lateral factor at x_n. Particles: right-hand side
-    b = h (f_n + h K v_n), the 3x3 diagonal of A (preconditioner) and the CG start dv = 0,
-    r = b, p = z = r / diagonal, with r . z, r . r and b . b."""
-    for s in range(model.spring_count):
+@ti.func
+def _linearise_springs(model: ti.template(), state: ti.template(), ws: ti.template(),
+                       tearable: ti.template(), begin, end):
+    """Springs begin .. end - 1: direction and clamped lateral factor at x_n."""
+    for s in range(begin, end):
         i, j = model.spring_indices[s][0], model.spring_indices[s][1]
         d = state.particle_position[i] - state.particle_position[j]
         length = d.norm()
@@ -139,60 +163,135 @@ def _linearise(model: ti.template(), state: ti.template(), ws: ti.template(), dt
                 c, n = 0.0, ti.Vector([0.0, 0.0, 0.0])
         ws.spring_normal[s] = n
         ws.spring_lateral[s] = c
+
+
+@ti.func
+def _linearise_altitudes(model: ti.template(), state: ti.template(), ws: ti.template(), begin,
+                         end):
+    """Altitude springs begin .. end - 1: normal and corner weights at x_n."""
+    for a in range(begin, end):
+        corner = model.altitude_indices[a]
+        n, _, g = altitude_gradient(state.particle_position, corner)
+        ws.altitude_normal[a] = n
+        for c in ti.static(range(4)):
+            ws.altitude_weight[4 * a + c] = g[c]
+
+
+@ti.func
+def _start_block(model: ti.template(), state: ti.template(), ws: ti.template(), block, dt, drag,
+                 tearable: ti.template()):
+    """Particles of `block`: right-hand side b = h (f_n + h K v_n), the 3x3 diagonal of A
+    (preconditioner) and the CG start dv = 0, r = b, p = z = r / diagonal; the block's
+    partial sums of r . z and b . b."""
+    begin, end = _block_range(block, model.particle_count)
+    rz, bb = 0.0, 0.0
+    for i in range(begin, end):
+        free = ti.cast(model.particle_inv_mass[i] > 0, float)
+        vi = state.particle_velocity[i]
+        kv = ti.Vector([0.0, 0.0, 0.0])
+        diagonal = model.particle_mass[i] * (1.0 + dt * drag) * ti.Vector([1.0, 1.0, 1.0])
+        for a in range(model.particle_spring_start[i], model.particle_spring_start[i + 1]):
+            s = model.adjacency_spring[a]
+            j = model.adjacency_other[a]
+            n, c = ws.spring_normal[s], ws.spring_lateral[s]
+            k, kd = model.spring_stiffness[s], model.spring_damping[s]
+            kv += _stiffness_times(k, n, c, vi - state.particle_velocity[j])
+            if ti.static(tearable):
+                if state.spring_alive[s] == 0:
+                    kd = 0.0
+            m = _spring_block(k, kd, n, c, dt, model.relative_damping)
+            ws.adjacency_block[a] = m
+            diagonal += ti.Vector([m[0], m[1], m[2]])
+        if ti.static(model.altitude_count > 0):
+            for a in range(model.particle_altitude_start[i],
+                           model.particle_altitude_start[i + 1]):
+                code = model.adjacency_altitude[a]
+                e = code // 4
+                n = ws.altitude_normal[e]
+                g = ws.altitude_weight[code]
+                kv += model.altitude_stiffness[e] * g * ws.altitude_projection[e] * n
+                diagonal += ((dt * dt * model.altitude_stiffness[e]
+                              + dt * model.altitude_damping[e]) * g * g * n * n)
+        b = free * dt * (state.particle_force[i] - dt * kv)
+        if free == 0:
+            diagonal = ti.Vector([1.0, 1.0, 1.0])   # a pin's row is the identity (b = 0 there)
+        z = b / diagonal
+        ws.dv[i] = ti.Vector([0.0, 0.0, 0.0])
+        ws.r[i] = b
+        ws.z[i] = z
+        ws.p[i] = z
+        ws.diagonal[i] = diagonal
+        rz += b.dot(z)
+        bb += b.dot(b)
+    ws.partial[block] = ti.Vector([rz, bb])
+
+
+@ti.func
+def _apply_block(model: ti.template(), ws: ti.template(), block, dt, drag):
+    """ap = A p on the particles of `block` (rows of pinned particles 0), and its partial
+    sum of p . ap."""
+    begin, end = _block_range(block, model.particle_count)
+    pap = 0.0
+    for i in range(begin, end):
+        free = ti.cast(model.particle_inv_mass[i] > 0, float)
+        pi = ws.p[i]
+        ap = model.particle_mass[i] * (1.0 + dt * drag) * pi
+        for a in range(model.particle_spring_start[i], model.particle_spring_start[i + 1]):
+            ap += _block_times(ws.adjacency_block[a], pi - ws.p[model.adjacency_other[a]])
+        ap += _altitudes_times(model, ws, i, dt)
+        ap *= free
+        ws.ap[i] = ap
+        pap += pi.dot(ap)
+    ws.partial_pap[block] = pap
+
+
+@ti.func
+def _update_block(model: ti.template(), ws: ti.template(), block, alpha):
+    """dv += alpha p, r -= alpha ap, z = r / diag on the particles of `block`; its partial
+    sums of r . z and r . r."""
+    begin, end = _block_range(block, model.particle_count)
+    rz, rr = 0.0, 0.0
+    for i in range(begin, end):
+        ws.dv[i] += alpha * ws.p[i]
+        r = ws.r[i] - alpha * ws.ap[i]
+        z = r / ws.diagonal[i]
+        ws.r[i] = r
+        ws.z[i] = z
+        rz += r.dot(z)
+        rr += r.dot(r)
+    ws.partial[block] = ti.Vector([rz, rr])
+
+
+@ti.func
+def _turn_block(model: ti.template(), ws: ti.template(), block, beta):
+    """p = z + beta p on the particles of `block`."""
+    begin, end = _block_range(block, model.particle_count)
+    for i in range(begin, end):
+        ws.p[i] = ws.z[i] + beta * ws.p[i]
+
+
+@ti.func
+def _advance_block(model: ti.template(), state: ti.template(), ws: ti.template(), block, dt,
+                   step):
+    """v_{n+1} = v_n + dv, x_{n+1} = x_n + h v_{n+1} on the particles of `block`."""
+    begin, end = _block_range(block, model.particle_count)
+    for i in range(begin, end):
+        v = state.particle_velocity[i] + ws.dv[i]
+        store_particle(state, i, state.particle_position[i] + dt * v, v, step)
+
+
+@ti.kernel
+def _linearise(model: ti.template(), state: ti.template(), ws: ti.template(), dt: float,
+               drag: float, tearable: ti.template()):
+    """The linearisation at x_n and the CG start (_start_block), with r . z, r . r and b . b."""
+    _linearise_springs(model, state, ws, tearable, 0, model.spring_count)
     if ti.static(model.altitude_count > 0):
-        for a in range(model.altitude_count):
-            corner = model.altitude_indices[a]
-            n, _, g = altitude_gradient(state.particle_position, corner)
-            ws.altitude_normal[a] = n
-            for c in ti.static(range(4)):
-                ws.altitude_weight[4 * a + c] = g[c]
-        _project_altitudes(model, ws, state.particle_velocity)
+        _linearise_altitudes(model, state, ws, 0, model.altitude_count)
+        _project_altitudes(model, ws, state.particle_velocity, 0, model.altitude_count)
     for block in range(ws.block_count):
-        begin, end = _block_range(block, model.particle_count)
-        rz, bb = 0.0, 0.0
-        for i in range(begin, end):
-            free = ti.cast(model.particle_inv_mass[i] > 0, float)
-            vi = state.particle_velocity[i]
-            kv = ti.Vector([0.0, 0.0, 0.0])
-            diagonal = model.particle_mass[i] * (1.0 + dt * drag) * ti.Vector([1.0, 1.0, 1.0])
-            for a in range(model.particle_spring_start[i], model.particle_spring_start[i + 1]):
-                s = model.adjacency_spring[a]
-                j = model.adjacency_other[a]
-                n, c = ws.spring_normal[s], ws.spring_lateral[s]
-                k, kd = model.spring_stiffness[s], model.spring_damping[s]
-                kv += _stiffness_times(k, n, c, vi - state.particle_velocity[j])
-                n2 = n * n
-                damp = kd * n2
-                if ti.static(model.relative_damping):
-                    damp = kd * ti.Vector([1.0, 1.0, 1.0])
-                if ti.static(tearable):
-                    if state.spring_alive[s] == 0:
-                        damp = ti.Vector([0.0, 0.0, 0.0])
-                diagonal += dt * dt * k * (n2 + c * (1.0 - n2)) + dt * damp
-            if ti.static(model.altitude_count > 0):
-                for a in range(model.particle_altitude_start[i],
-                               model.particle_altitude_start[i + 1]):
-                    code = model.adjacency_altitude[a]
-                    e = code // 4
-                    n = ws.altitude_normal[e]
-                    g = ws.altitude_weight[code]
-                    kv += model.altitude_stiffness[e] * g * ws.altitude_projection[e] * n
-                    diagonal += ((dt * dt * model.altitude_stiffness[e]
-                                  + dt * model.altitude_damping[e]) * g * g * n * n)
-            b = free * dt * (state.particle_force[i] - dt * kv)
-            if free == 0:
-                diagonal = ti.Vector([1.0, 1.0, 1.0])   # a pin's row is the identity (b = 0 there)
-            z = b / diagonal
-            ws.dv[i] = ti.Vector([0.0, 0.0, 0.0])
-            ws.r[i] = b
-            ws.z[i] = z
-            ws.p[i] = z
-            ws.diagonal[i] = diagonal
-            rz += b.dot(z)
-            bb += b.dot(b)
-        ws.partial[block] = ti.Vector([rz, bb])
+        _start_block(model, state, ws, block, dt, drag, tearable)
     for _ in range(1):
-        total = _total(ws)
+        total = _total(ws, ws.partial, ti.Vector([0.0, 0.0]))
         ws.scalar[RZ] = total[0]
         ws.scalar[RR] = total[1]
         ws.scalar[BB] = total[1]
@@ -203,31 +302,11 @@ def _apply(model: ti.template(), state: ti.template(), ws: ti.template(), dt: fl
            tearable: ti.template()):
     """ap = A p (rows of pinned particles 0) and p . ap."""
     if ti.static(model.altitude_count > 0):
-        _project_altitudes(model, ws, ws.p)
+        _project_altitudes(model, ws, ws.p, 0, model.altitude_count)
     for block in range(ws.block_count):
-        begin, end = _block_range(block, model.particle_count)
-        pap = 0.0
-        for i in range(begin, end):
-            free = ti.cast(model.particle_inv_mass[i] > 0, float)
-            pi = ws.p[i]
-            ap = model.particle_mass[i] * (1.0 + dt * drag) * pi
-            for a in range(model.particle_spring_start[i], model.particle_spring_start[i + 1]):
-                s = model.adjacency_spring[a]
-                d = pi - ws.p[model.adjacency_other[a]]
-                n = ws.spring_normal[s]
-                alive = True
-                if ti.static(tearable):
-                    alive = state.spring_alive[s] != 0
-                if alive:
-                    ap += dt * dt * _stiffness_times(model.spring_stiffness[s], n, ws.spring_lateral[s], d)
-                    ap += dt * _damping_times(model.spring_damping[s], n, d, model.relative_damping)
-            ap += _altitudes_times(model, ws, i, dt)
-            ap *= free
-            ws.ap[i] = ap
-            pap += pi.dot(ap)
-        ws.partial[block] = ti.Vector([pap, 0.0])
+        _apply_block(model, ws, block, dt, drag)
     for _ in range(1):
-        ws.scalar[PAP] = _total(ws)[0]
+        ws.scalar[PAP] = _total(ws, ws.partial_pap, 0.0)
 
 
 @ti.kernel
@@ -235,32 +314,20 @@ def _iterate(model: ti.template(), ws: ti.template()):
     """One CG update after ap = A p: dv += alpha p, r -= alpha ap, z = r / diag,
     then p = z + beta p (alpha = r.z / p.Ap, beta = new r.z / old r.z)."""
     for block in range(ws.block_count):
-        begin, end = _block_range(block, model.particle_count)
-        alpha = ws.scalar[RZ] / ws.scalar[PAP]
-        rz, rr = 0.0, 0.0
-        for i in range(begin, end):
-            ws.dv[i] += alpha * ws.p[i]
-            r = ws.r[i] - alpha * ws.ap[i]
-            z = r / ws.diagonal[i]
-            ws.r[i] = r
-            ws.z[i] = z
-            rz += r.dot(z)
-            rr += r.dot(r)
-        ws.partial[block] = ti.Vector([rz, rr])
+        _update_block(model, ws, block, ws.scalar[RZ] / ws.scalar[PAP])
     for _ in range(1):
-        total = _total(ws)
+        total = _total(ws, ws.partial, ti.Vector([0.0, 0.0]))
         ws.scalar[BETA] = total[0] / ws.scalar[RZ]
         ws.scalar[RZ] = total[0]
         ws.scalar[RR] = total[1]
-    for i in range(model.particle_count):
-        ws.p[i] = ws.z[i] + ws.scalar[BETA] * ws.p[i]
+    for block in range(ws.block_count):
+        _turn_block(model, ws, block, ws.scalar[BETA])
 
 
 @ti.kernel
 def _advance(model: ti.template(), state: ti.template(), ws: ti.template(), dt: float, step: ti.i32):
-    for i in range(model.particle_count):
-        v = state.particle_velocity[i] + ws.dv[i]
-        store_particle(state, i, state.particle_position[i] + dt * v, v, step)
+    for block in range(ws.block_count):
+        _advance_block(model, state, ws, block, dt, step)
 
 
 class ImplicitEuler(Integrator):
@@ -277,6 +344,8 @@ class ImplicitEuler(Integrator):
     name = "implicit_euler"
     order = 1
     step_limited = False
+    teamed = True
+    sums_in_step = True
 
     def __init__(self, *, tolerance: float = 1e-5, max_iterations: int = 200):
         self.tolerance = finite_number("ImplicitEuler.tolerance", tolerance, 0.0, strict=True)
@@ -288,9 +357,78 @@ class ImplicitEuler(Integrator):
     def options(self):
         return {"tolerance": self.tolerance, "max_iterations": self.max_iterations}
 
+    def workspace(self, model, state):
+        return self.buffers(state, lambda: _Workspace(model.particle_count, model.spring_count,
+                                                      model.altitude_count))
+
+    def step_work(self, model):
+        return (2 + 2 * TYPICAL_ITERATIONS) * fused.spring_work(model)
+
+    def after_launch(self, work):
+        self.last_iterations = int(work.iterations[None])
+        bb = work.scalar[BB]
+        self.last_residual = math.sqrt(work.scalar[RR] / bb) if bb > 0 else 0.0
+
+    @ti.func
+    def team_step(self, model: ti.template(), state: ti.template(), forces: ti.template(),
+                  work: ti.template(), team: ti.template(), worker, dt, step, start):
+        """step()'s kernels as phases of one worker's share of the springs, the altitude
+        springs and the blocks of particles, meeting the team between them: three barriers
+        per CG iteration (after A p, after the update, after the new direction). Every
+        worker sums the same partial sums in block order, so all take the same decisions."""
+        ws = work
+        s_begin, s_end = team.share(model.spring_count, worker)
+        a_begin, a_end = team.share(model.altitude_count, worker)
+        b_begin, b_end = team.share(ws.block_count, worker)
+        evaluate_springs(model, state, forces.tearable, s_begin, s_end)
+        evaluate_altitudes(model, state, a_begin, a_end)
+        _linearise_springs(model, state, ws, forces.tearable, s_begin, s_end)
+        if ti.static(model.altitude_count > 0):
+            _linearise_altitudes(model, state, ws, a_begin, a_end)
+        team.meet(worker)
+        for block in range(b_begin, b_end):
+            begin, end = _block_range(block, model.particle_count)
+            for i in range(begin, end):
+                state.particle_force[i] = gather_force(model, state, forces, i, True)
+        if ti.static(model.altitude_count > 0):
+            _project_altitudes(model, ws, state.particle_velocity, a_begin, a_end)
+            team.meet(worker)
+        for block in range(b_begin, b_end):
+            _start_block(model, state, ws, block, dt, forces.drag, forces.tearable)
+        team.meet(worker)
+        total = _total(ws, ws.partial, ti.Vector([0.0, 0.0]))
+        rz, rr, bb = total[0], total[1], total[1]
+        goal = ti.f64(self.tolerance ** 2) * ti.f64(bb)
+        iterations = 0
+        while ti.f64(rr) > goal and iterations < self.max_iterations:
+            if ti.static(model.altitude_count > 0):
+                _project_altitudes(model, ws, ws.p, a_begin, a_end)
+                team.meet(worker)
+            for block in range(b_begin, b_end):
+                _apply_block(model, ws, block, dt, forces.drag)
+            team.meet(worker)
+            alpha = rz / _total(ws, ws.partial_pap, 0.0)
+            for block in range(b_begin, b_end):
+                _update_block(model, ws, block, alpha)
+            team.meet(worker)
+            sums = _total(ws, ws.partial, ti.Vector([0.0, 0.0]))   # a new name: Taichi 1.7
+            beta = sums[0] / rz          # lost the assignment of a returned vector to `total`
+            rz = sums[0]
+            rr = sums[1]
+            for block in range(b_begin, b_end):
+                _turn_block(model, ws, block, beta)
+            team.meet(worker)
+            iterations += 1
+        for block in range(b_begin, b_end):
+            _advance_block(model, state, ws, block, dt, step)
+        if worker == 0:
+            ws.scalar[RR] = rr
+            ws.scalar[BB] = bb
+            ws.iterations[None] = iterations
+        team.meet(worker)
+
     def step(self, model, state, dt, forces, step_index):
-        ws = self.buffers(state, lambda: _Workspace(model.particle_count, model.spring_count,
-                                                    model.altitude_count))
+        ws = self.workspace(model, state)
         compute_forces(model, state, forces)
         _linearise(model, state, ws, dt, forces.drag, forces.tearable)
         iterations = 0
