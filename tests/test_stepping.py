@@ -86,7 +86,7 @@ FEATURES = {"none": {}, "tearing": dict(tearing=0.2), "strain limit": dict(strai
             "moving colliders": dict(colliders=contact_scene(True)),
             "everything": dict(tearing=0.4, strain_limit=tc.StrainLimit(0.05),
                                colliders=contact_scene(True))}
-EXACT = ("explicit_euler", "symplectic_euler", "xpbd", "implicit_euler")
+EXACT = ("explicit_euler", "symplectic_euler", "xpbd", "implicit_euler", "rk4")
 
 
 @pytest.mark.parametrize("integrator, body, feature",
@@ -96,7 +96,8 @@ EXACT = ("explicit_euler", "symplectic_euler", "xpbd", "implicit_euler")
                          + [("pbd", "sheet", "everything"), ("verlet", "sheet", "colliders"),
                             ("symplectic_euler", "braced strands", "none"),
                             ("xpbd", "braced strands", "none"),
-                            ("implicit_euler", "braced strands", "none")])
+                            ("implicit_euler", "braced strands", "none"),
+                            ("rk4", "sheet", "everything"), ("rk4", "sheet", "none")])
 def test_every_launch_plan_takes_the_same_steps(threads, integrator, feature, body, monkeypatch):
     """The same bits in every plan, for a sheet and for strands whose altitude springs are
     evaluated per element and gathered per corner (a team of two shares both), with each
@@ -191,7 +192,6 @@ def test_features_set_between_steps_take_one_launch_per_stage(f64):
                    dict(handles=[tc.Handle([0], lambda t: (0.0, 0.0, 0.0))]),
                    dict(self_collision=tc.SelfCollision(thickness=0.01))):
         assert tc.Simulation(cloth, dt=1e-4, **kwargs)._many_steps is None, kwargs
-    assert tc.Simulation(cloth, integrator="rk4", dt=1e-4)._many_steps is None
 
 
 def record_stages(monkeypatch):

@@ -6,8 +6,9 @@ import math
 import taichi as ti
 
 from .. import backend
-from ..forces import compute_forces
+from ..forces import compute_forces, evaluate_altitudes, evaluate_springs, gather_force
 from ..state import store_particle
+from . import fused
 from .base import Integrator
 
 # Stage weights of the classical tableau: the sum is k1 + 2 k2 + 2 k3 + k4, and stage s+1 is
@@ -35,25 +36,32 @@ class _Stages:
 @ti.kernel
 def _stage(model: ti.template(), state: ti.template(), stages: ti.template(), dt: float,
            stage: ti.template(), step: ti.i32):
-    """Stage k = (v, M^-1 f) at the current state: add it, weighted, to the sums; move the
-    state to where the next stage is evaluated, or (last stage) to the step's result."""
     for i in range(model.particle_count):
-        kx = state.particle_velocity[i]
-        kv = model.particle_inv_mass[i] * state.particle_force[i]
-        if ti.static(stage == 0):
-            stages.x0[i] = state.particle_position[i]
-            stages.v0[i] = kx
-            stages.sum_x[i] = kx
-            stages.sum_v[i] = kv
-        else:
-            stages.sum_x[i] += ti.static(WEIGHTS[stage]) * kx
-            stages.sum_v[i] += ti.static(WEIGHTS[stage]) * kv
-        if ti.static(stage < 3):
-            state.particle_position[i] = stages.x0[i] + ti.static(NEXT[stage]) * dt * kx
-            state.particle_velocity[i] = stages.v0[i] + ti.static(NEXT[stage]) * dt * kv
-        else:
-            store_particle(state, i, stages.x0[i] + dt / 6.0 * stages.sum_x[i],
-                           stages.v0[i] + dt / 6.0 * stages.sum_v[i], step)
+        _stage_particle(model, state, stages, i, dt, stage, step)
+
+
+@ti.func
+def _stage_particle(model: ti.template(), state: ti.template(), stages: ti.template(), i, dt,
+                    stage: ti.template(), step):
+    """Stage k = (v, M^-1 f) of particle i at the current state: add it, weighted, to the
+    sums; move the particle to where the next stage is evaluated, or (last stage) to the
+    step's result."""
+    kx = state.particle_velocity[i]
+    kv = model.particle_inv_mass[i] * state.particle_force[i]
+    if ti.static(stage == 0):
+        stages.x0[i] = state.particle_position[i]
+        stages.v0[i] = kx
+        stages.sum_x[i] = kx
+        stages.sum_v[i] = kv
+    else:
+        stages.sum_x[i] += ti.static(WEIGHTS[stage]) * kx
+        stages.sum_v[i] += ti.static(WEIGHTS[stage]) * kv
+    if ti.static(stage < 3):
+        state.particle_position[i] = stages.x0[i] + ti.static(NEXT[stage]) * dt * kx
+        state.particle_velocity[i] = stages.v0[i] + ti.static(NEXT[stage]) * dt * kv
+    else:
+        store_particle(state, i, stages.x0[i] + dt / 6.0 * stages.sum_x[i],
+                       stages.v0[i] + dt / 6.0 * stages.sum_v[i], step)
 
 
 class RK4(Integrator):
@@ -67,9 +75,33 @@ class RK4(Integrator):
 
     name = "rk4"
     order = 4
+    teamed = True
+
+    def workspace(self, model, state):
+        return self.buffers(state, lambda: _Stages(model.particle_count))
+
+    def step_work(self, model):
+        return 4 * fused.spring_work(model)
+
+    @ti.func
+    def team_step(self, model: ti.template(), state: ti.template(), forces: ti.template(),
+                  work: ti.template(), team: ti.template(), worker, dt, step, start):
+        """step()'s four force evaluations and stage updates as phases of one worker's
+        share, meeting the team after each."""
+        s_begin, s_end = team.share(model.spring_count, worker)
+        a_begin, a_end = team.share(model.altitude_count, worker)
+        p_begin, p_end = team.share(model.particle_count, worker)
+        for stage in ti.static(range(4)):
+            evaluate_springs(model, state, forces.tearable, s_begin, s_end)
+            evaluate_altitudes(model, state, a_begin, a_end)
+            team.meet(worker)
+            for i in range(p_begin, p_end):
+                state.particle_force[i] = gather_force(model, state, forces, i, True)
+                _stage_particle(model, state, work, i, dt, stage, step)
+            team.meet(worker)
 
     def step(self, model, state, dt, forces, step_index):
-        stages = self.buffers(state, lambda: _Stages(model.particle_count))
+        stages = self.workspace(model, state)
         for s in range(4):
             compute_forces(model, state, forces)    # f at stage s (x0 and v0 for s = 0)
             _stage(model, state, stages, dt, s, step_index)
