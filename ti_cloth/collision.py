@@ -6,7 +6,7 @@ meshes none of the turning code."""
 import numpy as np
 import taichi as ti
 
-from . import backend
+from . import backend, limits
 from ._validate import require
 from .colliders import MESH, Collider, Plane, signed_distance
 from .mesh_collider import MeshCollider
@@ -16,7 +16,6 @@ from .transfer import upload
 
 
 PLACEMENT = 30       # numbers per collider in a placement row (ColliderSet._placement)
-SCHEDULE_STEPS = 64  # placements a many-steps launch may read (stepping.py)
 
 
 @backend.kernel_argument
@@ -42,7 +41,7 @@ class ColliderSet:
         self.kinetic_friction = fields.scalar(real, count)
         self.velocity = fields.vector(3, real, count)
         self.step_start = fields.vector(3, real, particle_count)
-        self.scheduled = fields.vector(PLACEMENT, real, SCHEDULE_STEPS * count)
+        self.scheduled = fields.vector(PLACEMENT, real, limits.SCHEDULED_STEPS * count)
         if self.meshes:
             self.samples = fields.vector(4, real, self.nodes)
             self.grid_start = fields.scalar(ti.i32, count)
@@ -94,9 +93,9 @@ class ColliderSet:
 
     def schedule(self, first: int, count: int, dt: float) -> None:
         """Write the placements at the ends of steps first .. first + count - 1 (count at
-        most SCHEDULE_STEPS) for a many-steps launch (place_scheduled)."""
+        most limits.SCHEDULED_STEPS) for a many-steps launch (place_scheduled)."""
         rows = np.stack([self._placement((first + k + 1) * dt, dt) for k in range(count)])
-        table = np.zeros((SCHEDULE_STEPS * self.count, PLACEMENT), backend.numpy_real())
+        table = np.zeros((limits.SCHEDULED_STEPS * self.count, PLACEMENT), backend.numpy_real())
         table[:count * self.count] = rows.reshape(-1, PLACEMENT)
         self.scheduled.from_numpy(table)
 

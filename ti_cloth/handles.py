@@ -13,6 +13,7 @@ import taichi as ti
 
 from . import backend, limits
 from ._validate import as_array, in_range, require
+from .transfer import upload
 
 
 @dataclass(frozen=True)
@@ -60,6 +61,42 @@ def move_handles(state: ti.template(), index: ti.types.ndarray(), previous: ti.t
         state.particle_prev_position[i] = x_old
         state.particle_position[i] = x_new
         state.particle_velocity[i] = (x_new - x_old) / dt
+
+
+@backend.kernel_argument
+class HandleTable:
+    """The held particles and their targets at the starts and ends of the steps of a
+    many-steps launch (stepping.py), for a simulation whose handles hold `capacity`
+    particles in all: target[(2 k + e) * held + h] is held particle h's target at the start
+    (e = 0) and at the end (e = 1) of the launch's k-th step, as HandleSet.after_step
+    computes them."""
+
+    def __init__(self, capacity: int):
+        self.capacity = max(capacity, 1)
+        fields = backend.FieldGroup()
+        self.index = fields.scalar(ti.i32, self.capacity)
+        self.target = fields.vector(3, backend.real(),
+                                    2 * limits.SCHEDULED_STEPS * self.capacity)
+        fields.finalize(self)
+
+    @staticmethod
+    def structure(capacity: int) -> tuple:
+        return ("HandleTable", capacity)
+
+    def load(self, capacity: int) -> None:
+        """Nothing to load: schedule() writes the table before each launch."""
+
+    @ti.func
+    def move(self, state: ti.template(), begin, end, held, k, dt):
+        """Held particles begin .. end - 1 to their targets of the launch's k-th step, as
+        move_handles does."""
+        for h in range(begin, end):
+            i = self.index[h]
+            x_old = self.target[2 * k * held + h]
+            x_new = self.target[(2 * k + 1) * held + h]
+            state.particle_prev_position[i] = x_old
+            state.particle_position[i] = x_new
+            state.particle_velocity[i] = (x_new - x_old) / dt
 
 
 class HandleSet:
@@ -117,6 +154,40 @@ class HandleSet:
         if not self.holding:
             return
         self._move(state, self.targets(max(t - dt, 0.0)), self.targets(t), dt)
+        self.let_go(model, t, dt)
+
+    def steps_before_release(self, first: int, dt: float) -> int:
+        """How many steps from step `first` on run before the step in whose handle stage a
+        holding handle lets go (its particles are free for the stages after it in that
+        step, so a many-steps launch stops before it)."""
+        steps = limits.STEPS.high
+        for h in self.holding:
+            if h.release is not None:
+                step = max(first, int(h.release / dt) - 2)
+                while h.holds_after((step + 1) * dt, dt):
+                    step += 1
+                steps = min(steps, step - first)
+        return steps
+
+    def schedule(self, first: int, count: int, dt: float) -> int:
+        """Table the targets of the held particles for steps first .. first + count - 1
+        (count at most limits.SCHEDULED_STEPS) in `table` (a HandleTable); returns how many
+        particles are held."""
+        held = len(self.index)
+        if held:
+            real = backend.numpy_real()
+            rows = []
+            for k in range(count):
+                t = (first + k + 1) * dt
+                rows += [self.targets(max(t - dt, 0.0)), self.targets(t)]
+            target = np.zeros((2 * limits.SCHEDULED_STEPS * self.table.capacity, 3), real)
+            target[:2 * count * held] = np.concatenate(rows).astype(real)
+            upload(((self.table.index, self.index), (self.table.target, target)))
+        return held
+
+    def let_go(self, model, t: float, dt: float) -> None:
+        """After the step ending at t [s]: handles whose release falls before the next
+        step's end let go (model.set_pinned)."""
         still = [h for h in self.holding if h.holds_after(t, dt)]
         if len(still) < len(self.holding):
             self._hold(still)

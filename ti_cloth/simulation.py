@@ -26,7 +26,7 @@ from .collision import ColliderSet
 from .self_collision import SelfCollision, SelfContact, SelfContacts, warn_if_thick
 from .errors import SimulationDiverged, StaleSimulation
 from .forces import ForceSettings, energies
-from .handles import Handle, HandleSet
+from .handles import Handle, HandleSet, HandleTable
 from .integrators import make_integrator
 from .model import Model
 from .pool import POOL
@@ -107,12 +107,16 @@ class Simulation:
         if self_collision is not None:
             warn_if_thick(self_collision, cloth)
             parts["self_contact"] = (SelfContact, (self_collision, cloth))
+        if handles:
+            parts["handle_table"] = (HandleTable, (len(self.handles.index),))
         self._lent = self._lend(parts)
         self.model, self.state = self._lent["model"], self._lent["state"]
         self.wind = self._lent.get("wind")
         self.strain_limiter = self._lent.get("strain_limiter")
         self.colliders = self._lent.get("colliders")
         self.self_contact = self._lent.get("self_contact")
+        if self.handles is not None:
+            self.handles.table = self._lent["handle_table"]
         if self.self_contact is not None:
             self.self_contact.attach(self.colliders)
         self.forces = POOL.keep(ForceSettings(gravity=tuple(gravity), drag=drag,
@@ -135,8 +139,8 @@ class Simulation:
         # Many steps per launch on the CPU when every stage runs in a team launch; made on
         # first use (kept with the lent objects).
         self._many_per_launch = (self.integrator.teamed and backend.config().arch == "cpu"
-                                 and self.wind is None
-                                 and set(self.stages) <= set(stepping.TEAM_STAGES))
+                                 and set(self.stages) <= set(stepping.TEAM_STAGES)
+                                 and (self.wind is None or self.integrator.wind_once))
 
     def _lend(self, parts: dict) -> dict:
         """The objects this simulation passes to kernels, {name: cls(*args)}, lent by the pool
@@ -223,9 +227,7 @@ class Simulation:
         if self._diverged is not None:
             raise self._diverged
         if self._many_per_launch and (n > 1 or not self.integrator.fused):
-            self.step_count += self._many_steps.run(
-                self.integrator, self.model, self.state, self.forces, self.dt, self.step_count, n,
-                self.tearing, self.strain_limiter.limit if self.strain_limiter else None)
+            self._step_many(n)
             n = 0
         for _ in range(n):
             self._step_once()
@@ -254,6 +256,23 @@ class Simulation:
         if self._runtime != backend.generation():
             raise StaleSimulation()
 
+    def _step_many(self, n: int) -> None:
+        """n steps in few launches (stepping.py), until one diverges; a step in which a
+        handle lets go runs stage by stage."""
+        while True:
+            ran = self._many_steps.run(
+                self.integrator, self.model, self.state, self.forces, self.dt, self.step_count,
+                n, self.tearing, self.strain_limiter.limit if self.strain_limiter else None,
+                self.handles)
+            self.step_count += ran
+            n -= ran
+            if n == 0 or self.state.first_bad_step[None] != NO_BAD_STEP:
+                return
+            self._step_once()
+            n -= 1
+            if n == 0:
+                return
+
     def _step_once(self) -> None:
         """One step, launch by launch: the stages of STEP_ORDER this simulation has."""
         for stage in self._before:
@@ -272,7 +291,8 @@ class Simulation:
         key = ("many_steps", self.tearing is not None)
         if key not in self._lent:
             self._lent[key] = stepping.ManySteps(stepping.TeamStages(
-                self.strain_limiter, self.colliders, self.tearing is not None,
+                self._lent.get("handle_table"), self.strain_limiter, self.colliders,
+                self.tearing is not None,
                 self.model.spring_colouring() if self.strain_limiter is not None else None))
         return self._lent[key]
 

@@ -9,14 +9,17 @@ a Team (team.py): one worker runs every loop serially for launches of little wor
 per core otherwise, each owning fixed slices and meeting the others at barriers. A step is,
 per worker:
 
-    stage starts (the colliders keep the positions at the step start)
+    stage starts (the colliders keep the positions at the step start; the wind acts)
     ->  the integrator's team step (Integrator.team_step: its phases and barriers)
+    ->  handles (their particles put on targets tabled before the launch)
     ->  strain limiting (relaxation passes, colour by colour)
-    ->  colliders (scripted ones placed from a schedule written before the launch)
+    ->  colliders (scripted ones placed from a table written before the launch)
     ->  tearing
 
-the order of simulation.STEP_ORDER. Handles and the wind are set between steps from Python,
-so a simulation with either steps one launch per stage (GPUs always do).
+the order of simulation.STEP_ORDER. What Python computes from the time (scripted paths, the
+wind's gusts) is tabled for the launch's steps; a launch ends at the step after which a
+handle lets go (its particles are free from that step's handle stage on: that step runs stage
+by stage). Self-collision steps one launch per stage, as GPUs always do.
 
 Every worker evaluates each spring and particle with the same formula and in the same order
 as a launch per stage, and sums in fixed blocks, so thread counts never change a bit; plans
@@ -27,15 +30,16 @@ agree with a launch per stage to the bit where the same kernel code compiles the
 
 import taichi as ti
 
-from . import backend
+from . import backend, limits
+from .collision import resolve_particle
+from .constraints import relax_pass
 from .errors import TeamStalled
 from .state import NO_BAD_STEP
 from .team import BARRIER_SPINS, TASK_SPACING, Barrier, Team
 from .tearing import tear_overstretched
-from .collision import SCHEDULE_STEPS, resolve_particle
-from .constraints import relax_pass
+from .wind import wind_on_particles, wind_on_triangles
 
-TEAM_STAGES = ("integrator", "strain_limit", "colliders", "tearing")   # in STEP_ORDER
+TEAM_STAGES = ("integrator", "handles", "strain_limit", "colliders", "tearing")   # STEP_ORDER
 MAX_STEPS_PER_LAUNCH = 4096    # bounds one launch (Ctrl-C and the divergence check wait for it)
 SPRING_STEPS_PER_LAUNCH = 25_000_000   # about 0.1 s of one core's work: fewer steps for big cloths
 TEAM_MIN_SPRING_STEPS = 1_000_000   # less work per launch runs on one worker (launch_plans.py)
@@ -43,43 +47,63 @@ TEAM_MIN_SPRING_STEPS = 1_000_000   # less work per launch runs on one worker (l
 
 @backend.kernel_argument
 class TeamStages:
-    """The stages after the integrator that run inside a many-steps launch (None: absent,
-    compiled out). colours: the model's spring colouring (strain limiting's passes)."""
+    """The stages around the integrator that run inside a many-steps launch (None: absent,
+    compiled out): handles (their HandleTable), strain limiting, colliders, tearing; the
+    wind comes with the ForceSettings. colours: the model's spring colouring (strain
+    limiting's passes)."""
 
-    def __init__(self, strain_limiter=None, colliders=None, tearable=False, colours=None):
+    def __init__(self, handles=None, strain_limiter=None, colliders=None, tearable=False,
+                 colours=None):
+        self.handles = handles
         self.strain_limiter = strain_limiter
         self.colliders = colliders
         self.tearable = tearable
         self.colours = colours
-        self.limits_strain = strain_limiter is not None    # read at compile time
+        self.holds = handles is not None          # read at compile time
+        self.limits_strain = strain_limiter is not None
         self.collides = colliders is not None
 
     @ti.func
-    def begin(self, model: ti.template(), state: ti.template(), worker_begin, worker_end):
-        """At a step's start, on the worker's particles (before the integrator writes any)."""
+    def begin(self, model: ti.template(), state: ti.template(), forces: ti.template(),
+              team: ti.template(), worker, p_begin, p_end, k):
+        """At the start of the launch's k-th step, before the integrator: the colliders keep
+        the worker's particles' positions; the wind of the step's start acts."""
         if ti.static(self.collides):
-            for i in range(worker_begin, worker_end):
+            for i in range(p_begin, p_end):
                 self.colliders.step_start[i] = state.particle_position[i]
+        if ti.static(forces.has_wind):
+            wind = forces.wind
+            row = wind.scheduled[k]
+            t_begin, t_end = team.share(wind.triangle_count, worker)
+            wind_on_triangles(model, state, wind, ti.Vector([row[0], row[1], row[2]]),
+                              ti.Vector([row[3], row[4], row[5]]), forces.tearable, t_begin,
+                              t_end)
+            team.meet(worker)
+            wind_on_particles(wind, p_begin, p_end)
+            team.meet(worker)
 
     @ti.func
     def after(self, model: ti.template(), state: ti.template(), team: ti.template(), worker,
-              p_begin, p_end, s_begin, s_end, step, k, dt, tear_strain, strain_max, strain_passes,
-              strain_kinds, moving):
-        """The stages of a step ending after the integrator's last barrier (k: the step's
-        index in this launch)."""
+              p_begin, p_end, s_begin, s_end, step, k, dt, settings: ti.template()):
+        """The stages of the launch's k-th step after the integrator's last barrier, in
+        simulation.STEP_ORDER."""
+        if ti.static(self.holds):
+            h_begin, h_end = team.share(settings.held, worker)
+            self.handles.move(state, h_begin, h_end, settings.held, k, dt)
+            team.meet(worker)
         if ti.static(self.limits_strain):
             limiter = self.strain_limiter
             for i in range(p_begin, p_end):
                 limiter.before[i] = state.particle_position[i]
             team.meet(worker)
-            for _ in range(strain_passes):
-                relax_pass(model, state, self.colours, self.colours, strain_kinds, 0.0,
-                           limiter.tearable, strain_max, True, team, worker)
+            for _ in range(settings.strain_passes):
+                relax_pass(model, state, self.colours, self.colours, settings.strain_kinds, 0.0,
+                           limiter.tearable, settings.strain_max, True, team, worker)
             for i in range(p_begin, p_end):
                 state.particle_velocity[i] += (state.particle_position[i] - limiter.before[i]) / dt
             team.meet(worker)
         if ti.static(self.collides):
-            if moving != 0:
+            if settings.moving != 0:
                 if worker == 0:
                     self.colliders.place_scheduled(k)
                 team.meet(worker)
@@ -87,25 +111,24 @@ class TeamStages:
                 resolve_particle(model, state, self.colliders, i, dt)
             team.meet(worker)
         if ti.static(self.tearable):
-            tear_overstretched(model, state, tear_strain, step, s_begin, s_end)
+            tear_overstretched(model, state, settings.tear_strain, step, s_begin, s_end)
             team.meet(worker)
 
 
 @ti.func
 def _run(integrator: ti.template(), model: ti.template(), state: ti.template(),
          forces: ti.template(), work: ti.template(), stages: ti.template(), team: ti.template(),
-         worker, dt, first, count, start, tear_strain, strain_max, strain_passes, strain_kinds,
-         moving):
+         worker, dt, first, count, start, settings: ti.template()):
     """Worker `worker`'s share of steps first .. first + count - 1."""
     team.start(worker)
     p_begin, p_end = team.share(model.particle_count, worker)
     s_begin, s_end = team.share(model.spring_count, worker)
     for k in range(count):
-        stages.begin(model, state, p_begin, p_end)
+        stages.begin(model, state, forces, team, worker, p_begin, p_end, k)
         integrator.team_step(model, state, forces, work, team, worker, dt, first + k,
                              ti.i32(start != 0 and k == 0))
         stages.after(model, state, team, worker, p_begin, p_end, s_begin, s_end, first + k, k,
-                     dt, tear_strain, strain_max, strain_passes, strain_kinds, moving)
+                     dt, settings)
 
 
 @ti.kernel
@@ -113,22 +136,29 @@ def advance_many(integrator: ti.template(), model: ti.template(), state: ti.temp
                  forces: ti.template(), work: ti.template(), stages: ti.template(),
                  team: ti.template(), dt: float, first: ti.i32, count: ti.i32, start: ti.i32,
                  tear_strain: float, strain_max: float, strain_passes: ti.i32,
-                 strain_kinds: ti.math.vec3, moving: ti.i32):
+                 strain_kinds: ti.math.vec3, moving: ti.i32, held: ti.i32):
     """Steps first .. first + count - 1 in one launch, shared by `team` (start: 1 when the
-    state has no history yet)."""
-    if ti.static(team.workers == 1 and not integrator.sums_in_step):
+    state has no history yet). The stages' settings: tearing's strain, strain limiting's
+    limit, passes and spring kinds, whether a collider moves (placed from its schedule),
+    how many particles the handles hold (targets from their table)."""
+    settings = ti.Struct(tear_strain=tear_strain, strain_max=strain_max,
+                         strain_passes=strain_passes, strain_kinds=strain_kinds, moving=moving,
+                         held=held)
+    # One worker runs on the launching thread, unless the step holds code LLVM compiles
+    # differently there (sums it vectorises, the wind's turbulence): then as a pool task,
+    # compiled as a team's is, so one worker and a team give the same bits.
+    if ti.static(team.workers == 1 and not integrator.sums_in_step and not forces.has_wind):
         ti.loop_config(serialize=True)
         for worker in range(1):
             _run(integrator, model, state, forces, work, stages, team, worker, dt, first, count,
-                 start, tear_strain, strain_max, strain_passes, strain_kinds, moving)
+                 start, settings)
     else:
         if ti.static(team.workers > 1):
             team.barrier.arrived[None] = 0
         for index in range(team.workers * TASK_SPACING):   # one task per worker
             if index % TASK_SPACING == 0:
                 _run(integrator, model, state, forces, work, stages, team, index // TASK_SPACING,
-                     dt, first, count, start, tear_strain, strain_max, strain_passes,
-                     strain_kinds, moving)
+                     dt, first, count, start, settings)
 
 
 class ManySteps:
@@ -136,9 +166,9 @@ class ManySteps:
 
     stages: the TeamStages of the simulation (its Model's lent set). A launch holds at most
     MAX_STEPS_PER_LAUNCH steps, fewer for big cloths (SPRING_STEPS_PER_LAUNCH of the
-    integrator's step_work), and SCHEDULE_STEPS when a collider moves along a path. A launch
-    with less work than TEAM_MIN_SPRING_STEPS runs on one worker, a bigger one on a team of a
-    worker per Taichi CPU thread (at most one per core).
+    integrator's step_work), limits.SCHEDULED_STEPS when a collider moves, the wind blows or
+    a handle holds (their per-step values are tabled before the launch). A launch with less work than TEAM_MIN_SPRING_STEPS runs on one
+    worker, a bigger one on a team of a worker per Taichi CPU thread (at most one per core).
     """
 
     def __init__(self, stages: TeamStages):
@@ -150,12 +180,13 @@ class ManySteps:
         self.solo = Team(1)
         self.team = Team(workers, barrier) if workers > 1 else self.solo
 
-    def steps_per_launch(self, integrator, model) -> int:
+    def steps_per_launch(self, integrator, model, forces=None) -> int:
         """How many steps one launch of `integrator` on `model` holds at most."""
         most = MAX_STEPS_PER_LAUNCH
         colliders = self.stages.colliders
-        if colliders is not None and colliders.moving:
-            most = SCHEDULE_STEPS
+        if ((colliders is not None and colliders.moving) or self.stages.holds
+                or (forces is not None and forces.wind is not None)):
+            most = limits.SCHEDULED_STEPS
         return max(1, min(most, SPRING_STEPS_PER_LAUNCH // max(integrator.step_work(model), 1)))
 
     def team_for(self, integrator, model, steps: int) -> Team:
@@ -164,29 +195,39 @@ class ManySteps:
         return self.team if work >= TEAM_MIN_SPRING_STEPS else self.solo
 
     def run(self, integrator, model, state, forces, dt: float, first: int, count: int,
-            tearing=None, strain_limit=None) -> int:
-        """Up to `count` steps; stops after the launch in which a step diverged. Returns how
-        many steps ran. Raises TeamStalled if a barrier gave up on a worker (the state is then
-        unusable)."""
+            tearing=None, strain_limit=None, handles=None) -> int:
+        """Up to `count` steps; stops after the launch in which a step diverged, and before
+        a step in which a handle lets go (the caller runs that one stage by stage). Returns
+        how many steps ran. handles: the HandleSet (whose table is this plan's stages').
+        Raises TeamStalled if a barrier gave up on a worker (the state is then unusable)."""
         work = integrator.workspace(model, state)
         colliders = self.stages.colliders
         moving = colliders is not None and colliders.moving
         kinds = (strain_limit.kind_mask() if strain_limit is not None else ti.math.vec3(0.0))
         done = 0
         while done < count and state.first_bad_step[None] == NO_BAD_STEP:
-            chunk = min(self.steps_per_launch(integrator, model), count - done)
-            team = self.team_for(integrator, model, chunk)
+            step = first + done
+            chunk = min(self.steps_per_launch(integrator, model, forces), count - done)
+            held = 0
+            if handles is not None:
+                chunk = min(chunk, handles.steps_before_release(step, dt))
+                if chunk == 0:
+                    break
+                held = handles.schedule(step, chunk, dt)
             if moving:
-                colliders.schedule(first + done, chunk, dt)
-            advance_many(integrator, model, state, forces, work, self.stages, team, dt,
-                         first + done, chunk, not state.prev_valid,
+                colliders.schedule(step, chunk, dt)
+            if forces.wind is not None:
+                forces.wind.schedule(step, chunk, dt)
+            team = self.team_for(integrator, model, chunk)
+            advance_many(integrator, model, state, forces, work, self.stages, team, dt, step,
+                         chunk, not state.prev_valid,
                          tearing.strain if tearing is not None else 0.0,
                          strain_limit.max_strain if strain_limit is not None else 0.0,
                          strain_limit.passes if strain_limit is not None else 0, kinds,
-                         int(moving))
+                         int(moving), held)
             if team.stalled():
                 raise TeamStalled(
-                    f"a barrier of steps {first + done}..{first + done + chunk - 1} waited "
+                    f"a barrier of steps {step}..{step + chunk - 1} waited "
                     f"{BARRIER_SPINS} polls for one of {team.workers} workers; Taichi must give "
                     f"each worker its own CPU thread (ti_cloth.init(threads=1) avoids teams)")
             state.prev_valid = integrator.records_history

@@ -108,6 +108,7 @@ class WindField:
         self.mode_wave = fields.vector(3, real, TURBULENCE_MODES)
         self.mode_direction = fields.vector(3, real, TURBULENCE_MODES)
         self.mode_phase = fields.scalar(real, TURBULENCE_MODES)
+        self.scheduled = fields.vector(6, real, limits.SCHEDULED_STEPS)   # mean, drift per step
         fields.finalize(self)
         self.load(wind, cloth)
 
@@ -145,7 +146,19 @@ class WindField:
     def update(self, t: float) -> None:
         """Set the wind of time t."""
         self.mean = ti.math.vec3(*self.wind.mean_velocity(t))
-        self.drift = ti.math.vec3(*(np.asarray(self.wind.velocity) * t))
+        self.drift = ti.math.vec3(*self._drift(t))
+
+    def _drift(self, t: float) -> np.ndarray:
+        return np.asarray(self.wind.velocity) * t
+
+    def schedule(self, first: int, count: int, dt: float) -> None:
+        """Table the wind of the starts of steps first .. first + count - 1 (count at most
+        limits.SCHEDULED_STEPS) for a many-steps launch (stepping.py)."""
+        table = np.zeros((limits.SCHEDULED_STEPS, 6), backend.numpy_real())
+        for k in range(count):
+            t = (first + k) * dt
+            table[k] = np.concatenate([self.wind.mean_velocity(t), self._drift(t)])
+        self.scheduled.from_numpy(table)
 
     @ti.func
     def turbulence_at(self, x):
@@ -156,12 +169,13 @@ class WindField:
         return u * ti.sqrt(2.0 / TURBULENCE_MODES)
 
 
-@ti.kernel
-def _accumulate_wind(model: ti.template(), state: ti.template(), wind: ti.template(),
-                     mean: ti.math.vec3, drift: ti.math.vec3, tearable: ti.template()):
-    """The WindField is a template argument, so its frozen Wind's coefficients are
-    compile-time constants; only the per-step mean wind and drift are passed."""
-    for t in range(wind.triangle_count):
+@ti.func
+def wind_on_triangles(model: ti.template(), state: ti.template(), wind: ti.template(), mean,
+                      drift, tearable: ti.template(), begin, end):
+    """Triangles begin .. end - 1: each one's aerodynamic force (module doc), a third of it
+    kept per corner in triangle_force. The WindField is a template argument, so its frozen
+    Wind's coefficients are compile-time constants; the mean wind and drift are values."""
+    for t in range(begin, end):
         a, b, c = wind.triangle[t][0], wind.triangle[t][1], wind.triangle[t][2]
         xa, xb, xc = state.particle_position[a], state.particle_position[b], state.particle_position[c]
         u = mean - (state.particle_velocity[a] + state.particle_velocity[b]
@@ -186,11 +200,23 @@ def _accumulate_wind(model: ti.template(), state: ti.template(), wind: ti.templa
             drag = wind.wind.drag_coefficient * ti.abs(cos) + wind.wind.friction_coefficient
             f = q * (drag * flow + wind.wind.lift_coefficient * cos * (n - cos * flow))
         wind.triangle_force[t] = f / 3.0
-    for i in range(model.particle_count):
+
+
+@ti.func
+def wind_on_particles(wind: ti.template(), begin, end):
+    """Particles begin .. end - 1: the forces of their triangles, gathered in a fixed order."""
+    for i in range(begin, end):
         f = ti.Vector([0.0, 0.0, 0.0])
         for k in range(wind.particle_triangle_start[i], wind.particle_triangle_start[i + 1]):
             f += wind.triangle_force[wind.adjacency_triangle[k]]
         wind.particle_wind_force[i] = f
+
+
+@ti.kernel
+def _accumulate_wind(model: ti.template(), state: ti.template(), wind: ti.template(),
+                     mean: ti.math.vec3, drift: ti.math.vec3, tearable: ti.template()):
+    wind_on_triangles(model, state, wind, mean, drift, tearable, 0, wind.triangle_count)
+    wind_on_particles(wind, 0, model.particle_count)
 
 
 def accumulate_wind(model, state, wind: WindField, tearable: bool) -> None:

@@ -36,8 +36,12 @@ class Integrator:
     teamed: ClassVar[bool] = False          # True: defines team_step(), for stepping.py
     # True: team_step sums over particles. LLVM vectorises (and so reorders) those sums
     # differently when the step runs on the launching thread, so a launch of one worker runs
-    # as a pool task, compiled as a team's is: one worker and a team give the same bits.
+    # as a pool task, compiled as a team's is: one worker and a team give the same bits
+    # (stepping.advance_many).
     sums_in_step: ClassVar[bool] = False
+    # False: step() evaluates the wind more than once a step (at every stage); team_step
+    # sees only the wind of the step's start, so with wind the steps go stage by stage.
+    wind_once: ClassVar[bool] = True
     records_history: ClassVar[bool] = False  # True: a step leaves x_n in particle_prev_position
 
     def step(self, model, state, dt: float, forces, step_index: int) -> None:

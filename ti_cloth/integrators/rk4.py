@@ -76,6 +76,7 @@ class RK4(Integrator):
     name = "rk4"
     order = 4
     teamed = True
+    wind_once = False
 
     def workspace(self, model, state):
         return self.buffers(state, lambda: _Stages(model.particle_count))
