@@ -1,4 +1,4 @@
-"""Microseconds per step of symplectic Euler in each CPU launch plan (ti_cloth/integrators/fused.py), by
+"""Microseconds per step of symplectic Euler in each CPU launch plan (ti_cloth/stepping.py), by
 cloth size and by how many steps one Simulation.step(n) call asks for.
 
     launch per step   step(1) n times: one launch, two parallel loops a step
@@ -9,7 +9,7 @@ cloth size and by how many steps one Simulation.step(n) call asks for.
 The scene is throughput.py's (N x N sheet, stretch + shear + bend springs, two pinned corners,
 f32). Each cell is the median (and the 90th percentile, which shows the thread pool's slow
 wake-ups) of --repeats calls. Simulation.step picks between "one worker" and "team" by the work
-in a launch (fused.TEAM_MIN_SPRING_STEPS); this table is what that threshold rests on.
+in a launch (stepping.TEAM_MIN_SPRING_STEPS); this table is what that threshold rests on.
 
     python benchmarks/launch_plans.py [--sizes 32 64 128 256] [--counts 16 256] [--threads 2]
 """
@@ -20,7 +20,7 @@ import time
 import numpy as np
 
 import ti_cloth as tc
-from ti_cloth.integrators import fused
+from ti_cloth import stepping
 
 from throughput import scene
 
@@ -29,7 +29,7 @@ PLANS = ("launch per step", "one worker", "team")
 
 def per_step_us(sim, plan: str, count: int, repeats: int) -> np.ndarray:
     """Microseconds per step of `repeats` calls that each advance `count` steps."""
-    fused.TEAM_MIN_SPRING_STEPS = 0 if plan == "team" else 1 << 62
+    stepping.TEAM_MIN_SPRING_STEPS = 0 if plan == "team" else 1 << 62
     times = []
     for _ in range(repeats + 1):                      # the first call compiles
         start = time.perf_counter()
@@ -51,7 +51,7 @@ def main(argv=None):
     parser.add_argument("--repeats", type=int, default=15)
     args = parser.parse_args(argv)
     tc.init(arch="cpu", precision="f32", threads=args.threads)
-    threshold = fused.TEAM_MIN_SPRING_STEPS
+    threshold = stepping.TEAM_MIN_SPRING_STEPS
     print(f"{'N':>5} {'springs':>9} {'steps/call':>10}  "
           + "  ".join(f"{plan + ' (p50/p90)':>26}" for plan in PLANS) + f"  {'step(n) picks':>13}")
     for n in args.sizes:
@@ -63,8 +63,10 @@ def main(argv=None):
             for plan in PLANS:
                 us = per_step_us(sim, plan, count, args.repeats)
                 cells.append(f"{np.median(us):>12.1f} / {np.percentile(us, 90):>11.1f}")
-            fused.TEAM_MIN_SPRING_STEPS = threshold
-            picked = sim._many_steps.team_for(sim.model, min(count, sim._many_steps.steps_per_launch))
+            stepping.TEAM_MIN_SPRING_STEPS = threshold
+            many = sim._many_steps
+            picked = many.team_for(sim.integrator, sim.model,
+                                   min(count, many.steps_per_launch(sim.integrator, sim.model)))
             print(f"{n:>5} {cloth.spring_count:>9} {count:>10}  " + "  ".join(cells)
                   + f"  {'team' if picked.workers > 1 else 'one worker':>13}")
 

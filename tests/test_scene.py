@@ -150,15 +150,21 @@ def test_a_scene_compiles_only_what_it_lists(tmp_path, f64):
     forget_compiled(*kernels)
     scene = load_scene(write(tmp_path, GRID))
     sim = scene.build()
-    sim.step(5)
+    for _ in range(5):        # a launch per stage (many-steps launches: the stages' flags)
+        sim.step(1)
     assert sim.wind is None and sim.colliders is None and sim.strain_limiter is None
     assert not any(compiled(k) for k in kernels)
+    stages = sim._many_steps.stages
+    assert not (stages.collides or stages.limits_strain or stages.holds or sim.forces.has_wind)
     full = GRID.replace("[forces]", '[forces]\nwind = { velocity = [2.0, 0.0, 1.0] }').replace(
         "duration = 0.1", "duration = 0.1\nstrain_limit = { max_strain = 0.1 }")
     full += '[[colliders]]\ntype = "sphere"\ncentre = [0.25, -0.5, 0.0]\nradius = 0.2\n'
     sim = load_scene(write(tmp_path, full)).build()
-    sim.step(5)
+    for _ in range(5):
+        sim.step(1)
     assert all(compiled(k) for k in kernels)
+    stages = sim._many_steps.stages
+    assert stages.collides and stages.limits_strain and sim.forces.has_wind
 
 
 def test_bodies_of_a_scene_move_as_they_would_alone(tmp_path, f64):

@@ -267,7 +267,7 @@ class Simulation:
             self.step_count += ran
             n -= ran
             if n == 0 or self.state.first_bad_step[None] != NO_BAD_STEP:
-                return
+                return   # Simulation.step reads the flag again: a diverged step is reported
             self._step_once()
             n -= 1
             if n == 0:

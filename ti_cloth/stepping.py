@@ -96,8 +96,10 @@ class TeamStages:
             for i in range(p_begin, p_end):
                 limiter.before[i] = state.particle_position[i]
             team.meet(worker)
+            kinds = ti.Vector([ti.cast((settings.strain_kinds >> kind) & 1, float)
+                               for kind in ti.static(range(3))])
             for _ in range(settings.strain_passes):
-                relax_pass(model, state, self.colours, self.colours, settings.strain_kinds, 0.0,
+                relax_pass(model, state, self.colours, self.colours, kinds, 0.0,
                            limiter.tearable, settings.strain_max, True, team, worker)
             for i in range(p_begin, p_end):
                 state.particle_velocity[i] += (state.particle_position[i] - limiter.before[i]) / dt
@@ -136,10 +138,10 @@ def advance_many(integrator: ti.template(), model: ti.template(), state: ti.temp
                  forces: ti.template(), work: ti.template(), stages: ti.template(),
                  team: ti.template(), dt: float, first: ti.i32, count: ti.i32, start: ti.i32,
                  tear_strain: float, strain_max: float, strain_passes: ti.i32,
-                 strain_kinds: ti.math.vec3, moving: ti.i32, held: ti.i32):
+                 strain_kinds: ti.i32, moving: ti.i32, held: ti.i32):
     """Steps first .. first + count - 1 in one launch, shared by `team` (start: 1 when the
     state has no history yet). The stages' settings: tearing's strain, strain limiting's
-    limit, passes and spring kinds, whether a collider moves (placed from its schedule),
+    limit, passes and spring kinds (bit k: SpringKind k), whether a collider moves (placed from its schedule),
     how many particles the handles hold (targets from their table)."""
     settings = ti.Struct(tear_strain=tear_strain, strain_max=strain_max,
                          strain_passes=strain_passes, strain_kinds=strain_kinds, moving=moving,
@@ -203,9 +205,11 @@ class ManySteps:
         work = integrator.workspace(model, state)
         colliders = self.stages.colliders
         moving = colliders is not None and colliders.moving
-        kinds = (strain_limit.kind_mask() if strain_limit is not None else ti.math.vec3(0.0))
+        kinds = 0
+        if strain_limit is not None:
+            kinds = sum(1 << kind for kind, on in enumerate(strain_limit.kind_mask()) if on)
         done = 0
-        while done < count and state.first_bad_step[None] == NO_BAD_STEP:
+        while done < count and (done == 0 or state.first_bad_step[None] == NO_BAD_STEP):
             step = first + done
             chunk = min(self.steps_per_launch(integrator, model, forces), count - done)
             held = 0
