@@ -9,16 +9,22 @@ predicted stable step for the others (stability.auto_dt). Each process runs --re
 step(n) with n steps taking about --seconds, after a warm-up, and reports the median; the
 table gives min / median / max over --processes processes, and the ratio of medians.
 
+With --baseline DIR (a checkout of an earlier ti_cloth, e.g. `git worktree add /tmp/base
+<commit>`), every process is run once with that checkout's package and once with this one,
+alternating, and the table gives both and the ratio of their medians.
+
     python benchmarks/solvers.py [--sizes 64 128] [--integrators ...] [--processes 3]
-        [--threads 2] [--arch cpu]
+        [--threads 2] [--arch cpu] [--baseline DIR]
 """
 
 import argparse
 import json
+import os
 import statistics
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import ti_cloth as tc
 
@@ -73,31 +79,52 @@ def main(argv=None):
     parser.add_argument("--arch", default="cpu")
     parser.add_argument("--seconds", type=float, default=0.5)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--baseline", type=Path, default=None,
+                        help="an earlier checkout to time beside this one")
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.child:
         return child(args)
-    runs = []
     command = [sys.executable, __file__, "--child", "--arch", args.arch, "--seconds",
                str(args.seconds), "--repeats", str(args.repeats), "--sizes",
                *map(str, args.sizes), "--integrators", *args.integrators]
     if args.threads:
         command += ["--threads", str(args.threads)]
+    versions = {"now": None} if args.baseline is None else {"before": args.baseline, "now": None}
+    runs = {name: [] for name in versions}
     for _ in range(args.processes):
-        out = subprocess.run(command, check=True, capture_output=True, text=True).stdout
-        runs.append(json.loads(out.strip().splitlines()[-1]))
+        for name, path in versions.items():
+            env = dict(os.environ)
+            if path is not None:
+                env["PYTHONPATH"] = str(path)
+            out = subprocess.run(command, check=True, capture_output=True, text=True, env=env,
+                                 cwd=path or None).stdout
+            runs[name].append(json.loads(out.strip().splitlines()[-1]))
     print(f"arch={args.arch} f32 threads={args.threads or 'all'}: steps/s, min / median / max "
           f"over {args.processes} processes (each the median of {args.repeats} calls)")
-    print("| N | integrator | free | with plane + sphere | ratio of medians |")
-    print("|---|---|---|---|---|")
-    for n in args.sizes:
-        for name in args.integrators:
-            cells, medians = [], []
-            for c in (0, 1):
-                rates = sorted(run[f"{n} {name} {c}"] for run in runs)
-                medians.append(statistics.median(rates))
-                cells.append(f"{rates[0]:,.0f} / {medians[-1]:,.0f} / {rates[-1]:,.0f}")
-            print(f"| {n}² | {name} | {cells[0]} | {cells[1]} | {medians[1] / medians[0]:.2f} |")
+    for name in runs:
+        print(f"\n{name}:\n")
+        print("| N | integrator | free | with plane + sphere | ratio of medians |")
+        print("|---|---|---|---|---|")
+        for n in args.sizes:
+            for integrator in args.integrators:
+                cells, medians = [], []
+                for c in (0, 1):
+                    rates = sorted(run[f"{n} {integrator} {c}"] for run in runs[name])
+                    medians.append(statistics.median(rates))
+                    cells.append(f"{rates[0]:,.0f} / {medians[-1]:,.0f} / {rates[-1]:,.0f}")
+                print(f"| {n}² | {integrator} | {cells[0]} | {cells[1]} | "
+                      f"{medians[1] / medians[0]:.2f} |")
+    if "before" in runs:
+        print("\nnow / before, ratio of medians:\n")
+        print("| N | integrator | free | with plane + sphere |")
+        print("|---|---|---|---|")
+        for n in args.sizes:
+            for integrator in args.integrators:
+                ratios = [statistics.median(r[f"{n} {integrator} {c}"] for r in runs["now"])
+                          / statistics.median(r[f"{n} {integrator} {c}"] for r in runs["before"])
+                          for c in (0, 1)]
+                print(f"| {n}² | {integrator} | {ratios[0]:.2f}× | {ratios[1]:.2f}× |")
 
 
 if __name__ == "__main__":

@@ -29,9 +29,13 @@ stretch = { k = 50.0, kd = 0.01 }
 
 
 def use(precision: str) -> None:
-    """Taichi on the CPU in `precision`, re-initialised only when the precision changes."""
+    """Taichi on the CPU in `precision`, re-initialised only when the precision changes, with
+    this process's share of the cores (pytest-xdist runs a process per core: Taichi threads
+    beyond a process's share would spin against the other processes' at team barriers)."""
     if backend._config is None or backend._config.precision != precision:
-        tc.init(arch="cpu", precision=precision)
+        workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+        tc.init(arch="cpu", precision=precision,
+                threads=max(1, backend.cpu_cores() // workers))
 
 
 def forget_compiled(*kernels) -> None:

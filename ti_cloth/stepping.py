@@ -28,6 +28,8 @@ agree with a launch per stage to the bit where the same kernel code compiles the
 """
 
 
+import time
+
 import taichi as ti
 
 from . import backend, limits
@@ -43,6 +45,7 @@ TEAM_STAGES = ("integrator", "handles", "strain_limit", "colliders", "tearing") 
 MAX_STEPS_PER_LAUNCH = 4096    # bounds one launch (Ctrl-C and the divergence check wait for it)
 SPRING_STEPS_PER_LAUNCH = 25_000_000   # about 0.1 s of one core's work: fewer steps for big cloths
 TEAM_MIN_SPRING_STEPS = 1_000_000   # less work per launch runs on one worker (launch_plans.py)
+PROBE_EVERY = 16    # of big launches, one in this many takes the plan measured slower
 
 
 @backend.kernel_argument
@@ -181,6 +184,10 @@ class ManySteps:
         workers = min(backend.cpu_threads(), backend.cpu_cores())
         self.solo = Team(1)
         self.team = Team(workers, barrier) if workers > 1 else self.solo
+        self.adaptive = True       # False: big launches always on the team (tests, benchmarks)
+        self._cost = {}            # workers -> running seconds per spring-step of big launches
+        self._big_launches = 0
+        self._launched = set()     # plans that have run a big launch (compiled)
 
     def steps_per_launch(self, integrator, model, forces=None) -> int:
         """How many steps one launch of `integrator` on `model` holds at most."""
@@ -192,9 +199,32 @@ class ManySteps:
         return max(1, min(most, SPRING_STEPS_PER_LAUNCH // max(integrator.step_work(model), 1)))
 
     def team_for(self, integrator, model, steps: int) -> Team:
-        """The team that runs a launch of `steps` steps."""
+        """The team that runs a launch of `steps` steps: one worker below
+        TEAM_MIN_SPRING_STEPS of work; above it the team, unless measured launches show one
+        worker faster in this process (its spinning workers sharing cores with other
+        processes): each big launch is timed, and every PROBE_EVERY-th takes the plan not
+        in favour, so the choice follows the machine. Both give the same bits."""
         work = steps * integrator.step_work(model)
-        return self.team if work >= TEAM_MIN_SPRING_STEPS else self.solo
+        if work < TEAM_MIN_SPRING_STEPS or self.team is self.solo:
+            return self.solo
+        if not self.adaptive:
+            return self.team
+        self._big_launches += 1
+        measured = [team for team in (self.team, self.solo) if team.workers in self._cost]
+        if len(measured) < 2:
+            return self.solo if measured == [self.team] else self.team
+        best, other = sorted(measured, key=lambda team: self._cost[team.workers])
+        return other if self._big_launches % PROBE_EVERY == 0 else best
+
+    def _timed(self, team: Team, work: int, seconds: float) -> None:
+        """Fold a big launch's seconds per spring-step into its plan's running cost (not the
+        first launch of a plan: it may have compiled the kernel)."""
+        if team.workers not in self._launched:
+            self._launched.add(team.workers)
+            return
+        cost = seconds / work
+        old = self._cost.get(team.workers, cost)
+        self._cost[team.workers] = 0.5 * (old + cost)
 
     def run(self, integrator, model, state, forces, dt: float, first: int, count: int,
             tearing=None, strain_limit=None, handles=None) -> int:
@@ -223,12 +253,16 @@ class ManySteps:
             if forces.wind is not None:
                 forces.wind.schedule(step, chunk, dt)
             team = self.team_for(integrator, model, chunk)
+            began = time.perf_counter()
             advance_many(integrator, model, state, forces, work, self.stages, team, dt, step,
                          chunk, not state.prev_valid,
                          tearing.strain if tearing is not None else 0.0,
                          strain_limit.max_strain if strain_limit is not None else 0.0,
                          strain_limit.passes if strain_limit is not None else 0, kinds,
                          int(moving), held)
+            spring_steps = chunk * integrator.step_work(model)
+            if spring_steps >= TEAM_MIN_SPRING_STEPS:
+                self._timed(team, spring_steps, time.perf_counter() - began)
             if team.stalled():
                 raise TeamStalled(
                     f"a barrier of steps {step}..{step + chunk - 1} waited "
