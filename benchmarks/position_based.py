@@ -84,8 +84,9 @@ def max_strain(cloth, x):
 
 
 def measure(solver, steps, repeats):
-    """(positions, median seconds of `repeats` runs) after a warm-up run."""
-    solver.run(2)
+    """(positions, median seconds of `repeats` runs) after a warm-up run of the same length
+    (it compiles every launch plan the runs take)."""
+    solver.run(steps)
     times, x = [], None
     for _ in range(repeats):
         start = time.perf_counter()

@@ -20,6 +20,7 @@ import tempfile
 import pytest
 
 from helpers import use
+from ti_cloth import backend
 
 # mesh colliders cache their distance grids on disk: the tests' go to a folder of their own
 os.environ["TI_CLOTH_CACHE"] = tempfile.mkdtemp(prefix="ti_cloth_test_cache_")
@@ -31,8 +32,11 @@ def pytest_collection_modifyitems(items):
     then those in f32: switching precision re-initialises Taichi, which drops every kernel the
     worker compiled, so the switches are kept few. Tests that call tc.init themselves (a
     thread count, a precision or a fresh runtime of their own) go last, so the tests after
-    them do not compile everything again."""
-    items.sort(key=lambda item: (reinitialises(item), item.get_closest_marker("slow") is None,
+    them do not compile everything again; before them those that need two threads (the
+    `threads` fixture: every other test runs on its process's share of the cores)."""
+    items.sort(key=lambda item: (reinitialises(item),
+                                 "threads" in getattr(item, "fixturenames", ()),
+                                 item.get_closest_marker("slow") is None,
                                  "f32" in getattr(item, "fixturenames", ())))
 
 
@@ -50,3 +54,10 @@ def f64():
 @pytest.fixture
 def f32():
     use("f32")
+
+
+@pytest.fixture
+def threads():
+    """f64 on at least two Taichi CPU threads, so a team of two can run (on a one-core
+    machine too)."""
+    use("f64", threads=max(2, backend.cpu_cores()))

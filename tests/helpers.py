@@ -28,14 +28,17 @@ stretch = { k = 50.0, kd = 0.01 }
 """
 
 
-def use(precision: str) -> None:
-    """Taichi on the CPU in `precision`, re-initialised only when the precision changes, with
-    this process's share of the cores (pytest-xdist runs a process per core: Taichi threads
-    beyond a process's share would spin against the other processes' at team barriers)."""
-    if backend._config is None or backend._config.precision != precision:
+def use(precision: str, threads: int | None = None) -> None:
+    """Taichi on the CPU in `precision` with `threads` CPU threads (default: this process's
+    share of the cores: pytest-xdist runs a process per core, and Taichi threads beyond a
+    process's share would spin against the other processes' at team barriers),
+    re-initialised only when either changes."""
+    if threads is None:
         workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
-        tc.init(arch="cpu", precision=precision,
-                threads=max(1, backend.cpu_cores() // workers))
+        threads = max(1, backend.cpu_cores() // workers)
+    if (backend._config is None or backend._config.precision != precision
+            or backend.cpu_threads() != threads):
+        tc.init(arch="cpu", precision=precision, threads=threads)
 
 
 def forget_compiled(*kernels) -> None:

@@ -34,13 +34,6 @@ def sheet(n=6, damping="axial"):
 PLANS = ["launch per stage", "one worker", "team"]
 
 
-@pytest.fixture
-def threads(f64):
-    """At least two Taichi CPU threads, so a team of two can run (on a one-core machine too)."""
-    if backend.cpu_threads() < 2:
-        tc.init(arch="cpu", precision="f64", threads=2)
-
-
 def run(sim, plan, steps, monkeypatch, per_launch=100):
     """`steps` steps in the given plan; many-steps plans launch per_launch steps at a time."""
     if plan == "launch per stage":
@@ -169,7 +162,8 @@ def test_a_team_shares_big_launches_and_one_worker_takes_small_ones(threads):
 
 def test_big_launches_go_to_the_plan_measured_faster_and_probe_the_other(threads, monkeypatch):
     """Timed big launches (the first of each plan ignored: it compiles) steer the choice to
-    the cheaper plan per spring-step; every PROBE_EVERY-th big launch tries the other."""
+    one worker when the team costs more than TEAM_MARGIN times as much per spring-step, and
+    back; every PROBE_EVERY-th big launch tries the plan not in favour."""
     cloth, _ = sheet()
     sim = tc.Simulation(cloth, dt=2e-5)
     many, model, integrator = sim._many_steps, sim.model, sim.integrator
@@ -186,7 +180,9 @@ def test_big_launches_go_to_the_plan_measured_faster_and_probe_the_other(threads
     assert picks[:4] == [2, 2, 1, 1]
     probes = [k for k, w in enumerate(picks) if w == 2 and k >= 4]
     assert len(probes) >= 2 and set(np.diff(probes)) == {stepping.PROBE_EVERY}
-    assert many._cost[2] > many._cost[1]
+    assert many.cost(many.team) > stepping.TEAM_MARGIN * many.cost(many.solo)
+    many._timed(many.team, work, 1.1 * work * 1e-9)      # the team within the margin again
+    assert many.team_for(integrator, model, big) is many.team
 
 
 def test_a_team_has_no_more_workers_than_cores(threads, monkeypatch):

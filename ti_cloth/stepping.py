@@ -29,6 +29,7 @@ agree with a launch per stage to the bit where the same kernel code compiles the
 
 
 import time
+from collections import deque
 
 import taichi as ti
 
@@ -45,7 +46,9 @@ TEAM_STAGES = ("integrator", "handles", "strain_limit", "colliders", "tearing") 
 MAX_STEPS_PER_LAUNCH = 4096    # bounds one launch (Ctrl-C and the divergence check wait for it)
 SPRING_STEPS_PER_LAUNCH = 25_000_000   # about 0.1 s of one core's work: fewer steps for big cloths
 TEAM_MIN_SPRING_STEPS = 1_000_000   # less work per launch runs on one worker (launch_plans.py)
-PROBE_EVERY = 16    # of big launches, one in this many takes the plan measured slower
+PROBE_EVERY = 16    # of big launches, one in this many takes the plan not in favour
+RECENT_LAUNCHES = 4    # big launches a plan's cost is judged on (the least of them)
+TEAM_MARGIN = 1.25     # one worker takes over when the team costs more than this times its cost
 
 
 @backend.kernel_argument
@@ -185,7 +188,7 @@ class ManySteps:
         self.solo = Team(1)
         self.team = Team(workers, barrier) if workers > 1 else self.solo
         self.adaptive = True       # False: big launches always on the team (tests, benchmarks)
-        self._cost = {}            # workers -> running seconds per spring-step of big launches
+        self._cost = {}            # workers -> seconds per spring-step of recent big launches
         self._big_launches = 0
         self._launched = set()     # plans that have run a big launch (compiled)
 
@@ -200,31 +203,35 @@ class ManySteps:
 
     def team_for(self, integrator, model, steps: int) -> Team:
         """The team that runs a launch of `steps` steps: one worker below
-        TEAM_MIN_SPRING_STEPS of work; above it the team, unless measured launches show one
-        worker faster in this process (its spinning workers sharing cores with other
-        processes): each big launch is timed, and every PROBE_EVERY-th takes the plan not
-        in favour, so the choice follows the machine. Both give the same bits."""
+        TEAM_MIN_SPRING_STEPS of work; above it the team, unless timed launches show it
+        costing more than TEAM_MARGIN x one worker in this process (its spinning workers
+        sharing the cores with other processes): every PROBE_EVERY-th big launch takes the
+        plan not in favour, so the choice follows the machine. Both give the same bits."""
         work = steps * integrator.step_work(model)
         if work < TEAM_MIN_SPRING_STEPS or self.team is self.solo:
             return self.solo
         if not self.adaptive:
             return self.team
         self._big_launches += 1
-        measured = [team for team in (self.team, self.solo) if team.workers in self._cost]
+        measured = [team for team in (self.team, self.solo) if self._cost.get(team.workers)]
         if len(measured) < 2:
             return self.solo if measured == [self.team] else self.team
-        best, other = sorted(measured, key=lambda team: self._cost[team.workers])
+        slower = self.cost(self.team) > TEAM_MARGIN * self.cost(self.solo)
+        best, other = (self.solo, self.team) if slower else (self.team, self.solo)
         return other if self._big_launches % PROBE_EVERY == 0 else best
 
+    def cost(self, team: Team) -> float:
+        """Seconds per spring-step of `team`'s recent big launches: the least of the last
+        few (one slow wake-up does not condemn a plan; a lasting slowdown shows in all)."""
+        return min(self._cost[team.workers])
+
     def _timed(self, team: Team, work: int, seconds: float) -> None:
-        """Fold a big launch's seconds per spring-step into its plan's running cost (not the
-        first launch of a plan: it may have compiled the kernel)."""
+        """Keep a big launch's seconds per spring-step (not the first launch of a plan: it
+        may have compiled the kernel)."""
         if team.workers not in self._launched:
             self._launched.add(team.workers)
             return
-        cost = seconds / work
-        old = self._cost.get(team.workers, cost)
-        self._cost[team.workers] = 0.5 * (old + cost)
+        self._cost.setdefault(team.workers, deque(maxlen=RECENT_LAUNCHES)).append(seconds / work)
 
     def run(self, integrator, model, state, forces, dt: float, first: int, count: int,
             tearing=None, strain_limit=None, handles=None) -> int:
