@@ -89,12 +89,12 @@ EXACT = ("explicit_euler", "symplectic_euler", "xpbd", "implicit_euler", "rk4")
 
 @pytest.mark.parametrize("integrator, body, feature",
                          [(i, "sheet", f) for f in ("none", "tearing") for i in FUSED]
-                         + [("symplectic_euler", "sheet", f) for f in FEATURES if f != "none"]
+                         + [("symplectic_euler", "sheet", f)
+                            for f in ("moving colliders", "wind", "handles", "everything")]
                          + [(i, "sheet", "everything") for i in ("xpbd", "pbd", "implicit_euler")]
                          + [("xpbd", "sheet", "moving colliders"), ("rk4", "sheet", "moving colliders"),
                             ("symplectic_euler", "braced strands", "none"),
-                            ("xpbd", "braced strands", "none"),
-                            ("implicit_euler", "braced strands", "none")])
+                            ("xpbd", "braced strands", "none")])
 def test_every_launch_plan_takes_the_same_steps(threads, integrator, feature, body, monkeypatch):
     """The same bits in every plan, for a sheet and for strands whose altitude springs are
     evaluated per element and gathered per corner (a team of two shares both), with each
@@ -167,7 +167,8 @@ def test_big_launches_go_to_the_plan_measured_faster_and_probe_the_other(threads
     cloth, _ = sheet()
     sim = tc.Simulation(cloth, dt=2e-5)
     many, model, integrator = sim._many_steps, sim.model, sim.integrator
-    monkeypatch.setattr(many, "team", team.Team(2, team.Barrier()))
+    many = stepping.ManySteps(many.stages)       # no timings yet (a lent plan may have some)
+    many.team = team.Team(2, team.Barrier())
     big = stepping.TEAM_MIN_SPRING_STEPS // integrator.step_work(model) + 1
     work = big * integrator.step_work(model)
     picks = []
