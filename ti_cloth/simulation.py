@@ -259,7 +259,7 @@ class Simulation:
     def _step_many(self, n: int) -> None:
         """n steps in few launches (stepping.py), until one diverges; a step in which a
         handle lets go runs stage by stage."""
-        while True:
+        while n > 0:
             ran = self._many_steps.run(
                 self.integrator, self.model, self.state, self.forces, self.dt, self.step_count,
                 n, self.tearing, self.strain_limiter.limit if self.strain_limiter else None,
@@ -270,8 +270,6 @@ class Simulation:
                 return   # Simulation.step reads the flag again: a diverged step is reported
             self._step_once()
             n -= 1
-            if n == 0:
-                return
 
     def _step_once(self) -> None:
         """One step, launch by launch: the stages of STEP_ORDER this simulation has."""
