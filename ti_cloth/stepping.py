@@ -38,7 +38,7 @@ from .collision import resolve_particle
 from .constraints import relax_pass
 from .errors import TeamStalled
 from .state import NO_BAD_STEP
-from .team import BARRIER_SPINS, TASK_SPACING, Barrier, Team
+from .team import BARRIER_SPINS, MAX_WORKERS, TASK_SPACING, Barrier, Team
 from .tearing import tear_overstretched
 from .wind import wind_on_particles, wind_on_triangles
 
@@ -184,7 +184,7 @@ class ManySteps:
         barrier = Barrier()
         # A worker per pool thread, but no more than the cores: a worker waiting at a barrier
         # for one that has no core to run on spins away its time slice.
-        workers = min(backend.cpu_threads(), backend.cpu_cores())
+        workers = min(backend.cpu_threads(), backend.cpu_cores(), MAX_WORKERS)
         self.solo = Team(1)
         self.team = Team(workers, barrier) if workers > 1 else self.solo
         self.adaptive = True       # False: big launches always on the team (tests, benchmarks)

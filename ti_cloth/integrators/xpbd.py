@@ -31,8 +31,7 @@ def _predict(model: ti.template(), state: ti.template(), dt: float):
 @backend.kernel_argument
 class _Multipliers:
     """One Lagrange multiplier per spring (in colour order) and per altitude spring [N s^2],
-    reset every step,
-    and the model's colourings (read by the team step)."""
+    reset every step, and the model's colourings (read by the team step)."""
 
     def __init__(self, model):
         fields = backend.FieldGroup()
