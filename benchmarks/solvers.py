@@ -6,8 +6,8 @@ The scene: an N x N sheet (1 m, stretch + shear + bend springs, default Material
 pinned, hanging in gravity over a sphere (r = 0.2 m) resting on a plane. Steps: 1/240 s for
 the integrators without a step limit (pbd, xpbd with 10 passes, implicit Euler), half the
 predicted stable step for the others (stability.auto_dt). Each process runs --repeats calls of
-step(n) with n steps taking about --seconds, after a warm-up, and reports the median; the
-table gives min / median / max over --processes processes, and the ratio of medians.
+step(n) with n steps taking about --seconds, after a warm-up, and reports the medians (and of
+the ratios); the table gives min / median / max over --processes processes.
 
 With --baseline DIR (a checkout of an earlier ti_cloth, e.g. `git worktree add /tmp/base
 <commit>`), every process is run once with that checkout's package and once with this one,
@@ -41,32 +41,42 @@ def scene(n: int, integrator: str, colliders: bool) -> tc.Simulation:
                          dt=LONG_STEP if integrator in UNLIMITED else "auto")
 
 
-def measure(n: int, integrator: str, colliders: bool, seconds: float, repeats: int) -> float:
-    """Median steps/s of `repeats` calls of about `seconds` each."""
-    sim = scene(n, integrator, colliders)
-    sim.step(2)
+def timed(sim: tc.Simulation, steps: int) -> float:
+    """Seconds of sim.step(steps) from rest."""
+    sim.restart()
+    start = time.perf_counter()
+    sim.step(steps)
+    sim.state.first_bad_step[None]
+    return time.perf_counter() - start
+
+
+def measure(n: int, integrator: str, seconds: float, repeats: int) -> dict:
+    """Median steps/s of `repeats` calls of about `seconds` each, free and with colliders,
+    the two timed in turn, and the median ratio (with / free) of the pairs: the process's
+    own swing (see benchmarks/README.md) cancels in it."""
+    sims = [scene(n, integrator, colliders) for colliders in (False, True)]
     steps, elapsed = 2, 0.0
+    for sim in sims:
+        sim.step(2)
     while elapsed < seconds / 4:
         steps *= 2
-        start = time.perf_counter()
-        sim.step(steps)
-        sim.state.first_bad_step[None]
-        elapsed = time.perf_counter() - start
+        elapsed = max(timed(sim, steps) for sim in sims)
     steps = max(2, int(steps * seconds / elapsed))
-    rates = []
+    rates = [[], []]
     for _ in range(repeats):
-        sim.restart()
-        start = time.perf_counter()
-        sim.step(steps)
-        sim.state.first_bad_step[None]
-        rates.append(steps / (time.perf_counter() - start))
-    return statistics.median(rates)
+        for sim, kept in zip(sims, rates):
+            kept.append(steps / timed(sim, steps))
+    return {"0": statistics.median(rates[0]), "1": statistics.median(rates[1]),
+            "ratio": statistics.median(w / f for f, w in zip(*rates))}
 
 
 def child(args) -> None:
     tc.init(arch=args.arch, precision="f32", threads=args.threads)
-    rates = {f"{n} {name} {int(c)}": measure(n, name, c, args.seconds, args.repeats)
-             for n in args.sizes for name in args.integrators for c in (False, True)}
+    rates = {}
+    for n in args.sizes:
+        for name in args.integrators:
+            for key, value in measure(n, name, args.seconds, args.repeats).items():
+                rates[f"{n} {name} {key}"] = value
     print(json.dumps(rates))
 
 
@@ -104,17 +114,17 @@ def main(argv=None):
           f"over {args.processes} processes (each the median of {args.repeats} calls)")
     for name in runs:
         print(f"\n{name}:\n")
-        print("| N | integrator | free | with plane + sphere | ratio of medians |")
+        print("| N | integrator | free | with plane + sphere | with / free |")
         print("|---|---|---|---|---|")
         for n in args.sizes:
             for integrator in args.integrators:
-                cells, medians = [], []
-                for c in (0, 1):
+                cells = []
+                for c in ("0", "1", "ratio"):
                     rates = sorted(run[f"{n} {integrator} {c}"] for run in runs[name])
-                    medians.append(statistics.median(rates))
-                    cells.append(f"{rates[0]:,.0f} / {medians[-1]:,.0f} / {rates[-1]:,.0f}")
-                print(f"| {n}² | {integrator} | {cells[0]} | {cells[1]} | "
-                      f"{medians[1] / medians[0]:.2f} |")
+                    digits = ".2f" if c == "ratio" else ",.0f"
+                    cells.append(" / ".join(format(r, digits) for r in
+                                            (rates[0], statistics.median(rates), rates[-1])))
+                print(f"| {n}² | {integrator} | {' | '.join(cells)} |")
     if "before" in runs:
         print("\nnow / before, ratio of medians:\n")
         print("| N | integrator | free | with plane + sphere |")

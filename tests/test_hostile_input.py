@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from ti_cloth import limits
+from helpers import use
+from ti_cloth import backend, limits
 from ti_cloth.app import signals
 from ti_cloth.app.scene import load_scene
 from ti_cloth.app.scene_file import SceneError
@@ -249,7 +250,7 @@ def test_step_counts_are_checked_and_a_simulation_after_a_second_init_raises(f64
             with pytest.raises(StaleSimulation, match="init was called again"):
                 use_it()
     finally:
-        tc.init(precision="f64")
+        use("f64")
     fresh = tc.Simulation(sheet(), dt=1e-3)
     fresh.step(2)
     assert np.isfinite(fresh.positions()).all()
@@ -284,9 +285,27 @@ def test_init_closes_the_renderers_of_the_runtime_it_ends(f64):
             assert np.array_equal(frame(renderer), expected)
     finally:
         gc.enable()
-        tc.init(precision="f64")
+        use("f64")
     with pytest.raises(ValueError, match="renderer"):
         kept.begin()
+
+
+def test_ensure_keeps_the_runtime_a_caller_chose_when_asked_for_no_thread_count(f64):
+    """run_scene, the CLI and the demos call backend.ensure without a thread count; it
+    re-initialised a runtime given one (tc.init(threads=...)), dropping the caller's setting
+    and every compiled kernel. Now only another arch, precision or an explicit other count
+    starts a new runtime."""
+    generation, given = backend.generation(), backend.config().threads
+    assert given is not None              # the f64 fixture gives a count
+    backend.ensure("cpu", "f64")          # no count asked: kept
+    backend.ensure("cpu", "f64", threads=given)
+    assert (backend.generation(), backend.config().threads) == (generation, given)
+    try:
+        backend.ensure("cpu", "f32")
+        assert backend.generation() == generation + 1
+        assert backend.config().precision == "f32"
+    finally:
+        use("f64")
 
 
 def test_tearing_does_not_hide_a_step_ten_times_too_large(f64):

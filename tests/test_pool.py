@@ -76,6 +76,12 @@ PAIRS = {
     "other colliders, limit and wind": (
         lambda: every_stage(cloth()),
         lambda: every_stage(cloth(k=800.0), radius=0.2, strain=0.05, wind=(0, 0, 2.0))),
+    # a fused integrator's particles collide inside its step (stepping.TeamStages), xpbd's
+    # after it: the second must not inherit the first's plan
+    "a fused then a position-based integrator": (
+        lambda: tc.Simulation(cloth(), dt=1e-3, colliders=[tc.Sphere(centre=(0.5, -0.4, 0.5), radius=0.42)]),
+        lambda: tc.Simulation(cloth(), integrator="xpbd", dt=1e-3,
+                              colliders=[tc.Sphere(centre=(0.5, -0.4, 0.5), radius=0.42)])),
     "other damping model": (
         lambda: tc.Simulation(cloth(), dt=1e-3),
         lambda: tc.Simulation(cloth(damping="relative"), dt=1e-3)),

@@ -70,9 +70,13 @@ def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None,
 
 
 def ensure(arch: str = "cpu", precision: str = "f32", threads: int | None = None) -> BackendConfig:
-    """`init` unless the runtime already runs with exactly these settings, which then keeps
-    its compiled kernels, pooled simulations and open renderers."""
-    if _config == BackendConfig(arch=arch, precision=precision, threads=threads):
+    """`init` unless the runtime already runs with these settings, which then keeps its
+    compiled kernels, pooled simulations and open renderers. threads=None asks for no thread
+    count: a runtime of this arch and precision is kept with the count it was given (a
+    caller's ti_cloth.init(threads=...) before run_scene or a demo holds), and a new one gets
+    Taichi's default."""
+    if (_config is not None and _config.arch == arch and _config.precision == precision
+            and threads in (None, _config.threads)):
         return _config
     return init(arch=arch, precision=precision, threads=threads)
 

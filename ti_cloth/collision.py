@@ -265,11 +265,11 @@ def surface_velocity(colliders: ti.template(), c, x, dt):
 
 @ti.func
 def resolve_particle(model: ti.template(), state: ti.template(), colliders: ti.template(), i,
-                     dt):
+                     x0, dt):
     """Project particle i (if free) out of every collider, in collider order, with Coulomb
-    friction on its displacement over the step relative to the surface (colliders.py)."""
+    friction on its displacement over the step (from x0, its position at the step's start)
+    relative to the surface (colliders.py)."""
     if model.particle_inv_mass[i] > 0:
-        x0 = colliders.step_start[i]
         x = state.particle_position[i]
         v = state.particle_velocity[i]
         touched = False
@@ -302,7 +302,7 @@ def resolve_collisions(model: ti.template(), state: ti.template(), colliders: ti
                        dt: float):
     """resolve_particle for every particle."""
     for i in range(model.particle_count):
-        resolve_particle(model, state, colliders, i, dt)
+        resolve_particle(model, state, colliders, i, colliders.step_start[i], dt)
 
 
 @ti.kernel

@@ -286,12 +286,13 @@ class Simulation:
         integrator that is not fused), or None when steps go launch by launch."""
         if not self._many_per_launch:
             return None
-        key = ("many_steps", self.tearing is not None)
+        key = ("many_steps", self.tearing is not None, self.integrator.fused)
         if key not in self._lent:
             self._lent[key] = stepping.ManySteps(stepping.TeamStages(
                 self._lent.get("handle_table"), self.strain_limiter, self.colliders,
                 self.tearing is not None,
-                self.model.spring_colouring() if self.strain_limiter is not None else None))
+                self.model.spring_colouring() if self.strain_limiter is not None else None,
+                self.integrator.fused))
         return self._lent[key]
 
     def positions(self) -> np.ndarray:

@@ -56,10 +56,18 @@ class TeamStages:
     """The stages around the integrator that run inside a many-steps launch (None: absent,
     compiled out): handles (their HandleTable), strain limiting, colliders, tearing; the
     wind comes with the ForceSettings. colours: the model's spring colouring (strain
-    limiting's passes)."""
+    limiting's passes).
+
+    fused: whether the integrator is fused (its particles move independently of each other
+    at the end of its step). Then, unless strain limiting moves them in between, each
+    particle meets the colliders as soon as it has moved (`collides_on_move`, called by
+    fused.move_particles): the collision stage reads and writes nothing but the particle,
+    and held particles (handles, the stage in between) never collide, so this is the order
+    of STEP_ORDER with the same bits, without a pass over the particles of its own nor the
+    copy of the step's start positions."""
 
     def __init__(self, handles=None, strain_limiter=None, colliders=None, tearable=False,
-                 colours=None):
+                 colours=None, fused=False):
         self.handles = handles
         self.strain_limiter = strain_limiter
         self.colliders = colliders
@@ -68,13 +76,24 @@ class TeamStages:
         self.holds = handles is not None          # read at compile time
         self.limits_strain = strain_limiter is not None
         self.collides = colliders is not None
+        self.collides_on_move = self.collides and fused and not self.limits_strain
+
+    @ti.func
+    def collide(self, model: ti.template(), state: ti.template(), i, x0, dt):
+        """The collision stage of particle i, which was at x0 at the step's start."""
+        resolve_particle(model, state, self.colliders, i, x0, dt)
 
     @ti.func
     def begin(self, model: ti.template(), state: ti.template(), forces: ti.template(),
-              team: ti.template(), worker, p_begin, p_end, k):
+              team: ti.template(), worker, p_begin, p_end, k, settings: ti.template()):
         """At the start of the launch's k-th step, before the integrator: the colliders keep
-        the worker's particles' positions; the wind of the step's start acts."""
-        if ti.static(self.collides):
+        the worker's particles' positions (or, when they collide on the move, worker 0 puts
+        moving ones where this step leaves them: the integrator's barrier before its particle
+        loop publishes that); the wind of the step's start acts."""
+        if ti.static(self.collides_on_move):
+            if settings.moving != 0 and worker == 0:
+                self.colliders.place_scheduled(k)
+        elif ti.static(self.collides):
             for i in range(p_begin, p_end):
                 self.colliders.step_start[i] = state.particle_position[i]
         if ti.static(forces.has_wind):
@@ -110,13 +129,14 @@ class TeamStages:
             for i in range(p_begin, p_end):
                 state.particle_velocity[i] += (state.particle_position[i] - limiter.before[i]) / dt
             team.meet(worker)
-        if ti.static(self.collides):
+        if ti.static(self.collides and not self.collides_on_move):
             if settings.moving != 0:
                 if worker == 0:
                     self.colliders.place_scheduled(k)
                 team.meet(worker)
             for i in range(p_begin, p_end):
-                resolve_particle(model, state, self.colliders, i, dt)
+                resolve_particle(model, state, self.colliders, i, self.colliders.step_start[i],
+                                 dt)
             team.meet(worker)
         if ti.static(self.tearable):
             tear_overstretched(model, state, settings.tear_strain, step, s_begin, s_end)
@@ -132,8 +152,8 @@ def _run(integrator: ti.template(), model: ti.template(), state: ti.template(),
     p_begin, p_end = team.share(model.particle_count, worker)
     s_begin, s_end = team.share(model.spring_count, worker)
     for k in range(count):
-        stages.begin(model, state, forces, team, worker, p_begin, p_end, k)
-        integrator.team_step(model, state, forces, work, team, worker, dt, first + k,
+        stages.begin(model, state, forces, team, worker, p_begin, p_end, k, settings)
+        integrator.team_step(model, state, forces, work, stages, team, worker, dt, first + k,
                              ti.i32(start != 0 and k == 0))
         stages.after(model, state, team, worker, p_begin, p_end, s_begin, s_end, first + k, k,
                      dt, settings)

@@ -51,11 +51,13 @@ class Integrator:
 
     @ti.func
     def team_step(self, model: ti.template(), state: ti.template(), forces: ti.template(),
-                  work: ti.template(), team: ti.template(), worker, dt, step, start):
+                  work: ti.template(), stages: ti.template(), team: ti.template(), worker, dt,
+                  step, start):
         """Worker `worker`'s share of one step in a many-steps launch (stepping.py), ending at
         a barrier after which every particle has its new position and velocity; `work` is
-        workspace()'s object. A fused integrator's is fused.team_step."""
-        fused.team_step(self, model, state, forces, team, worker, dt, step, start)
+        workspace()'s object, `stages` the launch's stepping.TeamStages. A fused
+        integrator's is fused.team_step (which lets a particle collide as it moves)."""
+        fused.team_step(self, model, state, forces, stages, team, worker, dt, step, start)
 
     def workspace(self, model, state):
         """The working storage team_step reads (a kernel argument; the State when none)."""

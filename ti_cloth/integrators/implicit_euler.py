@@ -371,7 +371,8 @@ class ImplicitEuler(Integrator):
 
     @ti.func
     def team_step(self, model: ti.template(), state: ti.template(), forces: ti.template(),
-                  work: ti.template(), team: ti.template(), worker, dt, step, start):
+                  work: ti.template(), stages: ti.template(), team: ti.template(), worker, dt,
+                  step, start):
         """step()'s kernels as phases of one worker's share of the springs, the altitude
         springs and the blocks of particles, meeting the team between them: three barriers
         per CG iteration (after A p, after the update, after the new direction). Every

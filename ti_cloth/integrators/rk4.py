@@ -86,7 +86,8 @@ class RK4(Integrator):
 
     @ti.func
     def team_step(self, model: ti.template(), state: ti.template(), forces: ti.template(),
-                  work: ti.template(), team: ti.template(), worker, dt, step, start):
+                  work: ti.template(), stages: ti.template(), team: ti.template(), worker, dt,
+                  step, start):
         """step()'s four force evaluations and stage updates as phases of one worker's
         share, meeting the team after each."""
         s_begin, s_end = team.share(model.spring_count, worker)

@@ -79,7 +79,8 @@ class XPBD(Integrator):
 
     @ti.func
     def team_step(self, model: ti.template(), state: ti.template(), forces: ti.template(),
-                  work: ti.template(), team: ti.template(), worker, dt, step, start):
+                  work: ti.template(), stages: ti.template(), team: ti.template(), worker, dt,
+                  step, start):
         """step()'s kernels as phases of one worker's share, meeting the team between them
         (and after every colour of a pass)."""
         p_begin, p_end = team.share(model.particle_count, worker)
