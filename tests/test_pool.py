@@ -37,7 +37,7 @@ def test_building_and_dropping_simulations_does_not_grow_memory(f64, features):
     """The issue's loop: 60 simulations built, stepped and dropped. Before the pool each left
     its compiled kernels behind: +3.3 MB (plain) and +4.4 MB (every stage) per simulation,
     so +130 MB and +175 MB over the last 40. A flat process moves by allocator noise only."""
-    integrators = ["symplectic_euler", "verlet", "xpbd", "implicit_euler"]
+    integrators = ["symplectic_euler", "verlet", "xpbd"]
     body = cloth()
     rss = []
     for index in range(60):
