@@ -95,7 +95,10 @@ EXACT = ("explicit_euler", "symplectic_euler", "xpbd", "implicit_euler", "rk4")
                          [(i, "sheet", f) for f in ("none", "tearing") for i in FUSED]
                          + [("symplectic_euler", "sheet", f)
                             for f in ("moving colliders", "all but strain limit", "everything")]
-                         + [(i, "sheet", "everything") for i in ("xpbd", "pbd", "implicit_euler")]
+                         + [(i, "sheet", "everything") for i in ("xpbd", "pbd")]
+                         # implicit Euler's CG with every stage compiled 7 s per plan: its own
+                         # tearable paths, with the stages' shared code tested above
+                         + [("implicit_euler", "sheet", "tearing")]
                          + [("xpbd", "sheet", "moving colliders"), ("rk4", "sheet", "moving colliders"),
                             ("symplectic_euler", "braced strands", "none"),
                             ("xpbd", "braced strands", "none")])
