@@ -14,7 +14,7 @@ With --baseline DIR (a checkout of an earlier ti_cloth, e.g. `git worktree add /
 alternating, and the table gives both and the ratio of their medians.
 
     python benchmarks/solvers.py [--sizes 64 128] [--integrators ...] [--processes 3]
-        [--threads 2] [--arch cpu] [--baseline DIR]
+        [--threads 2] [--arch cpu] [--baseline DIR] [--strain-limit 0.1]
 """
 
 import argparse
@@ -32,12 +32,13 @@ LONG_STEP = 1 / 240
 UNLIMITED = ("pbd", "xpbd", "implicit_euler")
 
 
-def scene(n: int, integrator: str, colliders: bool) -> tc.Simulation:
+def scene(n: int, integrator: str, colliders: bool, strain: float | None = None) -> tc.Simulation:
     cloth = tc.Cloth(tc.grid_mesh(n, n, plane="xz"), tc.Material(), pinned=[0, n - 1])
     shapes = [tc.Plane(point=(0, -0.6, 0), normal=(0, 1, 0), thickness=0.002, static_friction=0.3),
               tc.Sphere(centre=(0.5, -0.4, 0.5), radius=0.2, thickness=0.002,
                         static_friction=0.3)] if colliders else []
     return tc.Simulation(cloth, integrator=integrator, colliders=shapes,
+                         strain_limit=None if strain is None else tc.StrainLimit(strain),
                          dt=LONG_STEP if integrator in UNLIMITED else "auto")
 
 
@@ -50,11 +51,12 @@ def timed(sim: tc.Simulation, steps: int) -> float:
     return time.perf_counter() - start
 
 
-def measure(n: int, integrator: str, seconds: float, repeats: int) -> dict:
+def measure(n: int, integrator: str, seconds: float, repeats: int,
+            strain: float | None = None) -> dict:
     """Median steps/s of `repeats` calls of about `seconds` each, free and with colliders,
     the two timed in turn, and the median ratio (with / free) of the pairs: the process's
     own swing (see benchmarks/README.md) cancels in it."""
-    sims = [scene(n, integrator, colliders) for colliders in (False, True)]
+    sims = [scene(n, integrator, colliders, strain) for colliders in (False, True)]
     steps, elapsed = 2, 0.0
     for sim in sims:
         sim.step(2)
@@ -75,7 +77,8 @@ def child(args) -> None:
     rates = {}
     for n in args.sizes:
         for name in args.integrators:
-            for key, value in measure(n, name, args.seconds, args.repeats).items():
+            for key, value in measure(n, name, args.seconds, args.repeats,
+                                      args.strain_limit).items():
                 rates[f"{n} {name} {key}"] = value
     print(json.dumps(rates))
 
@@ -89,6 +92,8 @@ def main(argv=None):
     parser.add_argument("--arch", default="cpu")
     parser.add_argument("--seconds", type=float, default=0.5)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--strain-limit", type=float, default=None,
+                        help="both cloths strain-limited to this strain (Provot)")
     parser.add_argument("--baseline", type=Path, default=None,
                         help="an earlier checkout to time beside this one")
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
@@ -100,6 +105,8 @@ def main(argv=None):
                *map(str, args.sizes), "--integrators", *args.integrators]
     if args.threads:
         command += ["--threads", str(args.threads)]
+    if args.strain_limit is not None:
+        command += ["--strain-limit", str(args.strain_limit)]
     versions = {"now": None} if args.baseline is None else {"before": args.baseline, "now": None}
     runs = {name: [] for name in versions}
     for _ in range(args.processes):
@@ -110,7 +117,8 @@ def main(argv=None):
             out = subprocess.run(command, check=True, capture_output=True, text=True, env=env,
                                  cwd=path or None).stdout
             runs[name].append(json.loads(out.strip().splitlines()[-1]))
-    print(f"arch={args.arch} f32 threads={args.threads or 'all'}: steps/s, min / median / max "
+    limited = "" if args.strain_limit is None else f", strain limited to {args.strain_limit:g}"
+    print(f"arch={args.arch} f32 threads={args.threads or 'all'}{limited}: steps/s, min / median / max "
           f"over {args.processes} processes (each the median of {args.repeats} calls)")
     for name in runs:
         print(f"\n{name}:\n")
