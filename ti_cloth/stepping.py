@@ -46,7 +46,7 @@ TEAM_STAGES = ("integrator", "handles", "strain_limit", "colliders", "tearing") 
 MAX_STEPS_PER_LAUNCH = 4096    # bounds one launch (Ctrl-C and the divergence check wait for it)
 SPRING_STEPS_PER_LAUNCH = 25_000_000   # about 0.1 s of one core's work: fewer steps for big cloths
 TEAM_MIN_SPRING_STEPS = 1_000_000   # less work per launch runs on one worker (launch_plans.py)
-PROBE_EVERY = 16    # of big launches, one in this many takes the plan not in favour
+PROBE_EVERY = 64    # of big launches, one in this many takes the plan not in favour (~1 % cost)
 RECENT_LAUNCHES = 4    # big launches a plan's cost is judged on (the least of them)
 TEAM_MARGIN = 1.25     # one worker takes over when the team costs more than this times its cost
 
