@@ -1,6 +1,7 @@
 """The speed/accuracy study: reference, metrics against closed forms, outputs and the command."""
 
 import csv
+import gc
 import math
 
 import imageio.v3 as iio
@@ -74,6 +75,26 @@ def test_symplectic_error_on_free_fall_is_g_h_t_over_2(tmp_path):
         report(f"max error at dt = {run.dt:.3g}", run.max_error, expected)
         assert run.max_error == pytest.approx(expected, rel=1e-9)
         assert run.max_strain < 1e-9 and not run.diverged and run.cost > 0
+
+
+def test_the_steps_it_times_run_with_the_garbage_collector_paused(tmp_path, monkeypatch):
+    """A full collection in a big process (tens of ms) landing in one of two small runs
+    decided which looked cheaper (the advisor once chose rk4 at half the step it needed).
+    Every step the study times runs with collection paused; the one untimed step (the
+    compile) and the rest of the process keep it."""
+    scene = scene_file(tmp_path, FALLING_STRING)
+    collecting = []
+    step = tc.Simulation.step
+
+    def watched(sim, n=1):
+        collecting.append(gc.isenabled())
+        return step(sim, n)
+
+    monkeypatch.setattr(tc.Simulation, "step", watched)
+    study.run_study(scene, integrators=["symplectic_euler"], dts=[scene.frame_dt / 4],
+                    precisions=["f64"], repeats=2, progress=False)
+    assert gc.isenabled()
+    assert len(collecting) > 3 and collecting.count(True) == 1    # sim.step(1), the compile
 
 
 @pytest.mark.slow

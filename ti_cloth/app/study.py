@@ -17,6 +17,7 @@ timings are then taken with other tasks running, and the result says so).
 from __future__ import annotations
 
 import csv
+import gc
 import io
 import math
 import statistics
@@ -101,17 +102,27 @@ def sample_times(scene, duration: float | None = None) -> np.ndarray:
 
 
 def _trajectory(sim, times: np.ndarray, steps_per_frame: int) -> tuple[np.ndarray, np.ndarray, float]:
-    """Positions and energies at the sample times, and the wall time spent stepping."""
+    """Positions and energies at the sample times, and the wall time spent stepping.
+
+    Python's garbage collector is paused meanwhile, as timeit does: in a process holding many
+    objects a full collection takes tens of milliseconds, more than a small run's whole cost,
+    and where it falls would decide which of two runs looks cheaper."""
     positions, energies, wall = [], [], 0.0
     frame_steps = np.rint(times / times[0]).astype(int) * steps_per_frame
     done = 0
-    for target in frame_steps:
-        start = time.perf_counter()
-        sim.step(int(target - done))
-        positions.append(sim.positions())   # also waits for the device: part of the cost
-        wall += time.perf_counter() - start
-        energies.append(sim.energy()["total"])
-        done = target
+    collecting = gc.isenabled()
+    gc.disable()
+    try:
+        for target in frame_steps:
+            start = time.perf_counter()
+            sim.step(int(target - done))
+            positions.append(sim.positions())   # also waits for the device: part of the cost
+            wall += time.perf_counter() - start
+            energies.append(sim.energy()["total"])
+            done = target
+    finally:
+        if collecting:
+            gc.enable()
     return np.array(positions), np.array(energies), wall
 
 
