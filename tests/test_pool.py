@@ -66,6 +66,7 @@ def test_a_dropped_simulations_kernels_serve_the_next_one(f64):
     assert len(fused.advance_one._primal.compiled_kernels) == compiled
 
 
+BALL = tc.Sphere(centre=(0.5, -0.4, 0.5), radius=0.42)   # the sheet's middle starts in it
 PAIRS = {
     "other stiffness, density and pins": (
         lambda: tc.Simulation(cloth(), dt=1e-3),
@@ -79,9 +80,8 @@ PAIRS = {
     # a fused integrator's particles collide inside its step (stepping.TeamStages), xpbd's
     # after it: the second must not inherit the first's plan
     "a fused then a position-based integrator": (
-        lambda: tc.Simulation(cloth(), dt=1e-3, colliders=[tc.Sphere(centre=(0.5, -0.4, 0.5), radius=0.42)]),
-        lambda: tc.Simulation(cloth(), integrator="xpbd", dt=1e-3,
-                              colliders=[tc.Sphere(centre=(0.5, -0.4, 0.5), radius=0.42)])),
+        lambda: tc.Simulation(cloth(), dt=1e-3, colliders=[BALL]),
+        lambda: tc.Simulation(cloth(), integrator="xpbd", dt=1e-3, colliders=[BALL])),
     "other damping model": (
         lambda: tc.Simulation(cloth(), dt=1e-3),
         lambda: tc.Simulation(cloth(damping="relative"), dt=1e-3)),

@@ -79,9 +79,9 @@ def test_symplectic_error_on_free_fall_is_g_h_t_over_2(tmp_path):
 
 def test_the_steps_it_times_run_with_the_garbage_collector_paused(tmp_path, monkeypatch):
     """A full collection in a big process (tens of ms) landing in one of two small runs
-    decided which looked cheaper (the advisor once chose rk4 at half the step it needed).
-    Every step the study times runs with collection paused; the one untimed step (the
-    compile) and the rest of the process keep it."""
+    can decide which looks cheaper (an advisor test in CI once saw its choice cost 1.8x the
+    cheapest passing run). Every step the study times runs with collection paused; the one
+    untimed step (the compile) and the rest of the process keep it."""
     scene = scene_file(tmp_path, FALLING_STRING)
     collecting = []
     step = tc.Simulation.step
