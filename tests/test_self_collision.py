@@ -282,6 +282,7 @@ def test_friction_between_layers_is_coulomb_on_a_slope(f64):
             assert abs(slid - expected) < 0.03 * expected
         else:
             assert abs(slid) < 1e-3
+        del sim          # its fields and kernels go to the next friction's simulation
 
 
 def folded_sheet(n=12, size=0.6, width=0.45, y0=0.005):
