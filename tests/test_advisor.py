@@ -177,16 +177,18 @@ def test_ctrl_c_leaves_no_worker_process():
     """Ctrl-C while two 30 s tasks run: the workers are terminated at once, not left computing
     (or waited for)."""
     start = time.monotonic()
-    # Python's own Ctrl-C handler, whatever a test before this one in the process left
+    # Python's own Ctrl-C handler: a suite started as a shell's background job ignores SIGINT
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)
-    with pytest.raises(KeyboardInterrupt):
-        with sweep.local_jobs(2) as workers:
-            workers.executor.submit(abs, 1).result()           # the pool is up
-            children = multiprocessing.active_children()
-            assert children
-            threading.Timer(1.0, os.kill, (os.getpid(), signal.SIGINT)).start()
-            sweep.run_tasks(slow, [1, 2], workers)
-    signal.signal(signal.SIGINT, previous)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with sweep.local_jobs(2) as workers:
+                workers.executor.submit(abs, 1).result()           # the pool is up
+                children = multiprocessing.active_children()
+                assert children
+                threading.Timer(1.0, os.kill, (os.getpid(), signal.SIGINT)).start()
+                sweep.run_tasks(slow, [1, 2], workers)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     deadline = time.monotonic() + 10
     while any(c.is_alive() for c in children) and time.monotonic() < deadline:
         time.sleep(0.05)

@@ -337,6 +337,21 @@ def test_exit_codes_are_128_plus_the_signal():
     assert signals.exit_code(signals.Stopped(signal.SIGTERM)) == 143
 
 
+def test_a_signal_the_process_ignores_stays_ignored_during_a_run():
+    """A shell script's background job starts with SIGINT ignored (the script's Ctrl-C is for
+    its foreground job); a run keeps that, while SIGTERM still stops it."""
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        with pytest.raises(signals.Stopped) as stop:
+            with signals.stop_signals_raise():
+                signal.raise_signal(signal.SIGINT)
+                signal.raise_signal(signal.SIGTERM)
+        assert stop.value.signum == signal.SIGTERM
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def test_the_readme_limits_table_is_the_one_in_limits_py():
     readme = (Path(__file__).parents[1] / "README.md").read_text()
     assert limits.markdown() in readme

@@ -38,7 +38,9 @@ def _raise_stopped(signum, frame):
 
 @contextmanager
 def stop_signals_raise():
-    """Within the block SIGINT and SIGTERM raise Stopped (outside the main thread: no change)."""
+    """Within the block SIGINT and SIGTERM raise Stopped (outside the main thread: no change).
+    A signal the process was started ignoring stays ignored: a shell script's `ti-cloth run &`
+    ignores Ctrl-C, which is meant for the script's foreground job."""
     with _handlers(_raise_stopped):
         yield
 
@@ -56,7 +58,8 @@ def _handlers(handler):
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = {s: signal.signal(s, handler) for s in STOP_SIGNALS}
+    previous = {s: signal.signal(s, handler) for s in STOP_SIGNALS
+                if signal.getsignal(s) is not signal.SIG_IGN}
     try:
         yield
     finally:
