@@ -13,8 +13,10 @@ Where a test of an integrator goes:
   tearing, divergence, determinism).
 """
 
+import atexit
 import inspect
 import os
+import shutil
 import tempfile
 
 import pytest
@@ -22,8 +24,10 @@ import pytest
 from helpers import use
 from ti_cloth import backend
 
-# mesh colliders cache their distance grids on disk: the tests' go to a folder of their own
+# mesh colliders cache their distance grids on disk: the tests' go to a folder of their own,
+# removed when the process (each xdist worker has its own) exits
 os.environ["TI_CLOTH_CACHE"] = tempfile.mkdtemp(prefix="ti_cloth_test_cache_")
+atexit.register(shutil.rmtree, os.environ["TI_CLOTH_CACHE"], ignore_errors=True)
 
 
 def pytest_collection_modifyitems(items):

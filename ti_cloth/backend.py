@@ -36,6 +36,7 @@ class BackendConfig:
 _config: BackendConfig | None = None
 _generation = 0   # bumped by every init: trees of an earlier runtime must not be destroyed
 _tree_count = 0   # trees of this runtime FieldGroup allocated and has not destroyed
+_trees_made = 0   # trees of this runtime FieldGroup allocated, destroyed or not
 
 
 def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None,
@@ -62,9 +63,9 @@ def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None,
         user.close()
     _closed_by_init.clear()
     ti.init(**options)
-    global _generation, _tree_count
+    global _generation, _tree_count, _trees_made
     _generation += 1
-    _tree_count = 0
+    _tree_count = _trees_made = 0
     _config = BackendConfig(arch=arch, precision=precision, threads=threads)
     return _config
 
@@ -203,8 +204,9 @@ class FieldGroup:
     def finalize(self, owner) -> None:
         """Allocate the fields; their tree is freed some time after `owner` is collected."""
         tree = self._builder.finalize()
-        global _tree_count
+        global _tree_count, _trees_made
         _tree_count += 1
+        _trees_made += 1
         finalizer = weakref.finalize(owner, _dead_trees.append, (tree, _generation))
         finalizer.atexit = False
 
@@ -218,6 +220,12 @@ _dead_trees: list = []
 def tree_count() -> int:
     """Field trees of this runtime allocated by FieldGroup and not yet destroyed."""
     return _tree_count
+
+
+def trees_made() -> int:
+    """Field trees FieldGroup allocated in this runtime, destroyed since or not (a count that
+    only grows: the trees an object holds are the difference across its construction)."""
+    return _trees_made
 
 
 def free_dead_trees() -> None:
