@@ -20,7 +20,7 @@ kept, so a big simulation's memory goes back when it is dropped), and KEPT_LIMIT
 kept: a sweep over ever new structures stays bounded in fields and in field trees, with most of
 the trees left to live simulations (its kernels are new ones: that is Taichi's and cannot be
 helped). Bounding the trees, not the sets, keeps many small sets (two trees each without
-stages) for a process that returns to earlier structures, as a test suite or a study does. `ti_cloth.init` starts a new runtime: what was pooled before belongs to the old one
+stages) for a process that returns to earlier structures, as a sweep over sizes does. `ti_cloth.init` starts a new runtime: what was pooled before belongs to the old one
 and is dropped.
 """
 
