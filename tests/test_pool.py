@@ -130,32 +130,15 @@ def test_a_new_runtime_drops_the_pool(f64):
     assert tc.Simulation(body, dt=1e-3).model is not model
 
 
-def test_the_free_list_is_bounded_in_field_trees_and_bytes(f64, monkeypatch):
-    """A sweep over ever new structures keeps sets of at most FREE_TREES field trees and
-    FREE_BYTES, the longest-unused going first; a set bigger than either goes back to the
-    system when its simulation is dropped."""
+def test_the_free_list_is_bounded_in_count_and_bytes(f64, monkeypatch):
+    """A sweep over ever new structures keeps at most FREE_LIMIT sets of FREE_BYTES; a set
+    bigger than FREE_BYTES goes back to the system when its simulation is dropped."""
     monkeypatch.setattr(simulation, "POOL", Pool())
-    monkeypatch.setattr(pool, "FREE_TREES", 5)
-    for rows in (4, 5, 6, 7):                       # a model and a state: two trees a set
+    monkeypatch.setattr(pool, "FREE_LIMIT", 2)
+    for rows in (4, 5, 6, 7):
         tc.Simulation(tc.Cloth(tc.grid_mesh(rows, 4), tc.Material()), dt=1e-3).step(1)
         gc.collect()
         assert simulation.POOL.free_count() == min(rows - 3, 2)
-        assert simulation.POOL.free_trees() == 2 * simulation.POOL.free_count()
-    for rows in (6, 7):                             # the two newest structures are found
-        before = backend.trees_made()
-        tc.Simulation(tc.Cloth(tc.grid_mesh(rows, 4), tc.Material()), dt=1e-3).step(1)
-        assert backend.trees_made() == before
-    gc.collect()
-    grounded = tc.Cloth(tc.grid_mesh(3, 3), tc.Material())
-    ground = [tc.Plane(point=(0, -1, 0), normal=(0, 1, 0))]
-    monkeypatch.setattr(pool, "FREE_TREES", 2)
-    made = []
-    for _ in range(2):                              # a third tree (the colliders): not kept
-        before = backend.trees_made()
-        tc.Simulation(grounded, dt=1e-3, colliders=ground).step(1)
-        made.append(backend.trees_made() - before)
-        gc.collect()
-    assert made == [3, 3]
     body = tc.Cloth(tc.grid_mesh(4, 4), tc.Material())
     small = limits.memory_needed(body.particle_count, body.spring_count)
     monkeypatch.setattr(pool, "FREE_BYTES", small)
@@ -167,11 +150,27 @@ def test_the_free_list_is_bounded_in_field_trees_and_bytes(f64, monkeypatch):
     assert simulation.POOL.free_bytes() <= small
 
 
+def test_the_pool_gives_its_field_trees_to_a_live_simulation_that_needs_them(f64, monkeypatch):
+    """Sets waiting in the free list hold field trees; when the live ones reach the budget the
+    pool gives them up and the new simulation is built (without that it would be refused)."""
+    monkeypatch.setattr(simulation, "POOL", Pool())
+    gc.collect()
+    backend.free_dead_trees()
+    for rows in (4, 5, 6):             # three structures waiting, a model and a state each
+        tc.Simulation(tc.Cloth(tc.grid_mesh(rows, 4), tc.Material()), dt=1e-3).step(1)
+        gc.collect()
+    assert simulation.POOL.free_count() == 3
+    monkeypatch.setattr(backend, "TREE_BUDGET", backend.tree_count() + 2)
+    alive = [tc.Simulation(cloth(), dt=1e-3) for _ in range(3)]     # 6 trees, room for 2
+    assert len(alive) == 3 and simulation.POOL.free_count() == 0
+    assert backend.tree_count() <= backend.TREE_BUDGET
+
+
 def test_too_many_live_field_trees_is_refused_before_taichi_crashes(f64, monkeypatch):
     """Taichi 1.7 crashes past 512 field trees; ti_cloth refuses at its budget, naming why, and
     builds again once simulations are dropped (with no free list, their trees die with them)."""
     monkeypatch.setattr(simulation, "POOL", Pool())
-    monkeypatch.setattr(pool, "FREE_TREES", 0)
+    monkeypatch.setattr(pool, "FREE_LIMIT", 0)
     gc.collect()
     backend.free_dead_trees()
     monkeypatch.setattr(backend, "TREE_BUDGET", backend.tree_count() + 4)

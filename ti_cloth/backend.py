@@ -9,6 +9,7 @@ Calling `init` again resets Taichi: fields and simulations created before become
 
 from __future__ import annotations
 
+import gc
 import os
 import weakref
 from dataclasses import dataclass
@@ -36,7 +37,6 @@ class BackendConfig:
 _config: BackendConfig | None = None
 _generation = 0   # bumped by every init: trees of an earlier runtime must not be destroyed
 _tree_count = 0   # trees of this runtime FieldGroup allocated and has not destroyed
-_trees_made = 0   # trees of this runtime FieldGroup allocated, destroyed or not
 
 
 def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None,
@@ -63,9 +63,9 @@ def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None,
         user.close()
     _closed_by_init.clear()
     ti.init(**options)
-    global _generation, _tree_count, _trees_made
+    global _generation, _tree_count
     _generation += 1
-    _tree_count = _trees_made = 0
+    _tree_count = 0
     _config = BackendConfig(arch=arch, precision=precision, threads=threads)
     return _config
 
@@ -170,14 +170,22 @@ class FieldGroup:
     own and never frees it; a process runs out of trees (512) after a few dozen simulations.
     Freeing a tree makes Taichi drop every compiled kernel, so dead trees are freed in batches
     of DEAD_TREE_BATCH, when a new group is allocated, not one by one as objects die (or
-    sooner, when the live ones reach TREE_BUDGET: past TREE_LIMIT Taichi crashes, so a group
-    beyond the budget is refused with a RuntimeError instead).
+    sooner, when the live ones reach TREE_BUDGET; then the releases registered with
+    `on_tree_shortage`, the pool's free lists, give theirs up too: past TREE_LIMIT Taichi
+    crashes, so a group still beyond the budget is refused with a RuntimeError instead).
     Create every field through `scalar` / `vector`, then call `finalize(owner)` before use.
     """
 
     def __init__(self):
         """Raises RuntimeError, naming the cause, when Taichi has no tree left to give."""
         if len(_dead_trees) >= DEAD_TREE_BATCH or tree_count() >= TREE_BUDGET:
+            free_dead_trees()
+        if tree_count() >= TREE_BUDGET and _shortage_releases:
+            for weak in list(_shortage_releases):
+                release = weak()
+                if release is not None:
+                    release()
+            gc.collect()                  # what they held, cycles included, dies now
             free_dead_trees()
         if tree_count() >= TREE_BUDGET:
             raise RuntimeError(
@@ -204,9 +212,8 @@ class FieldGroup:
     def finalize(self, owner) -> None:
         """Allocate the fields; their tree is freed some time after `owner` is collected."""
         tree = self._builder.finalize()
-        global _tree_count, _trees_made
+        global _tree_count
         _tree_count += 1
-        _trees_made += 1
         finalizer = weakref.finalize(owner, _dead_trees.append, (tree, _generation))
         finalizer.atexit = False
 
@@ -215,17 +222,19 @@ TREE_LIMIT = 512       # SNode trees a Taichi 1.7 program can hold (beyond it: a
 TREE_BUDGET = 448      # trees ti_cloth allocates before it must free dead ones or refuse
 DEAD_TREE_BATCH = 192
 _dead_trees: list = []
+_shortage_releases: list = []   # weak methods: objects holding trees they can give up
+
+
+def on_tree_shortage(release) -> None:
+    """Call `release` (a bound method, held weakly) when the live trees reach TREE_BUDGET,
+    before a new group is refused: it drops the objects it keeps that hold trees."""
+    _shortage_releases[:] = [r for r in _shortage_releases if r() is not None]
+    _shortage_releases.append(weakref.WeakMethod(release))
 
 
 def tree_count() -> int:
     """Field trees of this runtime allocated by FieldGroup and not yet destroyed."""
     return _tree_count
-
-
-def trees_made() -> int:
-    """Field trees FieldGroup allocated in this runtime, destroyed since or not (a count that
-    only grows: the trees an object holds are the difference across its construction)."""
-    return _trees_made
 
 
 def free_dead_trees() -> None:

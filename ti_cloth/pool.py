@@ -14,14 +14,13 @@ Simulation passes to kernels come from here:
   a weak reference, and weak references to live objects compare like the objects themselves, so
   a new simulation's equal settings find the kernels compiled for the kept copy.
 
-The objects waiting in free lists hold at most FREE_TREES of Taichi's field trees and
-FREE_BYTES of memory in all (the longest-unused go first; one bigger than FREE_BYTES is never
-kept, so a big simulation's memory goes back when it is dropped), and KEPT_LIMIT settings are
-kept: a sweep over ever new structures stays bounded in fields and in field trees, with most of
-the trees left to live simulations (its kernels are new ones: that is Taichi's and cannot be
-helped). Bounding the trees, not the sets, keeps many small sets (two trees each without
-stages) for a process that returns to earlier structures, as a sweep over sizes does. `ti_cloth.init` starts a new runtime: what was pooled before belongs to the old one
-and is dropped.
+At most FREE_LIMIT objects of FREE_BYTES in all wait in free lists (the longest-unused go
+first; one bigger than FREE_BYTES is never kept, so a big simulation's memory goes back when it
+is dropped) and KEPT_LIMIT settings are kept: a sweep over ever new structures stays bounded in
+fields and in Taichi's field trees (its kernels are new ones: that is Taichi's and cannot be
+helped). Free objects never cost a live simulation its field trees: when Taichi's run short
+(backend.on_tree_shortage) the free lists are emptied. `ti_cloth.init` starts a new runtime:
+what was pooled before belongs to the old one and is dropped.
 """
 
 from __future__ import annotations
@@ -32,7 +31,7 @@ from collections.abc import Callable, Hashable
 
 from . import backend
 
-FREE_TREES = 128         # field trees of the objects waiting to be lent again (backend.TREE_BUDGET)
+FREE_LIMIT = 64          # objects waiting to be lent again, over every structure
 FREE_BYTES = 256 << 20   # their memory, estimated by the borrower
 KEPT_LIMIT = 64          # immutable settings kept alive for their kernels
 
@@ -42,9 +41,10 @@ class Pool:
 
     def __init__(self):
         self._generation = backend.generation()
-        self._free: OrderedDict[tuple, object] = OrderedDict()   # (key, serial, bytes, trees) -> object
+        self._free: OrderedDict[tuple, object] = OrderedDict()   # (key, serial, bytes) -> object
         self._kept: OrderedDict[object, object] = OrderedDict()
         self._serial = 0
+        backend.on_tree_shortage(self.release)
 
     def lend(self, key: Hashable, make: Callable[[], object], borrower,
              size: int) -> tuple[object, bool]:
@@ -53,14 +53,8 @@ class Pool:
         `borrower` is collected."""
         self._check_runtime()
         found = next((k for k in reversed(self._free) if k[0] == key), None)
-        if found is not None:
-            obj, trees = self._free.pop(found), found[3]
-        else:
-            before = backend.trees_made()
-            obj = make()
-            trees = backend.trees_made() - before
-        finalizer = weakref.finalize(borrower, self._give_back, key, obj, size, trees,
-                                     self._generation)
+        obj = self._free.pop(found) if found is not None else make()
+        finalizer = weakref.finalize(borrower, self._give_back, key, obj, size, self._generation)
         finalizer.atexit = False
         return obj, found is not None
 
@@ -81,16 +75,16 @@ class Pool:
         """Their memory [bytes], as estimated when they were lent."""
         return sum(k[2] for k in self._free)
 
-    def free_trees(self) -> int:
-        """The field trees they hold."""
-        return sum(k[3] for k in self._free)
+    def release(self) -> None:
+        """Empty the free lists: their fields go back as their objects are collected."""
+        self._free.clear()
 
-    def _give_back(self, key, obj, size: int, trees: int, generation: int) -> None:
-        if generation != self._generation or size > FREE_BYTES or trees > FREE_TREES:
+    def _give_back(self, key, obj, size: int, generation: int) -> None:
+        if generation != self._generation or size > FREE_BYTES:
             return
         self._serial += 1
-        self._free[(key, self._serial, size, trees)] = obj
-        while self.free_trees() > FREE_TREES or self.free_bytes() > FREE_BYTES:
+        self._free[(key, self._serial, size)] = obj
+        while len(self._free) > FREE_LIMIT or self.free_bytes() > FREE_BYTES:
             self._free.popitem(last=False)
 
     def _check_runtime(self) -> None:
