@@ -181,6 +181,7 @@ class FieldGroup:
         if len(_dead_trees) >= DEAD_TREE_BATCH or tree_count() >= TREE_BUDGET:
             free_dead_trees()
         if tree_count() >= TREE_BUDGET and _shortage_releases:
+            gc.collect()                  # dropped simulations give their sets back first
             for weak in list(_shortage_releases):
                 release = weak()
                 if release is not None:
