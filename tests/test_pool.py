@@ -153,6 +153,7 @@ def test_the_free_list_is_bounded_in_count_and_bytes(f64, monkeypatch):
 def test_the_pool_gives_its_field_trees_to_a_live_simulation_that_needs_them(f64, monkeypatch):
     """Sets waiting in the free list hold field trees; when the live ones reach the budget the
     pool gives them up and the new simulation is built (without that it would be refused)."""
+    simulation.POOL.release()          # only this test's sets wait
     monkeypatch.setattr(simulation, "POOL", Pool())
     gc.collect()
     backend.free_dead_trees()
@@ -169,6 +170,7 @@ def test_the_pool_gives_its_field_trees_to_a_live_simulation_that_needs_them(f64
 def test_too_many_live_field_trees_is_refused_before_taichi_crashes(f64, monkeypatch):
     """Taichi 1.7 crashes past 512 field trees; ti_cloth refuses at its budget, naming why, and
     builds again once simulations are dropped (with no free list, their trees die with them)."""
+    simulation.POOL.release()          # earlier tests' sets would give their trees up too
     monkeypatch.setattr(simulation, "POOL", Pool())
     monkeypatch.setattr(pool, "FREE_LIMIT", 0)
     gc.collect()
