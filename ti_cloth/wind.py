@@ -27,6 +27,7 @@ import taichi as ti
 from . import backend, limits
 from ._validate import as_array, finite_number, in_range, integer, require
 from .mesh import vertex_triangles
+from .team import TASK_SPACING
 from .transfer import upload
 
 TURBULENCE_MODES = 8
@@ -214,8 +215,21 @@ def wind_on_particles(wind: ti.template(), begin, end):
 
 @ti.kernel
 def _accumulate_wind(model: ti.template(), state: ti.template(), wind: ti.template(),
-                     mean: ti.math.vec3, drift: ti.math.vec3, tearable: ti.template()):
-    wind_on_triangles(model, state, wind, mean, drift, tearable, 0, wind.triangle_count)
+                     mean: ti.math.vec3, drift: ti.math.vec3, tearable: ti.template(),
+                     tasks: ti.template()):
+    if ti.static(tasks > 0):
+        # CPU: each of `tasks` pool tasks a serial slice of the triangles, compiled as a team
+        # worker's share is (stepping.TeamStages.begin), so a launch per stage gives the bits of
+        # the many-steps plans. As a parallel loop's body, LLVM's fast-math vectorisation
+        # rounded differently on a CPU with AVX-512.
+        for index in range(tasks * TASK_SPACING):
+            if index % TASK_SPACING == 0:
+                task = index // TASK_SPACING
+                wind_on_triangles(model, state, wind, mean, drift, tearable,
+                                  ti.i32(ti.i64(task) * wind.triangle_count // tasks),
+                                  ti.i32(ti.i64(task + 1) * wind.triangle_count // tasks))
+    else:
+        wind_on_triangles(model, state, wind, mean, drift, tearable, 0, wind.triangle_count)
     wind_on_particles(wind, 0, model.particle_count)
 
 
@@ -223,4 +237,5 @@ def accumulate_wind(model, state, wind: WindField, tearable: bool) -> None:
     """wind.particle_wind_force = every triangle's aerodynamic force (module doc) at the current
     state, gathered per particle over its triangles in a fixed order (forces.gather_force
     adds it)."""
-    _accumulate_wind(model, state, wind, wind.mean, wind.drift, tearable)
+    tasks = backend.cpu_threads() if backend.config().arch == "cpu" else 0
+    _accumulate_wind(model, state, wind, wind.mean, wind.drift, tearable, tasks)
