@@ -73,8 +73,7 @@ class Team:
     @ti.func
     def share(self, count, worker):
         """Worker `worker`'s slice [begin, end) of `count` items."""
-        return (ti.i32(ti.i64(worker) * count // self.workers),
-                ti.i32(ti.i64(worker + 1) * count // self.workers))
+        return share(count, worker, self.workers)
 
     @ti.func
     def share_range(self, begin, end, worker):
@@ -85,6 +84,12 @@ class Team:
     def stalled(self) -> bool:
         """Whether a barrier of the last launch gave up on a worker."""
         return self.workers > 1 and self.barrier.arrived[None] >= STALLED
+
+
+@ti.func
+def share(count, part, parts):
+    """Part `part`'s slice [begin, end) of `count` items cut into `parts` near-equal parts."""
+    return ti.i32(ti.i64(part) * count // parts), ti.i32(ti.i64(part + 1) * count // parts)
 
 
 SOLO = Team(1)   # one worker: every loop serial, no barriers (holds no fields)

@@ -27,7 +27,7 @@ import taichi as ti
 from . import backend, limits
 from ._validate import as_array, finite_number, in_range, integer, require
 from .mesh import vertex_triangles
-from .team import TASK_SPACING
+from .team import TASK_SPACING, share
 from .transfer import upload
 
 TURBULENCE_MODES = 8
@@ -224,10 +224,8 @@ def _accumulate_wind(model: ti.template(), state: ti.template(), wind: ti.templa
         # rounded differently on a CPU with AVX-512.
         for index in range(tasks * TASK_SPACING):
             if index % TASK_SPACING == 0:
-                task = index // TASK_SPACING
-                wind_on_triangles(model, state, wind, mean, drift, tearable,
-                                  ti.i32(ti.i64(task) * wind.triangle_count // tasks),
-                                  ti.i32(ti.i64(task + 1) * wind.triangle_count // tasks))
+                begin, end = share(wind.triangle_count, index // TASK_SPACING, tasks)
+                wind_on_triangles(model, state, wind, mean, drift, tearable, begin, end)
     else:
         wind_on_triangles(model, state, wind, mean, drift, tearable, 0, wind.triangle_count)
     wind_on_particles(wind, 0, model.particle_count)
