@@ -35,9 +35,9 @@ def per_step_us(sim, plan: str, count: int, repeats: int) -> np.ndarray:
         start = time.perf_counter()
         if plan == "launch per step":
             for _ in range(count):
-                sim.step(1)
+                sim.step(1, plan="per stage")
         else:
-            sim.step(count)
+            sim.step(count, plan="many steps")
         sim.state.first_bad_step[None]               # waits for the launch to finish
         times.append((time.perf_counter() - start) / count * 1e6)
     return np.array(times[1:])
@@ -64,11 +64,11 @@ def main(argv=None):
                 us = per_step_us(sim, plan, count, args.repeats)
                 cells.append(f"{np.median(us):>12.1f} / {np.percentile(us, 90):>11.1f}")
             stepping.TEAM_MIN_SPRING_STEPS = threshold
-            many = sim._many_steps
-            picked = many.team_for(sim.integrator, sim.model,
-                                   min(count, many.steps_per_launch(sim.integrator, sim.model)))
+            many = sim.many_steps
+            picked = many.workers_for(sim.integrator, sim.model,
+                                      min(count, many.steps_per_launch(sim.integrator, sim.model)))
             print(f"{n:>5} {cloth.spring_count:>9} {count:>10}  " + "  ".join(cells)
-                  + f"  {'team' if picked.workers > 1 else 'one worker':>13}")
+                  + f"  {'team' if picked > 1 else 'one worker':>13}")
 
 
 if __name__ == "__main__":

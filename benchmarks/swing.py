@@ -25,7 +25,7 @@ def child(size: int, samples: int, threads: int | None) -> list[float]:
     tc.init(arch="cpu", precision="f32", threads=threads)
     cloth = tc.Cloth(tc.grid_mesh(size, size, plane="xz"), tc.Material(), pinned=[0, size - 1])
     sim = tc.Simulation(cloth, integrator="symplectic_euler", dt="auto")
-    sim._many_steps.adaptive = False
+    sim.many_steps.adaptive = False
     sim.step(200)
     sim.state.first_bad_step[None]
     rates = []

@@ -352,6 +352,6 @@ def test_a_signal_the_process_ignores_stays_ignored_during_a_run():
         signal.signal(signal.SIGINT, previous)
 
 
-def test_the_readme_limits_table_is_the_one_in_limits_py():
-    readme = (Path(__file__).parents[1] / "README.md").read_text()
-    assert limits.markdown() in readme
+def test_the_documented_limits_table_is_the_one_in_limits_py():
+    page = (Path(__file__).parents[1] / "docs" / "integrators.md").read_text()
+    assert limits.markdown() in page

@@ -120,6 +120,20 @@ def test_live_simulations_never_share_a_set(f64):
     np.testing.assert_array_equal(b.positions(), body.particle_position)
 
 
+def test_a_users_integrator_is_the_one_its_simulation_steps_with(f64):
+    """Two live simulations with equal integrators of their own: each steps with and reports
+    on its user's object (an equal kept one only keeps the compiled kernels alive)."""
+    body = cloth()
+    first, second = tc.ImplicitEuler(), tc.ImplicitEuler()
+    a = tc.Simulation(body, integrator=first, dt=1e-3)
+    b = tc.Simulation(body, integrator=second, dt=1e-3)
+    assert a.integrator is first and b.integrator is second
+    b.step(3)
+    assert second.last_iterations > 0 and first.last_iterations == 0
+    a.step(1, plan="per stage")
+    assert first.last_iterations > 0
+
+
 def test_a_new_runtime_drops_the_pool(f64):
     body = cloth()
     sim = tc.Simulation(body, dt=1e-3)

@@ -33,7 +33,7 @@ def two_sheets(integrator: str, gravity=(0.0, -9.81, 0.0)) -> tc.Simulation:
                      tc.Material())
     cloth = tc.Cloth.combine([lower, upper])
     return tc.Simulation(
-        cloth, integrator, dt=1 / 240, gravity=gravity, tearing=0.5,
+        cloth, integrator=integrator, dt=1 / 240, gravity=gravity, tearing=0.5,
         wind=tc.Wind(velocity=(0.5, 0.0, 0.0), turbulence=0.3),
         handles=[tc.Handle([64], lambda t: (0.0, 0.0, 0.0), release=0.1)],
         colliders=[tc.Sphere(centre=(0.2, -0.2, 0.2), radius=0.1,
@@ -91,7 +91,7 @@ def test_many_steps_per_launch_resume_on_the_same_bits(f64, tmp_path):
     3 calls of step(16), loaded and stepped 3 more, it equals 6 calls of one run."""
     def sheet():
         return tc.Simulation(tc.Cloth(tc.grid_mesh(10, 10), tc.Material(), pinned=[0, 9]),
-                             "symplectic_euler", dt="auto")
+                             integrator="symplectic_euler", dt="auto")
 
     sim = sheet()
     for call in range(6):

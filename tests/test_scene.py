@@ -154,7 +154,7 @@ def test_a_scene_compiles_only_what_it_lists(tmp_path, f64):
         sim.step(1)
     assert sim.wind is None and sim.colliders is None and sim.strain_limiter is None
     assert not any(compiled(k) for k in kernels)
-    stages = sim._many_steps.stages
+    stages = sim.many_steps.stages
     assert not (stages.collides or stages.limits_strain or stages.holds or sim.forces.has_wind)
     full = GRID.replace("[forces]", '[forces]\nwind = { velocity = [2.0, 0.0, 1.0] }').replace(
         "duration = 0.1", "duration = 0.1\nstrain_limit = { max_strain = 0.1 }")
@@ -163,7 +163,7 @@ def test_a_scene_compiles_only_what_it_lists(tmp_path, f64):
     for _ in range(5):
         sim.step(1)
     assert all(compiled(k) for k in kernels)
-    stages = sim._many_steps.stages
+    stages = sim.many_steps.stages
     assert stages.collides and stages.limits_strain and sim.forces.has_wind
 
 
@@ -219,11 +219,11 @@ def test_a_handle_release_time_from_a_scene(tmp_path):
         load_scene(write(tmp_path, text.replace("release = 0.05", "release = -1")))
 
 
-def test_the_readme_scene_reference_is_a_valid_scene(tmp_path, f64):
-    """The README's scene-file reference lists the keys as a real scene: it must load, build
-    and step, so the documentation cannot drift from the reader."""
-    readme = (Path(__file__).parents[1] / "README.md").read_text()
-    block = readme.split("```toml\n", 1)[1].split("```", 1)[0]
+def test_the_scene_reference_is_a_valid_scene(tmp_path, f64):
+    """docs/scenes.md's scene-file reference lists the keys as a real scene: it must load,
+    build and step, so the documentation cannot drift from the reader."""
+    reference = (Path(__file__).parents[1] / "docs" / "scenes.md").read_text()
+    block = reference.split("```toml\n", 1)[1].split("```", 1)[0]
     (tmp_path / "assets").mkdir()
     shutil.copy(Path(__file__).parents[1] / "demos" / "assets" / "table.obj", tmp_path / "assets")
     scene = load_scene(write(tmp_path, block))

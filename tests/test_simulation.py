@@ -251,3 +251,18 @@ def test_simulations_free_their_taichi_fields_when_dropped(f64):
         sizes.append(program.get_snode_tree_size())
     report("SNode trees in use after each simulation", sizes, "constant")
     assert sizes[-1] == sizes[1]
+
+
+def test_options_by_position_still_work_for_a_release_with_a_warning(f64):
+    """Simulation's options are keyword-only; the positional form of the last release gives
+    the same simulation, with a DeprecationWarning, and an option given twice is refused."""
+    cloth = tc.Cloth(tc.grid_mesh(4, 4), tc.Material(), pinned=[0])
+    keyword = tc.Simulation(cloth, integrator="verlet", dt=2e-4, gravity=(0.0, -1.0, 0.0))
+    with pytest.warns(DeprecationWarning, match="keyword-only"):
+        positional = tc.Simulation(cloth, "verlet", 2e-4, (0.0, -1.0, 0.0))
+    assert positional.integrator == keyword.integrator and positional.dt == keyword.dt
+    keyword.step(20)
+    positional.step(20)
+    np.testing.assert_array_equal(positional.positions(), keyword.positions())
+    with pytest.warns(DeprecationWarning), pytest.raises(TypeError, match="'dt'"):
+        tc.Simulation(cloth, "verlet", 2e-4, dt=1e-4)

@@ -54,8 +54,8 @@ def _relax(model: ti.template(), state: ti.template(), colours: ti.template(), t
     if alive and wp + wq > 0 and length > 0:
         delta = (length - target) / length
         dx = stiffness[colours.kind[t]] * delta * d
-        state.particle_position[p] += wp / (wp + wq) * dx
-        state.particle_position[q] -= wq / (wp + wq) * dx
+        state.particle_position[p] = state.particle_position[p] + wp / (wp + wq) * dx
+        state.particle_position[q] = state.particle_position[q] - wq / (wp + wq) * dx
 
 
 @ti.func
@@ -78,7 +78,8 @@ def _relax_altitude(model: ti.template(), state: ti.template(), a, stiffness):
     if norm > 0 and n.norm() > 0:
         scale = -stiffness * (h - model.altitude_rest_length[a]) / norm
         for c in ti.static(range(4)):
-            state.particle_position[corner[c]] += scale * weight[c] * g[c] * n
+            x = state.particle_position[corner[c]]
+            state.particle_position[corner[c]] = x + scale * weight[c] * g[c] * n
 
 
 @ti.func
@@ -159,9 +160,9 @@ def _xpbd(model: ti.template(), state: ti.template(), colours: ti.template(), t,
         dlambda = ((-(length - colours.rest[t]) - compliance * multiplier[t]
                     - gamma * n.dot(motion))
                    / ((1.0 + gamma) * (wp + wq) + compliance))
-        multiplier[t] += dlambda
-        state.particle_position[p] += wp * dlambda * n
-        state.particle_position[q] -= wq * dlambda * n
+        multiplier[t] = multiplier[t] + dlambda
+        state.particle_position[p] = state.particle_position[p] + wp * dlambda * n
+        state.particle_position[q] = state.particle_position[q] - wq * dlambda * n
 
 
 @ti.func
@@ -180,9 +181,10 @@ def _xpbd_altitude(model: ti.template(), state: ti.template(), a, multiplier: ti
                                    - state.particle_prev_position[corner[c]])
         dlambda = ((-(h - model.altitude_rest_length[a]) - compliance * multiplier[a]
                     - gamma * motion) / ((1.0 + gamma) * norm + compliance))
-        multiplier[a] += dlambda
+        multiplier[a] = multiplier[a] + dlambda
         for c in ti.static(range(4)):
-            state.particle_position[corner[c]] += weight[c] * dlambda * g[c] * n
+            x = state.particle_position[corner[c]]
+            state.particle_position[corner[c]] = x + weight[c] * dlambda * g[c] * n
 
 
 @ti.func
@@ -250,8 +252,8 @@ def _damp(model: ti.template(), state: ti.template(), colours: ti.template(), t,
     if alive and wp + wq > 0:
         rate = dt * colours.damping[t] * (wp + wq)
         dv = (state.particle_velocity[p] - state.particle_velocity[q]) * (rate / (1.0 + rate))
-        state.particle_velocity[p] -= wp / (wp + wq) * dv
-        state.particle_velocity[q] += wq / (wp + wq) * dv
+        state.particle_velocity[p] = state.particle_velocity[p] - wp / (wp + wq) * dv
+        state.particle_velocity[q] = state.particle_velocity[q] + wq / (wp + wq) * dv
 
 
 @ti.func

@@ -10,9 +10,10 @@ Simulation passes to kernels come from here:
   each at a time; when it is collected they go back to a free list under their structure key
   (everything their kernels read at compile time), and the next simulation of that structure
   gets them back, with the kernels already compiled for them. Its data is uploaded anew.
-- immutable settings (ForceSettings, integrators) are *kept*: Taichi keys a template argument by
-  a weak reference, and weak references to live objects compare like the objects themselves, so
-  a new simulation's equal settings find the kernels compiled for the kept copy.
+- settings (ForceSettings, integrators) are *kept* alive: Taichi keys a template argument by a
+  weak reference, and weak references to live objects compare like the objects themselves, so
+  a new simulation's equal settings find the kernels compiled for the kept copy (the pool's
+  own copy: a user's integrator is never shared between simulations).
 
 At most FREE_LIMIT objects of FREE_BYTES in all wait in free lists (the longest-unused go
 first; one bigger than FREE_BYTES is never kept, so a big simulation's memory goes back when it
@@ -25,6 +26,7 @@ what was pooled before belongs to the old one and is dropped.
 
 from __future__ import annotations
 
+import copy
 import weakref
 from collections import OrderedDict
 from collections.abc import Callable, Hashable
@@ -59,9 +61,15 @@ class Pool:
         return obj, found is not None
 
     def keep(self, value):
-        """The kept setting equal to `value`, else `value`, kept from now on."""
+        """The kept setting equal to `value`, else a copy of `value`, kept from now on. Pass
+        the kept one to kernels (Taichi's keys hold weak references to what was passed, so
+        the kernels compiled for it serve every equal setting while it lives); it is the
+        pool's own copy, never a user's object, so simulations sharing it share nothing a
+        user reads."""
         self._check_runtime()
-        kept = self._kept.pop(value, value)
+        kept = self._kept.pop(value, None)
+        if kept is None:
+            kept = copy.copy(value)
         self._kept[kept] = kept
         while len(self._kept) > KEPT_LIMIT:
             self._kept.popitem(last=False)

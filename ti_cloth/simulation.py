@@ -15,6 +15,7 @@ one launch (stepping.py; tested against a launch per stage).
 """
 
 
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -38,6 +39,10 @@ from .topology import Cloth
 from .wind import WindField
 
 STEP_ORDER = ("integrator", "handles", "strain_limit", "colliders", "self_collision", "tearing")
+PLANS = ("per stage", "many steps")   # Simulation.step's launch plans
+# Simulation's options, in the order of the positional form kept for one release
+OPTIONS = ("integrator", "dt", "gravity", "drag", "wind", "tearing", "handles", "colliders",
+           "strain_limit", "position_limit", "self_collision")
 
 
 class Simulation:
@@ -60,10 +65,17 @@ class Simulation:
     step start.
     """
 
-    def __init__(self, cloth: Cloth, integrator="symplectic_euler", dt: float = 1e-3,
-                 gravity=(0.0, -9.81, 0.0), drag: float = 0.0, wind=None, tearing=None,
-                 handles: Sequence[Handle] = (), colliders=(), strain_limit=None,
+    def __init__(self, cloth: Cloth, *positional, integrator="symplectic_euler",
+                 dt: float = 1e-3, gravity=(0.0, -9.81, 0.0), drag: float = 0.0, wind=None,
+                 tearing=None, handles: Sequence[Handle] = (), colliders=(), strain_limit=None,
                  position_limit: float = 1e6, self_collision: SelfCollision | None = None):
+        options = {name: value for name, value in locals().items() if name in OPTIONS}
+        if positional:
+            options = _from_positional(positional, options)
+        self._build(cloth, **options)
+
+    def _build(self, cloth, integrator, dt, gravity, drag, wind, tearing, handles, colliders,
+               strain_limit, position_limit, self_collision) -> None:
         require(isinstance(cloth, Cloth), "cloth", cloth, "a ti_cloth.Cloth")
         self._runtime = backend.generation()
         self.cloth = cloth
@@ -119,9 +131,11 @@ class Simulation:
             self.handles.table = self._lent["handle_table"]
         if self.self_contact is not None:
             self.self_contact.attach(self.colliders)
+        # Kernels get the pool's equal copies, whose compiled kernels outlive this simulation;
+        # the user's integrator gets the reports of the steps (Simulation.step).
         self.forces = POOL.keep(ForceSettings(gravity=tuple(gravity), drag=drag,
                                               tearable=tearing is not None, wind=self.wind))
-        self.integrator = POOL.keep(self.integrator)   # an equal one, whose kernels exist
+        self._stepper = POOL.keep(self.integrator)
         if auto:
             self.dt = auto_dt(cloth, self.integrator, drag, pinned if self.handles is None
                               else self.handles.pinned(permanent=True))
@@ -218,19 +232,38 @@ class Simulation:
         """Simulated time [s]."""
         return self.step_count * self.dt
 
-    def step(self, n: int = 1) -> None:
+    def step(self, n: int = 1, *, plan: str | None = None) -> None:
         """Advance n steps of dt, each the stages of STEP_ORDER. Raises SimulationDiverged at
         the first step whose result is not finite; after that the simulation refuses to
-        continue."""
+        continue.
+
+        plan: how the steps are launched (PLANS). None takes the default, decided by the
+        arch and the call alone: on the CPU many steps per launch when every stage runs
+        there (many_steps), except a single step of a fused integrator; else a launch per
+        stage. "per stage" or "many steps" forces one (ValueError if this simulation has no
+        many-steps plan). The plans agree to rounding, and each gives the same bits on
+        every rerun and thread count."""
         self._check_runtime()
         integer("n", n, 0, limits.STEPS.high - self.step_count)
+        require(plan is None or plan in PLANS, "plan", plan, f"None or one of {PLANS}")
+        require(plan != "many steps" or self._many_per_launch, "plan", plan,
+                "'per stage' here: this simulation has a stage (self-collision, or the wind of "
+                "an integrator that reads it more than once a step) or an arch that runs a "
+                "launch per stage")
         if self._diverged is not None:
             raise self._diverged
-        if self._many_per_launch and (n > 1 or not self.integrator.fused):
-            self._step_many(n)
-            n = 0
-        for _ in range(n):
-            self._step_once()
+        if plan is None:
+            many = self._many_per_launch and (n > 1 or not self.integrator.fused)
+        else:
+            many = plan == "many steps"
+        try:
+            if many:
+                self._step_many(n)
+            else:
+                for _ in range(n):
+                    self._step_once()
+        finally:
+            self.integrator.copy_reports(self._stepper)
         bad = int(self.state.first_bad_step[None])
         if bad != NO_BAD_STEP:
             self._diverged = SimulationDiverged(
@@ -260,8 +293,8 @@ class Simulation:
         """n steps in few launches (stepping.py), until one diverges; a step in which a
         handle lets go runs stage by stage."""
         while n > 0:
-            ran = self._many_steps.run(
-                self.integrator, self.model, self.state, self.forces, self.dt, self.step_count,
+            ran = self.many_steps.run(
+                self._stepper, self.model, self.state, self.forces, self.dt, self.step_count,
                 n, self.tearing, self.strain_limiter.limit if self.strain_limiter else None,
                 self.handles)
             self.step_count += ran
@@ -275,13 +308,13 @@ class Simulation:
         """One step, launch by launch: the stages of STEP_ORDER this simulation has."""
         for stage in self._before:
             stage.before_step(self.state, self.time)
-        self.integrator.step(self.model, self.state, self.dt, self.forces, self.step_count)
+        self._stepper.step(self.model, self.state, self.dt, self.forces, self.step_count)
         self.step_count += 1
         for stage in self._after:
             stage.after_step(self.model, self.state, self.time, self.dt, self.step_count - 1)
 
     @property
-    def _many_steps(self) -> stepping.ManySteps | None:
+    def many_steps(self) -> stepping.ManySteps | None:
         """The plan that runs steps in few launches (step(n > 1), and every step of an
         integrator that is not fused), or None when steps go launch by launch."""
         if not self._many_per_launch:
@@ -389,6 +422,23 @@ class Simulation:
     def __repr__(self) -> str:
         return (f"Simulation({self.cloth!r}, integrator={self.integrator!r}, dt={self.dt}, "
                 f"time={self.time:.6g})")
+
+
+def _from_positional(positional: tuple, options: dict) -> dict:
+    """The options with `positional` (the pre-keyword-only form, in OPTIONS order) filled in,
+    with a DeprecationWarning; TypeError for too many or for an option given twice."""
+    warnings.warn("Simulation's options are keyword-only (Simulation(cloth, integrator=..., "
+                  "dt=...)); passing them by position stops working in the next release",
+                  DeprecationWarning, stacklevel=3)
+    if len(positional) > len(OPTIONS):
+        raise TypeError(f"Simulation takes at most {len(OPTIONS)} options after the cloth, got "
+                        f"{len(positional)}")
+    defaults = Simulation.__init__.__kwdefaults__
+    for name, value in zip(OPTIONS, positional):
+        if options[name] is not defaults[name]:
+            raise TypeError(f"Simulation got two values for option {name!r}")
+        options[name] = value
+    return options
 
 
 def _prefixed(arrays: dict, prefix: str) -> dict:

@@ -22,9 +22,11 @@ handle lets go (its particles are free from that step's handle stage on: that st
 by stage). Self-collision steps one launch per stage, as GPUs always do.
 
 Every worker evaluates each spring and particle with the same formula and in the same order
-as a launch per stage, and sums in fixed blocks, so thread counts never change a bit; plans
-agree with a launch per stage to the bit where the same kernel code compiles the same way
-(tests/test_stepping.py says where fast math contracts differently).
+as a launch per stage, and sums in fixed blocks. One worker and a team run the same compiled
+kernel on chunk-aligned slices (team.py), so thread counts never change a bit, by construction.
+A launch per stage is other compiled code: LLVM's fast math may contract and vectorise it
+differently, so the plans agree to rounding (tests/test_stepping.py bounds the difference),
+and which plan a step takes is decided by the arch and the call alone (Simulation.step).
 """
 
 
@@ -38,7 +40,7 @@ from .collision import resolve_particle
 from .constraints import relax_pass
 from .errors import TeamStalled
 from .state import NO_BAD_STEP
-from .team import BARRIER_SPINS, MAX_WORKERS, TASK_SPACING, Barrier, Team
+from .team import BARRIER_SPINS, MAX_WORKERS, TASK_SPACING, Team
 from .tearing import tear_overstretched
 from .wind import wind_on_particles, wind_on_triangles
 
@@ -127,7 +129,8 @@ class TeamStages:
                 relax_pass(model, state, self.colours, self.colours, kinds, 0.0,
                            limiter.tearable, settings.strain_max, True, team, worker)
             for i in range(p_begin, p_end):
-                state.particle_velocity[i] += (state.particle_position[i] - limiter.before[i]) / dt
+                state.particle_velocity[i] = (state.particle_velocity[i]
+                                              + (state.particle_position[i] - limiter.before[i]) / dt)
             team.meet(worker)
         if ti.static(self.collides and not self.collides_on_move):
             if settings.moving != 0:
@@ -164,7 +167,7 @@ def advance_many(integrator: ti.template(), model: ti.template(), state: ti.temp
                  forces: ti.template(), work: ti.template(), stages: ti.template(),
                  team: ti.template(), dt: float, first: ti.i32, count: ti.i32, start: ti.i32,
                  tear_strain: float, strain_max: float, strain_passes: ti.i32,
-                 strain_kinds: ti.i32, moving: ti.i32, held: ti.i32):
+                 strain_kinds: ti.i32, moving: ti.i32, held: ti.i32, serial: ti.template()):
     """Steps first .. first + count - 1 in one launch, shared by `team` (start: 1 when the
     state has no history yet). The stages' settings: tearing's strain, strain limiting's
     limit, passes and spring kinds (bit k: SpringKind k), whether a collider moves (placed from its schedule),
@@ -172,18 +175,14 @@ def advance_many(integrator: ti.template(), model: ti.template(), state: ti.temp
     settings = ti.Struct(tear_strain=tear_strain, strain_max=strain_max,
                          strain_passes=strain_passes, strain_kinds=strain_kinds, moving=moving,
                          held=held)
-    # One worker runs on the launching thread, unless the step holds code LLVM compiles
-    # differently there (sums it vectorises, the wind's turbulence): then as a pool task,
-    # compiled as a team's is, so one worker and a team give the same bits.
-    if ti.static(team.workers == 1 and not integrator.sums_in_step and not forces.has_wind):
+    team.arrived[None] = 0
+    if ti.static(serial):        # a small launch, on the launching thread (ManySteps.serial)
         ti.loop_config(serialize=True)
         for worker in range(1):
             _run(integrator, model, state, forces, work, stages, team, worker, dt, first, count,
                  start, settings)
     else:
-        if ti.static(team.workers > 1):
-            team.barrier.arrived[None] = 0
-        for index in range(team.workers * TASK_SPACING):   # one task per worker
+        for index in range(team.size[None] * TASK_SPACING):   # one task per worker (team.py)
             if index % TASK_SPACING == 0:
                 _run(integrator, model, state, forces, work, stages, team, index // TASK_SPACING,
                      dt, first, count, start, settings)
@@ -201,16 +200,14 @@ class ManySteps:
 
     def __init__(self, stages: TeamStages):
         self.stages = stages
-        barrier = Barrier()
+        self.team = Team()
         # A worker per pool thread, but no more than the cores: a worker waiting at a barrier
         # for one that has no core to run on spins away its time slice.
-        workers = min(backend.cpu_threads(), backend.cpu_cores(), MAX_WORKERS)
-        self.solo = Team(1)
-        self.team = Team(workers, barrier) if workers > 1 else self.solo
+        self.workers = min(backend.cpu_threads(), backend.cpu_cores(), MAX_WORKERS)
         self.adaptive = True       # False: big launches always on the team (tests, benchmarks)
         self._cost = {}            # workers -> seconds per spring-step of recent big launches
         self._big_launches = 0
-        self._launched = set()     # plans that have run a big launch (compiled)
+        self._launched = set()     # team sizes that have run a big launch
 
     def steps_per_launch(self, integrator, model, forces=None) -> int:
         """How many steps one launch of `integrator` on `model` holds at most."""
@@ -221,37 +218,49 @@ class ManySteps:
             most = limits.SCHEDULED_STEPS
         return max(1, min(most, SPRING_STEPS_PER_LAUNCH // max(integrator.step_work(model), 1)))
 
-    def team_for(self, integrator, model, steps: int) -> Team:
-        """The team that runs a launch of `steps` steps: one worker below
-        TEAM_MIN_SPRING_STEPS of work; above it the team, unless timed launches show it
-        costing more than TEAM_MARGIN x one worker in this process (its spinning workers
-        sharing the cores with other processes): every PROBE_EVERY-th big launch takes the
-        plan not in favour, so the choice follows the machine. Both give the same bits."""
+    def workers_for(self, integrator, model, steps: int) -> int:
+        """How many workers run a launch of `steps` steps: one below TEAM_MIN_SPRING_STEPS of
+        work; above it every worker, unless timed launches show the team costing more than
+        TEAM_MARGIN x one worker in this process (its spinning workers sharing the cores with
+        other processes): every PROBE_EVERY-th big launch takes the size not in favour, so the
+        choice follows the machine. Every size runs the same compiled kernel on chunk-aligned
+        slices (team.py), so the choice never changes a bit."""
         work = steps * integrator.step_work(model)
-        if work < TEAM_MIN_SPRING_STEPS or self.team is self.solo:
-            return self.solo
+        if work < TEAM_MIN_SPRING_STEPS or self.workers == 1:
+            return 1
         if not self.adaptive:
-            return self.team
+            return self.workers
         self._big_launches += 1
-        measured = [team for team in (self.team, self.solo) if self._cost.get(team.workers)]
+        measured = [size for size in (self.workers, 1) if self._cost.get(size)]
         if len(measured) < 2:
-            return self.solo if measured == [self.team] else self.team
-        slower = self.cost(self.team) > TEAM_MARGIN * self.cost(self.solo)
-        best, other = (self.solo, self.team) if slower else (self.team, self.solo)
+            return 1 if measured == [self.workers] else self.workers
+        slower = self.cost(self.workers) > TEAM_MARGIN * self.cost(1)
+        best, other = (1, self.workers) if slower else (self.workers, 1)
         return other if self._big_launches % PROBE_EVERY == 0 else best
 
-    def cost(self, team: Team) -> float:
-        """Seconds per spring-step of `team`'s recent big launches: the least of the last
-        few (one slow wake-up does not condemn a plan; a lasting slowdown shows in all)."""
-        return min(self._cost[team.workers])
+    def serial(self, integrator, model, forces, steps: int) -> bool:
+        """Whether a launch of `steps` steps runs serially on the launching thread (no pool
+        wake-up): below TEAM_MIN_SPRING_STEPS of work, whatever the thread count, except for
+        an integrator that sums over particles in its step or with wind, whose code LLVM
+        vectorises differently there than in a pool task: those run every launch as pool
+        tasks, so small and big launches of them are the same code. Bigger launches run as
+        pool tasks on any number of workers (workers_for), one compiled kernel."""
+        small = steps * integrator.step_work(model) < TEAM_MIN_SPRING_STEPS
+        return small and not (integrator.sums_in_step or forces.has_wind)
 
-    def _timed(self, team: Team, work: int, seconds: float) -> None:
-        """Keep a big launch's seconds per spring-step (not the first launch of a plan: it
+    def cost(self, workers: int) -> float:
+        """Seconds per spring-step of recent big launches on `workers` workers: the least of
+        the last few (one slow wake-up does not condemn a size; a lasting slowdown shows in
+        all)."""
+        return min(self._cost[workers])
+
+    def timed(self, workers: int, work: int, seconds: float) -> None:
+        """Keep a big launch's seconds per spring-step (not the first launch on a size: it
         may have compiled the kernel)."""
-        if team.workers not in self._launched:
-            self._launched.add(team.workers)
+        if workers not in self._launched:
+            self._launched.add(workers)
             return
-        self._cost.setdefault(team.workers, deque(maxlen=RECENT_LAUNCHES)).append(seconds / work)
+        self._cost.setdefault(workers, deque(maxlen=RECENT_LAUNCHES)).append(seconds / work)
 
     def run(self, integrator, model, state, forces, dt: float, first: int, count: int,
             tearing=None, strain_limit=None, handles=None) -> int:
@@ -279,17 +288,20 @@ class ManySteps:
                 colliders.schedule(step, chunk, dt)
             if forces.wind is not None:
                 forces.wind.schedule(step, chunk, dt)
-            team = self.team_for(integrator, model, chunk)
+            serial = self.serial(integrator, model, forces, chunk)
+            workers = 1 if serial else self.workers_for(integrator, model, chunk)
+            team = self.team
+            team.set_size(workers)
             began = time.perf_counter()
             advance_many(integrator, model, state, forces, work, self.stages, team, dt, step,
                          chunk, not state.prev_valid,
                          tearing.strain if tearing is not None else 0.0,
                          strain_limit.max_strain if strain_limit is not None else 0.0,
                          strain_limit.passes if strain_limit is not None else 0, kinds,
-                         int(moving), held)
+                         int(moving), held, serial)
             spring_steps = chunk * integrator.step_work(model)
-            if spring_steps >= TEAM_MIN_SPRING_STEPS:
-                self._timed(team, spring_steps, time.perf_counter() - began)
+            if not serial and spring_steps >= TEAM_MIN_SPRING_STEPS:
+                self.timed(workers, spring_steps, time.perf_counter() - began)
             if team.stalled():
                 raise TeamStalled(
                     f"a barrier of steps {step}..{step + chunk - 1} waited "

@@ -75,4 +75,5 @@ def _follow_velocity(state: ti.template(), limiter: ti.template(), dt: float):
     """v += correction / dt, so force-based integrators carry on from the corrected motion
     (Verlet-type history already does: it differences positions)."""
     for i in limiter.before:
-        state.particle_velocity[i] += (state.particle_position[i] - limiter.before[i]) / dt
+        state.particle_velocity[i] = (state.particle_velocity[i]
+                                      + (state.particle_position[i] - limiter.before[i]) / dt)

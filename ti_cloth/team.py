@@ -1,12 +1,20 @@
 """A team of CPU workers sharing one launch: the persistent-threads plan of every many-steps
 CPU launch (stepping.py), as inside an OpenMP parallel region.
 
-Each worker is one task of a Taichi parallel loop (`Team.workers * TASK_SPACING` indices, the
+Each worker is one task of a Taichi parallel loop (`Team.size * TASK_SPACING` indices, the
 worker being index / TASK_SPACING): Taichi 1.7's CPU runtime makes each block of 512 indices a
 task, so every worker runs on a pool thread of its own. Workers own fixed slices of each loop
 (`share`) and meet at barriers (`meet`) between phases that read what other workers wrote.
-One worker runs everything serially on the launching thread; its barriers compile to nothing,
-so a team of any size computes the same bits as one worker.
+
+Thread counts never change a bit, by construction rather than by two kernels compiling alike:
+
+- how many workers share a launch is a field (`size`), read at run time, so one worker and a
+  team of any size run the same compiled kernel (one worker is a pool task too);
+- every slice starts at a multiple of CHUNK items from the start of its loop, so LLVM's
+  vectorised loop body and its scalar remainder see each item at the same place whatever the
+  slices: an item is computed by the same instructions for every team size;
+- sums over items are taken in fixed blocks and totalled in block order by the callers
+  (implicit_euler.py), never per worker.
 
 A barrier spins: on a 2-core machine a wake-up through the OS costs tens of microseconds, far
 more than the phases between barriers. After BARRIER_SPINS polls a barrier gives up
@@ -19,6 +27,7 @@ import taichi as ti
 from . import backend
 
 TASK_SPACING = 512   # indices per Taichi CPU task: worker w is index w * TASK_SPACING
+CHUNK = 256          # slices start at multiples of this (a multiple of any vector width x unroll)
 BARRIER_SPINS = 1 << 28   # polls before a barrier gives up on a missing worker
 STALLED = 1 << 29         # added to the arrival count by a worker that gave up
 PAD = 16                  # i32 slots between two workers' counters (one cache line)
@@ -26,54 +35,58 @@ MAX_WORKERS = 64
 
 
 @backend.kernel_argument
-class Barrier:
-    """The counters of a team's barriers: `arrived`, how many meetings have been attended in
-    this launch (+ STALLED once a barrier gave up), and each worker's count of barriers
-    passed. Teams that never run at the same time may share one."""
+class Team:
+    """Up to MAX_WORKERS CPU workers that share the work of one launch: `size` of them in the
+    next launch (set_size; they must not outnumber Taichi's CPU threads, since a barrier
+    waits for every worker). Fields: `size`, `arrived` (meetings attended in this launch,
+    + STALLED once a barrier gave up) and each worker's count of barriers passed."""
 
     def __init__(self):
         fields = backend.FieldGroup()
+        self.size = fields.scalar(ti.i32, ())
         self.arrived = fields.scalar(ti.i32, ())
         self.passed = fields.scalar(ti.i32, PAD * MAX_WORKERS)
         fields.finalize(self)
+        self._size = 0
+        self.set_size(1)
 
-
-@backend.kernel_argument
-class Team:
-    """`workers` CPU workers (1 to MAX_WORKERS) that share the work of one launch. workers
-    must not exceed Taichi's CPU threads, since a barrier waits for every worker."""
-
-    def __init__(self, workers: int, barrier: Barrier | None = None):
+    def set_size(self, workers: int) -> None:
+        """How many workers run the next launches (1 to MAX_WORKERS)."""
         if not 1 <= workers <= MAX_WORKERS:
-            raise ValueError(f"Team.workers must be in [1, {MAX_WORKERS}], got {workers}")
-        if workers > 1 and barrier is None:
-            raise ValueError("a Team of several workers needs a Barrier")
-        self.workers = workers
-        self.barrier = barrier
+            raise ValueError(f"Team workers must be in [1, {MAX_WORKERS}], got {workers}")
+        if workers != self._size:
+            self.size[None] = workers
+            self._size = workers
+
+    @property
+    def workers(self) -> int:
+        """How many workers run the next launch."""
+        return self._size
 
     @ti.func
     def start(self, worker):
         """Called by each worker first in its task: no barrier passed yet."""
-        if ti.static(self.workers > 1):
-            self.barrier.passed[PAD * worker] = 0
+        self.passed[PAD * worker] = 0
 
     @ti.func
     def meet(self, worker):
         """Barrier: wait until every worker has called meet as often as `worker` has."""
-        if ti.static(self.workers > 1):
-            passed = self.barrier.passed[PAD * worker] + 1
-            self.barrier.passed[PAD * worker] = passed
-            ti.atomic_add(self.barrier.arrived[None], 1)
+        workers = self.size[None]
+        if workers > 1:
+            passed = self.passed[PAD * worker] + 1
+            self.passed[PAD * worker] = passed
+            ti.atomic_add(self.arrived[None], 1)
             spins = 0
-            while ti.atomic_add(self.barrier.arrived[None], 0) < passed * self.workers:
+            while ti.atomic_add(self.arrived[None], 0) < passed * workers:
                 spins += 1
                 if spins == BARRIER_SPINS:
-                    ti.atomic_add(self.barrier.arrived[None], STALLED)
+                    ti.atomic_add(self.arrived[None], STALLED)
 
     @ti.func
     def share(self, count, worker):
-        """Worker `worker`'s slice [begin, end) of `count` items."""
-        return share(count, worker, self.workers)
+        """Worker `worker`'s slice [begin, end) of `count` items, starting at a multiple of
+        CHUNK (module doc)."""
+        return chunked_share(count, worker, self.size[None])
 
     @ti.func
     def share_range(self, begin, end, worker):
@@ -83,13 +96,34 @@ class Team:
 
     def stalled(self) -> bool:
         """Whether a barrier of the last launch gave up on a worker."""
-        return self.workers > 1 and self.barrier.arrived[None] >= STALLED
+        return self.workers > 1 and self.arrived[None] >= STALLED
 
 
 @ti.func
-def share(count, part, parts):
-    """Part `part`'s slice [begin, end) of `count` items cut into `parts` near-equal parts."""
-    return ti.i32(ti.i64(part) * count // parts), ti.i32(ti.i64(part + 1) * count // parts)
+def chunked_share(count, part, parts):
+    """Part `part`'s slice [begin, end) of `count` items cut into `parts` near-equal parts,
+    every cut at a multiple of CHUNK (the last part ends at `count`)."""
+    begin = ti.i32(ti.i64(part) * count // parts) // CHUNK * CHUNK
+    end = count
+    if part + 1 < parts:
+        end = ti.i32(ti.i64(part + 1) * count // parts) // CHUNK * CHUNK
+    return begin, end
 
 
-SOLO = Team(1)   # one worker: every loop serial, no barriers (holds no fields)
+@backend.kernel_argument
+class _Solo:
+    """One worker known at compile time: every loop serial, no barriers, no fields (the
+    serial sweeps of a launch per stage: constraints.py)."""
+
+    workers = 1
+
+    @ti.func
+    def meet(self, worker):
+        pass
+
+    @ti.func
+    def share_range(self, begin, end, worker):
+        return begin, end
+
+
+SOLO = _Solo()

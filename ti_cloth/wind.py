@@ -27,7 +27,6 @@ import taichi as ti
 from . import backend, limits
 from ._validate import as_array, finite_number, in_range, integer, require
 from .mesh import vertex_triangles
-from .team import TASK_SPACING, share
 from .transfer import upload
 
 TURBULENCE_MODES = 8
@@ -215,19 +214,8 @@ def wind_on_particles(wind: ti.template(), begin, end):
 
 @ti.kernel
 def _accumulate_wind(model: ti.template(), state: ti.template(), wind: ti.template(),
-                     mean: ti.math.vec3, drift: ti.math.vec3, tearable: ti.template(),
-                     tasks: ti.template()):
-    if ti.static(tasks > 0):
-        # CPU: each of `tasks` pool tasks a serial slice of the triangles, compiled as a team
-        # worker's share is (stepping.TeamStages.begin), so a launch per stage gives the bits of
-        # the many-steps plans. As a parallel loop's body, LLVM's fast-math vectorisation
-        # rounded differently on a CPU with AVX-512.
-        for index in range(tasks * TASK_SPACING):
-            if index % TASK_SPACING == 0:
-                begin, end = share(wind.triangle_count, index // TASK_SPACING, tasks)
-                wind_on_triangles(model, state, wind, mean, drift, tearable, begin, end)
-    else:
-        wind_on_triangles(model, state, wind, mean, drift, tearable, 0, wind.triangle_count)
+                     mean: ti.math.vec3, drift: ti.math.vec3, tearable: ti.template()):
+    wind_on_triangles(model, state, wind, mean, drift, tearable, 0, wind.triangle_count)
     wind_on_particles(wind, 0, model.particle_count)
 
 
@@ -235,5 +223,4 @@ def accumulate_wind(model, state, wind: WindField, tearable: bool) -> None:
     """wind.particle_wind_force = every triangle's aerodynamic force (module doc) at the current
     state, gathered per particle over its triangles in a fixed order (forces.gather_force
     adds it)."""
-    tasks = backend.cpu_threads() if backend.config().arch == "cpu" else 0
-    _accumulate_wind(model, state, wind, wind.mean, wind.drift, tearable, tasks)
+    _accumulate_wind(model, state, wind, wind.mean, wind.drift, tearable)

@@ -257,6 +257,30 @@ def info() -> int:
 
 
 def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command == "info":
+        return info()
+    if args.command == "study":
+        if args.duration is not None and not args.duration > 0:
+            parser.error(f"--duration must be > 0, got {args.duration}")
+        return study(args.scene, out=args.out, integrators=args.integrators, dts=args.dts,
+                     precisions=args.precisions, iterations=args.iterations, duration=args.duration,
+                     arch=args.arch, plot=not args.no_plot, progress=not args.no_progress,
+                     jobs=args.jobs, scheduler=args.scheduler)
+    if args.command == "advise":
+        return advise(args.scene, tolerance=args.tolerance, metric=args.metric, window=args.window,
+                      out=args.out, integrators=args.integrators, precisions=args.precisions,
+                      iterations=args.iterations, arch=args.arch, progress=not args.no_progress,
+                      jobs=args.jobs, scheduler=args.scheduler)
+    code, _ = run(args.scene, out=args.out, frames=args.frames, arch=args.arch,
+                  precision=args.precision, progress=not args.no_progress, export=args.export,
+                  resume=args.resume, checkpoint_every=args.checkpoint_every)
+    return code
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The `ti-cloth` command's argument parser (its subcommands run, study, advise, info)."""
     parser = argparse.ArgumentParser(prog="ti-cloth", description="Mass-spring cloth, strings, "
                                      "hair and soft bodies in Taichi, rendered headlessly.")
     commands = parser.add_subparsers(dest="command", required=True)
@@ -300,25 +324,7 @@ def main(argv=None) -> int:
     advise_parser.add_argument("--arch", choices=sorted(backend.ARCHS), default="cpu")
     _sweep_arguments(advise_parser)
     commands.add_parser("info", help="versions, architecture and threads")
-    args = parser.parse_args(argv)
-    if args.command == "info":
-        return info()
-    if args.command == "study":
-        if args.duration is not None and not args.duration > 0:
-            parser.error(f"--duration must be > 0, got {args.duration}")
-        return study(args.scene, out=args.out, integrators=args.integrators, dts=args.dts,
-                     precisions=args.precisions, iterations=args.iterations, duration=args.duration,
-                     arch=args.arch, plot=not args.no_plot, progress=not args.no_progress,
-                     jobs=args.jobs, scheduler=args.scheduler)
-    if args.command == "advise":
-        return advise(args.scene, tolerance=args.tolerance, metric=args.metric, window=args.window,
-                      out=args.out, integrators=args.integrators, precisions=args.precisions,
-                      iterations=args.iterations, arch=args.arch, progress=not args.no_progress,
-                      jobs=args.jobs, scheduler=args.scheduler)
-    code, _ = run(args.scene, out=args.out, frames=args.frames, arch=args.arch,
-                  precision=args.precision, progress=not args.no_progress, export=args.export,
-                  resume=args.resume, checkpoint_every=args.checkpoint_every)
-    return code
+    return parser
 
 
 def demo_main(scene_path, argv=None, description: str | None = None) -> list[Path]:

@@ -34,10 +34,9 @@ class Integrator:
     step_limited: ClassVar[bool] = True     # False: stable at any step (stable_dt is inf)
     fused: ClassVar[bool] = False           # True: defines move(), fused.py runs the step
     teamed: ClassVar[bool] = False          # True: defines team_step(), for stepping.py
-    # True: team_step sums over particles. LLVM vectorises (and so reorders) those sums
-    # differently when the step runs on the launching thread, so a launch of one worker runs
-    # as a pool task, compiled as a team's is: one worker and a team give the same bits
-    # (stepping.advance_many).
+    # True: team_step sums over particles, code LLVM vectorises differently on the launching
+    # thread than in a pool task: its small launches run as pool tasks too
+    # (stepping.ManySteps.serial), so every launch of it is the same code.
     sums_in_step: ClassVar[bool] = False
     # False: step() evaluates the wind more than once a step (at every stage); team_step
     # sees only the wind of the step's start, so with wind the steps go stage by stage.
@@ -69,6 +68,10 @@ class Integrator:
 
     def after_launch(self, work) -> None:
         """Read back what a many-steps launch left for reports (the last solve's figures)."""
+
+    def copy_reports(self, stepper) -> None:
+        """Take the reports of the last steps (the last solve's figures) from `stepper`, the
+        equal integrator the simulation's kernels ran with (pool.py)."""
 
     def stable_step(self, cloth, drag: float, pinned) -> float:
         """Largest stable step [s] predicted for `cloth` with uniform drag [1/s] and `pinned`

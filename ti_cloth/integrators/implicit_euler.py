@@ -252,7 +252,7 @@ def _update_block(model: ti.template(), ws: ti.template(), block, alpha):
     begin, end = _block_range(block, model.particle_count)
     rz, rr = 0.0, 0.0
     for i in range(begin, end):
-        ws.dv[i] += alpha * ws.p[i]
+        ws.dv[i] = ws.dv[i] + alpha * ws.p[i]
         r = ws.r[i] - alpha * ws.ap[i]
         z = r / ws.diagonal[i]
         ws.r[i] = r
@@ -356,6 +356,10 @@ class ImplicitEuler(Integrator):
 
     def options(self):
         return {"tolerance": self.tolerance, "max_iterations": self.max_iterations}
+
+    def copy_reports(self, stepper):
+        self.last_iterations = stepper.last_iterations
+        self.last_residual = stepper.last_residual
 
     def workspace(self, model, state):
         return self.buffers(state, lambda: _Workspace(model.particle_count, model.spring_count,

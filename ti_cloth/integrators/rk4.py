@@ -54,8 +54,8 @@ def _stage_particle(model: ti.template(), state: ti.template(), stages: ti.templ
         stages.sum_x[i] = kx
         stages.sum_v[i] = kv
     else:
-        stages.sum_x[i] += ti.static(WEIGHTS[stage]) * kx
-        stages.sum_v[i] += ti.static(WEIGHTS[stage]) * kv
+        stages.sum_x[i] = stages.sum_x[i] + ti.static(WEIGHTS[stage]) * kx
+        stages.sum_v[i] = stages.sum_v[i] + ti.static(WEIGHTS[stage]) * kv
     if ti.static(stage < 3):
         state.particle_position[i] = stages.x0[i] + ti.static(NEXT[stage]) * dt * kx
         state.particle_velocity[i] = stages.v0[i] + ti.static(NEXT[stage]) * dt * kv
