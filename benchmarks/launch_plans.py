@@ -1,10 +1,16 @@
-"""Microseconds per step of symplectic Euler in each CPU launch plan (ti_cloth/stepping.py), by
-cloth size and by how many steps one Simulation.step(n) call asks for.
+"""Microseconds per step of an integrator (--integrator, default symplectic Euler) in each CPU
+launch plan (ti_cloth/stepping.py), by cloth size and by how many steps one
+Simulation.step(n) call asks for.
 
-    launch per step   step(1) n times: one launch, two parallel loops a step
-    one worker        step(n): n steps in one launch, every loop serial
+    launch per step   step(1, plan="per stage") n times: a launch per stage
+    one worker        step(n): n steps in one launch on the launching thread, every loop serial
     team              step(n): n steps in one launch, each Taichi CPU thread owning a slice of
                       every loop, meeting at barriers
+    timed choice      step(n) as Simulation.step runs big launches: the team or one pool
+                      worker, whichever timed launches in this process show faster
+
+With --busy another process keeps one core busy meanwhile, as a second job on a shared
+machine does: spinning team workers then wait for a core, which the timed choice notices.
 
 The scene is throughput.py's (N x N sheet, stretch + shear + bend springs, two pinned corners,
 f32). Each cell is the median (and the 90th percentile, which shows the thread pool's slow
@@ -15,6 +21,8 @@ in a launch (stepping.TEAM_MIN_SPRING_STEPS); this table is what that threshold 
 """
 
 import argparse
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -24,12 +32,13 @@ from ti_cloth import stepping
 
 from throughput import scene
 
-PLANS = ("launch per step", "one worker", "team")
+PLANS = ("launch per step", "one worker", "team", "timed choice")
 
 
 def per_step_us(sim, plan: str, count: int, repeats: int) -> np.ndarray:
     """Microseconds per step of `repeats` calls that each advance `count` steps."""
-    stepping.TEAM_MIN_SPRING_STEPS = 0 if plan == "team" else 1 << 62
+    stepping.TEAM_MIN_SPRING_STEPS = 1 << 62 if plan == "one worker" else 0
+    sim.many_steps.adaptive = plan == "timed choice"
     times = []
     for _ in range(repeats + 1):                      # the first call compiles
         start = time.perf_counter()
@@ -49,14 +58,20 @@ def main(argv=None):
     parser.add_argument("--counts", type=int, nargs="+", default=[16, 256])
     parser.add_argument("--threads", type=int, default=None, help="CPU threads (default: all)")
     parser.add_argument("--repeats", type=int, default=15)
+    parser.add_argument("--integrator", default="symplectic_euler", help="any of tc.INTEGRATORS")
+    parser.add_argument("--busy", action="store_true",
+                        help="keep one core busy with another process meanwhile (what the timed "
+                             "choice between one worker and the team is for)")
     args = parser.parse_args(argv)
     tc.init(arch="cpu", precision="f32", threads=args.threads)
+    busy = (subprocess.Popen([sys.executable, "-c", "while True: pass"]) if args.busy else None)
     threshold = stepping.TEAM_MIN_SPRING_STEPS
     print(f"{'N':>5} {'springs':>9} {'steps/call':>10}  "
           + "  ".join(f"{plan + ' (p50/p90)':>26}" for plan in PLANS) + f"  {'step(n) picks':>13}")
     for n in args.sizes:
         cloth, start = scene(n)
-        sim = tc.Simulation(cloth, dt=tc.auto_dt(cloth, "explicit_euler"))
+        sim = tc.Simulation(cloth, integrator=args.integrator,
+                            dt=tc.auto_dt(cloth, "explicit_euler"))
         sim.set_positions(start)
         for count in args.counts:
             cells = []
@@ -69,6 +84,8 @@ def main(argv=None):
                                       min(count, many.steps_per_launch(sim.integrator, sim.model)))
             print(f"{n:>5} {cloth.spring_count:>9} {count:>10}  " + "  ".join(cells)
                   + f"  {'team' if picked > 1 else 'one worker':>13}")
+    if busy is not None:
+        busy.kill()
 
 
 if __name__ == "__main__":

@@ -31,10 +31,14 @@ from pathlib import Path
 
 import numpy as np
 import taichi as ti
-from taichi.lang.field import Field
-from taichi.lang.matrix import MatrixField
 
 import ti_cloth as tc
+from ti_cloth import backend
+
+import peers
+
+WARP_CHECKED = ("1.19.",)     # the versions the docs' figures were measured with
+NEWTON_CHECKED = ("1.8.",)
 
 CHECK_STEPS = 20
 STRETCH = 1.01
@@ -107,6 +111,7 @@ class WarpCloth:
     """The same step as Warp kernels: per-spring forces with atomic scatter, then integration."""
 
     def __init__(self, cloth, start, dt, gravity, dtype, device):
+        peers.require("warp-lang", WARP_CHECKED, "--warp")
         import warp as wp
         wp.config.quiet = True
         wp.init()
@@ -174,6 +179,7 @@ class NewtonCloth:
     """Newton's semi-implicit solver on the same particles and springs (no contacts)."""
 
     def __init__(self, cloth, start, dt, gravity, dtype, device):
+        peers.require("newton", NEWTON_CHECKED, "--newton")
         import newton
         import warp as wp
         wp.config.quiet = True
@@ -214,9 +220,9 @@ def field_bytes(objects, particles: int, springs: int) -> tuple[float, float]:
     per_particle = per_spring = 0
     for obj in objects:
         for value in vars(obj).values():
-            if isinstance(value, Field) and value.shape:
-                size = int(np.prod(value.shape)) * np.dtype(ti.lang.util.to_numpy_type(value.dtype)).itemsize
-                size *= value.n * value.m if isinstance(value, MatrixField) else 1
+            if isinstance(value, ti.Field) and value.shape:
+                size = int(np.prod(value.shape)) * np.dtype(backend.numpy_dtype(value.dtype)).itemsize
+                size *= value.n * value.m if isinstance(value, ti.MatrixField) else 1
                 if value.shape[0] in (particles, particles + 1):
                     per_particle += size
                 else:

@@ -14,7 +14,6 @@ Where a test of an integrator goes:
 """
 
 import atexit
-import inspect
 import os
 import shutil
 import tempfile
@@ -28,6 +27,7 @@ from ti_cloth import backend
 # removed when the process (each xdist worker has its own) exits
 os.environ["TI_CLOTH_CACHE"] = tempfile.mkdtemp(prefix="ti_cloth_test_cache_")
 atexit.register(shutil.rmtree, os.environ["TI_CLOTH_CACHE"], ignore_errors=True)
+backend.count_compilations()    # tests ask which kernels a scene compiled (helpers.compiled)
 
 
 def pytest_collection_modifyitems(items):
@@ -36,7 +36,8 @@ def pytest_collection_modifyitems(items):
     then those in f32: switching precision re-initialises Taichi, which drops every kernel the
     worker compiled, so the switches are kept few. Tests that call tc.init themselves (a
     thread count, a precision or a fresh runtime of their own) go last, so the tests after
-    them do not compile everything again; before them those that need two threads (the
+    them do not compile everything again (marked `reinitialises`); before them those that
+    need two threads (the
     `threads` fixture: every other test runs on its process's share of the cores)."""
     items.sort(key=lambda item: (reinitialises(item),
                                  "threads" in getattr(item, "fixturenames", ()),
@@ -45,9 +46,8 @@ def pytest_collection_modifyitems(items):
 
 
 def reinitialises(item) -> bool:
-    """Whether the test's own code calls tc.init."""
-    function = getattr(item, "function", None)
-    return function is not None and "tc.init(" in inspect.getsource(function)
+    """Whether the test starts a Taichi runtime of its own (marked `reinitialises`)."""
+    return item.get_closest_marker("reinitialises") is not None
 
 
 @pytest.fixture

@@ -36,22 +36,22 @@ def use(precision: str, threads: int | None = None) -> None:
     if threads is None:
         workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
         threads = max(1, backend.cpu_cores() // workers)
-    if (backend._config is None or backend._config.precision != precision
-            or backend.cpu_threads() != threads):
+    config = backend.current()
+    if config is None or config.precision != precision or backend.cpu_threads() != threads:
         tc.init(arch="cpu", precision=precision, threads=threads)
 
 
 def forget_compiled(*kernels) -> None:
-    """Drop what Taichi compiled of these kernels, so `compiled` tells what runs from now on."""
-    for kernel in kernels:
-        kernel._primal.compiled_kernels.clear()
+    """Start counting these kernels' compilations afresh, so `compiled` tells what runs from
+    now on (backend.compilations; counting is on for the whole suite: conftest.py)."""
+    backend.forget_compilations(*kernels)
 
 
 def compiled(kernel) -> bool:
-    """Whether Taichi has compiled `kernel` (a @ti.kernel function) for any arguments (since
-    forget_compiled). Feature tests use it to show that a scene without a feature never
+    """Whether `kernel` (a ti_cloth kernel) was compiled and launched for any arguments since
+    forget_compiled. Feature tests use it to show that a scene without a feature never
     compiles that feature's kernels."""
-    return bool(kernel._primal.compiled_kernels)
+    return backend.compilations(kernel) > 0
 
 
 def stretched_energy_ratios(sim, steps=30):

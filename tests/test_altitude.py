@@ -266,6 +266,7 @@ def test_the_stable_step_counts_altitude_springs(f64):
         sim.step(3000)
 
 
+@pytest.mark.reinitialises
 @pytest.mark.slow
 def test_braced_strands_give_the_same_bits_on_one_thread_and_all_cores():
     """Altitude forces are gathered per particle in a fixed order: implicit Euler (its CG

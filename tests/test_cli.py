@@ -172,8 +172,8 @@ def test_a_large_body_is_announced_before_its_stable_step_is_sought(tmp_path, ca
 
     heard = []
     monkeypatch.setattr(limits, "LARGE_BODY", 101)
-    original = scene_module._check_runnable
-    monkeypatch.setattr(scene_module, "_check_runnable",
+    original = scene_module.check_runnable
+    monkeypatch.setattr(scene_module, "check_runnable",
                         lambda *args: (heard.append(capsys.readouterr().err), original(*args)))
     path = tmp_path / "tiny.toml"
     path.write_text(SCENE)

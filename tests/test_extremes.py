@@ -137,6 +137,7 @@ def test_ten_minutes_undamped_energy_stays_bounded(f64, integrator):
     assert drift < 0.01
 
 
+@pytest.mark.reinitialises
 def test_f32_adds_only_rounding_error():
     """The same run in f32 and f64 (the study scene's flap, 0.5 s, symplectic Euler at half the
     stable step): f32 rounding (eps 6e-8 per operation) accumulates like a random walk over

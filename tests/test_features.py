@@ -13,12 +13,12 @@ from ti_cloth.state import copy_positions
 from helpers import compiled, forget_compiled
 
 OPTIONAL = {
-    "wind": wind._accumulate_wind, "collisions": resolve_collisions,
+    "wind": wind.wind_forces, "collisions": resolve_collisions,
     "collision snapshot": copy_positions, "relaxation": constraints.relax_springs,
-    "strain-limit velocity": strain_limit._follow_velocity, "tearing": tearing.tear_springs,
+    "strain-limit velocity": strain_limit.follow_velocity, "tearing": tearing.tear_springs,
     "handles": handles.move_handles, "xpbd": constraints.xpbd_springs,
-    "xpbd prediction": xpbd._predict, "implicit solve": implicit_euler._linearise,
-    "rk4 stages": rk4._stage, "self-collision": contact_pairs.list_pairs,
+    "xpbd prediction": xpbd.xpbd_predict, "implicit solve": implicit_euler.linearise,
+    "rk4 stages": rk4.rk4_stage, "self-collision": contact_pairs.list_pairs,
 }
 
 

@@ -234,6 +234,7 @@ def test_a_body_too_big_for_memory_is_refused_before_allocating(monkeypatch):
     assert tc.grid_mesh(100, 100).vertex_count == 10_000
 
 
+@pytest.mark.reinitialises
 def test_step_counts_are_checked_and_a_simulation_after_a_second_init_raises(f64):
     """sim.step(True) stepped and sim.step(2**63) was accepted; init resets Taichi and frees
     every field, so stepping or reading an older simulation crashed the process (SIGSEGV).
@@ -256,6 +257,7 @@ def test_step_counts_are_checked_and_a_simulation_after_a_second_init_raises(f64
     assert np.isfinite(fresh.positions()).all()
 
 
+@pytest.mark.reinitialises
 def test_init_closes_the_renderers_of_the_runtime_it_ends(f64):
     """A Renderer's Taichi ndarrays freed after a second init asked the new runtime to delete
     them, and it freed its own live ndarray at the same address (a demo test's worker crashed
@@ -290,6 +292,7 @@ def test_init_closes_the_renderers_of_the_runtime_it_ends(f64):
         kept.begin()
 
 
+@pytest.mark.reinitialises
 def test_ensure_keeps_the_runtime_a_caller_chose_when_asked_for_no_thread_count(f64):
     """run_scene, the CLI and the demos call backend.ensure without a thread count; it
     re-initialised a runtime given one (tc.init(threads=...)), dropping the caller's setting

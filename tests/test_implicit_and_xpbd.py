@@ -185,6 +185,7 @@ def test_serial_and_parallel_sweeps_give_the_same_bits(f64, integrator, body, mo
     np.testing.assert_array_equal(results[0], results[1])
 
 
+@pytest.mark.reinitialises
 @pytest.mark.parametrize("make", [tc.RK4, tc.ImplicitEuler, tc.XPBD], ids=["rk4", "implicit_euler", "xpbd"])
 def test_an_integrator_reused_across_simulations_and_runtimes(make):
     """Working buffers belong to a State: a dropped simulation's go back to the pool with it

@@ -65,10 +65,10 @@ def test_the_checker_sees_a_forbidden_import(tmp_path, monkeypatch):
     """The layer test can fail: a physics module importing the renderer is reported."""
     fake = tmp_path / "ti_cloth"
     fake.mkdir()
-    (fake / "forces.py").write_text("from .render.image import write_png\nfrom ._validate import _x\n")
+    (fake / "forces.py").write_text("from .render.image import write_png\nfrom .validation import _x\n")
     monkeypatch.setitem(globals(), "PACKAGE", fake)
     found = imports(fake / "forces.py")
-    assert found == [("ti_cloth.render.image", ["write_png"]), ("ti_cloth._validate", ["_x"])]
+    assert found == [("ti_cloth.render.image", ["write_png"]), ("ti_cloth.validation", ["_x"])]
     assert layer(fake / "forces.py") == "physics"
 
 
@@ -80,3 +80,39 @@ def test_the_app_modules_keep_their_old_names():
     assert study is app_study and cli is app_cli
     assert scene.load_scene is ti_cloth.load_scene and runner.run_scene is ti_cloth.run_scene
     assert scene_file.SceneError.__module__ == "ti_cloth.app.scene_file"
+
+
+ROOT = PACKAGE.parent
+SOURCES = [p for folder in ("ti_cloth", "tests", "benchmarks", "demos", "tools")
+           for p in sorted((ROOT / folder).rglob("*.py"))]
+TAICHI_INTERNALS = ("_primal", "compiled_kernels", "get_runtime", "ti.lang.", "taichi.lang", "ti._lib",
+                    "current_cfg")
+
+
+def private_reaches(source: str) -> list[str]:
+    """`x._name` where `_name` is not defined in this source (self, cls and this module's
+    own classes and functions may use their own private names)."""
+    tree = ast.parse(source)
+    own = {n.name for n in ast.walk(tree) if isinstance(n, (ast.ClassDef, ast.FunctionDef))}
+    own |= {t.attr for n in ast.walk(tree) if isinstance(n, (ast.Assign, ast.AnnAssign))
+            for t in (n.targets if isinstance(n, ast.Assign) else [n.target])
+            if isinstance(t, ast.Attribute)}
+    return [f"line {n.lineno}: {ast.unparse(n)}" for n in ast.walk(tree)
+            if isinstance(n, ast.Attribute) and n.attr.startswith("_")
+            and not n.attr.startswith("__") and n.attr not in own]
+
+
+def test_no_source_reaches_a_private_name_of_another_module():
+    """In the package, the tests, the benchmarks, the demos and the tools; and none reads
+    Taichi's internals (the runtime counts its own compilations: backend.compilations)."""
+    bad = {str(p.relative_to(ROOT)): private_reaches(p.read_text()) for p in SOURCES}
+    assert {k: v for k, v in bad.items() if v} == {}
+    internals = {str(p.relative_to(ROOT)): [w for w in TAICHI_INTERNALS if w in p.read_text()]
+                 for p in SOURCES if p.name != "test_layers.py"}
+    assert {k: v for k, v in internals.items() if v} == {}
+
+
+def test_the_private_reach_checker_can_fail():
+    assert private_reaches("import m\nm._hidden()\n") == ["line 2: m._hidden"]
+    assert private_reaches("class A:\n    def _f(self):\n        self._g = 1\n"
+                           "    def h(self, other):\n        other._f(); other._g\n") == []

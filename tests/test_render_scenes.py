@@ -149,6 +149,7 @@ def test_null_renderer_has_the_renderer_interface_and_draws_nothing(f32):
     assert r.frames == 3
 
 
+@pytest.mark.reinitialises
 def test_simulation_never_imports_the_renderer():
     code = ("import sys, ti_cloth as tc; tc.init('cpu'); "
             "sim = tc.Simulation(tc.Cloth(tc.grid_mesh(3, 3), tc.Material())); sim.step(2); "
@@ -156,6 +157,7 @@ def test_simulation_never_imports_the_renderer():
     subprocess.run([sys.executable, "-c", code], check=True)
 
 
+@pytest.mark.reinitialises
 def test_renders_with_no_display_and_opens_no_window(tmp_path):
     # no DISPLAY / WAYLAND_DISPLAY, and Taichi's window classes replaced by ones that raise
     code = f"""

@@ -190,6 +190,7 @@ def test_a_thickness_above_half_the_mean_edge_is_warned_about(f64):
         tc.Simulation(cloth, self_collision=tc.SelfCollision(0.01))
 
 
+@pytest.mark.reinitialises
 def test_one_thread_and_all_cores_and_a_rerun_give_the_same_bits():
     """Grid cells are filled in index order, contacts listed in index order and gathered per
     particle in list order: the grid, the lists and the positions repeat bit for bit on one

@@ -237,9 +237,6 @@ def test_simulations_free_their_taichi_fields_when_dropped(f64):
     Taichi's 512 trees (before, a process crashed after about 40 simulations)."""
     import gc
 
-    import taichi as ti
-
-    program = ti.lang.impl.get_runtime().prog
     sizes = []
     for _ in range(4):
         sim = tc.Simulation(tc.Cloth(tc.grid_mesh(4, 4), tc.Material(), pinned=[0]), dt=1e-4,
@@ -248,7 +245,7 @@ def test_simulations_free_their_taichi_fields_when_dropped(f64):
         del sim
         gc.collect()
         backend.free_dead_trees()
-        sizes.append(program.get_snode_tree_size())
+        sizes.append(backend.tree_count())
     report("SNode trees in use after each simulation", sizes, "constant")
     assert sizes[-1] == sizes[1]
 

@@ -6,6 +6,7 @@ stage a team launch runs (strain limiting, colliders standing and scripted, tear
 divergence guard must name the same step whichever plan ran."""
 
 import importlib.util
+import sys
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -317,6 +318,8 @@ def test_two_phase_gather_matches_an_independent_scatter(f64, damping):
 
 def load_benchmark():
     path = Path(__file__).parents[1] / "benchmarks" / "throughput.py"
+    if str(path.parent) not in sys.path:
+        sys.path.append(str(path.parent))           # its sibling modules (peers.py)
     spec = importlib.util.spec_from_file_location("throughput", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

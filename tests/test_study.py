@@ -47,6 +47,7 @@ def test_reference_of_free_fall_is_the_parabola(tmp_path):
     np.testing.assert_allclose(ref.times, np.arange(1, 7) / 30)
 
 
+@pytest.mark.reinitialises
 def test_reference_halving_criterion_holds(tmp_path):
     """The reference's own step, halved once more, moves positions by less than 1e-9 x size."""
     scene = scene_file(tmp_path, SWINGING_STRING)

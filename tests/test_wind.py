@@ -178,13 +178,13 @@ def test_banner_moves_downwind_more_in_stronger_wind(f32):
 
 
 def test_scene_without_wind_compiles_no_wind_kernel(f64):
-    forget_compiled(wind_module._accumulate_wind)
+    forget_compiled(wind_module.wind_forces)
     tc.Simulation(tc.Cloth(tc.grid_mesh(4, 4), tc.Material(), pinned=[0]), dt=1e-4).step(3)
-    assert not compiled(wind_module._accumulate_wind)
+    assert not compiled(wind_module.wind_forces)
     windy = tc.Simulation(tc.Cloth(tc.grid_mesh(4, 4), tc.Material(), pinned=[0]), dt=1e-4,
                           wind=tc.Wind(velocity=(1, 0, 0)))
     windy.step(1)
-    assert compiled(wind_module._accumulate_wind)
+    assert compiled(wind_module.wind_forces)
 
 
 @pytest.mark.parametrize("kwargs, field", [

@@ -9,7 +9,9 @@ Calling `init` again resets Taichi: fields and simulations created before become
 
 from __future__ import annotations
 
+import functools
 import gc
+import inspect
 import os
 import weakref
 from dataclasses import dataclass
@@ -18,7 +20,7 @@ import numpy as np
 import taichi as ti
 
 from . import limits
-from ._validate import count
+from .validation import count
 
 ARCHS = {"cpu": "cpu", "cuda": "cuda", "vulkan": "vulkan", "gpu": "gpu"}
 PRECISIONS = {"f32": ti.f32, "f64": ti.f64}
@@ -109,9 +111,15 @@ def config() -> BackendConfig:
 
 
 def cpu_threads() -> int:
-    """How many CPU threads Taichi's thread pool has (the `threads` of init, or all cores)."""
-    config()
-    return int(ti.lang.impl.current_cfg().cpu_max_num_threads)
+    """How many CPU threads Taichi's thread pool has: the `threads` of init, else Taichi's
+    default, one per hardware thread."""
+    threads = config().threads
+    return threads if threads is not None else (os.cpu_count() or 1)
+
+
+def current() -> BackendConfig | None:
+    """The active configuration, None before the first `init`."""
+    return _config
 
 
 def cpu_cores() -> int:
@@ -133,6 +141,57 @@ def taichi_dtype(dtype):
 def numpy_dtype(dtype):
     """The numpy dtype of a Taichi type (DTYPES read backwards)."""
     return next(np_type for np_type, ti_type in DTYPES.items() if ti_type == dtype)
+
+
+_counting = False
+_launched: dict = {}   # kernel -> the distinct template arguments it was launched with
+TEMPLATE = type(ti.template())
+
+
+def kernel(function):
+    """ti.kernel, and a count of its compilations (compilations()): Taichi compiles a
+    kernel once for each distinct set of template arguments, each object argument keyed by a
+    weak reference (an equal live object finds the same compiled kernel), so ti_cloth counts
+    the distinct sets it launched it with, keyed the same way, while count_compilations()
+    is on (tests: a scene compiles only the features it uses; the pool keeps compiled
+    kernels serving new simulations)."""
+    compiled = ti.kernel(function)
+    templates = [i for i, parameter in enumerate(inspect.signature(function).parameters.values())
+                 if isinstance(parameter.annotation, TEMPLATE)]
+
+    @functools.wraps(function)
+    def launch(*args):
+        if _counting:
+            _launched.setdefault(launch, set()).add(tuple(_key(args[i]) for i in templates))
+        return compiled(*args)
+
+    return launch
+
+
+def _key(value):
+    """A template argument as Taichi keys it: a weak reference to an object, else the value."""
+    try:
+        return weakref.ref(value)
+    except TypeError:
+        return value
+
+
+def count_compilations(on: bool = True) -> None:
+    """Start (or stop) counting the compilations of ti_cloth's kernels (compilations())."""
+    global _counting
+    _counting = on
+
+
+def compilations(kernel_function) -> int:
+    """How many distinct compilations of `kernel_function` (a ti_cloth kernel) were launched
+    since counting started or forget_compilations; 0: it never ran."""
+    return len(_launched.get(kernel_function, ()))
+
+
+def forget_compilations(*kernel_functions) -> None:
+    """Start these kernels' counts afresh (all kernels' when none is named)."""
+    for function in kernel_functions or list(_launched):
+        _launched.pop(function, None)
 
 
 def kernel_argument(cls):

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import limits
-from ._validate import as_array, count, in_range, require
+from .validation import as_array, count, in_range, require
 from .material import Material, SpringKind, SpringParams
 from .mesh import Mesh, tet_grid_mesh
 from .topology import Cloth, unique_springs

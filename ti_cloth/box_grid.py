@@ -76,7 +76,7 @@ class BoxGrid:
         return int(d[0]) * int(d[1]) * int(d[2])
 
 
-@ti.kernel
+@backend.kernel
 def _bounds(grid: ti.template()):
     for b in range(grid.block_count):
         begin = b * BLOCK
@@ -93,7 +93,7 @@ def _bounds(grid: ti.template()):
             grid.upper[None] = ti.max(grid.upper[None], grid.block_bounds[2 * b + 1])
 
 
-@ti.kernel
+@backend.kernel
 def _layout(grid: ti.template(), side: float) -> ti.i32:
     """Cells of `side` over the bounds: 1 if they fit in cell_capacity (float volume: the
     product of int dims could overflow), else 0."""
@@ -104,7 +104,7 @@ def _layout(grid: ti.template(), side: float) -> ti.i32:
     return ti.select(ti.cast(dims[0], ti.f64) * dims[1] * dims[2] <= grid.cell_capacity, 1, 0)
 
 
-@ti.kernel
+@backend.kernel
 def _count(grid: ti.template()) -> ti.i32:
     """cell_start[k C + c + 1] = how many boxes of kind k meet cell c (integer atomics:
     exact); the entries."""
@@ -132,7 +132,7 @@ def _kind(grid: ti.template(), i):
     return kind
 
 
-@ti.kernel
+@backend.kernel
 def _fill(grid: ti.template()):
     """Exclusive prefix sum of the counts, then each item entered in its cells in item order
     (serial: a cell lists its items in increasing index)."""

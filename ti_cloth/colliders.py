@@ -20,7 +20,7 @@ import numpy as np
 import taichi as ti
 
 from . import limits
-from ._validate import as_array, finite_number, in_range, require
+from .validation import as_array, finite_number, in_range, require
 
 PLANE, SPHERE, BOX, CAPSULE, MESH = 0, 1, 2, 3, 4   # MESH: mesh_collider.py
 

@@ -7,7 +7,7 @@ import numpy as np
 import taichi as ti
 
 from . import backend, limits
-from ._validate import require
+from .validation import require
 from .colliders import MESH, Collider, Plane, signed_distance
 from .mesh_collider import MeshCollider
 from .sdf import layout, sample_grid
@@ -192,7 +192,7 @@ def place_collider(colliders: ti.template(), c, row):
             colliders.rotation_prev[c][k] = row[21 + k]
 
 
-@ti.kernel
+@backend.kernel
 def write_placement(colliders: ti.template(), rows: ti.types.ndarray()):
     """Copy ColliderSet._placement's rows into the colliders' fields (one launch per step)."""
     for c in range(colliders.count):
@@ -297,7 +297,7 @@ def resolve_particle(model: ti.template(), state: ti.template(), colliders: ti.t
             state.particle_prev_position[i] = x - v * dt
 
 
-@ti.kernel
+@backend.kernel
 def resolve_collisions(model: ti.template(), state: ti.template(), colliders: ti.template(),
                        dt: float):
     """resolve_particle for every particle."""
@@ -305,7 +305,7 @@ def resolve_collisions(model: ti.template(), state: ti.template(), colliders: ti
         resolve_particle(model, state, colliders, i, colliders.step_start[i], dt)
 
 
-@ti.kernel
+@backend.kernel
 def project_out(model: ti.template(), state: ti.template(), colliders: ti.template()):
     """Project every free particle out of every collider, positions only (no friction, the
     velocities left to the caller): for stages that move particles after the collision stage
@@ -319,7 +319,7 @@ def project_out(model: ti.template(), state: ti.template(), colliders: ti.templa
             state.particle_position[i] = x
 
 
-@ti.kernel
+@backend.kernel
 def measure_distances(colliders: ti.template(), points: ti.types.ndarray(),
                       distance: ti.types.ndarray(), normal: ti.types.ndarray()):
     """distance[p, c], normal[p, c] of points[p] from collider c (ColliderSet.distance)."""

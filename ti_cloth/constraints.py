@@ -105,7 +105,7 @@ def relax_pass(model: ti.template(), state: ti.template(), colours: ti.template(
             team.meet(worker)
 
 
-@ti.kernel
+@backend.kernel
 def relax_springs(model: ti.template(), state: ti.template(), colours: ti.template(),
                   altitude_colours: ti.template(), stiffness: ti.math.vec3,
                   altitude_stiffness: float, tearable: ti.template(), max_strain: float,
@@ -208,7 +208,7 @@ def xpbd_pass(model: ti.template(), state: ti.template(), colours: ti.template()
             team.meet(worker)
 
 
-@ti.kernel
+@backend.kernel
 def xpbd_springs(model: ti.template(), state: ti.template(), colours: ti.template(),
                  altitude_colours: ti.template(), multiplier: ti.template(),
                  altitude_multiplier: ti.template(), dt: float, tearable: ti.template(),
@@ -267,7 +267,7 @@ def damp_pass(model: ti.template(), state: ti.template(), colours: ti.template()
         team.meet(worker)
 
 
-@ti.kernel
+@backend.kernel
 def damp_springs(model: ti.template(), state: ti.template(), colours: ti.template(),
                  altitude_colours: ti.template(), dt: float, tearable: ti.template(),
                  passes: ti.i32, serial: ti.template()):

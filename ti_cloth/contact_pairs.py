@@ -45,7 +45,7 @@ class PairList:
         fields.finalize(self)
 
 
-@ti.kernel
+@backend.kernel
 def displacement_box(stage: ti.template(), state: ti.template(), since: ti.template()) -> ti.f64:
     """span[0], span[1] = the bounding box of every particle's displacement from `since`; returns
     its diagonal [m], the most any two particles moved relative to each other. Each block of
@@ -67,7 +67,7 @@ def displacement_box(stage: ti.template(), state: ti.template(), since: ti.templ
     return ti.cast((stage.span[1] - stage.span[0]).norm(), ti.f64)
 
 
-@ti.kernel
+@backend.kernel
 def sweep_boxes(stage: ti.template(), state: ti.template()):
     """Each particle's and each edge's box over the step: the box of its positions now and at
     the step's start moved by `shift`, the middle of all particles' displacements in the step
@@ -96,7 +96,7 @@ def _start(stage: ti.template(), i):
     return stage.step_start[i] + stage.shift[None]
 
 
-@ti.kernel
+@backend.kernel
 def mean_edge(stage: ti.template(), state: ti.template()) -> ti.f64:
     """The mean edge length now [m]: summed per block of BLOCK edges, then over the blocks, in
     a fixed order (the same bits on any thread count)."""
@@ -252,7 +252,7 @@ def _edge_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template()
     return found
 
 
-@ti.kernel
+@backend.kernel
 def list_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template(),
                 state: ti.template(), near: float, thickness: float, write: ti.i32):
     """Count (write = 0: pair_start[1 + t] = the pairs of triangle t, pair_start[1 + T + e] =
@@ -271,7 +271,7 @@ def list_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template(),
                 stage.pair_start[k + 1] = found
 
 
-@ti.kernel
+@backend.kernel
 def prefix_pairs(stage: ti.template()) -> ti.i32:
     """Inclusive prefix sum of the counts (serial): pair_start becomes offsets; the total."""
     stage.pair_start[0] = 0
@@ -281,7 +281,7 @@ def prefix_pairs(stage: ti.template()) -> ti.i32:
     return stage.pair_start[stage.triangle_count + stage.edge_count]
 
 
-@ti.kernel
+@backend.kernel
 def index_contacts(stage: ti.template(), pairs: ti.template()):
     """contact[contact_start[i]:contact_start[i + 1]] = the slots 4 p + k at which pair p
     moves particle i, in pair order (counts, prefix sum and fill all serial)."""

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from . import backend
-from ._validate import finite_number, require
+from .validation import finite_number, require
 from .errors import StateMismatch
 from .files import atomic_path
 from .material import SpringKind

@@ -178,7 +178,7 @@ def gather_force(model: ti.template(), state: ti.template(), forces: ti.template
     return f
 
 
-@ti.kernel
+@backend.kernel
 def accumulate_forces(model: ti.template(), state: ti.template(), forces: ti.template(),
                       springs: ti.template()):
     """state.particle_force = gather_force(i) for every particle, springs evaluated first."""

@@ -12,7 +12,7 @@ import numpy as np
 import taichi as ti
 
 from . import backend, limits
-from ._validate import as_array, in_range, require
+from .validation import as_array, in_range, require
 from .transfer import upload
 
 
@@ -48,7 +48,7 @@ class Handle:
         return self.release is None or t + dt <= self.release * (1 + 1e-12)
 
 
-@ti.kernel
+@backend.kernel
 def move_handles(state: ti.template(), index: ti.types.ndarray(), previous: ti.types.ndarray(),
                  target: ti.types.ndarray(), dt: float):
     """Put held particles on their targets, with the path's history: the previous position its

@@ -6,7 +6,7 @@ import enum
 from dataclasses import dataclass, field
 
 from . import limits
-from ._validate import finite_number, in_range, require
+from .validation import finite_number, in_range, require
 
 
 class SpringKind(enum.IntEnum):

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from . import limits
-from ._validate import as_array, count, in_range, require
+from .validation import as_array, count, in_range, require
 from .files import atomic_path
 
 PLANES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2), "zx": (2, 0), "yx": (1, 0), "zy": (2, 1)}

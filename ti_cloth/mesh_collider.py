@@ -15,7 +15,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import limits
-from ._validate import as_array, count, require
+from .validation import as_array, count, require
 from .colliders import MESH, Collider
 from .mesh import Mesh, triangle_edges, unique_rows
 from .sdf import DistanceGrid, distance_grid, layout

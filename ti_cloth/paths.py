@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import limits
-from ._validate import as_array, finite_number, require
+from .validation import as_array, finite_number, require
 
 INTERPOLATIONS = ("linear", "smooth")
 

@@ -34,7 +34,7 @@ import numpy as np
 import taichi as ti
 
 from . import backend, limits
-from ._validate import count, finite_number, require
+from .validation import count, finite_number, require
 from .box_grid import BLOCK, BoxGrid
 from .collision import project_out
 from .contact_pairs import (PairList, displacement_box, index_contacts, list_pairs, mean_edge,
@@ -344,7 +344,7 @@ def _contact_move(stage: ti.template(), pairs: ti.template(), model: ti.template
                                       * (gap * n + slip * tangential))
 
 
-@ti.kernel
+@backend.kernel
 def evaluate_contacts(stage: ti.template(), pairs: ti.template(), model: ti.template(),
               state: ti.template(), thickness: float,
               friction: float) -> ti.types.vector(2, ti.i32):
@@ -380,7 +380,7 @@ def evaluate_contacts(stage: ti.template(), pairs: ti.template(), model: ti.temp
     return stage.touching[None]
 
 
-@ti.kernel
+@backend.kernel
 def apply_contacts(stage: ti.template(), pairs: ti.template(), model: ti.template(),
                     state: ti.template()):
     """Each particle moves by the mean of its contacts' moves, gathered in pair order."""
@@ -397,7 +397,7 @@ def apply_contacts(stage: ti.template(), pairs: ti.template(), model: ti.templat
                 state.particle_position[i] += move / contacts
 
 
-@ti.kernel
+@backend.kernel
 def follow_corrections(stage: ti.template(), state: ti.template(), dt: float):
     """Velocities follow the contact corrections of this stage (v += dx / h)."""
     for i in range(stage.particle_count):

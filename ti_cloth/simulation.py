@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from . import backend, limits, saved_state, stepping
-from ._validate import as_array, in_range, integer, require
+from .validation import as_array, in_range, integer, require
 from .collision import ColliderSet
 from .self_collision import SelfCollision, SelfContact, SelfContacts, warn_if_thick
 from .errors import SimulationDiverged, StaleSimulation

@@ -98,7 +98,7 @@ class State:
         self.prev_valid = False
 
 
-@ti.kernel
+@backend.kernel
 def _reset(state: ti.template(), rest_position: ti.template(), position_limit: ti.f64):
     for i in state.particle_position:
         state.particle_position[i] = rest_position[i]
@@ -121,7 +121,7 @@ def store_particle(state: ti.template(), i, x, v, step):
         ti.atomic_min(state.first_bad_step[None], step)
 
 
-@ti.kernel
+@backend.kernel
 def copy_positions(state: ti.template(), target: ti.template()):
     """target[i] = particle_position[i] (a snapshot for corrections applied after a step)."""
     for i in target:

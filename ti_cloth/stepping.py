@@ -162,7 +162,7 @@ def _run(integrator: ti.template(), model: ti.template(), state: ti.template(),
                      dt, settings)
 
 
-@ti.kernel
+@backend.kernel
 def advance_many(integrator: ti.template(), model: ti.template(), state: ti.template(),
                  forces: ti.template(), work: ti.template(), stages: ti.template(),
                  team: ti.template(), dt: float, first: ti.i32, count: ti.i32, start: ti.i32,

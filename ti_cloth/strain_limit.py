@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import taichi as ti
 
 from . import backend, limits
-from ._validate import count, finite_number, require
+from .validation import count, finite_number, require
 from .constraints import relax_springs, sweep
 from .material import SpringKind
 from .state import copy_positions
@@ -67,11 +67,11 @@ class StrainLimiter:
         # the lecture's relaxation, for stretched springs only
         sweep(relax_springs, model, state, self.limit.passes, self.limit.kind_mask(), 0.0,
               self.tearable, self.limit.max_strain, True)
-        _follow_velocity(state, self, dt)
+        follow_velocity(state, self, dt)
 
 
-@ti.kernel
-def _follow_velocity(state: ti.template(), limiter: ti.template(), dt: float):
+@backend.kernel
+def follow_velocity(state: ti.template(), limiter: ti.template(), dt: float):
     """v += correction / dt, so force-based integrators carry on from the corrected motion
     (Verlet-type history already does: it differences positions)."""
     for i in limiter.before:

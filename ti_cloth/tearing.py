@@ -7,7 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from ._validate import finite_number
+from .validation import finite_number
+from . import backend
 
 
 @dataclass(frozen=True, init=False)
@@ -48,7 +49,7 @@ class Tearing:
 RUNAWAY_STRAIN = 0.5
 
 
-@ti.kernel
+@backend.kernel
 def tear_springs(model: ti.template(), state: ti.template(), strain: float, step: ti.i32):
     """Remove every intact spring longer than (1 + strain) x rest; record the step it tore."""
     tear_overstretched(model, state, strain, step, 0, model.spring_count)

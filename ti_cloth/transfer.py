@@ -3,7 +3,7 @@
 import numpy as np
 import taichi as ti
 
-from .backend import numpy_dtype
+from . import backend
 
 
 def upload(pairs) -> None:
@@ -21,7 +21,7 @@ def upload(pairs) -> None:
         if len(values) == 0:
             continue
         width = values.shape[1] if values.ndim == 2 else 0
-        typed = np.ascontiguousarray(values, dtype=numpy_dtype(field.dtype))
+        typed = np.ascontiguousarray(values, dtype=backend.numpy_dtype(field.dtype))
         chunks.append(typed.astype(np.float64).ravel())   # exact for f32, f64, i8 and i32
         groups.setdefault(len(values), []).append((len(targets), offset, width, field.dtype))
         targets.append(field)
@@ -32,7 +32,7 @@ def upload(pairs) -> None:
         _copy_in(tuple(targets), np.concatenate(chunks), layout)
 
 
-@ti.kernel
+@backend.kernel
 def _copy_in(targets: ti.template(), data: ti.types.ndarray(), layout: ti.template()):
     """One loop over the most rows (layout[0], the longest group, first); in it, for each group (rows, members) of layout that has
     row i, for each member (k, offset, width, dtype): targets[k][i] = data[offset + i] (a

@@ -25,7 +25,7 @@ import numpy as np
 import taichi as ti
 
 from . import backend, limits
-from ._validate import as_array, finite_number, in_range, integer, require
+from .validation import as_array, finite_number, in_range, integer, require
 from .mesh import vertex_triangles
 from .transfer import upload
 
@@ -115,7 +115,7 @@ class WindField:
     @staticmethod
     def structure(wind: Wind, cloth) -> tuple:
         """What the kernel of a WindField reads at compile time (the counts and the Wind's
-        attributes _accumulate_wind reads; velocity, gust and seed are uploaded): fields of
+        attributes wind_forces reads; velocity, gust and seed are uploaded): fields of
         equal structure are interchangeable once load() has run (pool.py). Raises ValueError
         unless `wind` is a Wind and the cloth has triangles."""
         require(isinstance(wind, Wind), "wind", wind, "None or a ti_cloth.Wind")
@@ -212,8 +212,8 @@ def wind_on_particles(wind: ti.template(), begin, end):
         wind.particle_wind_force[i] = f
 
 
-@ti.kernel
-def _accumulate_wind(model: ti.template(), state: ti.template(), wind: ti.template(),
+@backend.kernel
+def wind_forces(model: ti.template(), state: ti.template(), wind: ti.template(),
                      mean: ti.math.vec3, drift: ti.math.vec3, tearable: ti.template()):
     wind_on_triangles(model, state, wind, mean, drift, tearable, 0, wind.triangle_count)
     wind_on_particles(wind, 0, model.particle_count)
@@ -223,4 +223,4 @@ def accumulate_wind(model, state, wind: WindField, tearable: bool) -> None:
     """wind.particle_wind_force = every triangle's aerodynamic force (module doc) at the current
     state, gathered per particle over its triangles in a fixed order (forces.gather_force
     adds it)."""
-    _accumulate_wind(model, state, wind, wind.mean, wind.drift, tearable)
+    wind_forces(model, state, wind, wind.mean, wind.drift, tearable)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 import platform
 import sys
 import time
@@ -243,16 +242,14 @@ def info() -> int:
     import numpy
     import taichi as ti
 
-    backend.init(arch="cpu")
-    core = ti._lib.core
-    built_with = [name for name in ("cuda", "vulkan") if getattr(core, f"with_{name}", lambda: False)()]
+    config = backend.init(arch="cpu")
     print(f"ti_cloth {version('ti_cloth')}\n"
           f"python   {platform.python_version()} ({platform.platform()})\n"
           f"taichi   {'.'.join(map(str, ti.__version__))}\n"
           f"numpy    {numpy.__version__}\n"
-          f"arch     {ti.lang.impl.current_cfg().arch.name} (GPU backends available: "
-          f"{', '.join(built_with) or 'none'})\n"
-          f"threads  {os.cpu_count()}")
+          f"arch     {config.arch} (a GPU with --arch gpu: Taichi falls back to the CPU "
+          "without one)\n"
+          f"threads  {backend.cpu_threads()} Taichi CPU threads, {backend.cpu_cores()} cores")
     return 0
 
 

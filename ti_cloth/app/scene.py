@@ -9,7 +9,7 @@ from __future__ import annotations
 import inspect
 import math
 import re
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -21,11 +21,9 @@ from ..handles import Handle
 from ..integrators import INTEGRATORS
 from ..material import DAMPING_MODELS, PRESETS, Material, SpringParams
 from ..mesh import PLANES, Mesh, grid_mesh, load_mesh
-from ..export import FORMATS
 from ..mesh_collider import MeshCollider
 from ..paths import INTERPOLATIONS, Keyframes, Oscillation
 from ..render.camera import Camera
-from ..render.renderer import SurfaceStyle
 from ..simulation import Simulation
 from ..stability import auto_substeps
 from ..self_collision import SelfCollision
@@ -33,32 +31,14 @@ from ..strain_limit import StrainLimit
 from ..topology import Cloth
 from ..wind import Wind
 from .scene_file import SceneError, Table, load_toml
+from .scene_output import Output, read_camera, read_output
 
 BODY_TYPES = ("grid", "mesh", "string", "hair", "tet_block")
 COLLIDER_TYPES = {"plane": Plane, "sphere": Sphere, "box": Box, "capsule": Capsule,
                   "mesh": MeshCollider}
-VIEWS = ("3d", "2d")
 NAME_FORBIDDEN = r"[^\w .-]"
 GUARD_SIZES = 100.0   # a run has diverged once a coordinate is this many body sizes out
 ADVICE_WINDOW = 1.0   # s: integrator = "auto" advises on at most this much of the scene by default
-
-
-@dataclass
-class Output:
-    """Where and how frames are written."""
-
-    folder: Path
-    gif: bool = True
-    mp4: bool = False
-    width: int = 640
-    height: int = 360
-    supersample: int = 2
-    gif_width: int = 480
-    view: str = "3d"
-    ground: float | None = None
-    style: SurfaceStyle = field(default_factory=SurfaceStyle)
-    export: tuple = ()          # geometry formats (export.FORMATS) written beside the frames
-    checkpoint_every: int | None = None   # frames between saved states (None: runner decides)
 
 
 @dataclass(frozen=True)
@@ -180,7 +160,7 @@ def load_scene(path, note=None) -> Scene:
         dt = sim.number("dt", within=limits.DT)
         substeps = max(1, math.ceil(1.0 / fps / dt - 1e-9))
         if substeps > limits.SUBSTEPS.high:
-            sim._bad("dt", dt, f">= {1.0 / fps / limits.SUBSTEPS.high:.3g} s at fps = {fps:g} "
+            sim.bad("dt", dt, f">= {1.0 / fps / limits.SUBSTEPS.high:.3g} s at fps = {fps:g} "
                      f"(at most {limits.SUBSTEPS.high:_} steps per frame)")
     advice = _advice_request(sim, fps, frames) if automatic else None
     precision = sim.string("precision", _default(backend.init, "precision"),
@@ -232,8 +212,8 @@ def load_scene(path, note=None) -> Scene:
     colliders = [_collider(t, path.parent) for t in root.tables("colliders")]
 
     camera_table = root.table("camera")
-    camera, camera_fit = _camera(camera_table) if camera_table is not None else (None, {})
-    output = _output(root.table("output") or Table({}, "output", str(path)), name, colliders)
+    camera, camera_fit = read_camera(camera_table) if camera_table is not None else (None, {})
+    output = read_output(root.table("output") or Table({}, "output", str(path)), name, colliders)
     root.finish()
     scene = Scene(name=name, source=path, description=description, cloth=cloth,
                   integrator=integrator, fps=fps, frames=max(frames, 1), substeps=substeps,
@@ -244,7 +224,7 @@ def load_scene(path, note=None) -> Scene:
     if note is not None and cloth.spring_count > limits.LARGE_BODY:
         note(f"'{name}' has {cloth.particle_count:,} particles and {cloth.spring_count:,} "
              "springs: finding its stable step takes a while")
-    _check_runnable(scene, root)
+    check_runnable(scene, root)
     return scene
 
 
@@ -259,11 +239,11 @@ def _advice_request(sim: Table, fps: float, frames: int) -> AdviceRequest:
     duration = frames / fps
     window = sim.number("window", min(ADVICE_WINDOW, duration), minimum=0.0, strict=True, unit="s")
     if window > duration:
-        sim._bad("window", window, f"<= the duration, {duration:g} s")
+        sim.bad("window", window, f"<= the duration, {duration:g} s")
     candidates = sim.value("integrators", None)
     if candidates is not None and (not isinstance(candidates, list) or not candidates
                                    or not set(candidates) <= set(INTEGRATORS)):
-        sim._bad("integrators", candidates, f"a list of some of {sorted(INTEGRATORS)}")
+        sim.bad("integrators", candidates, f"a list of some of {sorted(INTEGRATORS)}")
     return AdviceRequest(tolerance, metric, window,
                          tuple(candidates) if candidates is not None else None, ())
 
@@ -277,12 +257,12 @@ def _name(meta: Table, stem: str) -> str:
     name = meta.string("name")
     if not (0 < len(name) <= limits.NAME_LENGTH and not name.startswith(".")
             and not re.search(NAME_FORBIDDEN, name)):
-        meta._bad("name", name, f"1 to {limits.NAME_LENGTH} letters, digits, spaces, '_', '-' or "
+        meta.bad("name", name, f"1 to {limits.NAME_LENGTH} letters, digits, spaces, '_', '-' or "
                   "'.' (it names files), not starting with '.'")
     return name
 
 
-def _check_runnable(scene: Scene, root: Table) -> None:
+def check_runnable(scene: Scene, root: Table) -> None:
     """What only the whole scene decides, checked before anything runs: the wind has triangles
     to act on, the step count per frame and per run, and the camera can frame the body."""
     if scene.wind is not None and scene.cloth.mesh.triangle_count == 0:
@@ -356,7 +336,7 @@ def _material(owner: Table) -> Material:
         return Material()
     if isinstance(value, str):
         if value not in PRESETS:
-            owner._bad("material", value, f"a table or one of the presets {sorted(PRESETS)}")
+            owner.bad("material", value, f"a table or one of the presets {sorted(PRESETS)}")
         return Material.preset(value)
     table = Table(value, owner.path("material"), owner.source)
     preset = table.string("preset", None, sorted(PRESETS)) if table.has("preset") else None
@@ -394,7 +374,7 @@ def _indices(table: Table, key: str, count: int, named: dict | None = None) -> l
             result.append(item)
         else:
             names = f" or one of {list(named)}" if named else ""
-            table._bad(key, item, f"particle indices in [0, {count - 1}]{names}")
+            table.bad(key, item, f"particle indices in [0, {count - 1}]{names}")
     return sorted(set(result))
 
 
@@ -533,70 +513,3 @@ def _wind(table: Table) -> Wind:
     wind = table.build(Wind, **options)
     table.finish()
     return wind
-
-
-def _camera(table: Table):
-    """(an explicit Camera, {}) when `position` is given, else (None, the Camera.fit options:
-    direction, up, fov) to fit the body."""
-    options = {}
-    table.optional(options, "up", "vector")
-    table.optional(options, "fov", within=limits.FOV)
-    if table.has("position"):
-        options["position"] = table.vector("position", unit="m")
-        table.optional(options, "target", "vector", unit="m")
-        camera = table.build(Camera, **options)
-        table.finish()
-        return camera, {}
-    table.optional(options, "direction", "vector")
-    table.finish()
-    return None, options
-
-
-def _output(table: Table, name: str, colliders) -> Output:
-    formats = table.value("formats", ["png", "gif"])
-    if (not isinstance(formats, list) or not set(formats) <= {"png", "gif", "mp4", *FORMATS}
-            or "png" not in formats):
-        table._bad("formats", formats, 'a list of "png" (always) and any of "gif", "mp4", '
-                   + ", ".join(f'"{f}"' for f in FORMATS))
-    ground = table.value("ground", "auto")
-    if ground == "auto":
-        planes = [c for c in colliders if isinstance(c, Plane) and c.normal == (0.0, 1.0, 0.0)]
-        ground = planes[0].point[1] if planes else None
-    elif ground is False:
-        ground = None
-    elif (isinstance(ground, bool) or not isinstance(ground, (int, float))
-          or not limits.COORDINATE.low <= ground <= limits.COORDINATE.high):
-        table._bad("ground", ground, f'"auto", false or a height {limits.COORDINATE.text()}')
-    options = {}
-    table.optional(options, "style", lambda k: _style(table.table(k)))
-    for key, within in (("width", limits.IMAGE_SIDE), ("height", limits.IMAGE_SIDE),
-                        ("supersample", limits.SUPERSAMPLE), ("gif_width", limits.IMAGE_SIDE)):
-        table.optional(options, key, "integer", within=within)
-    table.optional(options, "view", "string", choices=VIEWS)
-    table.optional(options, "checkpoint_every", "integer", within=limits.FRAMES)
-    folder = table.string("folder", f"renders/{name}")
-    if not folder or "\0" in folder:
-        table._bad("folder", folder, "a folder path")
-    output = Output(folder=Path(folder), gif="gif" in formats, mp4="mp4" in formats,
-                    ground=ground, export=tuple(f for f in FORMATS if f in formats), **options)
-    samples = output.width * output.height * output.supersample**2
-    if samples > limits.SAMPLES:
-        table._bad("width", output.width, f"such that width x height x supersample^2 "
-                   f"({output.width} x {output.height} x {output.supersample}^2) <= {limits.SAMPLES:_}")
-    table.finish()
-    return output
-
-
-def _style(table: Table) -> SurfaceStyle:
-    options = {}
-    for key in ("front", "back", "wire_colour", "particle_colour", "pin_colour"):
-        if table.has(key):
-            options[key] = table.vector(key)
-    for key in ("checker", "strain_max", "wireframe", "particles", "line_width", "checker_contrast"):
-        if table.has(key):
-            options[key] = table.number(key, minimum=0.0)
-    if table.has("strain"):
-        options["strain"] = table.boolean("strain")
-    style = table.build(SurfaceStyle, **options)
-    table.finish()
-    return style

@@ -65,7 +65,8 @@ class Table:
             self.fail(f"{self.path(key)} is required")
         return default
 
-    def _bad(self, key: str, value, allowed: str):
+    def bad(self, key: str, value, allowed: str):
+        """Raise the scene file's error for `key`: its path, what is allowed, the value."""
         self.fail(f"{self.path(key)} must be {allowed}, got {value!r:.80}")
 
     def number(self, key: str, default=MISSING, minimum: float | None = None, *,
@@ -77,11 +78,11 @@ class Table:
         if within is not None:
             allowed, minimum, strict = f"a number {within.text()}", within.low, False
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            self._bad(key, value, allowed)
+            self.bad(key, value, allowed)
         if minimum is not None and (value <= minimum if strict else value < minimum):
-            self._bad(key, value, allowed)
+            self.bad(key, value, allowed)
         if within is not None and value > within.high:
-            self._bad(key, value, allowed)
+            self.bad(key, value, allowed)
         return float(value)
 
     def integer(self, key: str, default=MISSING, minimum: int | None = None, *,
@@ -93,19 +94,19 @@ class Table:
                                   "" if minimum is None else f" >= {minimum}")
         if (isinstance(value, bool) or not isinstance(value, int) or (low is not None and value < low)
                 or (high is not None and value > high)):
-            self._bad(key, value, allowed)
+            self.bad(key, value, allowed)
         return value
 
     def string(self, key: str, default=MISSING, choices=None) -> str:
         value = self._get(key, default)
         if not isinstance(value, str) or (choices is not None and value not in choices):
-            self._bad(key, value, "a string" if choices is None else f"one of {list(choices)}")
+            self.bad(key, value, "a string" if choices is None else f"one of {list(choices)}")
         return value
 
     def boolean(self, key: str, default=MISSING) -> bool:
         value = self._get(key, default)
         if not isinstance(value, bool):
-            self._bad(key, value, "true or false")
+            self.bad(key, value, "true or false")
         return value
 
     def vector(self, key: str, default=MISSING, length: int = 3, unit: str = "",
@@ -118,7 +119,7 @@ class Table:
                       and low <= v <= high for v in value))
         if not ok:
             each = f", each {within.text()}" if within else f" [{unit}]" if unit else ""
-            self._bad(key, value, f"a list of {length} numbers{each}")
+            self.bad(key, value, f"a list of {length} numbers{each}")
         return tuple(float(v) for v in value)
 
     def value(self, key: str, default=MISSING) -> Any:
@@ -142,7 +143,7 @@ class Table:
     def tables(self, key: str) -> list[Table]:
         value = self._get(key, [])
         if not isinstance(value, list):
-            self._bad(key, value, "an array of tables ([[" + self.path(key) + "]])")
+            self.bad(key, value, "an array of tables ([[" + self.path(key) + "]])")
         return [Table(v, f"{self.path(key)}[{i}]", self.source) for i, v in enumerate(value)]
 
     def finish(self, also=()) -> None:

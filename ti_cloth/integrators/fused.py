@@ -51,7 +51,7 @@ class _Stageless:
 STAGELESS = _Stageless()
 
 
-@ti.kernel
+@backend.kernel
 def advance_one(integrator: ti.template(), model: ti.template(), state: ti.template(),
                 forces: ti.template(), dt: float, step: ti.i32, start: ti.i32):
     """One step, its loops in parallel. start: 1 if the state has no history yet."""

@@ -26,7 +26,7 @@ import math
 import taichi as ti
 
 from .. import backend, limits
-from .._validate import count, finite_number, require
+from ..validation import count, finite_number, require
 from ..forces import (altitude_gradient, compute_forces, evaluate_altitudes, evaluate_springs,
                       gather_force)
 from ..state import store_particle
@@ -280,8 +280,8 @@ def _advance_block(model: ti.template(), state: ti.template(), ws: ti.template()
         store_particle(state, i, state.particle_position[i] + dt * v, v, step)
 
 
-@ti.kernel
-def _linearise(model: ti.template(), state: ti.template(), ws: ti.template(), dt: float,
+@backend.kernel
+def linearise(model: ti.template(), state: ti.template(), ws: ti.template(), dt: float,
                drag: float, tearable: ti.template()):
     """The linearisation at x_n and the CG start (_start_block), with r . z, r . r and b . b."""
     _linearise_springs(model, state, ws, tearable, 0, model.spring_count)
@@ -297,8 +297,8 @@ def _linearise(model: ti.template(), state: ti.template(), ws: ti.template(), dt
         ws.scalar[BB] = total[1]
 
 
-@ti.kernel
-def _apply(model: ti.template(), state: ti.template(), ws: ti.template(), dt: float, drag: float,
+@backend.kernel
+def apply_system(model: ti.template(), state: ti.template(), ws: ti.template(), dt: float, drag: float,
            tearable: ti.template()):
     """ap = A p (rows of pinned particles 0) and p . ap."""
     if ti.static(model.altitude_count > 0):
@@ -309,7 +309,7 @@ def _apply(model: ti.template(), state: ti.template(), ws: ti.template(), dt: fl
         ws.scalar[PAP] = _total(ws, ws.partial_pap, 0.0)
 
 
-@ti.kernel
+@backend.kernel
 def _iterate(model: ti.template(), ws: ti.template()):
     """One CG update after ap = A p: dv += alpha p, r -= alpha ap, z = r / diag,
     then p = z + beta p (alpha = r.z / p.Ap, beta = new r.z / old r.z)."""
@@ -324,7 +324,7 @@ def _iterate(model: ti.template(), ws: ti.template()):
         _turn_block(model, ws, block, ws.scalar[BETA])
 
 
-@ti.kernel
+@backend.kernel
 def _advance(model: ti.template(), state: ti.template(), ws: ti.template(), dt: float, step: ti.i32):
     for block in range(ws.block_count):
         _advance_block(model, state, ws, block, dt, step)
@@ -435,11 +435,11 @@ class ImplicitEuler(Integrator):
     def step(self, model, state, dt, forces, step_index):
         ws = self.workspace(model, state)
         compute_forces(model, state, forces)
-        _linearise(model, state, ws, dt, forces.drag, forces.tearable)
+        linearise(model, state, ws, dt, forces.drag, forces.tearable)
         iterations = 0
         goal = self.tolerance ** 2 * ws.scalar[BB]   # b = 0 (no load on a free particle): dv = 0
         while ws.scalar[RR] > goal and iterations < self.max_iterations:
-            _apply(model, state, ws, dt, forces.drag, forces.tearable)
+            apply_system(model, state, ws, dt, forces.drag, forces.tearable)
             _iterate(model, ws)
             iterations += 1
         bb = ws.scalar[BB]

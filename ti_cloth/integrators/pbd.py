@@ -5,8 +5,8 @@ from collections.abc import Mapping
 
 import taichi as ti
 
-from .. import limits
-from .._validate import count, finite_number, require
+from .. import backend, limits
+from ..validation import count, finite_number, require
 from ..constraints import SweepOrder, relax_pass, relax_springs, sweep
 from ..forces import compute_forces, gather_force
 from ..material import SpringKind
@@ -23,13 +23,13 @@ def velocity_from_positions(state: ti.template(), i, dt, step):
     store_particle(state, i, x, (x - state.particle_prev_position[i]) / dt, step)
 
 
-@ti.kernel
+@backend.kernel
 def update_velocity(model: ti.template(), state: ti.template(), dt: float, step: ti.i32):
     for i in range(model.particle_count):
         velocity_from_positions(state, i, dt, step)
 
 
-@ti.kernel
+@backend.kernel
 def _predict(model: ti.template(), state: ti.template(), dt: float, damping: float, start: ti.i32,
              step: ti.i32):
     """Verlet prediction under the external forces in particle_force."""

@@ -33,8 +33,8 @@ class _Stages:
         fields.finalize(self)
 
 
-@ti.kernel
-def _stage(model: ti.template(), state: ti.template(), stages: ti.template(), dt: float,
+@backend.kernel
+def rk4_stage(model: ti.template(), state: ti.template(), stages: ti.template(), dt: float,
            stage: ti.template(), step: ti.i32):
     for i in range(model.particle_count):
         _stage_particle(model, state, stages, i, dt, stage, step)
@@ -106,7 +106,7 @@ class RK4(Integrator):
         stages = self.workspace(model, state)
         for s in range(4):
             compute_forces(model, state, forces)    # f at stage s (x0 and v0 for s = 0)
-            _stage(model, state, stages, dt, s, step_index)
+            rk4_stage(model, state, stages, dt, s, step_index)
         state.prev_valid = False
 
     def mode_stable_step(self, w2, g):

@@ -5,7 +5,7 @@ constraints with compliance 1 / k, so the cloth has its material stiffness in N/
 import taichi as ti
 
 from .. import backend, limits
-from .._validate import count
+from ..validation import count
 from ..constraints import damp_pass, damp_springs, sweep, xpbd_pass, xpbd_springs
 from ..forces import compute_forces, gather_force
 from . import fused
@@ -22,8 +22,8 @@ def _predict_particle(model: ti.template(), state: ti.template(), i, dt):
     state.particle_position[i] = x + dt * v
 
 
-@ti.kernel
-def _predict(model: ti.template(), state: ti.template(), dt: float):
+@backend.kernel
+def xpbd_predict(model: ti.template(), state: ti.template(), dt: float):
     for i in range(model.particle_count):
         _predict_particle(model, state, i, dt)
 
@@ -107,7 +107,7 @@ class XPBD(Integrator):
 
     def step(self, model, state, dt, forces, step_index):
         compute_forces(model, state, forces, springs=False)   # external forces only
-        _predict(model, state, dt)
+        xpbd_predict(model, state, dt)
         if model.spring_count + model.altitude_count:
             multipliers = self.workspace(model, state)
             multipliers.value.fill(0)

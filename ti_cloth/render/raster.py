@@ -18,6 +18,7 @@ keep the camera outside the bodies it looks at.
 """
 
 import taichi as ti
+from .. import backend
 
 INF_BITS = 0x7F800000             # the bit pattern of f32 +inf
 EMPTY = INF_BITS << 32             # +inf depth, black: "nothing drawn here"
@@ -100,13 +101,13 @@ def bounding_box(lo, hi, samples: ti.template()):
     return x0, x1, y0, y1
 
 
-@ti.kernel
+@backend.kernel
 def clear(samples: samples_type):
     for i, j in samples:
         samples[i, j] = ti.i64(EMPTY)
 
 
-@ti.kernel
+@backend.kernel
 def vertex_stage(cam: ndarray_f32_1, position: ndarray_f32_2, triangles: ndarray_i32_2,
                  visible: ndarray_i32_1, vertex_start: ndarray_i32_1,
                  vertex_triangles: ndarray_i32_1, screen: ndarray_f32_2, normal: ndarray_f32_2):
@@ -147,7 +148,7 @@ def strain_ramp(strain, strain_max):
     return ti.math.mix(cold, warm, 2 * t) if t < 0.5 else ti.math.mix(warm, hot, 2 * t - 1)
 
 
-@ti.kernel
+@backend.kernel
 def raster_triangles(samples: samples_type, cam: ndarray_f32_1, triangles: ndarray_i32_2,
                      visible: ndarray_i32_1, screen: ndarray_f32_2, normal: ndarray_f32_2,
                      rest: ndarray_f32_2, strain: ndarray_f32_1, vertex_colour: ndarray_f32_2,
@@ -205,7 +206,7 @@ def raster_triangles(samples: samples_type, cam: ndarray_f32_1, triangles: ndarr
                         ti.atomic_min(samples[x, y], pack(depth, colour))
 
 
-@ti.kernel
+@backend.kernel
 def raster_segments(samples: samples_type, cam: ndarray_f32_1, position: ndarray_f32_2,
                     segments: ndarray_i32_2, colour: ndarray_f32_2, width: float,
                     light: ti.math.vec3, ambient: float):
@@ -236,7 +237,7 @@ def raster_segments(samples: samples_type, cam: ndarray_f32_1, position: ndarray
                     ti.atomic_min(samples[x, y], pack(mu[0] * a[2] + mu[1] * b[2], shaded))
 
 
-@ti.kernel
+@backend.kernel
 def raster_discs(samples: samples_type, cam: ndarray_f32_1, position: ndarray_f32_2,
                  colour: ndarray_f32_2, radius: float, depth_bias: float):
     """Flat discs of `radius` samples at points, pulled `depth_bias` (a fraction of their
@@ -252,7 +253,7 @@ def raster_discs(samples: samples_type, cam: ndarray_f32_1, position: ndarray_f3
                     ti.atomic_min(samples[x, y], key)
 
 
-@ti.kernel
+@backend.kernel
 def resolve(samples: samples_type, image: ti.types.ndarray(dtype=ti.u8, ndim=3),
             top: ti.math.vec3, bottom: ti.math.vec3, supersample: ti.i32):
     """Average supersample x supersample samples per pixel (a box filter); empty samples show

@@ -19,7 +19,7 @@ import numpy as np
 import taichi as ti
 
 from .. import backend, limits
-from .._validate import as_array, finite_number, in_range, integer, require
+from ..validation import as_array, finite_number, in_range, integer, require
 from ..backend import taichi_dtype
 from ..colliders import BOX, CAPSULE, SPHERE, Box, Capsule, Plane, Sphere
 from ..mesh_collider import MeshCollider

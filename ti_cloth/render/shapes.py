@@ -7,6 +7,7 @@ import taichi as ti
 
 from ..colliders import BOX, SPHERE
 from .raster import EMPTY, camera_basis, lambert, ndarray_f32_1, pack, samples_type
+from .. import backend
 
 MISS = -1.0
 
@@ -99,7 +100,7 @@ def plot_hit(samples: ti.template(), x, y, t, depth_per_t, near, colour):
     samples[x, y] = ti.min(samples[x, y], hit_key(t, depth_per_t, near, colour))
 
 
-@ti.kernel
+@backend.kernel
 def raster_plane(samples: samples_type, cam: ndarray_f32_1, point: ti.math.vec3,
                  normal: ti.math.vec3, axis_u: ti.math.vec3, axis_v: ti.math.vec3,
                  colour: ti.math.vec3, cell: float, contrast: float, fade: float,
@@ -128,7 +129,7 @@ def raster_plane(samples: samples_type, cam: ndarray_f32_1, point: ti.math.vec3,
             samples[x, y] = ti.min(samples[x, y], key)
 
 
-@ti.kernel
+@backend.kernel
 def raster_solid(samples: samples_type, cam: ndarray_f32_1, shape: ti.template(),
                  a: ti.math.vec3, b: ti.math.vec3, radius: float, colour: ti.math.vec3,
                  light: ti.math.vec3, ambient: float):

@@ -4,11 +4,12 @@ particle is beyond its rest length — the quantity tearing (Stuyck 4.5) compare
 import numpy as np
 import taichi as ti
 
-from .._validate import as_array, require
+from ..validation import as_array, require
 from .raster import ndarray_f32_1, ndarray_f32_2, ndarray_i32_1, ndarray_i32_2
+from .. import backend
 
 
-@ti.kernel
+@backend.kernel
 def _max_spring_strain(position: ndarray_f32_2, springs: ndarray_i32_2, rest: ndarray_f32_1,
                        alive: ndarray_i32_1, strain: ndarray_f32_1):
     for i in range(strain.shape[0]):
