@@ -33,11 +33,12 @@ from ti_cloth import stepping
 from throughput import scene
 
 PLANS = ("launch per step", "one worker", "team", "timed choice")
+THRESHOLD = stepping.TEAM_MIN_SPRING_STEPS   # work below which step(n) runs on one worker
 
 
 def per_step_us(sim, plan: str, count: int, repeats: int) -> np.ndarray:
     """Microseconds per step of `repeats` calls that each advance `count` steps."""
-    stepping.TEAM_MIN_SPRING_STEPS = 1 << 62 if plan == "one worker" else 0
+    stepping.TEAM_MIN_SPRING_STEPS = {"one worker": 1 << 62, "team": 0}.get(plan, THRESHOLD)
     sim.many_steps.adaptive = plan == "timed choice"
     times = []
     for _ in range(repeats + 1):                      # the first call compiles
@@ -65,7 +66,6 @@ def main(argv=None):
     args = parser.parse_args(argv)
     tc.init(arch="cpu", precision="f32", threads=args.threads)
     busy = (subprocess.Popen([sys.executable, "-c", "while True: pass"]) if args.busy else None)
-    threshold = stepping.TEAM_MIN_SPRING_STEPS
     print(f"{'N':>5} {'springs':>9} {'steps/call':>10}  "
           + "  ".join(f"{plan + ' (p50/p90)':>26}" for plan in PLANS) + f"  {'step(n) picks':>13}")
     for n in args.sizes:
@@ -78,7 +78,7 @@ def main(argv=None):
             for plan in PLANS:
                 us = per_step_us(sim, plan, count, args.repeats)
                 cells.append(f"{np.median(us):>12.1f} / {np.percentile(us, 90):>11.1f}")
-            stepping.TEAM_MIN_SPRING_STEPS = threshold
+            stepping.TEAM_MIN_SPRING_STEPS = THRESHOLD
             many = sim.many_steps
             picked = many.workers_for(sim.integrator, sim.model,
                                       min(count, many.steps_per_launch(sim.integrator, sim.model)))

@@ -12,7 +12,7 @@ import time
 from dataclasses import asdict
 
 import ti_cloth as tc
-from ti_cloth import backend
+from ti_cloth.runtime import backend
 from ti_cloth.app import study, sweep
 
 

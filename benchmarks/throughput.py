@@ -33,7 +33,7 @@ import numpy as np
 import taichi as ti
 
 import ti_cloth as tc
-from ti_cloth import backend
+from ti_cloth.runtime import backend
 
 import peers
 

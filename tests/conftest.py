@@ -21,7 +21,7 @@ import tempfile
 import pytest
 
 from helpers import use
-from ti_cloth import backend
+from ti_cloth.runtime import backend
 
 # mesh colliders cache their distance grids on disk: the tests' go to a folder of their own,
 # removed when the process (each xdist worker has its own) exits

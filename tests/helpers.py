@@ -7,7 +7,7 @@ import imageio.v3 as iio
 import numpy as np
 
 import ti_cloth as tc
-from ti_cloth import backend
+from ti_cloth.runtime import backend
 from ti_cloth.render import write_png
 
 

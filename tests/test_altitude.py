@@ -7,9 +7,9 @@ import pytest
 
 import ti_cloth as tc
 from helpers import report
-from ti_cloth import backend
-from ti_cloth.forces import compute_forces, energies
-from ti_cloth.topology import altitude_springs, color_springs
+from ti_cloth.runtime import backend
+from ti_cloth.physics.forces import compute_forces, energies
+from ti_cloth.body.topology import altitude_springs, color_springs
 
 G = 9.81
 

@@ -9,7 +9,7 @@ import pytest
 
 import ti_cloth as tc
 from helpers import compiled, forget_compiled, report
-from ti_cloth import collision as colliders_module
+from ti_cloth.contact import collision as colliders_module
 from ti_cloth.state import copy_positions
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from ti_cloth.forces import ForceSettings, compute_forces, energies
+from ti_cloth.physics.forces import ForceSettings, compute_forces, energies
 from helpers import report
 
 

@@ -13,7 +13,7 @@ import pytest
 
 import ti_cloth as tc
 from helpers import use
-from ti_cloth import backend, limits
+from ti_cloth.runtime import backend, limits
 from ti_cloth.app import signals
 from ti_cloth.app.scene import load_scene
 from ti_cloth.app.scene_file import SceneError

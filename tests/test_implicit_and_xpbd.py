@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from ti_cloth import constraints
+from ti_cloth.physics import constraints
 from helpers import report, stretched_energy_ratios
 
 

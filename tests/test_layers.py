@@ -116,3 +116,12 @@ def test_the_private_reach_checker_can_fail():
     assert private_reaches("import m\nm._hidden()\n") == ["line 2: m._hidden"]
     assert private_reaches("class A:\n    def _f(self):\n        self._g = 1\n"
                            "    def h(self, other):\n        other._f(); other._g\n") == []
+
+
+def test_the_package_keeps_a_folder_per_concern():
+    """At most 12 modules at the top of ti_cloth; the rest in body/, physics/, contact/,
+    integrators/, runtime/, render/ and app/."""
+    top = sorted(p.name for p in PACKAGE.glob("*.py"))
+    folders = sorted(p.name for p in PACKAGE.iterdir() if (p / "__init__.py").exists())
+    assert len(top) <= 12, top
+    assert folders == ["app", "body", "contact", "integrators", "physics", "render", "runtime"]

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from ti_cloth.mesh import unique_rows
+from ti_cloth.body.mesh import unique_rows
 
 
 def test_grid_layout_and_counts():

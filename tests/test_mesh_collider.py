@@ -10,7 +10,7 @@ import pytest
 
 import ti_cloth as tc
 from helpers import report
-from ti_cloth import sdf
+from ti_cloth.contact import sdf
 
 THICKNESS = 0.01
 

@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from ti_cloth import backend, limits, pool, simulation
+from ti_cloth.runtime import backend, limits, pool
+from ti_cloth import simulation
 from ti_cloth.integrators import fused
-from ti_cloth.pool import Pool
+from ti_cloth.runtime.pool import Pool
 
 
 def resident_mb() -> float:

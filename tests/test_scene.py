@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from ti_cloth import wind as wind_module
-from ti_cloth.collision import resolve_collisions
-from ti_cloth.constraints import relax_springs
+from ti_cloth.physics import wind as wind_module
+from ti_cloth.contact.collision import resolve_collisions
+from ti_cloth.physics.constraints import relax_springs
 from ti_cloth.app.scene import load_scene
 from ti_cloth.app.scene_file import SceneError
 from helpers import compiled, forget_compiled, report

@@ -198,7 +198,7 @@ def test_one_thread_and_all_cores_and_a_rerun_give_the_same_bits():
     (a ball under the lower sheet lifting the upper one). The default runtime comes back after
     the one-thread run and serves the other two (one re-initialisation fewer: each drops every
     kernel this worker compiled)."""
-    from ti_cloth import backend
+    from ti_cloth.runtime import backend
     body = two_sheets(8, height=0.05)
     ball = tc.MeshCollider(tc.sphere_mesh(0.15, (0.5, -0.12, 0.5), subdivisions=1),
                            thickness=THICKNESS, static_friction=0.5, resolution=16,

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from ti_cloth import backend
-from ti_cloth import tearing as tearing_module
+from ti_cloth.runtime import backend
+from ti_cloth.physics import tearing as tearing_module
 from helpers import compiled, forget_compiled, report
 
 ALL = list(tc.INTEGRATORS)

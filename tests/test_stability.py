@@ -9,7 +9,7 @@ import pytest
 
 import ti_cloth as tc
 from helpers import report
-from ti_cloth.modes import stiffest_mode
+from ti_cloth.body.modes import stiffest_mode
 
 DEMOS = Path(__file__).parents[1] / "demos"
 

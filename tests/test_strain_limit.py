@@ -6,8 +6,8 @@ import pytest
 
 import ti_cloth as tc
 from helpers import compiled, forget_compiled, report
-from ti_cloth import strain_limit as strain_limit_module
-from ti_cloth.constraints import relax_springs
+from ti_cloth.physics import strain_limit as strain_limit_module
+from ti_cloth.physics.constraints import relax_springs
 from ti_cloth.state import copy_positions
 
 N = 12

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from ti_cloth.topology import color_springs, mesh_springs, unique_springs
+from ti_cloth.body.topology import color_springs, mesh_springs, unique_springs
 from helpers import report
 
 K = tc.SpringKind

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from ti_cloth import wind as wind_module
-from ti_cloth.forces import ForceSettings, compute_forces
-from ti_cloth.wind import WindField
+from ti_cloth.physics import wind as wind_module
+from ti_cloth.physics.forces import ForceSettings, compute_forces
+from ti_cloth.physics.wind import WindField
 from helpers import compiled, forget_compiled, report
 
 RHO = 1.2

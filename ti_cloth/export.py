@@ -29,11 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
-from . import backend
-from .validation import finite_number, require
+from .runtime import backend
+from .runtime.validation import finite_number, require
 from .errors import StateMismatch
-from .files import atomic_path
-from .material import SpringKind
+from .runtime.files import atomic_path
+from .body.material import SpringKind
 
 FORMATS = ("obj", "ply", "pc2", "npz", "usd")
 STREAMS = ("pc2", "npz", "usd")            # assembled at close from the journal

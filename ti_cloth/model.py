@@ -7,10 +7,10 @@ import hashlib
 import numpy as np
 import taichi as ti
 
-from . import backend
+from .runtime import backend
 from .state import State
-from .transfer import upload
-from .topology import Cloth, color_springs
+from .runtime.transfer import upload
+from .body.topology import Cloth, color_springs
 
 
 @backend.kernel_argument

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import StateMismatch
-from .files import atomic_path
+from .runtime.files import atomic_path
 
 FORMAT = 1      # bump when what a state holds or means changes: older files are refused
 

@@ -21,22 +21,23 @@ from pathlib import Path
 
 import numpy as np
 
-from . import backend, limits, saved_state, stepping
-from .validation import as_array, in_range, integer, require
-from .collision import ColliderSet
-from .self_collision import SelfCollision, SelfContact, SelfContacts, warn_if_thick
+from .runtime import backend, limits
+from . import saved_state, stepping
+from .runtime.validation import as_array, in_range, integer, require
+from .contact.collision import ColliderSet
+from .contact.self_collision import SelfCollision, SelfContact, SelfContacts, warn_if_thick
 from .errors import SimulationDiverged, StaleSimulation
-from .forces import ForceSettings, energies
-from .handles import Handle, HandleSet, HandleTable
+from .physics.forces import ForceSettings, energies
+from .physics.handles import Handle, HandleSet, HandleTable
 from .integrators import make_integrator
 from .model import Model
-from .pool import POOL
+from .runtime.pool import POOL
 from .stability import auto_dt, stable_dt
-from .strain_limit import StrainLimit, StrainLimiter
+from .physics.strain_limit import StrainLimit, StrainLimiter
 from .state import NO_BAD_STEP, State
-from .tearing import RUNAWAY_STRAIN, Tearing, torn_triangles
-from .topology import Cloth
-from .wind import WindField
+from .physics.tearing import RUNAWAY_STRAIN, Tearing, torn_triangles
+from .body.topology import Cloth
+from .physics.wind import WindField
 
 STEP_ORDER = ("integrator", "handles", "strain_limit", "colliders", "self_collision", "tearing")
 PLANS = ("per stage", "many steps")   # Simulation.step's launch plans

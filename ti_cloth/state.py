@@ -4,7 +4,7 @@
 import numpy as np
 import taichi as ti
 
-from . import backend
+from .runtime import backend
 
 # Largest coordinate or speed the divergence guard accepts; anything beyond (or NaN) flags
 # the step. Well inside f32 range, so an exponential blow-up is caught before it overflows.

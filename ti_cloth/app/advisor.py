@@ -23,7 +23,7 @@ import math
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
-from ..files import atomic_path
+from ..runtime.files import atomic_path
 from ..integrators import INTEGRATORS, make_integrator
 from ..saved_state import fingerprint
 from .scene_file import SceneError

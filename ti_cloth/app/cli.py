@@ -9,7 +9,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from .. import backend
+from ..runtime import backend
 from ..export import FORMATS
 
 TEST_FRAMES, TEST_SIZE = 4, (160, 96)
@@ -77,7 +77,7 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
     resume from, 128 + signal when stopped by Ctrl-C (130) or SIGTERM (143)."""
     from ..errors import StateMismatch
     from . import signals
-    from ..limits import LONG_RUN_SECONDS
+    from ..runtime.limits import LONG_RUN_SECONDS
     from .runner import run_scene
     from .scene import load_scene
     from .scene_file import SceneError

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import backend, limits
+from ..runtime import backend, limits
 from ..errors import SimulationDiverged, StateMismatch
 from ..export import Exporter
 from ..render import Camera, FrameSequence, Renderer

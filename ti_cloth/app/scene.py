@@ -14,22 +14,22 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import backend, limits
-from .. import bodies as body_builders
-from ..colliders import Box, Capsule, Collider, Plane, Sphere
-from ..handles import Handle
+from ..runtime import backend, limits
+from ..body import bodies as body_builders
+from ..contact.colliders import Box, Capsule, Collider, Plane, Sphere
+from ..physics.handles import Handle
 from ..integrators import INTEGRATORS
-from ..material import DAMPING_MODELS, PRESETS, Material, SpringParams
-from ..mesh import PLANES, Mesh, grid_mesh, load_mesh
-from ..mesh_collider import MeshCollider
-from ..paths import INTERPOLATIONS, Keyframes, Oscillation
+from ..body.material import DAMPING_MODELS, PRESETS, Material, SpringParams
+from ..body.mesh import PLANES, Mesh, grid_mesh, load_mesh
+from ..contact.mesh_collider import MeshCollider
+from ..physics.paths import INTERPOLATIONS, Keyframes, Oscillation
 from ..render.camera import Camera
 from ..simulation import Simulation
 from ..stability import auto_substeps
-from ..self_collision import SelfCollision
-from ..strain_limit import StrainLimit
-from ..topology import Cloth
-from ..wind import Wind
+from ..contact.self_collision import SelfCollision
+from ..physics.strain_limit import StrainLimit
+from ..body.topology import Cloth
+from ..physics.wind import Wind
 from .scene_file import SceneError, Table, load_toml
 from .scene_output import Output, read_camera, read_output
 

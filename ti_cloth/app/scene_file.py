@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from ..limits import Range
+from ..runtime.limits import Range
 
 MISSING = object()
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .. import limits
-from ..colliders import Plane
+from ..runtime import limits
+from ..contact.colliders import Plane
 from ..export import FORMATS
 from ..render.camera import Camera
 from ..render.renderer import SurfaceStyle

@@ -28,9 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import backend
+from ..runtime import backend
 from ..errors import SimulationDiverged
-from ..files import atomic_path
+from ..runtime.files import atomic_path
 from ..integrators import INTEGRATORS, make_integrator
 from ..stability import stable_dt
 from .sweep import Failure, as_workers, run_tasks

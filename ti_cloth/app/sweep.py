@@ -20,7 +20,7 @@ from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 from dataclasses import dataclass
 
-from .. import backend
+from ..runtime import backend
 
 SCHEDULER_TIMEOUT = 5.0     # seconds to wait for a Dask scheduler to answer
 RETRIES = 1                 # further attempts at a task whose worker failed

@@ -7,8 +7,8 @@ from typing import ClassVar
 
 import taichi as ti
 
-from .. import backend
-from ..modes import stiffest_mode
+from ..runtime import backend
+from ..body.modes import stiffest_mode
 from . import fused
 
 

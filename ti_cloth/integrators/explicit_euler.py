@@ -6,7 +6,7 @@ import math
 import numpy as np
 import taichi as ti
 
-from ..modes import row_bounds, stiffest_mode
+from ..body.modes import row_bounds, stiffest_mode
 from ..state import store_particle
 from .base import Integrator
 

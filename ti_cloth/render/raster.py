@@ -18,7 +18,7 @@ keep the camera outside the bodies it looks at.
 """
 
 import taichi as ti
-from .. import backend
+from ..runtime import backend
 
 INF_BITS = 0x7F800000             # the bit pattern of f32 +inf
 EMPTY = INF_BITS << 32             # +inf depth, black: "nothing drawn here"

@@ -5,9 +5,9 @@ Each sample belongs to one thread here, so a plain minimum replaces the atomic o
 
 import taichi as ti
 
-from ..colliders import BOX, SPHERE
+from ..contact.colliders import BOX, SPHERE
 from .raster import EMPTY, camera_basis, lambert, ndarray_f32_1, pack, samples_type
-from .. import backend
+from ..runtime import backend
 
 MISS = -1.0
 

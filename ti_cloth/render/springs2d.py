@@ -4,7 +4,7 @@ drawn by Taichi's GUI with no window (show_gui=False)."""
 import numpy as np
 import taichi as ti
 
-from ..material import SpringKind
+from ..body.material import SpringKind
 from .image import from_taichi
 
 KIND_COLOURS = {SpringKind.STRETCH: 0x4CAF50, SpringKind.SHEAR: 0x9C27B0, SpringKind.BEND: 0xFFC107}

@@ -7,8 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from .validation import finite_number
-from . import backend
+from ..runtime.validation import finite_number
+from ..runtime import backend
 
 
 @dataclass(frozen=True, init=False)

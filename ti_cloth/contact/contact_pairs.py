@@ -21,7 +21,7 @@ one whose parts move apart fast makes one every step.
 
 import taichi as ti
 
-from . import backend
+from ..runtime import backend
 from .box_grid import BLOCK, box_cell, box_cell_count, cell_box, cell_range, found_here
 from .proximity import segment_distance, triangle_distance
 

@@ -23,7 +23,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from .validation import as_array, finite_number, require
+from ..runtime.validation import as_array, finite_number, require
 from .material import Material, SpringKind, SpringParams
 from .mesh import Mesh, triangle_edges, unique_rows
 

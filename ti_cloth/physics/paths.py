@@ -10,8 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import limits
-from .validation import as_array, finite_number, require
+from ..runtime import limits
+from ..runtime.validation import as_array, finite_number, require
 
 INTERPOLATIONS = ("linear", "smooth")
 

@@ -6,13 +6,13 @@ meshes none of the turning code."""
 import numpy as np
 import taichi as ti
 
-from . import backend, limits
-from .validation import require
+from ..runtime import backend, limits
+from ..runtime.validation import require
 from .colliders import MESH, Collider, Plane, signed_distance
 from .mesh_collider import MeshCollider
 from .sdf import layout, sample_grid
-from .state import copy_positions
-from .transfer import upload
+from ..state import copy_positions
+from ..runtime.transfer import upload
 
 
 PLACEMENT = 30       # numbers per collider in a placement row (ColliderSet._placement)

@@ -11,9 +11,9 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from . import backend, limits
-from .validation import as_array, in_range, require
-from .transfer import upload
+from ..runtime import backend, limits
+from ..runtime.validation import as_array, in_range, require
+from ..runtime.transfer import upload
 
 
 @dataclass(frozen=True)

@@ -13,9 +13,9 @@ SERIAL_SPRING_LIMIT springs (XPBD, 10 passes: 6.4x faster at 1.4k springs, 1.8x 
 
 import taichi as ti
 
-from . import backend
+from ..runtime import backend
 from .forces import altitude_gradient
-from .team import SOLO
+from ..runtime.team import SOLO
 
 SERIAL_SPRING_LIMIT = 50_000   # serial sweeps faster at 24k springs, parallel ones at 97k
 

@@ -19,8 +19,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 import taichi as ti
 
-from . import limits
-from .validation import as_array, finite_number, in_range, require
+from ..runtime import limits
+from ..runtime.validation import as_array, finite_number, in_range, require
 
 PLANE, SPHERE, BOX, CAPSULE, MESH = 0, 1, 2, 3, 4   # MESH: mesh_collider.py
 

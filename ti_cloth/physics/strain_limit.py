@@ -7,11 +7,11 @@ from dataclasses import dataclass
 
 import taichi as ti
 
-from . import backend, limits
-from .validation import count, finite_number, require
+from ..runtime import backend, limits
+from ..runtime.validation import count, finite_number, require
 from .constraints import relax_springs, sweep
-from .material import SpringKind
-from .state import copy_positions
+from ..body.material import SpringKind
+from ..state import copy_positions
 
 
 @dataclass(frozen=True)
