@@ -169,8 +169,9 @@ class SpringColouring:
 
     With `springs` (a Cloth), the springs' ends, rest lengths, stiffnesses, dampings and
     kinds are also kept in that order (position t holds spring order[t]): a pass then reads
-    them front to back instead of gathering through `order` (1.5x faster per projection at
-    128 x 128, CPU); pack() refreshes them when the Model is loaded with another cloth."""
+    them front to back instead of gathering through `order` (faster per projection:
+    docs/performance.md); pack() refreshes them when the Model is loaded with another
+    cloth."""
 
     def __init__(self, order, offsets, springs=None):
         self.count = len(offsets) - 1

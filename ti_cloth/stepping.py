@@ -1,10 +1,10 @@
 """Many steps per launch on the CPU: the plan Simulation.step takes there for every integrator
 that defines a team step (Integrator.teamed), with the stages of TEAM_STAGES inside the launch.
 
-On the 2-core CPU these figures were measured on (benchmarks/README.md), a launch costs 10 to
-25 us and every parallel loop another 15 to 50 us (the thread pool waking, up to milliseconds
-after the machine idled), while a 32 x 32 cloth's step is about 30 us of arithmetic; a step of
-xpbd is 2 + 17 x iterations loops, one per colour. So a run of steps is one launch, shared by
+A launch and every parallel loop in it cost tens of microseconds on a CPU (the thread pool
+waking), about a small cloth's whole step of arithmetic, and a step of xpbd is 2 + 17 x
+iterations loops, one per colour (docs/performance.md has the figures). So a run of steps is
+one launch, shared by
 a Team (team.py): one worker runs every loop serially for launches of little work, a worker
 per core otherwise, each owning fixed slices and meeting the others at barriers. A step is,
 per worker:

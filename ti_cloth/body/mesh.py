@@ -106,8 +106,8 @@ class Mesh:
 def unique_rows(rows: np.ndarray, **options):
     """np.unique(rows, axis=0, **options) for non-negative integer rows, as fast as a 1-D
     unique: each row is encoded as one int64 in mixed radix (lexicographic order kept), and
-    decoded back (np.unique over rows sorts void records, about 10x slower: 8 s of the 16 s
-    a 1,000 x 1,000 grid took to build). Falls back to the row unique when the codes could
+    decoded back (np.unique over rows sorts void records, far slower: docs/performance.md).
+    Falls back to the row unique when the codes could
     overflow int64."""
     rows = np.asarray(rows, np.int64)
     radix = int(rows.max()) + 1 if rows.size else 1

@@ -53,8 +53,8 @@ def stiffest_mode(cloth, drag: float = 0.0, pinned=None, steps: int = LANCZOS_ST
     from a fixed random vector: w^2 is the largest Ritz value, which grows towards the largest
     eigenvalue from below (stopped after `steps` or once it grew by less than
     LANCZOS_TOLERANCE in LANCZOS_WINDOW steps). Within 1e-6 of a dense eigensolver on the
-    tests' bodies, where the 100 power iterations used before stopped up to 1.6e-3 short;
-    2.9x faster than they were on a 300 x 300 grid (median of 3, both Lanczos runs).
+    tests' bodies, where the 100 power iterations used before stopped up to 1.6e-3 short
+    (and faster than they were: docs/performance.md).
 
     g is the largest damping rate of any mode: the largest eigenvalue of M^-1/2 C M^-1/2 (C
     from kd, "axial" along n n^T, "relative" I), by Lanczos too, plus drag. The pair is
@@ -74,7 +74,7 @@ def stiffest_mode(cloth, drag: float = 0.0, pinned=None, steps: int = LANCZOS_ST
     n = d / np.where(length > 0, length, 1.0)[:, None]
     n[length == 0] = 0.0    # zero-length springs: no direction at rest (linear k I handled as 0)
     # Component-major (3, S) and (3, N) arrays: 1-D gathers and bincounts over contiguous
-    # rows run 3-4x faster than over the columns of (S, 3) ones (a 1,000 x 1,000 grid).
+    # rows run faster than over the columns of (S, 3) ones (docs/performance.md).
     n_i, n_j = n.T * scale[i], n.T * scale[j]        # M^-1/2 folded into n
     corners = cloth.altitude_indices.T                                  # (4, A)
     altitude_n, _, g = altitude_frames(cloth.particle_position, cloth.altitude_indices)

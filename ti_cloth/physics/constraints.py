@@ -4,10 +4,9 @@ Springs are visited colour by colour (Model.spring_colouring: no two springs of 
 a particle), so a pass equals a sequential Gauss-Seidel sweep in colour order and is
 deterministic. Two launch plans give the same bits: `parallel` runs each colour as a parallel
 loop and launches one kernel per pass; `serial` runs every pass of every colour in one serial
-task of one launch. A parallel loop costs ~30 us to start on a CPU (measured, 2 cores), so a
-17-colour grid pays ~0.5 ms per pass before any work: on the CPU, serial wins below
-SERIAL_SPRING_LIMIT springs (XPBD, 10 passes: 6.4x faster at 1.4k springs, 1.8x at 24k;
-1.4x slower at 97k).
+task of one launch. A parallel loop costs tens of microseconds to start on a CPU, a pass
+one loop per colour: on the CPU, serial wins below SERIAL_SPRING_LIMIT springs (the figures:
+docs/performance.md).
 """
 
 

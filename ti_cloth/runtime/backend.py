@@ -200,9 +200,9 @@ def kernel_argument(cls):
 
     It sets the marker Taichi checks (`_data_oriented`), as ti.data_oriented does, without
     ti.data_oriented's __getattribute__ hook: the hook binds @ti.kernel methods (these
-    classes define none; TypeError if one does) and runs on every attribute access, which cost
-    about a third of the Python time of each launch of a kernel taking a Model, a State and
-    the ForceSettings (175 us of 500 us, rk4 steps of a spring pair, 2-core CPU).
+    classes define none; TypeError if one does) and runs on every attribute access, a third
+    of the Python time of a launch taking a Model, a State and the ForceSettings
+    (docs/performance.md).
     """
     kernels = [name for name, value in vars(cls).items() if hasattr(value, "_is_wrapped_kernel")]
     if kernels:

@@ -2,8 +2,8 @@
 
 Taichi compiles a kernel once per set of template arguments, keyed by the argument objects, and
 never frees what it compiled (the C++ program keeps every kernel). A simulation built, stepped
-and dropped would leave its kernels behind: about 3 MB each for a small cloth, so a study or an
-advisor building hundreds of simulations would grow without bound. So the objects a
+and dropped would leave its kernels behind (megabytes each: docs/performance.md), so a study
+or an advisor building hundreds of simulations would grow without bound. So the objects a
 Simulation passes to kernels come from here:
 
 - objects holding fields (Model, State, the stages' fields) are *lent*: one simulation uses

@@ -8,8 +8,8 @@ from . import backend
 
 def upload(pairs) -> None:
     """Copy numpy arrays into Taichi fields in one launch: one compiled kernel with one loop
-    for the whole set, where field.from_numpy compiles a kernel per field (about 0.1 s each on
-    a 2-core CPU, most of the cost of building a small Model).
+    for the whole set, where field.from_numpy compiles a kernel per field (most of the cost
+    of building a small Model: docs/performance.md).
 
     pairs: (field, values); values has the field's shape, or fewer rows (the rest keep their
     values: the padding of a field that cannot have length 0). Values are rounded to the
