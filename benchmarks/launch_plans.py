@@ -26,11 +26,10 @@ import sys
 import time
 
 import numpy as np
+from throughput import scene
 
 import ti_cloth as tc
 from ti_cloth import stepping
-
-from throughput import scene
 
 PLANS = ("launch per step", "one worker", "team", "timed choice")
 THRESHOLD = stepping.TEAM_MIN_SPRING_STEPS   # work below which step(n) runs on one worker

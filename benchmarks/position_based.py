@@ -20,10 +20,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+import peers
 
 import ti_cloth as tc
-
-import peers
 
 NEWTON_CHECKED = ()   # none: the set-up does not match Newton 1.8 (see NewtonXPBD)
 

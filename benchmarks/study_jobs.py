@@ -12,8 +12,8 @@ import time
 from dataclasses import asdict
 
 import ti_cloth as tc
-from ti_cloth.runtime import backend
 from ti_cloth.app import study, sweep
+from ti_cloth.runtime import backend
 
 
 def rows(result):

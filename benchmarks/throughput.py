@@ -30,12 +30,11 @@ import time
 from pathlib import Path
 
 import numpy as np
+import peers
 import taichi as ti
 
 import ti_cloth as tc
 from ti_cloth.runtime import backend
-
-import peers
 
 WARP_CHECKED = ("1.19.",)     # the versions the docs' figures were measured with
 NEWTON_CHECKED = ("1.8.",)

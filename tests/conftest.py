@@ -19,8 +19,8 @@ import shutil
 import tempfile
 
 import pytest
-
 from helpers import use
+
 from ti_cloth.runtime import backend
 
 # mesh colliders cache their distance grids on disk: the tests' go to a folder of their own,

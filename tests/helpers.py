@@ -7,9 +7,8 @@ import imageio.v3 as iio
 import numpy as np
 
 import ti_cloth as tc
-from ti_cloth.runtime import backend
 from ti_cloth.render import write_png
-
+from ti_cloth.runtime import backend
 
 # A 6-particle string swinging from one end for 0.2 s: the study's and advisor's small scene
 SWINGING_STRING = """

@@ -14,9 +14,9 @@ import time
 from pathlib import Path
 
 import pytest
+from helpers import SWINGING_STRING, report
 
 import ti_cloth as tc
-from helpers import SWINGING_STRING, report
 from ti_cloth.app import advisor, cli, study, sweep
 
 STRING = SWINGING_STRING.replace("duration = 0.2", 'duration = 0.2\nprecision = "f64"')

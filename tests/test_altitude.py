@@ -4,12 +4,12 @@ the stable step, and the same bits in every launch plan and thread count."""
 
 import numpy as np
 import pytest
+from helpers import report
 
 import ti_cloth as tc
-from helpers import report
-from ti_cloth.runtime import backend
-from ti_cloth.physics.forces import compute_forces, energies
 from ti_cloth.body.topology import altitude_springs, color_springs
+from ti_cloth.physics.forces import compute_forces, energies
+from ti_cloth.runtime import backend
 
 G = 9.81
 

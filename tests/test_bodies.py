@@ -3,9 +3,9 @@ solutions, and a soft block dropped on the ground."""
 
 import numpy as np
 import pytest
+from helpers import report
 
 import ti_cloth as tc
-from helpers import report
 from ti_cloth.body.bodies import GHOST_SHARE
 from ti_cloth.body.mesh import signed_volumes
 

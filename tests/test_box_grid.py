@@ -6,9 +6,15 @@ import numpy as np
 import pytest
 import taichi as ti
 
+from ti_cloth.contact.box_grid import (
+    BoxGrid,
+    box_cell,
+    box_cell_count,
+    cell_box,
+    cell_range,
+    found_here,
+)
 from ti_cloth.runtime import backend
-from ti_cloth.contact.box_grid import (BoxGrid, box_cell, box_cell_count, cell_box, cell_range,
-                                       found_here)
 
 
 @ti.kernel

@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 import pytest
+from helpers import compiled, forget_compiled, report
 
 import ti_cloth as tc
-from helpers import compiled, forget_compiled, report
 from ti_cloth.contact import collision as colliders_module
 from ti_cloth.state import copy_positions
 

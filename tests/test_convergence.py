@@ -3,9 +3,9 @@ forces) and compare positions at a fixed time with an rk4 reference at a much sm
 
 import numpy as np
 import pytest
+from helpers import report
 
 import ti_cloth as tc
-from helpers import report
 
 # Smooth, undamped forces (velocity-dependent forces make Verlet first order). The error is
 # C h^p (1 + O(h)), so log2 of successive error ratios approaches p as h shrinks; at the finest

@@ -4,9 +4,9 @@ parsed back, npz; ghosts left out, torn triangles dropped per frame."""
 import meshio
 import numpy as np
 import pytest
+from helpers import report
 
 import ti_cloth as tc
-from helpers import report
 from ti_cloth.export import read_pc2
 
 

@@ -5,9 +5,9 @@ import math
 
 import numpy as np
 import pytest
+from helpers import report
 
 import ti_cloth as tc
-from helpers import report
 
 ALL = list(tc.INTEGRATORS)
 

@@ -4,14 +4,14 @@ measures what that saves)."""
 
 import numpy as np
 import pytest
+from helpers import compiled, forget_compiled
 
 import ti_cloth as tc
-from ti_cloth.physics import constraints, handles, strain_limit, tearing, wind
 from ti_cloth.contact import contact_pairs
 from ti_cloth.contact.collision import resolve_collisions
 from ti_cloth.integrators import implicit_euler, rk4, xpbd
+from ti_cloth.physics import constraints, handles, strain_limit, tearing, wind
 from ti_cloth.state import copy_positions
-from helpers import compiled, forget_compiled
 
 OPTIONAL = {
     "wind": wind.wind_forces, "collisions": resolve_collisions,

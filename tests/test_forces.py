@@ -2,10 +2,10 @@
 
 import numpy as np
 import pytest
+from helpers import report
 
 import ti_cloth as tc
 from ti_cloth.physics.forces import ForceSettings, compute_forces, energies
-from helpers import report
 
 
 def forces_at(cloth, x, v, forces=ForceSettings(gravity=(0.0, 0.0, 0.0))):

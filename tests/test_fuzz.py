@@ -8,13 +8,13 @@ import re
 
 import numpy as np
 import pytest
+from helpers import use
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import ti_cloth as tc
 from ti_cloth.app.scene import load_scene
 from ti_cloth.app.scene_file import SceneError
-from helpers import use
 
 BASE = {
     "scene": {"name": "fuzz"},

@@ -10,16 +10,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import use
 
 import ti_cloth as tc
-from helpers import use
-from ti_cloth.runtime import backend, limits
 from ti_cloth.app import signals
 from ti_cloth.app.scene import load_scene
 from ti_cloth.app.scene_file import SceneError
 from ti_cloth.errors import StaleSimulation
 from ti_cloth.render import Camera, Renderer
 from ti_cloth.render.image import FrameSequence
+from ti_cloth.runtime import backend, limits
 
 BASE = """
 [scene]

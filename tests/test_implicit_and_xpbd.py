@@ -4,10 +4,10 @@ same linear system, the exact energy decay of backward Euler, and the Hookean st
 
 import numpy as np
 import pytest
+from helpers import report, stretched_energy_ratios
 
 import ti_cloth as tc
 from ti_cloth.physics import constraints
-from helpers import report, stretched_energy_ratios
 
 
 def perturbed_cloth(damping):

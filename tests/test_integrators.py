@@ -4,9 +4,9 @@ import math
 
 import numpy as np
 import pytest
+from helpers import report, stretched_energy_ratios
 
 import ti_cloth as tc
-from helpers import report, stretched_energy_ratios
 
 FORCE_BASED = ["explicit_euler", "symplectic_euler", "verlet", "implicit_euler", "rk4"]
 ALL = FORCE_BASED + ["pbd", "xpbd"]

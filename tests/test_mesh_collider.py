@@ -7,9 +7,9 @@ import sys
 
 import numpy as np
 import pytest
+from helpers import report
 
 import ti_cloth as tc
-from helpers import report
 from ti_cloth.contact import sdf
 
 THICKNESS = 0.01

@@ -2,9 +2,9 @@
 
 import numpy as np
 import pytest
+from helpers import report
 
 import ti_cloth as tc
-from helpers import report
 
 TIMES = [0.0, 0.5, 1.5, 2.0]
 VALUES = [[0, 0, 0], [1, 0, 0], [1, 2, 0], [0, 2, -1]]

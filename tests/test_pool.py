@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from ti_cloth.runtime import backend, limits, pool
 from ti_cloth import simulation
 from ti_cloth.integrators import fused
+from ti_cloth.runtime import backend, limits, pool
 from ti_cloth.runtime.pool import Pool
 
 

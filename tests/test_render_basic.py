@@ -8,8 +8,15 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from ti_cloth.render import (FrameSequence, SpringView, frame_path, from_taichi, write_gif,
-                             write_mp4, write_png)
+from ti_cloth.render import (
+    FrameSequence,
+    SpringView,
+    frame_path,
+    from_taichi,
+    write_gif,
+    write_mp4,
+    write_png,
+)
 
 
 def test_taichi_layout_becomes_top_left_numpy():

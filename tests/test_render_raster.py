@@ -8,9 +8,9 @@ pixels, bottom-left origin), no supersampling, and ambient light 1 so every colo
 import imageio.v3 as iio
 import numpy as np
 import pytest
+from helpers import report
 
 import ti_cloth as tc
-from helpers import report
 from ti_cloth.render import Background, Camera, Light, Renderer, SurfaceStyle, write_png
 
 RED, GREEN, BLUE = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)

@@ -8,9 +8,9 @@ import sys
 
 import numpy as np
 import pytest
+from helpers import assert_matches_golden, report
 
 import ti_cloth as tc
-from helpers import assert_matches_golden, report
 from ti_cloth.render import Background, Camera, Light, NullRenderer, Renderer, SurfaceStyle
 
 

@@ -6,14 +6,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import compiled, forget_compiled, report
 
 import ti_cloth as tc
-from ti_cloth.physics import wind as wind_module
-from ti_cloth.contact.collision import resolve_collisions
-from ti_cloth.physics.constraints import relax_springs
 from ti_cloth.app.scene import load_scene
 from ti_cloth.app.scene_file import SceneError
-from helpers import compiled, forget_compiled, report
+from ti_cloth.contact.collision import resolve_collisions
+from ti_cloth.physics import wind as wind_module
+from ti_cloth.physics.constraints import relax_springs
 
 DEMOS = Path(__file__).parents[1] / "demos"
 

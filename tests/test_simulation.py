@@ -2,11 +2,11 @@
 
 import numpy as np
 import pytest
+from helpers import compiled, forget_compiled, report
 
 import ti_cloth as tc
-from ti_cloth.runtime import backend
 from ti_cloth.physics import tearing as tearing_module
-from helpers import compiled, forget_compiled, report
+from ti_cloth.runtime import backend
 
 ALL = list(tc.INTEGRATORS)
 

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import report
 
 import ti_cloth as tc
-from helpers import report
 from ti_cloth.body.modes import stiffest_mode
 
 DEMOS = Path(__file__).parents[1] / "demos"

@@ -14,16 +14,15 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
-from ti_cloth.runtime import backend, limits
-from ti_cloth.contact.collision import ColliderSet
-from ti_cloth.physics.forces import ForceSettings, compute_forces
-from ti_cloth.physics.handles import HandleSet
 from ti_cloth import stepping
-from ti_cloth.runtime import team
+from ti_cloth.contact.collision import ColliderSet
 from ti_cloth.integrators import Integrator
 from ti_cloth.model import Model
-from ti_cloth.simulation import STEP_ORDER
+from ti_cloth.physics.forces import ForceSettings, compute_forces
+from ti_cloth.physics.handles import HandleSet
 from ti_cloth.physics.strain_limit import StrainLimiter
+from ti_cloth.runtime import backend, limits, team
+from ti_cloth.simulation import STEP_ORDER
 
 FUSED = ["explicit_euler", "symplectic_euler", "verlet"]
 

@@ -3,9 +3,9 @@ and stays at the limit with it; with enough passes no limited spring exceeds it 
 
 import numpy as np
 import pytest
+from helpers import compiled, forget_compiled, report
 
 import ti_cloth as tc
-from helpers import compiled, forget_compiled, report
 from ti_cloth.physics import strain_limit as strain_limit_module
 from ti_cloth.physics.constraints import relax_springs
 from ti_cloth.state import copy_positions

@@ -7,9 +7,9 @@ import math
 import imageio.v3 as iio
 import numpy as np
 import pytest
+from helpers import SWINGING_STRING, report
 
 import ti_cloth as tc
-from helpers import SWINGING_STRING, report
 from ti_cloth import study
 from ti_cloth.app.cli import main
 

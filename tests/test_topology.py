@@ -2,10 +2,10 @@
 
 import numpy as np
 import pytest
+from helpers import report
 
 import ti_cloth as tc
 from ti_cloth.body.topology import color_springs, mesh_springs, unique_springs
-from helpers import report
 
 K = tc.SpringKind
 

@@ -3,12 +3,12 @@ of the wind field, and a flag in wind."""
 
 import numpy as np
 import pytest
+from helpers import compiled, forget_compiled, report
 
 import ti_cloth as tc
 from ti_cloth.physics import wind as wind_module
 from ti_cloth.physics.forces import ForceSettings, compute_forces
 from ti_cloth.physics.wind import WindField
-from helpers import compiled, forget_compiled, report
 
 RHO = 1.2
 

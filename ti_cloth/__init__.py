@@ -4,29 +4,46 @@ Nothing here calls ti.init; call ti_cloth.init(arch=..., precision=...) first.
 """
 import importlib
 
-from .runtime.backend import init
 from .body.bodies import hair, soft_body, string, tet_block
-from .contact.colliders import Box, Capsule, Collider, Plane, Sphere
-from .errors import SimulationDiverged, StateMismatch, TeamStalled
-from .physics.forces import ForceSettings
-from .integrators import (INTEGRATORS, PBD, RK4, XPBD, ExplicitEuler, ImplicitEuler, Integrator,
-                          SymplecticEuler, Verlet)
 from .body.material import PRESETS, Material, SpringKind, SpringParams
-from .body.mesh import (Mesh, box_mesh, combine_meshes, grid_mesh, load_mesh, save_mesh,
-                        sphere_mesh, tet_grid_mesh)
-from .model import Model
-from .physics.paths import Keyframes, Oscillation
-from .export import Exporter
-from .physics.handles import Handle
+from .body.mesh import (
+    Mesh,
+    box_mesh,
+    combine_meshes,
+    grid_mesh,
+    load_mesh,
+    save_mesh,
+    sphere_mesh,
+    tet_grid_mesh,
+)
+from .body.topology import Cloth
+from .contact.colliders import Box, Capsule, Collider, Plane, Sphere
 from .contact.mesh_collider import MeshCollider
+from .contact.self_collision import SelfCollision, SelfContacts
+from .errors import SimulationDiverged, StateMismatch, TeamStalled
+from .export import Exporter
+from .integrators import (
+    INTEGRATORS,
+    PBD,
+    RK4,
+    XPBD,
+    ExplicitEuler,
+    ImplicitEuler,
+    Integrator,
+    SymplecticEuler,
+    Verlet,
+)
+from .model import Model
+from .physics.forces import ForceSettings
+from .physics.handles import Handle
+from .physics.paths import Keyframes, Oscillation
+from .physics.strain_limit import StrainLimit
+from .physics.tearing import Tearing
+from .physics.wind import Wind
+from .runtime.backend import init
 from .simulation import Simulation
 from .stability import AUTO_MAX_DT, auto_dt, auto_substeps, stable_dt
 from .state import State
-from .contact.self_collision import SelfCollision, SelfContacts
-from .physics.strain_limit import StrainLimit
-from .physics.tearing import Tearing
-from .body.topology import Cloth
-from .physics.wind import Wind
 
 __all__ = [
     "init", "Box", "Capsule", "Collider", "Exporter", "MeshCollider", "Plane", "Sphere", "SimulationDiverged", "StateMismatch",

@@ -29,11 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .runtime import backend
-from .runtime.validation import finite_number, require
-from .errors import StateMismatch
-from .runtime.files import atomic_path
 from .body.material import SpringKind
+from .errors import StateMismatch
+from .runtime import backend
+from .runtime.files import atomic_path
+from .runtime.validation import finite_number, require
 
 FORMATS = ("obj", "ply", "pc2", "npz", "usd")
 STREAMS = ("pc2", "npz", "usd")            # assembled at close from the journal

@@ -7,10 +7,10 @@ import hashlib
 import numpy as np
 import taichi as ti
 
-from .runtime import backend
-from .state import State
-from .runtime.transfer import upload
 from .body.topology import Cloth, color_springs
+from .runtime import backend
+from .runtime.transfer import upload
+from .state import State
 
 
 @backend.kernel_argument

@@ -21,23 +21,23 @@ from pathlib import Path
 
 import numpy as np
 
-from .runtime import backend, limits
 from . import saved_state, stepping
-from .runtime.validation import as_array, in_range, integer, require
+from .body.topology import Cloth
 from .contact.collision import ColliderSet
 from .contact.self_collision import SelfCollision, SelfContact, SelfContacts, warn_if_thick
 from .errors import SimulationDiverged, StaleSimulation
-from .physics.forces import ForceSettings, energies
-from .physics.handles import Handle, HandleSet, HandleTable
 from .integrators import make_integrator
 from .model import Model
-from .runtime.pool import POOL
-from .stability import auto_dt, stable_dt
+from .physics.forces import ForceSettings, energies
+from .physics.handles import Handle, HandleSet, HandleTable
 from .physics.strain_limit import StrainLimit, StrainLimiter
-from .state import NO_BAD_STEP, State
 from .physics.tearing import RUNAWAY_STRAIN, Tearing, torn_triangles
-from .body.topology import Cloth
 from .physics.wind import WindField
+from .runtime import backend, limits
+from .runtime.pool import POOL
+from .runtime.validation import as_array, in_range, integer, require
+from .stability import auto_dt, stable_dt
+from .state import NO_BAD_STEP, State
 
 STEP_ORDER = ("integrator", "handles", "strain_limit", "colliders", "self_collision", "tearing")
 PLANS = ("per stage", "many steps")   # Simulation.step's launch plans

@@ -7,9 +7,9 @@ import math
 
 import numpy as np
 
+from .integrators import make_integrator
 from .runtime import limits
 from .runtime.validation import in_range
-from .integrators import make_integrator
 
 AUTO_MAX_DT = 1.0 / 240.0     # "auto" steps: at most half the predicted stable step and at most this [s]
 

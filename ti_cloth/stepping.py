@@ -35,14 +35,14 @@ from collections import deque
 
 import taichi as ti
 
-from .runtime import backend, limits
 from .contact.collision import resolve_particle
-from .physics.constraints import relax_pass
 from .errors import TeamStalled
-from .state import NO_BAD_STEP
-from .runtime.team import BARRIER_SPINS, MAX_WORKERS, TASK_SPACING, Team
+from .physics.constraints import relax_pass
 from .physics.tearing import tear_overstretched
 from .physics.wind import wind_on_particles, wind_on_triangles
+from .runtime import backend, limits
+from .runtime.team import BARRIER_SPINS, MAX_WORKERS, TASK_SPACING, Team
+from .state import NO_BAD_STEP
 
 TEAM_STAGES = ("integrator", "handles", "strain_limit", "colliders", "tearing")   # STEP_ORDER
 MAX_STEPS_PER_LAUNCH = 4096    # bounds one launch (Ctrl-C and the divergence check wait for it)

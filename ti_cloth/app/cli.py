@@ -9,8 +9,8 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from ..runtime import backend
 from ..export import FORMATS
+from ..runtime import backend
 
 TEST_FRAMES, TEST_SIZE = 4, (160, 96)
 
@@ -76,8 +76,8 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
     1 diverged, 2 a scene the run refuses (the message names the key) or a state it cannot
     resume from, 128 + signal when stopped by Ctrl-C (130) or SIGTERM (143)."""
     from ..errors import StateMismatch
-    from . import signals
     from ..runtime.limits import LONG_RUN_SECONDS
+    from . import signals
     from .runner import run_scene
     from .scene import load_scene
     from .scene_file import SceneError

@@ -20,12 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..runtime import backend, limits
 from ..errors import SimulationDiverged, StateMismatch
 from ..export import Exporter
 from ..render import Camera, FrameSequence, Renderer
 from ..render.image import frame_path
 from ..render.springs2d import FRONT, SpringView
+from ..runtime import backend, limits
 from . import signals
 
 

@@ -14,22 +14,22 @@ from pathlib import Path
 
 import numpy as np
 
-from ..runtime import backend, limits
 from ..body import bodies as body_builders
-from ..contact.colliders import Box, Capsule, Collider, Plane, Sphere
-from ..physics.handles import Handle
-from ..integrators import INTEGRATORS
 from ..body.material import DAMPING_MODELS, PRESETS, Material, SpringParams
 from ..body.mesh import PLANES, Mesh, grid_mesh, load_mesh
+from ..body.topology import Cloth
+from ..contact.colliders import Box, Capsule, Collider, Plane, Sphere
 from ..contact.mesh_collider import MeshCollider
+from ..contact.self_collision import SelfCollision
+from ..integrators import INTEGRATORS
+from ..physics.handles import Handle
 from ..physics.paths import INTERPOLATIONS, Keyframes, Oscillation
+from ..physics.strain_limit import StrainLimit
+from ..physics.wind import Wind
 from ..render.camera import Camera
+from ..runtime import backend, limits
 from ..simulation import Simulation
 from ..stability import auto_substeps
-from ..contact.self_collision import SelfCollision
-from ..physics.strain_limit import StrainLimit
-from ..body.topology import Cloth
-from ..physics.wind import Wind
 from .scene_file import SceneError, Table, load_toml
 from .scene_output import Output, read_camera, read_output
 

@@ -5,11 +5,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..runtime import limits
 from ..contact.colliders import Plane
 from ..export import FORMATS
 from ..render.camera import Camera
 from ..render.renderer import SurfaceStyle
+from ..runtime import limits
 from .scene_file import Table
 
 VIEWS = ("3d", "2d")

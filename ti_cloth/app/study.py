@@ -28,10 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..runtime import backend
 from ..errors import SimulationDiverged
-from ..runtime.files import atomic_path
 from ..integrators import INTEGRATORS, make_integrator
+from ..runtime import backend
+from ..runtime.files import atomic_path
 from ..stability import stable_dt
 from .sweep import Failure, as_workers, run_tasks
 

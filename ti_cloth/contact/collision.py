@@ -7,13 +7,12 @@ import numpy as np
 import taichi as ti
 
 from ..runtime import backend, limits
+from ..runtime.transfer import upload
 from ..runtime.validation import require
+from ..state import copy_positions
 from .colliders import MESH, Collider, Plane, signed_distance
 from .mesh_collider import MeshCollider
 from .sdf import layout, sample_grid
-from ..state import copy_positions
-from ..runtime.transfer import upload
-
 
 PLACEMENT = 30       # numbers per collider in a placement row (ColliderSet._placement)
 

@@ -14,10 +14,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..body.mesh import Mesh, triangle_edges, unique_rows
 from ..runtime import limits
 from ..runtime.validation import as_array, count, require
 from .colliders import MESH, Collider
-from ..body.mesh import Mesh, triangle_edges, unique_rows
 from .sdf import DistanceGrid, distance_grid, layout
 
 MARGIN = 0.1          # the grid reaches this fraction of the mesh's largest extent beyond it

@@ -33,17 +33,26 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
+from ..body.mesh import triangle_edges, unique_rows
+from ..physics.forces import altitude_frame
 from ..runtime import backend, limits
+from ..runtime.transfer import upload
 from ..runtime.validation import count, finite_number, require
+from ..state import copy_positions
 from .box_grid import BLOCK, BoxGrid
 from .collision import project_out
-from .contact_pairs import (PairList, displacement_box, index_contacts, list_pairs, mean_edge,
-                            prefix_pairs, sweep_boxes, torn_edge, torn_triangle)
-from ..physics.forces import altitude_frame
-from ..body.mesh import triangle_edges, unique_rows
+from .contact_pairs import (
+    PairList,
+    displacement_box,
+    index_contacts,
+    list_pairs,
+    mean_edge,
+    prefix_pairs,
+    sweep_boxes,
+    torn_edge,
+    torn_triangle,
+)
 from .proximity import segment_parameters
-from ..state import copy_positions
-from ..runtime.transfer import upload
 
 PAIRS_PER_PARTICLE = 32     # candidate list room at first, per particle
 MAX_PAIRS_PER_PARTICLE = 256

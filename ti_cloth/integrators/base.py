@@ -4,11 +4,10 @@ step()."""
 import math
 from typing import ClassVar
 
-
 import taichi as ti
 
-from ..runtime import backend
 from ..body.modes import stiffest_mode
+from ..runtime import backend
 from . import fused
 
 

@@ -19,9 +19,9 @@ at 32 x 32. A team and one worker run the same kernel, so thread counts never ch
 
 import taichi as ti
 
-from ..runtime import backend, limits
 from ..physics.forces import evaluate_altitudes, evaluate_springs, gather_force
 from ..physics.wind import accumulate_wind
+from ..runtime import backend, limits
 
 
 @ti.func

@@ -25,10 +25,15 @@ import math
 
 import taichi as ti
 
+from ..physics.forces import (
+    altitude_gradient,
+    compute_forces,
+    evaluate_altitudes,
+    evaluate_springs,
+    gather_force,
+)
 from ..runtime import backend, limits
 from ..runtime.validation import count, finite_number, require
-from ..physics.forces import (altitude_gradient, compute_forces, evaluate_altitudes,
-                              evaluate_springs, gather_force)
 from ..state import store_particle
 from . import fused
 from .base import Integrator

@@ -5,11 +5,11 @@ from collections.abc import Mapping
 
 import taichi as ti
 
-from ..runtime import backend, limits
-from ..runtime.validation import count, finite_number, require
+from ..body.material import SpringKind
 from ..physics.constraints import SweepOrder, relax_pass, relax_springs, sweep
 from ..physics.forces import compute_forces, gather_force
-from ..body.material import SpringKind
+from ..runtime import backend, limits
+from ..runtime.validation import count, finite_number, require
 from ..state import store_particle
 from . import fused
 from .base import Integrator

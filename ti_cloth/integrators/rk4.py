@@ -5,8 +5,8 @@ import math
 
 import taichi as ti
 
-from ..runtime import backend
 from ..physics.forces import compute_forces, evaluate_altitudes, evaluate_springs, gather_force
+from ..runtime import backend
 from ..state import store_particle
 from . import fused
 from .base import Integrator

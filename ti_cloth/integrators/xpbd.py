@@ -4,10 +4,10 @@ constraints with compliance 1 / k, so the cloth has its material stiffness in N/
 
 import taichi as ti
 
-from ..runtime import backend, limits
-from ..runtime.validation import count
 from ..physics.constraints import damp_pass, damp_springs, sweep, xpbd_pass, xpbd_springs
 from ..physics.forces import compute_forces, gather_force
+from ..runtime import backend, limits
+from ..runtime.validation import count
 from . import fused
 from .base import Integrator
 from .pbd import update_velocity, velocity_from_positions

@@ -13,8 +13,8 @@ docs/performance.md).
 import taichi as ti
 
 from ..runtime import backend
-from .forces import altitude_gradient
 from ..runtime.team import SOLO
+from .forces import altitude_gradient
 
 SERIAL_SPRING_LIMIT = 50_000   # serial sweeps faster at 24k springs, parallel ones at 97k
 

@@ -20,9 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from ..runtime import backend
 from ..body.material import SpringKind
 from ..body.topology import altitude_frames
+from ..runtime import backend
 from .wind import accumulate_wind
 
 

@@ -12,8 +12,8 @@ import numpy as np
 import taichi as ti
 
 from ..runtime import backend, limits
-from ..runtime.validation import as_array, in_range, require
 from ..runtime.transfer import upload
+from ..runtime.validation import as_array, in_range, require
 
 
 @dataclass(frozen=True)

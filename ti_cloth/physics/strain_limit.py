@@ -7,11 +7,11 @@ from dataclasses import dataclass
 
 import taichi as ti
 
+from ..body.material import SpringKind
 from ..runtime import backend, limits
 from ..runtime.validation import count, finite_number, require
-from .constraints import relax_springs, sweep
-from ..body.material import SpringKind
 from ..state import copy_positions
+from .constraints import relax_springs, sweep
 
 
 @dataclass(frozen=True)

@@ -7,8 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from ..runtime.validation import finite_number
 from ..runtime import backend
+from ..runtime.validation import finite_number
 
 
 @dataclass(frozen=True, init=False)

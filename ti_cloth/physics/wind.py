@@ -24,10 +24,10 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from ..runtime import backend, limits
-from ..runtime.validation import as_array, finite_number, in_range, integer, require
 from ..body.mesh import vertex_triangles
+from ..runtime import backend, limits
 from ..runtime.transfer import upload
+from ..runtime.validation import as_array, finite_number, in_range, integer, require
 
 TURBULENCE_MODES = 8
 

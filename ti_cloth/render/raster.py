@@ -18,6 +18,7 @@ keep the camera outside the bodies it looks at.
 """
 
 import taichi as ti
+
 from ..runtime import backend
 
 INF_BITS = 0x7F800000             # the bit pattern of f32 +inf

@@ -18,13 +18,13 @@ from dataclasses import dataclass, fields
 import numpy as np
 import taichi as ti
 
-from ..runtime import backend, limits
-from ..runtime.validation import as_array, finite_number, in_range, integer, require
-from ..runtime.backend import taichi_dtype
-from ..contact.colliders import BOX, CAPSULE, SPHERE, Box, Capsule, Plane, Sphere
-from ..contact.mesh_collider import MeshCollider
 from ..body.material import SpringKind
 from ..body.mesh import vertex_triangles
+from ..contact.colliders import BOX, CAPSULE, SPHERE, Box, Capsule, Plane, Sphere
+from ..contact.mesh_collider import MeshCollider
+from ..runtime import backend, limits
+from ..runtime.backend import taichi_dtype
+from ..runtime.validation import as_array, finite_number, in_range, integer, require
 from . import raster, shapes
 from .camera import Camera
 from .image import from_taichi
