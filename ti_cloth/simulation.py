@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from . import saved_state, stepping
+from .stepping import STEP_ORDER
 from .body.topology import Cloth
 from .contact.collision import ColliderSet
 from .contact.self_collision import SelfCollision, SelfContact, SelfContacts, warn_if_thick
@@ -39,7 +40,6 @@ from .runtime.validation import as_array, in_range, integer, require
 from .stability import auto_dt, stable_dt
 from .state import NO_BAD_STEP, State
 
-STEP_ORDER = ("integrator", "handles", "strain_limit", "colliders", "self_collision", "tearing")
 PLANS = ("per stage", "many steps")   # Simulation.step's launch plans
 # Simulation's options, in the order of the positional form kept for one release
 OPTIONS = ("integrator", "dt", "gravity", "drag", "wind", "tearing", "handles", "colliders",

@@ -16,7 +16,7 @@ per worker:
     ->  colliders (scripted ones placed from a table written before the launch)
     ->  tearing
 
-the order of simulation.STEP_ORDER. What Python computes from the time (scripted paths, the
+the order of STEP_ORDER. What Python computes from the time (scripted paths, the
 wind's gusts) is tabled for the launch's steps; a launch ends at the step after which a
 handle lets go (its particles are free from that step's handle stage on: that step runs stage
 by stage). Self-collision steps one launch per stage, as GPUs always do.
@@ -44,7 +44,11 @@ from .runtime import backend, limits
 from .runtime.team import BARRIER_SPINS, MAX_WORKERS, TASK_SPACING, Team
 from .state import NO_BAD_STEP
 
-TEAM_STAGES = ("integrator", "handles", "strain_limit", "colliders", "tearing")   # STEP_ORDER
+# One step, in this order, in every launch plan (Simulation's launch per stage and the
+# many-steps launches here); held particles are on their paths before strain limiting and the
+# colliders see them.
+STEP_ORDER = ("integrator", "handles", "strain_limit", "colliders", "self_collision", "tearing")
+TEAM_STAGES = tuple(name for name in STEP_ORDER if name != "self_collision")   # in a launch
 MAX_STEPS_PER_LAUNCH = 4096    # bounds one launch (Ctrl-C and the divergence check wait for it)
 SPRING_STEPS_PER_LAUNCH = 25_000_000   # about 0.1 s of one core's work: fewer steps for big cloths
 TEAM_MIN_SPRING_STEPS = 1_000_000   # less work per launch runs on one worker (launch_plans.py)
@@ -113,37 +117,39 @@ class TeamStages:
     def after(self, model: ti.template(), state: ti.template(), team: ti.template(), worker,
               p_begin, p_end, s_begin, s_end, step, k, dt, settings: ti.template()):
         """The stages of the launch's k-th step after the integrator's last barrier, in
-        simulation.STEP_ORDER."""
-        if ti.static(self.holds):
-            h_begin, h_end = team.share(settings.held, worker)
-            self.handles.move(state, h_begin, h_end, settings.held, k, dt)
-            team.meet(worker)
-        if ti.static(self.limits_strain):
-            limiter = self.strain_limiter
-            for i in range(p_begin, p_end):
-                limiter.before[i] = state.particle_position[i]
-            team.meet(worker)
-            kinds = ti.Vector([ti.cast((settings.strain_kinds >> kind) & 1, float)
-                               for kind in ti.static(range(3))])
-            for _ in range(settings.strain_passes):
-                relax_pass(model, state, self.colours, self.colours, kinds, 0.0,
-                           limiter.tearable, settings.strain_max, True, team, worker)
-            for i in range(p_begin, p_end):
-                state.particle_velocity[i] = (state.particle_velocity[i]
-                                              + (state.particle_position[i] - limiter.before[i]) / dt)
-            team.meet(worker)
-        if ti.static(self.collides and not self.collides_on_move):
-            if settings.moving != 0:
-                if worker == 0:
-                    self.colliders.place_scheduled(k)
+        STEP_ORDER (those a team launch runs: TEAM_STAGES; self-collision never does)."""
+        for name in ti.static(STEP_ORDER[1:]):
+            if ti.static(name == "handles" and self.holds):
+                h_begin, h_end = team.share(settings.held, worker)
+                self.handles.move(state, h_begin, h_end, settings.held, k, dt)
                 team.meet(worker)
-            for i in range(p_begin, p_end):
-                resolve_particle(model, state, self.colliders, i, self.colliders.step_start[i],
-                                 dt)
-            team.meet(worker)
-        if ti.static(self.tearable):
-            tear_overstretched(model, state, settings.tear_strain, step, s_begin, s_end)
-            team.meet(worker)
+            if ti.static(name == "strain_limit" and self.limits_strain):
+                limiter = self.strain_limiter
+                for i in range(p_begin, p_end):
+                    limiter.before[i] = state.particle_position[i]
+                team.meet(worker)
+                kinds = ti.Vector([ti.cast((settings.strain_kinds >> kind) & 1, float)
+                                   for kind in ti.static(range(3))])
+                for _ in range(settings.strain_passes):
+                    relax_pass(model, state, self.colours, self.colours, kinds, 0.0,
+                               limiter.tearable, settings.strain_max, True, team, worker)
+                for i in range(p_begin, p_end):
+                    state.particle_velocity[i] = (state.particle_velocity[i]
+                                                  + (state.particle_position[i]
+                                                     - limiter.before[i]) / dt)
+                team.meet(worker)
+            if ti.static(name == "colliders" and self.collides and not self.collides_on_move):
+                if settings.moving != 0:
+                    if worker == 0:
+                        self.colliders.place_scheduled(k)
+                    team.meet(worker)
+                for i in range(p_begin, p_end):
+                    resolve_particle(model, state, self.colliders, i,
+                                     self.colliders.step_start[i], dt)
+                team.meet(worker)
+            if ti.static(name == "tearing" and self.tearable):
+                tear_overstretched(model, state, settings.tear_strain, step, s_begin, s_end)
+                team.meet(worker)
 
 
 @ti.func

@@ -27,7 +27,7 @@ import taichi as ti
 from . import backend
 
 TASK_SPACING = 512   # indices per Taichi CPU task: worker w is index w * TASK_SPACING
-CHUNK = 256          # slices start at multiples of this (a multiple of any vector width x unroll)
+CHUNK = 64           # slices start at multiples of this (a multiple of any vector width x unroll)
 BARRIER_SPINS = 1 << 28   # polls before a barrier gives up on a missing worker
 STALLED = 1 << 29         # added to the arrival count by a worker that gave up
 PAD = 16                  # i32 slots between two workers' counters (one cache line)
