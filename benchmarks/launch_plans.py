@@ -64,7 +64,9 @@ def main(argv=None):
                              "choice between one worker and the team is for)")
     args = parser.parse_args(argv)
     tc.init(arch="cpu", precision="f32", threads=args.threads)
-    busy = (subprocess.Popen([sys.executable, "-c", "while True: pass"]) if args.busy else None)
+    # the busy loop ends with this process, however it ends (it watches its parent)
+    busy = (subprocess.Popen([sys.executable, "-c", "import os\nparent = os.getppid()\n"
+                              "while os.getppid() == parent: pass"]) if args.busy else None)
     print(f"{'N':>5} {'springs':>9} {'steps/call':>10}  "
           + "  ".join(f"{plan + ' (p50/p90)':>26}" for plan in PLANS) + f"  {'step(n) picks':>13}")
     for n in args.sizes:
