@@ -19,8 +19,7 @@ at 32 x 32. A team and one worker run the same kernel, so thread counts never ch
 
 import taichi as ti
 
-from ..physics.forces import evaluate_altitudes, evaluate_springs, gather_force
-from ..physics.wind import accumulate_wind
+from ..physics.forces import blow, evaluate_altitudes, evaluate_springs, gather_force
 from ..runtime import backend, limits
 
 
@@ -79,9 +78,8 @@ def team_step(integrator: ti.template(), model: ti.template(), state: ti.templat
 
 
 def step_once(integrator, model, state, forces, dt: float, step_index: int) -> None:
-    """One step of a fused integrator: the wind's kernel if any, then one parallel launch."""
-    if forces.wind is not None:
-        accumulate_wind(model, state, forces.wind, forces.tearable)
+    """One step of a fused integrator: the wind (forces.blow), then one parallel launch."""
+    blow(model, state, forces)
     advance_one(integrator, model, state, forces, dt, step_index, not state.prev_valid)
     state.prev_valid = integrator.records_history
 

@@ -189,10 +189,17 @@ def accumulate_forces(model: ti.template(), state: ti.template(), forces: ti.tem
         state.particle_force[i] = gather_force(model, state, forces, i, springs)
 
 
-def compute_forces(model, state, forces: ForceSettings, springs: bool = True) -> None:
-    """particle_force at the current state: the wind's kernel if any, then springs and gather."""
+def blow(model, state, forces: ForceSettings) -> None:
+    """The wind's forces on the particles at the current state, if the simulation has wind:
+    the one place a launch per stage evaluates them (compute_forces, and the fused step's
+    own launch). A many-steps launch evaluates them in its stages (stepping.TeamStages)."""
     if forces.wind is not None:
         accumulate_wind(model, state, forces.wind, forces.tearable)
+
+
+def compute_forces(model, state, forces: ForceSettings, springs: bool = True) -> None:
+    """particle_force at the current state: the wind (blow), then springs and gather."""
+    blow(model, state, forces)
     accumulate_forces(model, state, forces,
                       springs and model.spring_count + model.altitude_count > 0)
 

@@ -9,7 +9,9 @@ task, so every worker runs on a pool thread of its own. Workers own fixed slices
 Thread counts never change a bit, by construction rather than by two kernels compiling alike:
 
 - how many workers share a launch is a field (`size`), read at run time, so one worker and a
-  team of any size run the same compiled kernel (one worker is a pool task too);
+  team of any size run the same compiled kernel (one worker is a pool task too; small
+  launches run serially on the launching thread instead, chosen by their work alone:
+  stepping.ManySteps.serial);
 - every slice starts at a multiple of CHUNK items from the start of its loop, so LLVM's
   vectorised loop body and its scalar remainder see each item at the same place whatever the
   slices: an item is computed by the same instructions for every team size;
