@@ -14,11 +14,11 @@ from ti_cloth.physics import constraints, handles, strain_limit, tearing, wind
 from ti_cloth.state import copy_positions
 
 OPTIONAL = {
-    "wind": wind.wind_forces, "collisions": resolve_collisions,
+    "wind": wind.wind_on_triangle, "collisions": resolve_collisions,
     "collision snapshot": copy_positions, "relaxation": constraints.relax_springs,
     "strain-limit velocity": strain_limit.follow_velocity, "tearing": tearing.tear_springs,
-    "handles": handles.move_handles, "xpbd": constraints.xpbd_springs,
-    "xpbd prediction": xpbd.xpbd_predict, "implicit solve": implicit_euler.linearise,
+    "handles": handles.move_handles, "xpbd": xpbd.solve_spring,
+    "xpbd prediction": xpbd.xpbd_predict, "implicit solve": implicit_euler.linearise_spring,
     "rk4 stages": rk4.rk4_stage, "self-collision": contact_pairs.list_pairs,
 }
 

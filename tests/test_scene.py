@@ -146,7 +146,7 @@ def test_scene_file_problems_outside_the_keys(tmp_path):
 
 
 def test_a_scene_compiles_only_what_it_lists(tmp_path, f64):
-    kernels = (wind_module.wind_forces, resolve_collisions, relax_springs)
+    kernels = (wind_module.wind_on_triangle, resolve_collisions, relax_springs)
     forget_compiled(*kernels)
     scene = load_scene(write(tmp_path, GRID))
     sim = scene.build()

@@ -9,9 +9,10 @@ One step, in this order (STEP_ORDER), the same in every launch plan:
 
 Each stage after the integrator is an object with after_step(model, state, t, dt, step_index)
 (t: the time at the step's end), compiled and launched only when the simulation has it; the
-colliders, self-collision and the wind also have before_step(state, t) (t: the step's start). On the CPU, an
-integrator with a team step whose stages are all among stepping.TEAM_STAGES runs many steps in
-one launch (stepping.py; tested against a launch per stage).
+colliders, self-collision and the wind also have before_step(state, t) (t: the step's start). The
+integrator's step is written once, as phases (runtime/plan.py): a launch per phase runs them
+(Integrator.step), and on the CPU, when every stage is among stepping.TEAM_STAGES, many steps
+run in one launch (stepping.py; tested against a launch per phase).
 """
 
 
@@ -22,7 +23,6 @@ from pathlib import Path
 import numpy as np
 
 from . import saved_state, stepping
-from .stepping import STEP_ORDER
 from .body.topology import Cloth
 from .contact.collision import ColliderSet
 from .contact.self_collision import SelfCollision, SelfContact, SelfContacts, warn_if_thick
@@ -39,6 +39,7 @@ from .runtime.pool import POOL
 from .runtime.validation import as_array, in_range, integer, require
 from .stability import auto_dt, stable_dt
 from .state import NO_BAD_STEP, State
+from .stepping import STEP_ORDER
 
 PLANS = ("per stage", "many steps")   # Simulation.step's launch plans
 # Simulation's options, in the order of the positional form kept for one release
@@ -153,9 +154,8 @@ class Simulation:
         self._place_handles_at_start()
         # Many steps per launch on the CPU when every stage runs in a team launch; made on
         # first use (kept with the lent objects).
-        self._many_per_launch = (self.integrator.teamed and backend.config().arch == "cpu"
-                                 and set(self.stages) <= set(stepping.TEAM_STAGES)
-                                 and (self.wind is None or self.integrator.wind_once))
+        self._many_per_launch = (backend.config().arch == "cpu"
+                                 and set(self.stages) <= set(stepping.TEAM_STAGES))
 
     def _lend(self, parts: dict) -> dict:
         """The objects this simulation passes to kernels, {name: cls(*args)}, lent by the pool

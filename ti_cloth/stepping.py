@@ -1,5 +1,5 @@
-"""Many steps per launch on the CPU: the plan Simulation.step takes there for every integrator
-that defines a team step (Integrator.teamed), with the stages of TEAM_STAGES inside the launch.
+"""Many steps per launch on the CPU: the plan Simulation.step takes there, with the stages of
+TEAM_STAGES inside the launch.
 
 A launch and every parallel loop in it cost tens of microseconds on a CPU (the thread pool
 waking), about a small cloth's whole step of arithmetic, and a step of xpbd is 2 + 17 x
@@ -9,8 +9,8 @@ a Team (team.py): one worker runs every loop serially for launches of little wor
 per core otherwise, each owning fixed slices and meeting the others at barriers. A step is,
 per worker:
 
-    stage starts (the colliders keep the positions at the step start; the wind acts)
-    ->  the integrator's team step (Integrator.team_step: its phases and barriers)
+    stage starts (the colliders keep the positions at the step start)
+    ->  the integrator's phases (Integrator.phases, run by plan.run_team: their barriers)
     ->  handles (their particles put on targets tabled before the launch)
     ->  strain limiting (relaxation passes, colour by colour)
     ->  colliders (scripted ones placed from a table written before the launch)
@@ -39,8 +39,7 @@ from .contact.collision import resolve_particle
 from .errors import TeamStalled
 from .physics.constraints import relax_pass
 from .physics.tearing import tear_overstretched
-from .physics.wind import wind_on_particles, wind_on_triangles
-from .runtime import backend, limits
+from .runtime import backend, limits, plan
 from .runtime.team import BARRIER_SPINS, MAX_WORKERS, TASK_SPACING, Team
 from .state import NO_BAD_STEP
 
@@ -90,28 +89,17 @@ class TeamStages:
         resolve_particle(model, state, self.colliders, i, x0, dt)
 
     @ti.func
-    def begin(self, model: ti.template(), state: ti.template(), forces: ti.template(),
-              team: ti.template(), worker, p_begin, p_end, k, settings: ti.template()):
+    def begin(self, state: ti.template(), worker, p_begin, p_end, k, settings: ti.template()):
         """At the start of the launch's k-th step, before the integrator: the colliders keep
         the worker's particles' positions (or, when they collide on the move, worker 0 puts
         moving ones where this step leaves them: the integrator's barrier before its particle
-        loop publishes that); the wind of the step's start acts."""
+        loop publishes that)."""
         if ti.static(self.collides_on_move):
             if settings.moving != 0 and worker == 0:
                 self.colliders.place_scheduled(k)
         elif ti.static(self.collides):
             for i in range(p_begin, p_end):
                 self.colliders.step_start[i] = state.particle_position[i]
-        if ti.static(forces.has_wind):
-            wind = forces.wind
-            row = wind.scheduled[k]
-            t_begin, t_end = team.share(wind.triangle_count, worker)
-            wind_on_triangles(model, state, wind, ti.Vector([row[0], row[1], row[2]]),
-                              ti.Vector([row[3], row[4], row[5]]), forces.tearable, t_begin,
-                              t_end)
-            team.meet(worker)
-            wind_on_particles(wind, p_begin, p_end)
-            team.meet(worker)
 
     @ti.func
     def after(self, model: ti.template(), state: ti.template(), team: ti.template(), worker,
@@ -161,9 +149,11 @@ def _run(integrator: ti.template(), model: ti.template(), state: ti.template(),
     p_begin, p_end = team.share(model.particle_count, worker)
     s_begin, s_end = team.share(model.spring_count, worker)
     for k in range(count):
-        stages.begin(model, state, forces, team, worker, p_begin, p_end, k, settings)
-        integrator.team_step(model, state, forces, work, stages, team, worker, dt, first + k,
-                             ti.i32(start != 0 and k == 0))
+        stages.begin(state, worker, p_begin, p_end, k, settings)
+        now = ti.Struct(dt=dt, step=first + k, k=k, start=ti.i32(start != 0 and k == 0),
+                        row=worker)
+        plan.run_team(ti.static(plan.nodes_of(integrator, "phases", model, forces, work)),
+                      model, state, forces, work, stages, team, worker, now)
         stages.after(model, state, team, worker, p_begin, p_end, s_begin, s_end, first + k, k,
                      dt, settings)
 
@@ -195,7 +185,7 @@ def advance_many(integrator: ti.template(), model: ti.template(), state: ti.temp
 
 
 class ManySteps:
-    """Runs many steps of a teamed integrator on the CPU in few launches.
+    """Runs many steps of an integrator on the CPU in few launches.
 
     stages: the TeamStages of the simulation (its Model's lent set). A launch holds at most
     MAX_STEPS_PER_LAUNCH steps, fewer for big cloths (SPRING_STEPS_PER_LAUNCH of the
@@ -275,6 +265,7 @@ class ManySteps:
         how many steps ran. handles: the HandleSet (whose table is this plan's stages').
         Raises TeamStalled if a barrier gave up on a worker (the state is then unusable)."""
         work = integrator.workspace(model, state)
+        plan.note_launch(plan.nodes_of(integrator, "phases", model, forces, work), "team")
         colliders = self.stages.colliders
         moving = colliders is not None and colliders.moving
         kinds = 0

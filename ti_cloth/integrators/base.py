@@ -1,13 +1,11 @@
-"""What every integrator offers: a name, its order of accuracy, its stability rule and one verb,
-step()."""
+"""What every integrator offers: a name, its order of accuracy, its stability rule and its step,
+written once as phases (runtime/plan.py)."""
 
 import math
 from typing import ClassVar
 
-import taichi as ti
-
 from ..body.modes import stiffest_mode
-from ..runtime import backend
+from ..runtime import backend, plan
 from . import fused
 
 
@@ -15,50 +13,45 @@ from . import fused
 class Integrator:
     """Advances a State by one step of dt [s] on a fixed Model.
 
-    step(model, state, dt, forces, step_index) reads like a list of physical concerns;
-    `step_index` is the global index of the step, recorded by the divergence guard. Options are
-    keyword-only arguments of the constructor, validated there (they are compile-time constants
-    of the kernels). stable_step() is the integrator's own stability rule.
+    phases(model, forces, work) is the step, written once: a tuple of runtime/plan.py's nodes
+    whose bodies are ti.funcs, read like a list of physical concerns. plan.run launches them
+    phase by phase (GPUs, single steps); stepping.py runs many steps of them in one launch
+    shared by a team of CPU workers. Options are keyword-only arguments of the constructor,
+    validated there (they are compile-time constants of the kernels). stable_step() is the
+    integrator's own stability rule.
 
     A fused integrator needs nothing but the force at the start of the step: it defines the
     ti.func move(model, state, i, f, dt, step, start), which moves particle i given its total
-    force f (start: 1 when the state has no history yet). It inherits a step() that runs one
-    launch of fused.py (every spring force, then every particle's gather and move), and
-    Simulation can run many of its steps in one launch.
+    force f (start: 1 when the state has no history yet), and inherits fused.py's phases.
     """
 
     name: ClassVar[str]
     order: ClassVar[int]           # global order of accuracy in positions, smooth conservative forces
     position_based: ClassVar[bool] = False  # True: springs are constraints projected on positions
     step_limited: ClassVar[bool] = True     # False: stable at any step (stable_dt is inf)
-    fused: ClassVar[bool] = False           # True: defines move(), fused.py runs the step
-    teamed: ClassVar[bool] = False          # True: defines team_step(), for stepping.py
-    # True: team_step sums over particles, code LLVM vectorises differently on the launching
+    fused: ClassVar[bool] = False           # True: defines move(), fused.py writes the phases
+    # True: its phases sum over particles, code LLVM vectorises differently on the launching
     # thread than in a pool task: its small launches run as pool tasks too
     # (stepping.ManySteps.serial), so every launch of it is the same code.
     sums_in_step: ClassVar[bool] = False
-    # False: step() evaluates the wind more than once a step (at every stage); team_step
-    # sees only the wind of the step's start, so with wind the steps go stage by stage.
-    wind_once: ClassVar[bool] = True
     records_history: ClassVar[bool] = False  # True: a step leaves x_n in particle_prev_position
 
-    def step(self, model, state, dt: float, forces, step_index: int) -> None:
+    def phases(self, model, forces, work) -> tuple:
+        """One step as runtime/plan.py's nodes; `work` is workspace()'s object."""
         if not self.fused:
             raise NotImplementedError
-        fused.step_once(self, model, state, forces, dt, step_index)
+        return fused.phases(self, model, forces)
 
-    @ti.func
-    def team_step(self, model: ti.template(), state: ti.template(), forces: ti.template(),
-                  work: ti.template(), stages: ti.template(), team: ti.template(), worker, dt,
-                  step, start):
-        """Worker `worker`'s share of one step in a many-steps launch (stepping.py), ending at
-        a barrier after which every particle has its new position and velocity; `work` is
-        workspace()'s object, `stages` the launch's stepping.TeamStages. A fused
-        integrator's is fused.team_step (which lets a particle collide as it moves)."""
-        fused.team_step(self, model, state, forces, stages, team, worker, dt, step, start)
+    def step(self, model, state, dt: float, forces, step_index: int) -> None:
+        """One step, a launch per phase (plan.run); `step_index` is the step's global index,
+        recorded by the divergence guard."""
+        work = self.workspace(model, state)
+        plan.run(self, model, state, forces, work, dt, step_index, not state.prev_valid)
+        state.prev_valid = self.records_history
+        self.after_launch(work)
 
     def workspace(self, model, state):
-        """The working storage team_step reads (a kernel argument; the State when none)."""
+        """The working storage the phases read (a kernel argument; the State when none)."""
         return state
 
     def step_work(self, model) -> int:
@@ -66,7 +59,7 @@ class Integrator:
         return fused.spring_work(model)
 
     def after_launch(self, work) -> None:
-        """Read back what a many-steps launch left for reports (the last solve's figures)."""
+        """Read back what a launch left for reports (the last solve's figures)."""
 
     def copy_reports(self, stepper) -> None:
         """Take the reports of the last steps (the last solve's figures) from `stepper`, the

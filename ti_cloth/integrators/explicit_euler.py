@@ -22,7 +22,6 @@ class ExplicitEuler(Integrator):
     name = "explicit_euler"
     order = 1
     fused = True
-    teamed = True
 
     @ti.func
     def move(self, model: ti.template(), state: ti.template(), i, f, dt, step, start):

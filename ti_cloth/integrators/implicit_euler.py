@@ -25,14 +25,11 @@ import math
 
 import taichi as ti
 
-from ..physics.forces import (
-    altitude_gradient,
-    compute_forces,
-    evaluate_altitudes,
-    evaluate_springs,
-    gather_force,
-)
+from ..physics import wind
+from ..physics.forces import altitude_gradient, gather_force, spring_loops
 from ..runtime import backend, limits
+from ..runtime.plan import Loop, Once, Phase, Until
+from ..runtime.team import MAX_WORKERS
 from ..runtime.validation import count, finite_number, require
 from ..state import store_particle
 from . import fused
@@ -40,7 +37,8 @@ from .base import Integrator
 
 BLOCK = 64                      # particles per partial sum of a dot product
 TYPICAL_ITERATIONS = 20         # CG iterations a step is assumed to take (sizing launches)
-PAP, RZ, RR, BB, BETA = range(5)  # slots of the workspace's scalar field
+ALPHA, RZ, RR, BB, BETA = range(5)  # slots of a row of the workspace's scalar field
+ROW = 16                        # slots per row (a worker's row fills its own cache line)
 
 
 @backend.kernel_argument
@@ -68,8 +66,10 @@ class _Workspace:
         self.altitude_projection = fields.scalar(real, max(altitude_count, 1))   # G . (v or p)
         self.partial = fields.vector(2, real, self.block_count)
         self.partial_pap = fields.scalar(real, self.block_count)
-        self.scalar = fields.scalar(real, 5)
-        self.iterations = fields.scalar(ti.i32, ())
+        # each worker's copy of the solve's scalars and iteration count (plan.Once), a row
+        # of ROW slots per worker
+        self.scalar = fields.scalar(real, MAX_WORKERS * ROW)
+        self.iterations = fields.scalar(ti.i32, MAX_WORKERS * ROW)
         fields.finalize(self)
 
 
@@ -106,16 +106,25 @@ def _block_times(m, d):
 
 
 @ti.func
-def _project_altitudes(model: ti.template(), ws: ti.template(), vectors: ti.template(), begin,
-                       end):
-    """altitude_projection[a] = G_a . vectors = n . sum_c g_c vectors[corner c], for altitude
-    springs begin .. end - 1."""
-    for a in range(begin, end):
-        corner = model.altitude_indices[a]
-        total = 0.0
-        for c in ti.static(range(4)):
-            total += ws.altitude_weight[4 * a + c] * ws.altitude_normal[a].dot(vectors[corner[c]])
-        ws.altitude_projection[a] = total
+def _project_altitude(model: ti.template(), ws: ti.template(), vectors: ti.template(), a):
+    """altitude_projection[a] = G_a . vectors = n . sum_c g_c vectors[corner c]."""
+    corner = model.altitude_indices[a]
+    total = 0.0
+    for c in ti.static(range(4)):
+        total += ws.altitude_weight[4 * a + c] * ws.altitude_normal[a].dot(vectors[corner[c]])
+    ws.altitude_projection[a] = total
+
+
+@ti.func
+def _project_velocity(model: ti.template(), state: ti.template(), forces: ti.template(),
+                      ws: ti.template(), stages: ti.template(), a, now: ti.template()):
+    _project_altitude(model, ws, state.particle_velocity, a)
+
+
+@ti.func
+def _project_direction(model: ti.template(), state: ti.template(), forces: ti.template(),
+                       ws: ti.template(), stages: ti.template(), a, now: ti.template()):
+    _project_altitude(model, ws, ws.p, a)
 
 
 @ti.func
@@ -149,45 +158,53 @@ def _block_range(block, count):
 
 
 @ti.func
-def _linearise_springs(model: ti.template(), state: ti.template(), ws: ti.template(),
-                       tearable: ti.template(), begin, end):
-    """Springs begin .. end - 1: direction and clamped lateral factor at x_n."""
-    for s in range(begin, end):
-        i, j = model.spring_indices[s][0], model.spring_indices[s][1]
-        d = state.particle_position[i] - state.particle_position[j]
-        length = d.norm()
-        n = ti.Vector([0.0, 0.0, 0.0])
-        c = 0.0
-        if length > 0:
-            n = d / length
-            c = ti.max(1.0 - model.spring_rest_length[s] / length, 0.0)
-        elif model.spring_rest_length[s] == 0:
-            c = 1.0    # a zero-length spring is linear: -df/dx = k I
-        if ti.static(tearable):
-            if state.spring_alive[s] == 0:
-                c, n = 0.0, ti.Vector([0.0, 0.0, 0.0])
-        ws.spring_normal[s] = n
-        ws.spring_lateral[s] = c
+def linearise_spring(model: ti.template(), state: ti.template(), forces: ti.template(),
+                      ws: ti.template(), stages: ti.template(), s, now: ti.template()):
+    """Spring s: direction and clamped lateral factor at x_n."""
+    i, j = model.spring_indices[s][0], model.spring_indices[s][1]
+    d = state.particle_position[i] - state.particle_position[j]
+    length = d.norm()
+    n = ti.Vector([0.0, 0.0, 0.0])
+    c = 0.0
+    if length > 0:
+        n = d / length
+        c = ti.max(1.0 - model.spring_rest_length[s] / length, 0.0)
+    elif model.spring_rest_length[s] == 0:
+        c = 1.0    # a zero-length spring is linear: -df/dx = k I
+    if ti.static(forces.tearable):
+        if state.spring_alive[s] == 0:
+            c, n = 0.0, ti.Vector([0.0, 0.0, 0.0])
+    ws.spring_normal[s] = n
+    ws.spring_lateral[s] = c
 
 
 @ti.func
-def _linearise_altitudes(model: ti.template(), state: ti.template(), ws: ti.template(), begin,
-                         end):
-    """Altitude springs begin .. end - 1: normal and corner weights at x_n."""
-    for a in range(begin, end):
-        corner = model.altitude_indices[a]
-        n, _, g = altitude_gradient(state.particle_position, corner)
-        ws.altitude_normal[a] = n
-        for c in ti.static(range(4)):
-            ws.altitude_weight[4 * a + c] = g[c]
+def _linearise_altitude(model: ti.template(), state: ti.template(), forces: ti.template(),
+                        ws: ti.template(), stages: ti.template(), a, now: ti.template()):
+    """Altitude spring a: normal and corner weights at x_n."""
+    corner = model.altitude_indices[a]
+    n, _, g = altitude_gradient(state.particle_position, corner)
+    ws.altitude_normal[a] = n
+    for c in ti.static(range(4)):
+        ws.altitude_weight[4 * a + c] = g[c]
 
 
 @ti.func
-def _start_block(model: ti.template(), state: ti.template(), ws: ti.template(), block, dt, drag,
-                 tearable: ti.template()):
+def _gather_block(model: ti.template(), state: ti.template(), forces: ti.template(),
+                  ws: ti.template(), stages: ti.template(), block, now: ti.template()):
+    """particle_force = f_n on the particles of `block` (springs evaluated)."""
+    begin, end = _block_range(block, model.particle_count)
+    for i in range(begin, end):
+        state.particle_force[i] = gather_force(model, state, forces, i, True)
+
+
+@ti.func
+def _start_block(model: ti.template(), state: ti.template(), forces: ti.template(),
+                 ws: ti.template(), stages: ti.template(), block, now: ti.template()):
     """Particles of `block`: right-hand side b = h (f_n + h K v_n), the 3x3 diagonal of A
     (preconditioner) and the CG start dv = 0, r = b, p = z = r / diagonal; the block's
     partial sums of r . z and b . b."""
+    dt, drag = now.dt, forces.drag
     begin, end = _block_range(block, model.particle_count)
     rz, bb = 0.0, 0.0
     for i in range(begin, end):
@@ -201,7 +218,7 @@ def _start_block(model: ti.template(), state: ti.template(), ws: ti.template(), 
             n, c = ws.spring_normal[s], ws.spring_lateral[s]
             k, kd = model.spring_stiffness[s], model.spring_damping[s]
             kv += _stiffness_times(k, n, c, vi - state.particle_velocity[j])
-            if ti.static(tearable):
+            if ti.static(forces.tearable):
                 if state.spring_alive[s] == 0:
                     kd = 0.0
             m = _spring_block(k, kd, n, c, dt, model.relative_damping)
@@ -232,9 +249,11 @@ def _start_block(model: ti.template(), state: ti.template(), ws: ti.template(), 
 
 
 @ti.func
-def _apply_block(model: ti.template(), ws: ti.template(), block, dt, drag):
+def _apply_block(model: ti.template(), state: ti.template(), forces: ti.template(),
+                 ws: ti.template(), stages: ti.template(), block, now: ti.template()):
     """ap = A p on the particles of `block` (rows of pinned particles 0), and its partial
     sum of p . ap."""
+    dt, drag = now.dt, forces.drag
     begin, end = _block_range(block, model.particle_count)
     pap = 0.0
     for i in range(begin, end):
@@ -251,9 +270,11 @@ def _apply_block(model: ti.template(), ws: ti.template(), block, dt, drag):
 
 
 @ti.func
-def _update_block(model: ti.template(), ws: ti.template(), block, alpha):
+def _update_block(model: ti.template(), state: ti.template(), forces: ti.template(),
+                  ws: ti.template(), stages: ti.template(), block, now: ti.template()):
     """dv += alpha p, r -= alpha ap, z = r / diag on the particles of `block`; its partial
     sums of r . z and r . r."""
+    alpha = ws.scalar[now.row * ROW + ALPHA]
     begin, end = _block_range(block, model.particle_count)
     rz, rr = 0.0, 0.0
     for i in range(begin, end):
@@ -268,71 +289,52 @@ def _update_block(model: ti.template(), ws: ti.template(), block, alpha):
 
 
 @ti.func
-def _turn_block(model: ti.template(), ws: ti.template(), block, beta):
+def _turn_block(model: ti.template(), state: ti.template(), forces: ti.template(),
+                ws: ti.template(), stages: ti.template(), block, now: ti.template()):
     """p = z + beta p on the particles of `block`."""
+    beta = ws.scalar[now.row * ROW + BETA]
     begin, end = _block_range(block, model.particle_count)
     for i in range(begin, end):
         ws.p[i] = ws.z[i] + beta * ws.p[i]
 
 
 @ti.func
-def _advance_block(model: ti.template(), state: ti.template(), ws: ti.template(), block, dt,
-                   step):
+def _advance_block(model: ti.template(), state: ti.template(), forces: ti.template(),
+                   ws: ti.template(), stages: ti.template(), block, now: ti.template()):
     """v_{n+1} = v_n + dv, x_{n+1} = x_n + h v_{n+1} on the particles of `block`."""
     begin, end = _block_range(block, model.particle_count)
     for i in range(begin, end):
         v = state.particle_velocity[i] + ws.dv[i]
-        store_particle(state, i, state.particle_position[i] + dt * v, v, step)
+        store_particle(state, i, state.particle_position[i] + now.dt * v, v, now.step)
 
 
-@backend.kernel
-def linearise(model: ti.template(), state: ti.template(), ws: ti.template(), dt: float,
-               drag: float, tearable: ti.template()):
-    """The linearisation at x_n and the CG start (_start_block), with r . z, r . r and b . b."""
-    _linearise_springs(model, state, ws, tearable, 0, model.spring_count)
-    if ti.static(model.altitude_count > 0):
-        _linearise_altitudes(model, state, ws, 0, model.altitude_count)
-        _project_altitudes(model, ws, state.particle_velocity, 0, model.altitude_count)
-    for block in range(ws.block_count):
-        _start_block(model, state, ws, block, dt, drag, tearable)
-    for _ in range(1):
-        total = _total(ws, ws.partial, ti.Vector([0.0, 0.0]))
-        ws.scalar[RZ] = total[0]
-        ws.scalar[RR] = total[1]
-        ws.scalar[BB] = total[1]
+@ti.func
+def _begin_solve(model: ti.template(), state: ti.template(), forces: ti.template(),
+                 ws: ti.template(), now: ti.template()):
+    """The start's r . z, r . r and b . b (r = b), in the worker's row; no iteration yet."""
+    total = _total(ws, ws.partial, ti.Vector([0.0, 0.0]))
+    ws.scalar[now.row * ROW + RZ] = total[0]
+    ws.scalar[now.row * ROW + RR] = total[1]
+    ws.scalar[now.row * ROW + BB] = total[1]
+    ws.iterations[now.row * ROW] = 0
 
 
-@backend.kernel
-def apply_system(model: ti.template(), state: ti.template(), ws: ti.template(), dt: float, drag: float,
-           tearable: ti.template()):
-    """ap = A p (rows of pinned particles 0) and p . ap."""
-    if ti.static(model.altitude_count > 0):
-        _project_altitudes(model, ws, ws.p, 0, model.altitude_count)
-    for block in range(ws.block_count):
-        _apply_block(model, ws, block, dt, drag)
-    for _ in range(1):
-        ws.scalar[PAP] = _total(ws, ws.partial_pap, 0.0)
+@ti.func
+def _step_length(model: ti.template(), state: ti.template(), forces: ti.template(),
+                 ws: ti.template(), now: ti.template()):
+    """alpha = r . z / p . Ap."""
+    ws.scalar[now.row * ROW + ALPHA] = ws.scalar[now.row * ROW + RZ] / _total(ws, ws.partial_pap, 0.0)
 
 
-@backend.kernel
-def _iterate(model: ti.template(), ws: ti.template()):
-    """One CG update after ap = A p: dv += alpha p, r -= alpha ap, z = r / diag,
-    then p = z + beta p (alpha = r.z / p.Ap, beta = new r.z / old r.z)."""
-    for block in range(ws.block_count):
-        _update_block(model, ws, block, ws.scalar[RZ] / ws.scalar[PAP])
-    for _ in range(1):
-        total = _total(ws, ws.partial, ti.Vector([0.0, 0.0]))
-        ws.scalar[BETA] = total[0] / ws.scalar[RZ]
-        ws.scalar[RZ] = total[0]
-        ws.scalar[RR] = total[1]
-    for block in range(ws.block_count):
-        _turn_block(model, ws, block, ws.scalar[BETA])
-
-
-@backend.kernel
-def _advance(model: ti.template(), state: ti.template(), ws: ti.template(), dt: float, step: ti.i32):
-    for block in range(ws.block_count):
-        _advance_block(model, state, ws, block, dt, step)
+@ti.func
+def _next_direction(model: ti.template(), state: ti.template(), forces: ti.template(),
+                    ws: ti.template(), now: ti.template()):
+    """beta = new r . z / old r . z; the new r . z and r . r; one more iteration."""
+    sums = _total(ws, ws.partial, ti.Vector([0.0, 0.0]))
+    ws.scalar[now.row * ROW + BETA] = sums[0] / ws.scalar[now.row * ROW + RZ]
+    ws.scalar[now.row * ROW + RZ] = sums[0]
+    ws.scalar[now.row * ROW + RR] = sums[1]
+    ws.iterations[now.row * ROW] = ws.iterations[now.row * ROW] + 1
 
 
 class ImplicitEuler(Integrator):
@@ -349,7 +351,6 @@ class ImplicitEuler(Integrator):
     name = "implicit_euler"
     order = 1
     step_limited = False
-    teamed = True
     sums_in_step = True
 
     def __init__(self, *, tolerance: float = 1e-5, max_iterations: int = 200):
@@ -374,81 +375,48 @@ class ImplicitEuler(Integrator):
         return (2 + 2 * TYPICAL_ITERATIONS) * fused.spring_work(model)
 
     def after_launch(self, work):
-        self.last_iterations = int(work.iterations[None])
+        self.last_iterations = int(work.iterations[0])
         bb = work.scalar[BB]
         self.last_residual = math.sqrt(work.scalar[RR] / bb) if bb > 0 else 0.0
 
     @ti.func
-    def team_step(self, model: ti.template(), state: ti.template(), forces: ti.template(),
-                  work: ti.template(), stages: ti.template(), team: ti.template(), worker, dt,
-                  step, start):
-        """step()'s kernels as phases of one worker's share of the springs, the altitude
-        springs and the blocks of particles, meeting the team between them: three barriers
-        per CG iteration (after A p, after the update, after the new direction). Every
-        worker sums the same partial sums in block order, so all take the same decisions."""
-        ws = work
-        s_begin, s_end = team.share(model.spring_count, worker)
-        a_begin, a_end = team.share(model.altitude_count, worker)
-        b_begin, b_end = team.share(ws.block_count, worker)
-        evaluate_springs(model, state, forces.tearable, s_begin, s_end)
-        evaluate_altitudes(model, state, a_begin, a_end)
-        _linearise_springs(model, state, ws, forces.tearable, s_begin, s_end)
-        if ti.static(model.altitude_count > 0):
-            _linearise_altitudes(model, state, ws, a_begin, a_end)
-        team.meet(worker)
-        for block in range(b_begin, b_end):
-            begin, end = _block_range(block, model.particle_count)
-            for i in range(begin, end):
-                state.particle_force[i] = gather_force(model, state, forces, i, True)
-        if ti.static(model.altitude_count > 0):
-            _project_altitudes(model, ws, state.particle_velocity, a_begin, a_end)
-            team.meet(worker)
-        for block in range(b_begin, b_end):
-            _start_block(model, state, ws, block, dt, forces.drag, forces.tearable)
-        team.meet(worker)
-        total = _total(ws, ws.partial, ti.Vector([0.0, 0.0]))
-        rz, rr, bb = total[0], total[1], total[1]
-        goal = ti.f64(self.tolerance ** 2) * ti.f64(bb)
-        iterations = 0
-        while ti.f64(rr) > goal and iterations < self.max_iterations:
-            if ti.static(model.altitude_count > 0):
-                _project_altitudes(model, ws, ws.p, a_begin, a_end)
-                team.meet(worker)
-            for block in range(b_begin, b_end):
-                _apply_block(model, ws, block, dt, forces.drag)
-            team.meet(worker)
-            alpha = rz / _total(ws, ws.partial_pap, 0.0)
-            for block in range(b_begin, b_end):
-                _update_block(model, ws, block, alpha)
-            team.meet(worker)
-            sums = _total(ws, ws.partial, ti.Vector([0.0, 0.0]))   # a new name: Taichi 1.7
-            beta = sums[0] / rz          # lost the assignment of a returned vector to `total`
-            rz = sums[0]
-            rr = sums[1]
-            for block in range(b_begin, b_end):
-                _turn_block(model, ws, block, beta)
-            team.meet(worker)
-            iterations += 1
-        for block in range(b_begin, b_end):
-            _advance_block(model, state, ws, block, dt, step)
-        if worker == 0:
-            ws.scalar[RR] = rr
-            ws.scalar[BB] = bb
-            ws.iterations[None] = iterations
-        team.meet(worker)
+    def unconverged(self, model: ti.template(), state: ti.template(), forces: ti.template(),
+                    ws: ti.template(), now: ti.template()):
+        """|r|^2 > tolerance^2 |b|^2 (in float64) and iterations left: CG goes on (b = 0,
+        no load on a free particle: dv = 0 at once)."""
+        row = now.row
+        return (ti.f64(ws.scalar[row * ROW + RR]) > ti.f64(self.tolerance ** 2) * ti.f64(ws.scalar[row * ROW + BB])
+                and ws.iterations[row * ROW] < self.max_iterations)
 
-    def step(self, model, state, dt, forces, step_index):
-        ws = self.workspace(model, state)
-        compute_forces(model, state, forces)
-        linearise(model, state, ws, dt, forces.drag, forces.tearable)
-        iterations = 0
-        goal = self.tolerance ** 2 * ws.scalar[BB]   # b = 0 (no load on a free particle): dv = 0
-        while ws.scalar[RR] > goal and iterations < self.max_iterations:
-            apply_system(model, state, ws, dt, forces.drag, forces.tearable)
-            _iterate(model, ws)
-            iterations += 1
-        bb = ws.scalar[BB]
-        self.last_iterations = iterations
-        self.last_residual = math.sqrt(ws.scalar[RR] / bb) if bb > 0 else 0.0
-        _advance(model, state, ws, dt, step_index)
-        state.prev_valid = False
+    def linearisation(self, model, forces, ws):
+        """f_n, the linearisation at x_n and the CG start (r = b, p = z = r / diagonal)."""
+        linear = spring_loops(model)
+        if model.spring_count:
+            linear += (Loop(model.spring_count, linearise_spring),)
+        if model.altitude_count:
+            linear += (Loop(model.altitude_count, _linearise_altitude),)
+        gather = Loop(ws.block_count, _gather_block)
+        start = Loop(ws.block_count, _start_block)
+        if model.altitude_count:
+            begin = (Phase(gather, Loop(model.altitude_count, _project_velocity)), Phase(start))
+        else:
+            begin = (Phase(gather, start),)
+        return (wind.phases(model, forces) + ((Phase(*linear),) if linear else ()) + begin
+                + (Once(_begin_solve),))
+
+    def system_product(self, model, forces, ws):
+        """ap = A p and its partial sums of p . ap."""
+        project = ()
+        if model.altitude_count:
+            project = (Phase(Loop(model.altitude_count, _project_direction)),)
+        return project + (Phase(Loop(ws.block_count, _apply_block)),)
+
+    def phases(self, model, forces, ws):
+        """The linearisation, preconditioned CG until converged (three synchronisation points
+        per iteration: after A p, the update, the new direction; every worker sums the same
+        partial sums in block order, so all take the same decisions), the step."""
+        iteration = (self.system_product(model, forces, ws)
+                     + (Once(_step_length), Phase(Loop(ws.block_count, _update_block)),
+                        Once(_next_direction), Phase(Loop(ws.block_count, _turn_block))))
+        return (self.linearisation(model, forces, ws) + (Until(self.unconverged, *iteration),)
+                + (Phase(Loop(ws.block_count, _advance_block)),))

@@ -6,9 +6,11 @@ from collections.abc import Mapping
 import taichi as ti
 
 from ..body.material import SpringKind
-from ..physics.constraints import SweepOrder, relax_pass, relax_springs, sweep
-from ..physics.forces import compute_forces, gather_force
-from ..runtime import backend, limits
+from ..physics import wind
+from ..physics.constraints import SweepOrder, relax, relax_altitude
+from ..physics.forces import gather_force
+from ..runtime import limits
+from ..runtime.plan import Loop, Phase, Repeat, Sweep
 from ..runtime.validation import count, finite_number, require
 from ..state import store_particle
 from . import fused
@@ -17,25 +19,38 @@ from .verlet import verlet_update
 
 
 @ti.func
-def velocity_from_positions(state: ti.template(), i, dt, step):
+def velocity_from_positions(model: ti.template(), state: ti.template(), forces: ti.template(),
+                            work: ti.template(), stages: ti.template(), i, now: ti.template()):
     """v_{n+1} = (x_{n+1} - x_n) / h for particle i, with x_n in particle_prev_position."""
     x = state.particle_position[i]
-    store_particle(state, i, x, (x - state.particle_prev_position[i]) / dt, step)
+    store_particle(state, i, x, (x - state.particle_prev_position[i]) / now.dt, now.step)
 
 
-@backend.kernel
-def update_velocity(model: ti.template(), state: ti.template(), dt: float, step: ti.i32):
-    for i in range(model.particle_count):
-        velocity_from_positions(state, i, dt, step)
+@ti.func
+def _predict(model: ti.template(), state: ti.template(), forces: ti.template(),
+             work: ti.template(), stages: ti.template(), i, now: ti.template(),
+             integrator: ti.template()):
+    """Verlet prediction of particle i under its external forces (kept in particle_force)."""
+    f = gather_force(model, state, forces, i, False)
+    state.particle_force[i] = f
+    verlet_update(state, i, model.particle_inv_mass[i] * f, now.dt, integrator.damping,
+                  now.start, now.step)
 
 
-@backend.kernel
-def _predict(model: ti.template(), state: ti.template(), dt: float, damping: float, start: ti.i32,
-             step: ti.i32):
-    """Verlet prediction under the external forces in particle_force."""
-    for i in range(model.particle_count):
-        verlet_update(state, i, model.particle_inv_mass[i] * state.particle_force[i], dt, damping,
-                      start, step)
+@ti.func
+def _relax_spring(model: ti.template(), state: ti.template(), forces: ti.template(),
+                  work: ti.template(), stages: ti.template(), t, now: ti.template(),
+                  integrator: ti.template()):
+    relax(model, state, work.colours, t, ti.Vector(integrator.kind_stiffness), forces.tearable,
+          0.0, False)
+
+
+@ti.func
+def _relax_altitude(model: ti.template(), state: ti.template(), forces: ti.template(),
+                    work: ti.template(), stages: ti.template(), t, now: ti.template(),
+                    integrator: ti.template()):
+    relax_altitude(model, state, work.altitude_colours.order[t],
+                   integrator.stiffness["altitude"])
 
 
 STIFFNESS_KEYS = tuple(k.name.lower() for k in SpringKind) + ("altitude",)
@@ -64,7 +79,6 @@ class PBD(Integrator):
     order = 1
     position_based = True
     step_limited = False
-    teamed = True
     records_history = True
 
     def __init__(self, *, iterations: int = 2, damping: float = 0.0, stiffness=None):
@@ -92,33 +106,15 @@ class PBD(Integrator):
     def step_work(self, model):
         return (self.iterations + 2) * fused.spring_work(model)
 
-    @ti.func
-    def team_step(self, model: ti.template(), state: ti.template(), forces: ti.template(),
-                  work: ti.template(), stages: ti.template(), team: ti.template(), worker, dt,
-                  step, start):
-        """step()'s kernels as phases of one worker's share (work: the SweepOrder),
-        meeting the team between them and after every colour of a pass."""
-        p_begin, p_end = team.share(model.particle_count, worker)
-        for i in range(p_begin, p_end):
-            f = gather_force(model, state, forces, i, False)
-            state.particle_force[i] = f
-            verlet_update(state, i, model.particle_inv_mass[i] * f, dt, self.damping, start, step)
-        if ti.static(model.spring_count + model.altitude_count > 0):
-            team.meet(worker)
-            stiffness = ti.Vector(self.kind_stiffness)
-            for _ in range(self.iterations):
-                relax_pass(model, state, work.colours, work.altitude_colours, stiffness,
-                           self.stiffness["altitude"], forces.tearable, 0.0, False, team, worker)
-        for i in range(p_begin, p_end):
-            velocity_from_positions(state, i, dt, step)
-        team.meet(worker)
-
-    def step(self, model, state, dt, forces, step_index):
-        compute_forces(model, state, forces, springs=False)   # external forces only
-        _predict(model, state, dt, self.damping, not state.prev_valid, step_index)
-        state.prev_valid = True
-        if model.spring_count + model.altitude_count:
-            stiffness = ti.math.vec3(*self.kind_stiffness)
-            sweep(relax_springs, model, state, self.iterations, stiffness,
-                  self.stiffness["altitude"], forces.tearable, 0.0, False)
-        update_velocity(model, state, dt, step_index)
+    def phases(self, model, forces, work):
+        """Predict under the external loads (and the wind), `iterations` relaxation passes
+        colour by colour (work: the SweepOrder), velocities from positions."""
+        passes = ()
+        if model.spring_count:
+            passes += (Sweep(work.colours, _relax_spring, self),)
+        if model.altitude_count:
+            passes += (Sweep(work.altitude_colours, _relax_altitude, self),)
+        return (wind.phases(model, forces)
+                + (Phase(Loop(model.particle_count, _predict, self)),)
+                + ((Repeat(self.iterations, *passes),) if passes else ())
+                + (Phase(Loop(model.particle_count, velocity_from_positions)),))

@@ -5,8 +5,10 @@ import math
 
 import taichi as ti
 
-from ..physics.forces import compute_forces, evaluate_altitudes, evaluate_springs, gather_force
+from ..physics import wind
+from ..physics.forces import gather_force, spring_loops
 from ..runtime import backend
+from ..runtime.plan import Loop, Phase
 from ..state import store_particle
 from . import fused
 from .base import Integrator
@@ -33,35 +35,31 @@ class _Stages:
         fields.finalize(self)
 
 
-@backend.kernel
-def rk4_stage(model: ti.template(), state: ti.template(), stages: ti.template(), dt: float,
-           stage: ti.template(), step: ti.i32):
-    for i in range(model.particle_count):
-        _stage_particle(model, state, stages, i, dt, stage, step)
-
-
 @ti.func
-def _stage_particle(model: ti.template(), state: ti.template(), stages: ti.template(), i, dt,
-                    stage: ti.template(), step):
-    """Stage k = (v, M^-1 f) of particle i at the current state: add it, weighted, to the
-    sums; move the particle to where the next stage is evaluated, or (last stage) to the
-    step's result."""
+def rk4_stage(model: ti.template(), state: ti.template(), forces: ti.template(),
+                    work: ti.template(), stages: ti.template(), i, now: ti.template(),
+                    stage: ti.template()):
+    """Stage k = (v, M^-1 f) of particle i at the current state (its total force gathered
+    and kept in particle_force): add it, weighted, to the sums; move the particle to where
+    the next stage is evaluated, or (last stage) to the step's result."""
+    state.particle_force[i] = gather_force(model, state, forces, i, True)
+    dt = now.dt
     kx = state.particle_velocity[i]
     kv = model.particle_inv_mass[i] * state.particle_force[i]
     if ti.static(stage == 0):
-        stages.x0[i] = state.particle_position[i]
-        stages.v0[i] = kx
-        stages.sum_x[i] = kx
-        stages.sum_v[i] = kv
+        work.x0[i] = state.particle_position[i]
+        work.v0[i] = kx
+        work.sum_x[i] = kx
+        work.sum_v[i] = kv
     else:
-        stages.sum_x[i] = stages.sum_x[i] + ti.static(WEIGHTS[stage]) * kx
-        stages.sum_v[i] = stages.sum_v[i] + ti.static(WEIGHTS[stage]) * kv
+        work.sum_x[i] = work.sum_x[i] + ti.static(WEIGHTS[stage]) * kx
+        work.sum_v[i] = work.sum_v[i] + ti.static(WEIGHTS[stage]) * kv
     if ti.static(stage < 3):
-        state.particle_position[i] = stages.x0[i] + ti.static(NEXT[stage]) * dt * kx
-        state.particle_velocity[i] = stages.v0[i] + ti.static(NEXT[stage]) * dt * kv
+        state.particle_position[i] = work.x0[i] + ti.static(NEXT[stage]) * dt * kx
+        state.particle_velocity[i] = work.v0[i] + ti.static(NEXT[stage]) * dt * kv
     else:
-        store_particle(state, i, stages.x0[i] + dt / 6.0 * stages.sum_x[i],
-                       stages.v0[i] + dt / 6.0 * stages.sum_v[i], step)
+        store_particle(state, i, work.x0[i] + dt / 6.0 * work.sum_x[i],
+                       work.v0[i] + dt / 6.0 * work.sum_v[i], now.step)
 
 
 class RK4(Integrator):
@@ -75,8 +73,6 @@ class RK4(Integrator):
 
     name = "rk4"
     order = 4
-    teamed = True
-    wind_once = False
 
     def workspace(self, model, state):
         return self.buffers(state, lambda: _Stages(model.particle_count))
@@ -84,30 +80,16 @@ class RK4(Integrator):
     def step_work(self, model):
         return 4 * fused.spring_work(model)
 
-    @ti.func
-    def team_step(self, model: ti.template(), state: ti.template(), forces: ti.template(),
-                  work: ti.template(), stages: ti.template(), team: ti.template(), worker, dt,
-                  step, start):
-        """step()'s four force evaluations and stage updates as phases of one worker's
-        share, meeting the team after each."""
-        s_begin, s_end = team.share(model.spring_count, worker)
-        a_begin, a_end = team.share(model.altitude_count, worker)
-        p_begin, p_end = team.share(model.particle_count, worker)
-        for stage in ti.static(range(4)):
-            evaluate_springs(model, state, forces.tearable, s_begin, s_end)
-            evaluate_altitudes(model, state, a_begin, a_end)
-            team.meet(worker)
-            for i in range(p_begin, p_end):
-                state.particle_force[i] = gather_force(model, state, forces, i, True)
-                _stage_particle(model, state, work, i, dt, stage, step)
-            team.meet(worker)
-
-    def step(self, model, state, dt, forces, step_index):
-        stages = self.workspace(model, state)
-        for s in range(4):
-            compute_forces(model, state, forces)    # f at stage s (x0 and v0 for s = 0)
-            rk4_stage(model, state, stages, dt, s, step_index)
-        state.prev_valid = False
+    def phases(self, model, forces, work):
+        """Four times: the wind and the springs at the stage's state, then every particle's
+        stage (work: the _Stages)."""
+        loops = spring_loops(model)
+        springs = (Phase(*loops),) if loops else ()
+        step = ()
+        for stage in range(4):
+            step += (wind.phases(model, forces) + springs
+                     + (Phase(Loop(model.particle_count, rk4_stage, stage)),))
+        return step
 
     def mode_stable_step(self, w2, g):
         """h |lambda| within the stability region: 2 sqrt(2) / w undamped (the region's reach up

@@ -20,7 +20,6 @@ class SymplecticEuler(Integrator):
     name = "symplectic_euler"
     order = 1
     fused = True
-    teamed = True
 
     @ti.func
     def move(self, model: ti.template(), state: ti.template(), i, f, dt, step, start):

@@ -35,7 +35,6 @@ class Verlet(Integrator):
     name = "verlet"
     order = 2
     fused = True
-    teamed = True
     records_history = True
 
     def __init__(self, *, damping: float = 0.0):

@@ -4,28 +4,57 @@ constraints with compliance 1 / k, so the cloth has its material stiffness in N/
 
 import taichi as ti
 
-from ..physics.constraints import damp_pass, damp_springs, sweep, xpbd_pass, xpbd_springs
-from ..physics.forces import compute_forces, gather_force
+from ..physics import wind
+from ..physics.constraints import damp, xpbd_altitude, xpbd_update
+from ..physics.forces import gather_force
 from ..runtime import backend, limits
+from ..runtime.plan import Loop, Phase, Repeat, Sweep
 from ..runtime.validation import count
 from . import fused
 from .base import Integrator
-from .pbd import update_velocity, velocity_from_positions
+from .pbd import velocity_from_positions
 
 
 @ti.func
-def _predict_particle(model: ti.template(), state: ti.template(), i, dt):
-    """x~ = x_n + h (v_n + h M^-1 f_ext); x_n is kept in particle_prev_position."""
+def xpbd_predict(model: ti.template(), state: ti.template(), forces: ti.template(),
+             work: ti.template(), stages: ti.template(), i, now: ti.template()):
+    """x~ = x_n + h (v_n + h M^-1 f_ext) for particle i, f_ext its external loads (kept in
+    particle_force); x_n is kept in particle_prev_position."""
+    state.particle_force[i] = gather_force(model, state, forces, i, False)
     x = state.particle_position[i]
-    v = state.particle_velocity[i] + dt * model.particle_inv_mass[i] * state.particle_force[i]
+    v = state.particle_velocity[i] + now.dt * model.particle_inv_mass[i] * state.particle_force[i]
     state.particle_prev_position[i] = x
-    state.particle_position[i] = x + dt * v
+    state.particle_position[i] = x + now.dt * v
 
 
-@backend.kernel
-def xpbd_predict(model: ti.template(), state: ti.template(), dt: float):
-    for i in range(model.particle_count):
-        _predict_particle(model, state, i, dt)
+@ti.func
+def clear_spring(model: ti.template(), state: ti.template(), forces: ti.template(),
+                  work: ti.template(), stages: ti.template(), s, now: ti.template()):
+    work.value[s] = 0.0
+
+
+@ti.func
+def clear_altitude(model: ti.template(), state: ti.template(), forces: ti.template(),
+                    work: ti.template(), stages: ti.template(), a, now: ti.template()):
+    work.altitude[a] = 0.0
+
+
+@ti.func
+def solve_spring(model: ti.template(), state: ti.template(), forces: ti.template(),
+                  work: ti.template(), stages: ti.template(), t, now: ti.template()):
+    xpbd_update(model, state, work.colours, t, work.value, now.dt, forces.tearable)
+
+
+@ti.func
+def solve_altitude(model: ti.template(), state: ti.template(), forces: ti.template(),
+                    work: ti.template(), stages: ti.template(), t, now: ti.template()):
+    xpbd_altitude(model, state, work.altitude_colours.order[t], work.altitude, now.dt)
+
+
+@ti.func
+def damp_spring(model: ti.template(), state: ti.template(), forces: ti.template(),
+                 work: ti.template(), stages: ti.template(), t, now: ti.template()):
+    damp(model, state, work.colours, t, now.dt, forces.tearable)
 
 
 @backend.kernel_argument
@@ -45,13 +74,13 @@ class _Multipliers:
 class XPBD(Integrator):
     """XPBD: predict under external forces (gravity, drag, wind), then `iterations`
     Gauss-Seidel passes over the springs in colour order, each updating the spring's Lagrange
-    multiplier (constraints.xpbd_springs), then v = (x_{n+1} - x_n) / h.
+    multiplier (constraints.xpbd_update), then v = (x_{n+1} - x_n) / h.
 
     Unlike pbd, the result does not depend on the iteration count once converged: it is the
     backward Euler step of the same Hookean springs (compliance 1/k) the force-based
     integrators use, with axial damping kd. On a body with relative damping (Stuyck eq. 4.7)
     the constraints are undamped and one pass of implicit relative damping on the new
-    velocities follows (constraints.damp_springs: each spring's backward Euler step in turn,
+    velocities follows (constraints.damp: each spring's backward Euler step in turn,
     stable at any h); positions keep their solve, as in position-based damping (Mueller et al.
     2007), and the next prediction starts from the damped velocities. Unconverged (few
     iterations, stiff springs, large h), the cloth is softer than its material.
@@ -63,7 +92,6 @@ class XPBD(Integrator):
     order = 1
     position_based = True
     step_limited = False
-    teamed = True
 
     def __init__(self, *, iterations: int = 10):
         self.iterations = count("XPBD.iterations", iterations, limits.ITERATIONS)
@@ -77,44 +105,21 @@ class XPBD(Integrator):
     def step_work(self, model):
         return (self.iterations + 2) * fused.spring_work(model)
 
-    @ti.func
-    def team_step(self, model: ti.template(), state: ti.template(), forces: ti.template(),
-                  work: ti.template(), stages: ti.template(), team: ti.template(), worker, dt,
-                  step, start):
-        """step()'s kernels as phases of one worker's share, meeting the team between them
-        (and after every colour of a pass)."""
-        p_begin, p_end = team.share(model.particle_count, worker)
-        for i in range(p_begin, p_end):
-            state.particle_force[i] = gather_force(model, state, forces, i, False)
-            _predict_particle(model, state, i, dt)
-        if ti.static(model.spring_count + model.altitude_count > 0):
-            s_begin, s_end = team.share(model.spring_count, worker)
-            for s in range(s_begin, s_end):
-                work.value[s] = 0.0
-            a_begin, a_end = team.share(model.altitude_count, worker)
-            for a in range(a_begin, a_end):
-                work.altitude[a] = 0.0
-            team.meet(worker)
-            for _ in range(self.iterations):
-                xpbd_pass(model, state, work.colours, work.altitude_colours, work.value,
-                          work.altitude, dt, forces.tearable, team, worker)
-        for i in range(p_begin, p_end):
-            velocity_from_positions(state, i, dt, step)
-        if ti.static(model.spring_count > 0 and model.relative_damping):
-            team.meet(worker)
-            damp_pass(model, state, work.colours, dt, forces.tearable, team, worker)
-        team.meet(worker)
-
-    def step(self, model, state, dt, forces, step_index):
-        compute_forces(model, state, forces, springs=False)   # external forces only
-        xpbd_predict(model, state, dt)
-        if model.spring_count + model.altitude_count:
-            multipliers = self.workspace(model, state)
-            multipliers.value.fill(0)
-            multipliers.altitude.fill(0)
-            sweep(xpbd_springs, model, state, self.iterations, multipliers.value,
-                  multipliers.altitude, dt, forces.tearable)
-        update_velocity(model, state, dt, step_index)
+    def phases(self, model, forces, work):
+        """Predict under the external loads (and the wind) with the multipliers cleared,
+        `iterations` passes colour by colour (work: the _Multipliers), velocities from
+        positions, and on a relative-damped body one pass of implicit damping."""
+        clear, passes = (), ()
+        if model.spring_count:
+            clear += (Loop(model.spring_count, clear_spring),)
+            passes += (Sweep(work.colours, solve_spring),)
+        if model.altitude_count:
+            clear += (Loop(model.altitude_count, clear_altitude),)
+            passes += (Sweep(work.altitude_colours, solve_altitude),)
+        damping = ()
         if model.spring_count and model.relative_damping:
-            sweep(damp_springs, model, state, 1, dt, forces.tearable)
-        state.prev_valid = False
+            damping = (Sweep(work.colours, damp_spring),)
+        return (wind.phases(model, forces)
+                + (Phase(Loop(model.particle_count, xpbd_predict), *clear),)
+                + ((Repeat(self.iterations, *passes),) if passes else ())
+                + (Phase(Loop(model.particle_count, velocity_from_positions)),) + damping)

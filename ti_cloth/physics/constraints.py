@@ -36,7 +36,7 @@ class SweepOrder:
 
 
 @ti.func
-def _relax(model: ti.template(), state: ti.template(), colours: ti.template(), t, stiffness,
+def relax(model: ti.template(), state: ti.template(), colours: ti.template(), t, stiffness,
            tearable: ti.template(), max_strain, stretched_only: ti.template()):
     """Project the spring at position t of the colour order (SpringColouring's packed
     values)."""
@@ -68,7 +68,7 @@ def _altitude_constraint(model: ti.template(), state: ti.template(), a):
 
 
 @ti.func
-def _relax_altitude(model: ti.template(), state: ti.template(), a, stiffness):
+def relax_altitude(model: ti.template(), state: ti.template(), a, stiffness):
     """Project altitude spring a (Selle et al. 2008; forces.altitude_frame) to its rest
     altitude: C = h - h0 with gradient g_c n on corner c, so corner c moves by
     -stiffness C w_c g_c n / sum_l w_l g_l^2 (the lecture's mass-weighted projection of one
@@ -92,7 +92,7 @@ def relax_pass(model: ti.template(), state: ti.template(), colours: ti.template(
     for c in range(colours.count):
         begin, end = team.share_range(colours.start[c], colours.start[c + 1], worker)
         for t in range(begin, end):
-            _relax(model, state, colours, t, stiffness, tearable, max_strain,
+            relax(model, state, colours, t, stiffness, tearable, max_strain,
                    stretched_only)
         team.meet(worker)
     if ti.static(model.altitude_count > 0 and not stretched_only):
@@ -100,7 +100,7 @@ def relax_pass(model: ti.template(), state: ti.template(), colours: ti.template(
             begin, end = team.share_range(altitude_colours.start[c],
                                           altitude_colours.start[c + 1], worker)
             for t in range(begin, end):
-                _relax_altitude(model, state, altitude_colours.order[t], altitude_stiffness)
+                relax_altitude(model, state, altitude_colours.order[t], altitude_stiffness)
             team.meet(worker)
 
 
@@ -118,7 +118,7 @@ def relax_springs(model: ti.template(), state: ti.template(), colours: ti.templa
     m_q / (m_p + m_q) = w_p / (w_p + w_q); pins (w = 0) do not move. stiffness[kind] scales the
     correction (1 = the lecture's full projection; 0 leaves that kind alone). PBD uses
     max_strain = 0; strain limiting (Provot 1995) uses stretched_only, which leaves springs no
-    longer than L. After the springs, each pass projects the altitude springs (_relax_altitude,
+    longer than L. After the springs, each pass projects the altitude springs (relax_altitude,
     scaled by altitude_stiffness), colour by colour too; strain limiting leaves them alone.
     """
     if ti.static(serial):
@@ -129,19 +129,28 @@ def relax_springs(model: ti.template(), state: ti.template(), colours: ti.templa
     else:
         for c in ti.static(range(colours.count)):
             for t in range(colours.offsets[c], colours.offsets[c + 1]):
-                _relax(model, state, colours, t, stiffness, tearable, max_strain,
+                relax(model, state, colours, t, stiffness, tearable, max_strain,
                        stretched_only)
         if ti.static(model.altitude_count > 0 and not stretched_only):
             for c in ti.static(range(altitude_colours.count)):
                 for t in range(altitude_colours.offsets[c], altitude_colours.offsets[c + 1]):
-                    _relax_altitude(model, state, altitude_colours.order[t], altitude_stiffness)
+                    relax_altitude(model, state, altitude_colours.order[t], altitude_stiffness)
 
 
 @ti.func
-def _xpbd(model: ti.template(), state: ti.template(), colours: ti.template(), t,
-          multiplier: ti.template(), dt, tearable: ti.template()):
-    """The XPBD update of the spring at position t of the colour order, whose multiplier
-    is multiplier[t]."""
+def xpbd_update(model: ti.template(), state: ti.template(), colours: ti.template(), t,
+                multiplier: ti.template(), dt, tearable: ti.template()):
+    """The XPBD update of the spring at position t of the colour order, whose multiplier is
+    multiplier[t] (Macklin et al. 2016, eq. 18; damping as Macklin et al. 2019, "Small
+    steps", with beta = kd).
+
+    Spring (p, q), C = |x_p - x_q| - L, n = (x_p - x_q) / |x_p - x_q|, compliance
+    alpha~ = 1 / (k h^2), gamma = alpha~ (h^2 kd) / h = kd / (k h):
+    dlambda = (-C - alpha~ lambda - gamma n . ((x_p - x_p^n) - (x_q - x_q^n)))
+              / ((1 + gamma)(w_p + w_q) + alpha~),
+    x_p += w_p dlambda n, x_q -= w_q dlambda n, lambda += dlambda. At convergence this is the
+    implicit step of the Hookean energy 1/2 k C^2 (Stuyck eq. 4.4) with axial damping kd.
+    Springs with k = 0 are not constraints."""
     alive = colours.stiffness[t] > 0
     if ti.static(tearable):
         alive = alive and state.spring_alive[colours.order[t]] != 0
@@ -165,9 +174,9 @@ def _xpbd(model: ti.template(), state: ti.template(), colours: ti.template(), t,
 
 
 @ti.func
-def _xpbd_altitude(model: ti.template(), state: ti.template(), a, multiplier: ti.template(), dt):
+def xpbd_altitude(model: ti.template(), state: ti.template(), a, multiplier: ti.template(), dt):
     """XPBD for altitude spring a: C = h - h0, gradient g_c n on corner c, compliance
-    1 / (k h^2) and damping kd on the altitude's rate, as _xpbd with sum_c w_c g_c^2 for
+    1 / (k h^2) and damping kd on the altitude's rate, as xpbd_update with sum_c w_c g_c^2 for
     w_p + w_q."""
     k = model.altitude_stiffness[a]
     corner, n, h, g, weight, norm = _altitude_constraint(model, state, a)
@@ -187,62 +196,13 @@ def _xpbd_altitude(model: ti.template(), state: ti.template(), a, multiplier: ti
 
 
 @ti.func
-def xpbd_pass(model: ti.template(), state: ti.template(), colours: ti.template(),
-              altitude_colours: ti.template(), multiplier: ti.template(),
-              altitude_multiplier: ti.template(), dt, tearable: ti.template(),
-              team: ti.template(), worker):
-    """Worker `worker`'s share of one XPBD pass (xpbd_springs), colour by colour, meeting
-    the team after each colour."""
-    for c in range(colours.count):
-        begin, end = team.share_range(colours.start[c], colours.start[c + 1], worker)
-        for t in range(begin, end):
-            _xpbd(model, state, colours, t, multiplier, dt, tearable)
-        team.meet(worker)
-    if ti.static(model.altitude_count > 0):
-        for c in range(altitude_colours.count):
-            begin, end = team.share_range(altitude_colours.start[c],
-                                          altitude_colours.start[c + 1], worker)
-            for t in range(begin, end):
-                _xpbd_altitude(model, state, altitude_colours.order[t], altitude_multiplier, dt)
-            team.meet(worker)
-
-
-@backend.kernel
-def xpbd_springs(model: ti.template(), state: ti.template(), colours: ti.template(),
-                 altitude_colours: ti.template(), multiplier: ti.template(),
-                 altitude_multiplier: ti.template(), dt: float, tearable: ti.template(),
-                 passes: ti.i32, serial: ti.template()):
-    """XPBD passes over every spring (Macklin et al. 2016, eq. 18; damping as Macklin et al.
-    2019, "Small steps", with beta = kd); `passes` of them when serial, else one.
-
-    Spring (p, q), C = |x_p - x_q| - L, n = (x_p - x_q) / |x_p - x_q|, compliance
-    alpha~ = 1 / (k h^2), gamma = alpha~ (h^2 kd) / h = kd / (k h):
-    dlambda = (-C - alpha~ lambda - gamma n . ((x_p - x_p^n) - (x_q - x_q^n)))
-              / ((1 + gamma)(w_p + w_q) + alpha~),
-    x_p += w_p dlambda n, x_q -= w_q dlambda n, lambda += dlambda. At convergence this is the
-    implicit step of the Hookean energy 1/2 k C^2 (Stuyck eq. 4.4) with axial damping kd.
-    Springs with k = 0 are not constraints. After the springs, each pass visits the altitude
-    springs (_xpbd_altitude), colour by colour.
-    """
-    if ti.static(serial):
-        for _ in range(1):
-            for _pass in range(passes):
-                xpbd_pass(model, state, colours, altitude_colours, multiplier, altitude_multiplier,
-                          dt, tearable, SOLO, 0)
-    else:
-        for c in ti.static(range(colours.count)):
-            for t in range(colours.offsets[c], colours.offsets[c + 1]):
-                _xpbd(model, state, colours, t, multiplier, dt, tearable)
-        if ti.static(model.altitude_count > 0):
-            for c in ti.static(range(altitude_colours.count)):
-                for t in range(altitude_colours.offsets[c], altitude_colours.offsets[c + 1]):
-                    _xpbd_altitude(model, state, altitude_colours.order[t], altitude_multiplier,
-                                   dt)
-
-
-@ti.func
-def _damp(model: ti.template(), state: ti.template(), colours: ti.template(), t, dt,
-          tearable: ti.template()):
+def damp(model: ti.template(), state: ti.template(), colours: ti.template(), t, dt,
+         tearable: ti.template()):
+    """Relative damping (Stuyck eq. 4.7, f_p = -kd (v_p - v_q)) of the spring at position t of
+    the colour order, solved implicitly on velocities: for one spring the backward Euler step
+    is exact, v_p - v_q shrinking by 1 / (1 + h kd (w_p + w_q)), split by inverse mass so
+    momentum is kept. A pass of it over every spring in colour order is the product of these
+    exact steps (a further pass would damp again, not converge)."""
     alive = colours.damping[t] > 0
     if ti.static(tearable):
         alive = alive and state.spring_alive[colours.order[t]] != 0
@@ -255,42 +215,9 @@ def _damp(model: ti.template(), state: ti.template(), colours: ti.template(), t,
         state.particle_velocity[q] = state.particle_velocity[q] + wq / (wp + wq) * dv
 
 
-@ti.func
-def damp_pass(model: ti.template(), state: ti.template(), colours: ti.template(), dt,
-              tearable: ti.template(), team: ti.template(), worker):
-    """Worker `worker`'s share of one damping pass (damp_springs), colour by colour."""
-    for c in range(colours.count):
-        begin, end = team.share_range(colours.start[c], colours.start[c + 1], worker)
-        for t in range(begin, end):
-            _damp(model, state, colours, t, dt, tearable)
-        team.meet(worker)
-
-
-@backend.kernel
-def damp_springs(model: ti.template(), state: ti.template(), colours: ti.template(),
-                 altitude_colours: ti.template(), dt: float, tearable: ti.template(),
-                 passes: ti.i32, serial: ti.template()):
-    """Relative damping (Stuyck eq. 4.7, f_p = -kd (v_p - v_q)) solved implicitly spring by
-    spring on velocities; `passes` of them when serial, else one. For one spring the backward
-    Euler step is exact: v_p - v_q shrinks by 1 / (1 + h kd (w_p + w_q)), split by inverse
-    mass so momentum is kept; a pass is the product of these exact steps, spring by spring in
-    colour order (a further pass would damp again, not converge). XPBD runs one after its
-    position passes on relative-damped bodies (its own damping acts along springs only).
-    Altitude springs are damped in their XPBD pass, on the altitude's rate (altitude_colours
-    is not read here)."""
-    if ti.static(serial):
-        for _ in range(1):
-            for _pass in range(passes):
-                damp_pass(model, state, colours, dt, tearable, SOLO, 0)
-    else:
-        for c in ti.static(range(colours.count)):
-            for t in range(colours.offsets[c], colours.offsets[c + 1]):
-                _damp(model, state, colours, t, dt, tearable)
-
-
 def sweep(kernel, model, state, passes: int, *args) -> None:
-    """Run `passes` passes of relax_springs, xpbd_springs or damp_springs on the model's launch
-    plan; args are the kernel's arguments after `altitude_colours` and before `passes`."""
+    """Run `passes` passes of relax_springs on the model's launch plan; args are the kernel's
+    arguments after `altitude_colours` and before `passes`."""
     colours, altitude_colours = model.spring_colouring(), model.altitude_colouring()
     if serial_is_faster(model):
         kernel(model, state, colours, altitude_colours, *args, passes, True)

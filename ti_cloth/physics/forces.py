@@ -8,9 +8,8 @@ No float atomics, so a run is deterministic; each spring's formula is evaluated 
 per end; Newton's third law holds exactly. Altitude springs (four particles each) are evaluated
 the same way: once each, into one force per corner, which each corner gathers in a fixed order.
 
-The pieces are ti.funcs, so integrators/fused.py can put a whole step (springs, gather, update)
-in one kernel: its loops run in parallel when that kernel is launched once per step, and split
-among CPU workers (or run by one) when it runs many steps in one launch.
+The pieces are ti.funcs, the bodies of the phases integrators write their steps with
+(runtime/plan.py): a loop over springs, then one over particles.
 """
 
 
@@ -22,8 +21,9 @@ import taichi as ti
 
 from ..body.material import SpringKind
 from ..body.topology import altitude_frames
-from ..runtime import backend
-from .wind import accumulate_wind
+from ..runtime import backend, plan
+from ..runtime.plan import Loop, Phase
+from . import wind
 
 
 @backend.kernel_argument
@@ -85,22 +85,21 @@ def spring_force(xi, xj, vi, vj, rest, k, kd, relative: ti.template()):
 
 
 @ti.func
-def evaluate_springs(model: ti.template(), state: ti.template(), tearable: ti.template(), begin,
-                     end):
-    """spring_force[s] = force of spring s on its first end (eq. 4.5, 4.7), 0 once torn, for
-    springs begin .. end - 1. (Altitude springs: evaluate_altitudes; they do not tear.)"""
-    for s in range(begin, end):
-        i, j = model.spring_indices[s][0], model.spring_indices[s][1]
-        f = ti.Vector([0.0, 0.0, 0.0])
-        alive = True
-        if ti.static(tearable):
-            alive = state.spring_alive[s] != 0
-        if alive:
-            f = spring_force(state.particle_position[i], state.particle_position[j],
-                             state.particle_velocity[i], state.particle_velocity[j],
-                             model.spring_rest_length[s], model.spring_stiffness[s],
-                             model.spring_damping[s], model.relative_damping)
-        state.spring_force[s] = f
+def spring_forces(model: ti.template(), state: ti.template(), forces: ti.template(),
+                  work: ti.template(), stages: ti.template(), s, now: ti.template()):
+    """spring_force[s] = force of spring s on its first end (eq. 4.5, 4.7), 0 once torn.
+    (Altitude springs: altitude_forces; they do not tear.)"""
+    i, j = model.spring_indices[s][0], model.spring_indices[s][1]
+    f = ti.Vector([0.0, 0.0, 0.0])
+    alive = True
+    if ti.static(forces.tearable):
+        alive = state.spring_alive[s] != 0
+    if alive:
+        f = spring_force(state.particle_position[i], state.particle_position[j],
+                         state.particle_velocity[i], state.particle_velocity[j],
+                         model.spring_rest_length[s], model.spring_stiffness[s],
+                         model.spring_damping[s], model.relative_damping)
+    state.spring_force[s] = f
 
 
 @ti.func
@@ -137,30 +136,39 @@ def altitude_gradient(positions: ti.template(), corner):
 
 
 @ti.func
-def evaluate_altitudes(model: ti.template(), state: ti.template(), begin, end):
-    """altitude_force[4 a + c] = force of altitude spring a on its corner c (p, a, b, c), for
-    altitude springs begin .. end - 1: with g = (1, -w_a, -w_b, -w_c) and the rate
-    dh/dt = n . sum_c g_c v_c, f_c = -(k (h - h0) + kd dh/dt) g_c n (Stuyck eq. 4.5 and 4.7
-    with the altitude for the spring's length: damping acts on the altitude's rate).
-    Compiled out for a body without altitude springs."""
-    if ti.static(model.altitude_count > 0):
-        for a in range(begin, end):
-            corner = model.altitude_indices[a]
-            n, h, g = altitude_gradient(state.particle_position, corner)
-            rate = 0.0
-            for c in ti.static(range(4)):
-                rate += g[c] * n.dot(state.particle_velocity[corner[c]])
-            magnitude = -(model.altitude_stiffness[a] * (h - model.altitude_rest_length[a])
-                          + model.altitude_damping[a] * rate)
-            for c in ti.static(range(4)):
-                state.altitude_force[4 * a + c] = magnitude * g[c] * n
+def altitude_forces(model: ti.template(), state: ti.template(), forces: ti.template(),
+                    work: ti.template(), stages: ti.template(), a, now: ti.template()):
+    """altitude_force[4 a + c] = force of altitude spring a on its corner c (p, a, b, c): with
+    g = (1, -w_a, -w_b, -w_c) and the rate dh/dt = n . sum_c g_c v_c,
+    f_c = -(k (h - h0) + kd dh/dt) g_c n (Stuyck eq. 4.5 and 4.7 with the altitude for the
+    spring's length: damping acts on the altitude's rate)."""
+    corner = model.altitude_indices[a]
+    n, h, g = altitude_gradient(state.particle_position, corner)
+    rate = 0.0
+    for c in ti.static(range(4)):
+        rate += g[c] * n.dot(state.particle_velocity[corner[c]])
+    magnitude = -(model.altitude_stiffness[a] * (h - model.altitude_rest_length[a])
+                  + model.altitude_damping[a] * rate)
+    for c in ti.static(range(4)):
+        state.altitude_force[4 * a + c] = magnitude * g[c] * n
+
+
+def spring_loops(model) -> tuple:
+    """The loops that evaluate every spring and altitude spring (spring_forces,
+    altitude_forces), none for a body without them."""
+    loops = ()
+    if model.spring_count:
+        loops += (Loop(model.spring_count, spring_forces),)
+    if model.altitude_count:
+        loops += (Loop(model.altitude_count, altitude_forces),)
+    return loops
 
 
 @ti.func
 def gather_force(model: ti.template(), state: ti.template(), forces: ti.template(), i,
                  springs: ti.template()):
     """Total force on particle i: m g (Stuyck eq. 4.3) - drag m v + its springs' forces, as
-    evaluate_springs left them (springs=False: external loads only) + the wind's share."""
+    spring_forces left them (springs=False: external loads only) + the wind's share."""
     f = model.particle_mass[i] * ti.Vector(forces.gravity)
     if ti.static(forces.drag > 0):
         f -= forces.drag * model.particle_mass[i] * state.particle_velocity[i]
@@ -178,30 +186,44 @@ def gather_force(model: ti.template(), state: ti.template(), forces: ti.template
     return f
 
 
-@backend.kernel
-def accumulate_forces(model: ti.template(), state: ti.template(), forces: ti.template(),
-                      springs: ti.template()):
-    """state.particle_force = gather_force(i) for every particle, springs evaluated first."""
-    if ti.static(springs):
-        evaluate_springs(model, state, forces.tearable, 0, model.spring_count)
-        evaluate_altitudes(model, state, 0, model.altitude_count)
-    for i in range(model.particle_count):
-        state.particle_force[i] = gather_force(model, state, forces, i, springs)
+@ti.func
+def total_force(model: ti.template(), state: ti.template(), forces: ti.template(),
+                work: ti.template(), stages: ti.template(), i, now: ti.template()):
+    """particle_force[i] = the total force on particle i (springs evaluated)."""
+    state.particle_force[i] = gather_force(model, state, forces, i, True)
 
 
-def blow(model, state, forces: ForceSettings) -> None:
-    """The wind's forces on the particles at the current state, if the simulation has wind:
-    the one place a launch per stage evaluates them (compute_forces, and the fused step's
-    own launch). A many-steps launch evaluates them in its stages (stepping.TeamStages)."""
-    if forces.wind is not None:
-        accumulate_wind(model, state, forces.wind, forces.tearable)
+@ti.func
+def external_force(model: ti.template(), state: ti.template(), forces: ti.template(),
+                   work: ti.template(), stages: ti.template(), i, now: ti.template()):
+    """particle_force[i] = the external loads on particle i (gravity, drag, wind)."""
+    state.particle_force[i] = gather_force(model, state, forces, i, False)
+
+
+@backend.kernel_argument
+class _Evaluation:
+    """The force evaluation of compute_forces, as phases (plan.py)."""
+
+    def phases(self, model, forces, work):
+        """The wind, every spring, every particle's total."""
+        loops = spring_loops(model)
+        springs = (Phase(*loops),) if loops else ()
+        return (wind.phases(model, forces) + springs
+                + (Phase(Loop(model.particle_count, total_force)),))
+
+    def external(self, model, forces, work):
+        """The wind, every particle's external loads."""
+        return wind.phases(model, forces) + (Phase(Loop(model.particle_count, external_force)),)
+
+
+EVALUATION = _Evaluation()
 
 
 def compute_forces(model, state, forces: ForceSettings, springs: bool = True) -> None:
-    """particle_force at the current state: the wind (blow), then springs and gather."""
-    blow(model, state, forces)
-    accumulate_forces(model, state, forces,
-                      springs and model.spring_count + model.altitude_count > 0)
+    """particle_force at the current state (the wind as the schedule's first row sets it:
+    WindField.set_time): with springs, or (springs=False) the external loads only."""
+    plan.run(EVALUATION, model, state, forces, state, 0.0, 0, False,
+             "phases" if springs else "external")
 
 
 def energies(cloth, positions: np.ndarray, velocities: np.ndarray, gravity,

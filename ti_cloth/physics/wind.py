@@ -26,6 +26,7 @@ import taichi as ti
 
 from ..body.mesh import vertex_triangles
 from ..runtime import backend, limits
+from ..runtime.plan import Loop, Phase
 from ..runtime.transfer import upload
 from ..runtime.validation import as_array, finite_number, in_range, integer, require
 
@@ -135,29 +136,27 @@ class WindField:
                 (self.triangle_edge_spring, cloth.triangle_edge_spring),
                 (self.adjacency_triangle, adjacent), (self.mode_wave, wave),
                 (self.mode_direction, direction), (self.mode_phase, phase)))
-        self.mean = ti.math.vec3(0.0)
-        self.drift = ti.math.vec3(0.0)
-        self.update(0.0)
+        self.set_time(0.0)
 
     def before_step(self, state, t: float) -> None:
-        """Set the wind for the step that starts at time t (held fixed during the step)."""
-        self.update(t)
+        """Set the wind for the step that starts at time t (held fixed during the step), for
+        a launch per phase (plan.run reads row 0 of the schedule)."""
+        self.set_time(t)
 
-    def update(self, t: float) -> None:
-        """Set the wind of time t."""
-        self.mean = ti.math.vec3(*self.wind.mean_velocity(t))
-        self.drift = ti.math.vec3(*self._drift(t))
+    def set_time(self, t: float) -> None:
+        """Make the wind of time t the schedule's first row (the wind of a launch of one
+        step)."""
+        self.scheduled[0] = self._row(t)
 
-    def _drift(self, t: float) -> np.ndarray:
-        return np.asarray(self.wind.velocity) * t
+    def _row(self, t: float) -> np.ndarray:
+        return np.concatenate([self.wind.mean_velocity(t), np.asarray(self.wind.velocity) * t])
 
     def schedule(self, first: int, count: int, dt: float) -> None:
         """Table the wind of the starts of steps first .. first + count - 1 (count at most
         limits.SCHEDULED_STEPS) for a many-steps launch (stepping.py)."""
         table = np.zeros((limits.SCHEDULED_STEPS, 6), backend.numpy_real())
         for k in range(count):
-            t = (first + k) * dt
-            table[k] = np.concatenate([self.wind.mean_velocity(t), self._drift(t)])
+            table[k] = self._row((first + k) * dt)
         self.scheduled.from_numpy(table)
 
     @ti.func
@@ -170,57 +169,56 @@ class WindField:
 
 
 @ti.func
-def wind_on_triangles(model: ti.template(), state: ti.template(), wind: ti.template(), mean,
-                      drift, tearable: ti.template(), begin, end):
-    """Triangles begin .. end - 1: each one's aerodynamic force (module doc), a third of it
-    kept per corner in triangle_force. The WindField is a template argument, so its frozen
-    Wind's coefficients are compile-time constants; the mean wind and drift are values."""
-    for t in range(begin, end):
-        a, b, c = wind.triangle[t][0], wind.triangle[t][1], wind.triangle[t][2]
-        xa, xb, xc = state.particle_position[a], state.particle_position[b], state.particle_position[c]
-        u = mean - (state.particle_velocity[a] + state.particle_velocity[b]
-                    + state.particle_velocity[c]) / 3.0
-        if ti.static(wind.wind.turbulence > 0):
-            u += wind.wind.turbulence * wind.turbulence_at((xa + xb + xc) / 3.0 - drift)
-        area_vector = 0.5 * (xb - xa).cross(xc - xa)
-        area = area_vector.norm()
-        speed = u.norm()
-        intact = True
-        if ti.static(tearable):
-            for e in ti.static(range(3)):
-                s = wind.triangle_edge_spring[t][e]
-                if s >= 0 and state.spring_alive[s] == 0:
-                    intact = False
-        f = ti.Vector([0.0, 0.0, 0.0])
-        if intact and area > 0 and speed > 0:
-            n = area_vector / area
-            flow = u / speed
-            cos = n.dot(flow)
-            q = 0.5 * wind.wind.air_density * speed * speed * area
-            drag = wind.wind.drag_coefficient * ti.abs(cos) + wind.wind.friction_coefficient
-            f = q * (drag * flow + wind.wind.lift_coefficient * cos * (n - cos * flow))
-        wind.triangle_force[t] = f / 3.0
+def wind_on_triangle(model: ti.template(), state: ti.template(), forces: ti.template(),
+                     work: ti.template(), stages: ti.template(), t, now: ti.template()):
+    """Triangle t's aerodynamic force (module doc) in the wind of row now.k of the schedule,
+    a third of it kept per corner in triangle_force. The WindField is a template argument, so
+    its frozen Wind's coefficients are compile-time constants."""
+    wind = forces.wind
+    row = wind.scheduled[now.k]
+    mean = ti.Vector([row[0], row[1], row[2]])
+    drift = ti.Vector([row[3], row[4], row[5]])
+    a, b, c = wind.triangle[t][0], wind.triangle[t][1], wind.triangle[t][2]
+    xa, xb, xc = state.particle_position[a], state.particle_position[b], state.particle_position[c]
+    u = mean - (state.particle_velocity[a] + state.particle_velocity[b]
+                + state.particle_velocity[c]) / 3.0
+    if ti.static(wind.wind.turbulence > 0):
+        u += wind.wind.turbulence * wind.turbulence_at((xa + xb + xc) / 3.0 - drift)
+    area_vector = 0.5 * (xb - xa).cross(xc - xa)
+    area = area_vector.norm()
+    speed = u.norm()
+    intact = True
+    if ti.static(forces.tearable):
+        for e in ti.static(range(3)):
+            s = wind.triangle_edge_spring[t][e]
+            if s >= 0 and state.spring_alive[s] == 0:
+                intact = False
+    f = ti.Vector([0.0, 0.0, 0.0])
+    if intact and area > 0 and speed > 0:
+        n = area_vector / area
+        flow = u / speed
+        cos = n.dot(flow)
+        q = 0.5 * wind.wind.air_density * speed * speed * area
+        drag = wind.wind.drag_coefficient * ti.abs(cos) + wind.wind.friction_coefficient
+        f = q * (drag * flow + wind.wind.lift_coefficient * cos * (n - cos * flow))
+    wind.triangle_force[t] = f / 3.0
 
 
 @ti.func
-def wind_on_particles(wind: ti.template(), begin, end):
-    """Particles begin .. end - 1: the forces of their triangles, gathered in a fixed order."""
-    for i in range(begin, end):
-        f = ti.Vector([0.0, 0.0, 0.0])
-        for k in range(wind.particle_triangle_start[i], wind.particle_triangle_start[i + 1]):
-            f += wind.triangle_force[wind.adjacency_triangle[k]]
-        wind.particle_wind_force[i] = f
+def wind_on_particle(model: ti.template(), state: ti.template(), forces: ti.template(),
+                     work: ti.template(), stages: ti.template(), i, now: ti.template()):
+    """Particle i's wind force: the forces of its triangles, gathered in a fixed order."""
+    wind = forces.wind
+    f = ti.Vector([0.0, 0.0, 0.0])
+    for k in range(wind.particle_triangle_start[i], wind.particle_triangle_start[i + 1]):
+        f += wind.triangle_force[wind.adjacency_triangle[k]]
+    wind.particle_wind_force[i] = f
 
 
-@backend.kernel
-def wind_forces(model: ti.template(), state: ti.template(), wind: ti.template(),
-                     mean: ti.math.vec3, drift: ti.math.vec3, tearable: ti.template()):
-    wind_on_triangles(model, state, wind, mean, drift, tearable, 0, wind.triangle_count)
-    wind_on_particles(wind, 0, model.particle_count)
-
-
-def accumulate_wind(model, state, wind: WindField, tearable: bool) -> None:
-    """wind.particle_wind_force = every triangle's aerodynamic force (module doc) at the current
-    state, gathered per particle over its triangles in a fixed order (forces.gather_force
-    adds it)."""
-    wind_forces(model, state, wind, wind.mean, wind.drift, tearable)
+def phases(model, forces) -> tuple:
+    """The wind's phases at the current state (plan.py), none without wind: every
+    triangle's force, then every particle's share (forces.gather_force adds it)."""
+    if forces.wind is None:
+        return ()
+    return (Phase(Loop(forces.wind.triangle_count, wind_on_triangle)),
+            Phase(Loop(model.particle_count, wind_on_particle)))

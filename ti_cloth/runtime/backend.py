@@ -182,6 +182,18 @@ def count_compilations(on: bool = True) -> None:
     _counting = on
 
 
+def counting() -> bool:
+    """Whether compilations are being counted (count_compilations)."""
+    return _counting
+
+
+def note_launch(function, key) -> None:
+    """Count a launch of `function` (a ti.func a kernel inlines: plan.py's phase bodies)
+    with compile-time key `key`, as a kernel's launches are counted (compilations)."""
+    if _counting:
+        _launched.setdefault(function, set()).add(key)
+
+
 def compilations(kernel_function) -> int:
     """How many distinct compilations of `kernel_function` (a ti_cloth kernel) were launched
     since counting started or forget_compilations; 0: it never ran."""

@@ -1,0 +1,236 @@
+"""The plan runner: a step written once, as phases, run as a kernel per phase or by a team.
+
+An integrator (or any owner of phases: forces.EVALUATION) writes its step once, as a tuple of
+nodes returned by a method (`phases(model, forces, work)`):
+
+    Phase(Loop(count, body), ...)   loops over items that read only what earlier phases wrote;
+                                    they end at a synchronisation point
+    Sweep(colouring, body)          the items of a colouring, colour by colour, a
+                                    synchronisation point after each colour
+    Once(body)                      a scalar computation (a sum of partial sums, a decision),
+                                    done by every worker on its own row of a workspace
+    Repeat(count, leaves...)        the leaves (Phase, Sweep, Once) `count` times
+    Until(test, leaves...)          the leaves while test(...) holds
+
+Bodies are ti.funcs: a Loop's and a Sweep's body(model, state, forces, work, stages, i, now,
+*extra) handles item i; a Once body and an Until test take (model, state, forces, work, now).
+`now` is a struct of dt, step (the step's global index), k (its index in the launch: rows of
+tables scheduled before the launch), start (1: the state has no history yet) and row (the
+worker's row of per-worker scalars; 0 in a launch per phase). `stages` tells a body which
+stages run inside the step (stepping.TeamStages; STAGELESS in a launch per phase).
+
+Two runners read the same nodes:
+
+- `run` (a launch per phase: GPUs, a single CPU step, and steps with a stage no team runs):
+  every maximal run of leaves is one kernel whose loops are its top-level parallel loops
+  (Taichi synchronises between them); Repeat and Until loop on the host, the test a kernel;
+- `run_team` (many steps per launch, CPU: stepping.py): each worker runs its slice of every
+  loop (Team.share) and meets the team at every synchronisation point.
+
+So a step's arithmetic is written once; the plans differ in how items are grouped into
+tasks, and agree to rounding (compiled in different kernels, fast math may contract them
+differently: tests/test_stepping.py).
+"""
+
+
+import taichi as ti
+
+from . import backend
+
+
+class Loop:
+    """body(model, state, forces, work, stages, i, now, *extra) for i in 0 .. count - 1
+    (count: a Python int, a compile-time constant)."""
+
+    def __init__(self, count: int, body, *extra):
+        self.count, self.body, self.extra = int(count), body, extra
+
+
+class Phase:
+    """Loops whose items are independent of each other's, then a synchronisation point."""
+
+    def __init__(self, *loops: Loop):
+        self.loops = loops
+
+
+class Sweep:
+    """body(..., t, now, *extra) for every position t of a colouring's order, colour by colour
+    (the items of one colour are independent), synchronising after each colour. colouring:
+    an object with count, start (field, count + 1) and offsets (the same, a list)."""
+
+    def __init__(self, colouring, body, *extra):
+        self.colouring, self.body, self.extra = colouring, body, extra
+
+
+class Once:
+    """body(model, state, forces, work, now, *extra) once per row (every worker of a team
+    computes it for itself: it reads what the team wrote before the last synchronisation
+    point and writes only row now.row of its workspace)."""
+
+    def __init__(self, body, *extra):
+        self.body, self.extra = body, extra
+
+
+class Repeat:
+    """The leaves `count` times (count: a Python int)."""
+
+    def __init__(self, count: int, *leaves):
+        self.count, self.leaves = int(count), leaves
+
+
+class Until:
+    """The leaves while test(model, state, forces, work, now) is true (test reads only the
+    worker's row, so every worker decides alike)."""
+
+    def __init__(self, test, *leaves):
+        self.test, self.leaves = test, leaves
+
+
+LEAVES = (Phase, Sweep, Once)
+
+
+def _check(nodes) -> tuple:
+    for node in nodes:
+        inner = node.leaves if isinstance(node, (Repeat, Until)) else (node,)
+        bad = [leaf for leaf in inner if not isinstance(leaf, LEAVES)]
+        if bad:
+            raise TypeError(f"phases may hold Phase, Sweep, Once, Repeat and Until (Repeat and "
+                            f"Until of leaves only), got {bad[0]!r}")
+    return tuple(nodes)
+
+
+def nodes_of(owner, part: str, model, forces, work) -> tuple:
+    """The nodes `owner`'s method `part` returns for this model, forces and workspace."""
+    return _check(getattr(owner, part)(model, forces, work))
+
+
+def _segment(nodes, path):
+    """The leaves a launch per phase runs in one kernel: path (i,) the run of top-level
+    leaves from node i, (i, 0) the leaves of node i (a Repeat or an Until)."""
+    if len(path) == 2:
+        return nodes[path[0]].leaves
+    end = path[0]
+    while end < len(nodes) and isinstance(nodes[end], LEAVES):
+        end += 1
+    return nodes[path[0]:end]
+
+
+def note_launch(nodes, key) -> None:
+    """Count a launch of every body in `nodes` under `key` (backend.note_launch): tests
+    tell what a step compiled by its bodies, as by kernels (backend.compilations)."""
+    if not backend.counting():
+        return
+    for node in nodes:
+        for leaf in node.leaves if isinstance(node, (Repeat, Until)) else (node,):
+            bodies = [loop.body for loop in leaf.loops] if isinstance(leaf, Phase) else [leaf.body]
+            if isinstance(node, Until):
+                bodies.append(node.test)
+            for body in bodies:
+                backend.note_launch(getattr(body, "__func__", body), key)
+
+
+@backend.kernel_argument
+class _Stageless:
+    """No stage runs inside the step (a launch per phase)."""
+
+    collides_on_move = False
+
+
+STAGELESS = _Stageless()
+
+
+@backend.kernel
+def launch_phases(owner: ti.template(), part: ti.template(), model: ti.template(),
+                 state: ti.template(), forces: ti.template(), work: ti.template(), dt: float,
+                 step: ti.i32, start: ti.i32, path: ti.template()):
+    """The leaves at `path` of owner's nodes, each loop a parallel loop of its own."""
+    for leaf in ti.static(_segment(nodes_of(owner, part, model, forces, work), path)):
+        if ti.static(isinstance(leaf, Phase)):
+            for loop in ti.static(leaf.loops):
+                for i in range(loop.count):
+                    now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0)
+                    loop.body(model, state, forces, work, STAGELESS, i, now, *loop.extra)
+        elif ti.static(isinstance(leaf, Sweep)):
+            colours = leaf.colouring
+            for c in ti.static(range(colours.count)):
+                for t in range(colours.offsets[c], colours.offsets[c + 1]):
+                    now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0)
+                    leaf.body(model, state, forces, work, STAGELESS, t, now, *leaf.extra)
+        else:
+            for _ in range(1):
+                now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0)
+                leaf.body(model, state, forces, work, now, *leaf.extra)
+
+
+@backend.kernel
+def _holds(owner: ti.template(), part: ti.template(), model: ti.template(), state: ti.template(),
+           forces: ti.template(), work: ti.template(), dt: float, step: ti.i32, start: ti.i32,
+           index: ti.template()) -> ti.i32:
+    """Whether the test of the Until at top-level node `index` holds (row 0)."""
+    now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0)
+    holds = 0
+    for node in ti.static(nodes_of(owner, part, model, forces, work)[index:index + 1]):
+        holds = ti.i32(node.test(model, state, forces, work, now))
+    return holds
+
+
+def run(owner, model, state, forces, work, dt: float, step: int, start: bool,
+        part: str = "phases") -> None:
+    """owner's nodes (its method `part`), a launch per run of leaves (module doc)."""
+    nodes = nodes_of(owner, part, model, forces, work)
+    note_launch(nodes, ("run", part))
+    args = (owner, part, model, state, forces, work, dt, step, int(start))
+    i = 0
+    while i < len(nodes):
+        node = nodes[i]
+        if isinstance(node, Repeat):
+            for _ in range(node.count):
+                launch_phases(*args, (i, 0))
+        elif isinstance(node, Until):
+            while _holds(*args, i):
+                launch_phases(*args, (i, 0))
+        else:
+            launch_phases(*args, (i,))
+            while i + 1 < len(nodes) and isinstance(nodes[i + 1], LEAVES):
+                i += 1
+        i += 1
+
+
+@ti.func
+def _run_leaf(leaf: ti.template(), model: ti.template(), state: ti.template(),
+              forces: ti.template(), work: ti.template(), stages: ti.template(),
+              team: ti.template(), worker, now: ti.template()):
+    if ti.static(isinstance(leaf, Phase)):
+        for loop in ti.static(leaf.loops):
+            begin, end = team.share(loop.count, worker)
+            for i in range(begin, end):
+                loop.body(model, state, forces, work, stages, i, now, *loop.extra)
+        team.meet(worker)
+    elif ti.static(isinstance(leaf, Sweep)):
+        colours = leaf.colouring
+        for c in range(colours.count):
+            begin, end = team.share_range(colours.start[c], colours.start[c + 1], worker)
+            for t in range(begin, end):
+                leaf.body(model, state, forces, work, stages, t, now, *leaf.extra)
+            team.meet(worker)
+    else:
+        leaf.body(model, state, forces, work, now, *leaf.extra)
+
+
+@ti.func
+def run_team(nodes: ti.template(), model: ti.template(), state: ti.template(),
+             forces: ti.template(), work: ti.template(), stages: ti.template(),
+             team: ti.template(), worker, now: ti.template()):
+    """Worker `worker`'s share of `nodes` (nodes_of) in a team launch (stepping.py), meeting
+    the team at every synchronisation point; now.row is the worker."""
+    for node in ti.static(nodes):
+        if ti.static(isinstance(node, Repeat)):
+            for _ in range(node.count):
+                for leaf in ti.static(node.leaves):
+                    _run_leaf(leaf, model, state, forces, work, stages, team, worker, now)
+        elif ti.static(isinstance(node, Until)):
+            while node.test(model, state, forces, work, now):
+                for leaf in ti.static(node.leaves):
+                    _run_leaf(leaf, model, state, forces, work, stages, team, worker, now)
+        else:
+            _run_leaf(node, model, state, forces, work, stages, team, worker, now)
