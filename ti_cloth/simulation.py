@@ -242,14 +242,14 @@ class Simulation:
         arch and the call alone: on the CPU many steps per launch when every stage runs
         there (many_steps), except a single step of a fused integrator; else a launch per
         stage. "per stage" or "many steps" forces one (ValueError if this simulation has no
-        many-steps plan). The plans agree to rounding, and each gives the same bits on
-        every rerun and thread count."""
+        many-steps plan). Every plan gives the same bits, on every rerun and thread
+        count (exact IEEE arithmetic: runtime/backend.py)."""
         self._check_runtime()
         integer("n", n, 0, limits.STEPS.high - self.step_count)
         require(plan is None or plan in PLANS, "plan", plan, f"None or one of {PLANS}")
         require(plan != "many steps" or self._many_per_launch, "plan", plan,
-                "'per stage' here: this simulation has a stage (self-collision, or the wind of "
-                "an integrator that reads it more than once a step) or an arch that runs a "
+                "'per stage' here: this simulation has a stage that runs only launch by launch "
+                "(self-collision) or an arch that runs a "
                 "launch per stage")
         if self._diverged is not None:
             raise self._diverged

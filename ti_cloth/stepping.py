@@ -22,11 +22,11 @@ handle lets go (its particles are free from that step's handle stage on: that st
 by stage). Self-collision steps one launch per stage, as GPUs always do.
 
 Every worker evaluates each spring and particle with the same formula and in the same order
-as a launch per stage, and sums in fixed blocks. One worker and a team run the same compiled
-kernel on chunk-aligned slices (team.py), so thread counts never change a bit, by construction.
-A launch per stage is other compiled code: LLVM's fast math may contract and vectorise it
-differently, so the plans agree to rounding (tests/test_stepping.py bounds the difference),
-and which plan a step takes is decided by the arch and the call alone (Simulation.step).
+as a launch per phase (the integrator's phases: runtime/plan.py), and sums in fixed blocks,
+with exact IEEE arithmetic (runtime/backend.py): every plan gives the same bits
+(tests/test_stepping.py). One worker and a team also run the same compiled kernel on
+chunk-aligned slices (team.py). Which plan a step takes is decided by the arch and the call
+alone (Simulation.step).
 """
 
 
@@ -234,15 +234,12 @@ class ManySteps:
         best, other = (1, self.workers) if slower else (self.workers, 1)
         return other if self._big_launches % PROBE_EVERY == 0 else best
 
-    def serial(self, integrator, model, forces, steps: int) -> bool:
+    def serial(self, integrator, model, steps: int) -> bool:
         """Whether a launch of `steps` steps runs serially on the launching thread (no pool
-        wake-up): below TEAM_MIN_SPRING_STEPS of work, whatever the thread count, except for
-        an integrator that sums over particles in its step or with wind, whose code LLVM
-        vectorises differently there than in a pool task: those run every launch as pool
-        tasks, so small and big launches of them are the same code. Bigger launches run as
-        pool tasks on any number of workers (workers_for), one compiled kernel."""
-        small = steps * integrator.step_work(model) < TEAM_MIN_SPRING_STEPS
-        return small and not (integrator.sums_in_step or forces.has_wind)
+        wake-up): below TEAM_MIN_SPRING_STEPS of work, whatever the thread count. Bigger
+        launches run as pool tasks on any number of workers (workers_for). Every plan gives
+        the same bits (IEEE arithmetic: runtime/backend.py)."""
+        return steps * integrator.step_work(model) < TEAM_MIN_SPRING_STEPS
 
     def cost(self, workers: int) -> float:
         """Seconds per spring-step of recent big launches on `workers` workers: the least of
@@ -285,7 +282,7 @@ class ManySteps:
                 colliders.schedule(step, chunk, dt)
             if forces.wind is not None:
                 forces.wind.schedule(step, chunk, dt)
-            serial = self.serial(integrator, model, forces, chunk)
+            serial = self.serial(integrator, model, chunk)
             workers = 1 if serial else self.workers_for(integrator, model, chunk)
             team = self.team
             team.set_size(workers)

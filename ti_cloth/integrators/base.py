@@ -30,10 +30,6 @@ class Integrator:
     position_based: ClassVar[bool] = False  # True: springs are constraints projected on positions
     step_limited: ClassVar[bool] = True     # False: stable at any step (stable_dt is inf)
     fused: ClassVar[bool] = False           # True: defines move(), fused.py writes the phases
-    # True: its phases sum over particles, code LLVM vectorises differently on the launching
-    # thread than in a pool task: its small launches run as pool tasks too
-    # (stepping.ManySteps.serial), so every launch of it is the same code.
-    sums_in_step: ClassVar[bool] = False
     records_history: ClassVar[bool] = False  # True: a step leaves x_n in particle_prev_position
 
     def phases(self, model, forces, work) -> tuple:

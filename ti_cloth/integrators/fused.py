@@ -10,11 +10,8 @@ the collision stage touches nothing but the particle, so it gives the same bits 
 its own, without one.
 
 Every plan evaluates each spring and moves each particle with the same formula and gathers in
-the same order, so explicit and symplectic Euler give the same bits in every plan. Verlet's
-results, and those of bodies with altitude springs, agree to rounding between a launch per step
-and many: fast math lets LLVM contract Verlet's three-term update and an altitude spring's
-cross and dot products differently in different kernels, and exact IEEE math would cost 40 %
-at 32 x 32. A team and one worker run the same kernel, so thread counts never change a bit.
+the same order, with exact IEEE arithmetic (runtime/backend.py), so every plan gives the same
+bits.
 """
 
 

@@ -351,7 +351,6 @@ class ImplicitEuler(Integrator):
     name = "implicit_euler"
     order = 1
     step_limited = False
-    sums_in_step = True
 
     def __init__(self, *, tolerance: float = 1e-5, max_iterations: int = 200):
         self.tolerance = finite_number("ImplicitEuler.tolerance", tolerance, 0.0, strict=True)

@@ -1,6 +1,11 @@
 """Taichi runtime set-up: architecture, floating-point precision and thread count.
 
 `init` is the only place ti_cloth calls ``ti.init``; importing the package never does.
+Kernels compile with exact IEEE arithmetic (``fast_math=False``): fast math lets LLVM
+reassociate sums and contract multiply-adds per kernel and per CPU model, so the same formula
+could round differently in two launch plans or on two machines. Exact, every plan, thread
+count and x86-64 CPU computes the same operations in the same order, at no measurable cost
+(docs/performance.md).
 Every Taichi field ti_cloth allocates uses the precision chosen here, and Taichi's
 ``default_fp`` is set to match so float literals inside kernels have the same type.
 Calling `init` again resets Taichi: fields and simulations created before become invalid
@@ -58,7 +63,8 @@ def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None,
     if threads is not None:
         count("threads", threads, limits.THREADS)
     options = dict(arch=getattr(ti, ARCHS[arch]), default_fp=PRECISIONS[precision],
-                   default_ip=ti.i32, random_seed=0, debug=debug, log_level=ti.WARN)
+                   default_ip=ti.i32, random_seed=0, debug=debug, log_level=ti.WARN,
+                   fast_math=False)
     if threads is not None:
         options["cpu_max_num_threads"] = threads
     for user in list(_closed_by_init):    # dead ones too, until the cycle collector runs

@@ -27,9 +27,9 @@ Two runners read the same nodes:
 - `run_team` (many steps per launch, CPU: stepping.py): each worker runs its slice of every
   loop (Team.share) and meets the team at every synchronisation point.
 
-So a step's arithmetic is written once; the plans differ in how items are grouped into
-tasks, and agree to rounding (compiled in different kernels, fast math may contract them
-differently: tests/test_stepping.py).
+So a step's arithmetic is written once; the plans differ only in how items are grouped into
+tasks, and with exact IEEE arithmetic (backend.py) they give the same bits
+(tests/test_stepping.py).
 """
 
 
