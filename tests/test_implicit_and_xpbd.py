@@ -7,7 +7,7 @@ import pytest
 from helpers import report, stretched_energy_ratios
 
 import ti_cloth as tc
-from ti_cloth.physics import constraints
+from ti_cloth.runtime import plan
 
 
 def perturbed_cloth(damping):
@@ -170,16 +170,17 @@ def test_xpbd_iterations_validated():
                                              (tc.XPBD(iterations=4), "braced strand")],
                          ids=["pbd-sheet", "xpbd-sheet", "xpbd-braced strand"])
 def test_serial_and_parallel_sweeps_give_the_same_bits(f64, integrator, body, monkeypatch):
-    """Both launch plans visit the springs (and the altitude springs of a braced strand)
-    colour by colour, so they agree exactly."""
+    """A launch per stage of the integrator's phases and of strain limiting's sweeps, serial
+    or parallel: both visit the springs (and the altitude springs of a braced strand) colour
+    by colour, so they agree exactly."""
     cloth = (tc.Cloth(tc.grid_mesh(6, 7, plane="xz"), tc.Material(), pinned=[0, 5]) if body == "sheet"
              else tc.hair([[0.0, 0.0, 0.0]], 2, 0.2, directions=[[1.0, 0.0, 0.0]], mass=1e-3))
     results = []
     sim = tc.Simulation(cloth, integrator=integrator, dt=1 / 120, strain_limit=tc.StrainLimit(0.05))
-    for limit in (10**9, -1):                # the plan is chosen at every sweep
-        monkeypatch.setattr(constraints, "SERIAL_SPRING_LIMIT", limit)
+    for limit in (10**9, -1):                # the plan is chosen at every launch
+        monkeypatch.setattr(plan, "SERIAL_SPRING_LIMIT", limit)
         sim.restart()
-        sim.step(20)
+        sim.step(20, plan="per stage")
         results.append(sim.positions())
     assert np.abs(results[0] - cloth.particle_position).max() > 1e-4, "the body moved"
     np.testing.assert_array_equal(results[0], results[1])

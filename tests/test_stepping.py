@@ -22,6 +22,7 @@ from ti_cloth.physics.forces import ForceSettings, compute_forces
 from ti_cloth.physics.handles import HandleSet
 from ti_cloth.physics.strain_limit import StrainLimiter
 from ti_cloth.runtime import backend, limits, team
+from ti_cloth.runtime import plan as runtime_plan
 from ti_cloth.simulation import STEP_ORDER
 
 FUSED = ["explicit_euler", "symplectic_euler", "verlet"]
@@ -33,12 +34,14 @@ def sheet(n=6, damping="axial"):
     return cloth, centre + 1.3 * (cloth.particle_position - centre)   # start stretched: it moves
 
 
-PLANS = ["launch per stage", "one worker", "pool of one", "team"]
+PLANS = ["launch per phase", "serial launch per step", "one worker", "pool of one", "team"]
 
 
 def run(sim, plan, steps, monkeypatch, per_launch=100):
     """`steps` steps in the given plan; many-steps plans launch per_launch steps at a time."""
-    if plan == "launch per stage":
+    if plan in ("launch per phase", "serial launch per step"):
+        monkeypatch.setattr(runtime_plan, "SERIAL_SPRING_LIMIT",
+                            -1 if plan == "launch per phase" else 10**9)
         for _ in range(steps):
             sim.step(1, plan="per stage")
         return
@@ -131,8 +134,8 @@ def test_every_launch_plan_takes_the_same_steps(threads, integrator, feature, bo
         assert touching > 0, "the sheet reached a collider"
     # Big launches on one worker and on a team run the same compiled kernel on chunk-aligned
     # slices (team.py): thread counts never change a bit.
-    np.testing.assert_array_equal(runs[2][0], runs[3][0])
-    np.testing.assert_array_equal(runs[2][1], runs[3][1])
+    np.testing.assert_array_equal(runs[3][0], runs[4][0])
+    np.testing.assert_array_equal(runs[3][1], runs[4][1])
     for plan, (x, v, torn, n) in zip(PLANS[1:], runs[1:]):
         print(f"{integrator}, {feature}, {plan}: moved {moved:.3g} m, torn {len(torn)} "
               f"springs, max |dx| against a launch per stage {np.abs(x - x0).max()}")

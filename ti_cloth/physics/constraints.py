@@ -2,10 +2,11 @@
 
 Springs are visited colour by colour (Model.spring_colouring: no two springs of a colour share
 a particle), so a pass equals a sequential Gauss-Seidel sweep in colour order and is
-deterministic. Two launch plans give the same bits: `parallel` runs each colour as a parallel
-loop and launches one kernel per pass; `serial` runs every pass of every colour in one serial
-task of one launch. A parallel loop costs tens of microseconds to start on a CPU, a pass
-one loop per colour: on the CPU, serial wins below SERIAL_SPRING_LIMIT springs (the figures:
+deterministic. The updates are per spring: pbd's and xpbd's phases sweep them
+(runtime/plan.py). Strain limiting's launch per stage sweeps with relax_springs, in two plans
+that give the same bits: `parallel` runs each colour as a parallel loop and launches one kernel
+per pass; `serial` runs every pass of every colour in one serial task of one launch, taken on
+the CPU below plan.SERIAL_SPRING_LIMIT springs (plan.serial_is_faster; the figures:
 docs/performance.md).
 """
 
@@ -13,16 +14,9 @@ docs/performance.md).
 import taichi as ti
 
 from ..runtime import backend
+from ..runtime.plan import serial_is_faster
 from ..runtime.team import SOLO
 from .forces import altitude_gradient
-
-SERIAL_SPRING_LIMIT = 50_000   # serial sweeps faster at 24k springs, parallel ones at 97k
-
-
-def serial_is_faster(model) -> bool:
-    """Whether this model's sweeps run faster serially in one launch (CPU, few springs)."""
-    return (backend.config().arch == "cpu"
-            and model.spring_count + model.altitude_count <= SERIAL_SPRING_LIMIT)
 
 
 @backend.kernel_argument

@@ -21,9 +21,12 @@ stages run inside the step (stepping.TeamStages; STAGELESS in a launch per phase
 
 Two runners read the same nodes:
 
-- `run` (a launch per phase: GPUs, a single CPU step, and steps with a stage no team runs):
-  every maximal run of leaves is one kernel whose loops are its top-level parallel loops
-  (Taichi synchronises between them); Repeat and Until loop on the host, the test a kernel;
+- `run` (GPUs, a single CPU step, and steps with a stage no team runs): a launch per phase,
+  every maximal run of leaves one kernel whose loops are its top-level parallel loops
+  (Taichi synchronises between them), Repeat and Until looping on the host, the test a
+  kernel; on the CPU, for a body of at most SERIAL_SPRING_LIMIT springs, one serial launch
+  of the whole step instead (a parallel loop costs tens of microseconds to start, a pass of
+  xpbd is a loop per colour: docs/performance.md);
 - `run_team` (many steps per launch, CPU: stepping.py): each worker runs its slice of every
   loop (Team.share) and meets the team at every synchronisation point.
 
@@ -36,6 +39,9 @@ tasks, and with exact IEEE arithmetic (backend.py) they give the same bits
 import taichi as ti
 
 from . import backend
+from .team import SOLO
+
+SERIAL_SPRING_LIMIT = 50_000   # serial launches faster at 24k springs, parallel ones at 97k
 
 
 class Loop:
@@ -174,12 +180,34 @@ def _holds(owner: ti.template(), part: ti.template(), model: ti.template(), stat
     return holds
 
 
+def serial_is_faster(model) -> bool:
+    """Whether a step of this model runs faster as one serial launch (CPU, few springs)."""
+    return (backend.config().arch == "cpu"
+            and model.spring_count + model.altitude_count <= SERIAL_SPRING_LIMIT)
+
+
+@backend.kernel
+def launch_serial(owner: ti.template(), part: ti.template(), model: ti.template(),
+                  state: ti.template(), forces: ti.template(), work: ti.template(), dt: float,
+                  step: ti.i32, start: ti.i32):
+    """Every node of owner's `part`, in one serial task (run_team with one worker)."""
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0)
+        run_team(ti.static(nodes_of(owner, part, model, forces, work)), model, state, forces,
+                 work, STAGELESS, SOLO, 0, now)
+
+
 def run(owner, model, state, forces, work, dt: float, step: int, start: bool,
         part: str = "phases") -> None:
-    """owner's nodes (its method `part`), a launch per run of leaves (module doc)."""
+    """owner's nodes (its method `part`): one serial launch when serial_is_faster, else a
+    launch per run of leaves (module doc)."""
     nodes = nodes_of(owner, part, model, forces, work)
     note_launch(nodes, ("run", part))
     args = (owner, part, model, state, forces, work, dt, step, int(start))
+    if serial_is_faster(model):
+        launch_serial(*args)
+        return
     i = 0
     while i < len(nodes):
         node = nodes[i]

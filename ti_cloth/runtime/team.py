@@ -114,14 +114,18 @@ def chunked_share(count, part, parts):
 
 @backend.kernel_argument
 class _Solo:
-    """One worker known at compile time: every loop serial, no barriers, no fields (the
-    serial sweeps of a launch per stage: constraints.py)."""
+    """One worker known at compile time: every loop serial, no barriers, no fields (a serial
+    launch of a step's phases: plan.py; strain limiting's serial sweeps: constraints.py)."""
 
     workers = 1
 
     @ti.func
     def meet(self, worker):
         pass
+
+    @ti.func
+    def share(self, count, worker):
+        return 0, count
 
     @ti.func
     def share_range(self, begin, end, worker):
