@@ -74,11 +74,12 @@ def spring_force(xi, xj, vi, vj, rest, k, kd, relative: ti.template()):
     length = xij.norm()
     f = ti.Vector([0.0, 0.0, 0.0])
     if length > 0:
-        n = xij / length
-        c = length - rest
-        f = -k * c * n
+        # -k (l - L) n - kd (vij . n) n = s x_ij, n = x_ij / l: one division and one scaling
+        # of x_ij (kernels compute in IEEE arithmetic, unfused: runtime/backend.py)
+        s = -k * (length - rest)
         if ti.static(not relative):
-            f -= kd * vij.dot(n) * n
+            s -= kd * vij.dot(xij) / length
+        f = (s / length) * xij
     if ti.static(relative):
         f -= kd * vij
     return f
