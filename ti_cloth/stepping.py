@@ -66,7 +66,7 @@ class TeamStages:
     fused: whether the integrator is fused (its particles move independently of each other
     at the end of its step). Then, unless strain limiting moves them in between, each
     particle meets the colliders as soon as it has moved (`collides_on_move`, called by
-    fused.move_particles): the collision stage reads and writes nothing but the particle,
+    fused.move_particle): the collision stage reads and writes nothing but the particle,
     and held particles (handles, the stage in between) never collide, so this is the order
     of STEP_ORDER with the same bits, without a pass over the particles of its own nor the
     copy of the step's start positions."""

@@ -60,7 +60,7 @@ def damp_spring(model: ti.template(), state: ti.template(), forces: ti.template(
 @backend.kernel_argument
 class _Multipliers:
     """One Lagrange multiplier per spring (in colour order) and per altitude spring [N s^2],
-    reset every step, and the model's colourings (read by the team step)."""
+    reset every step, and the model's colourings (read by the phases)."""
 
     def __init__(self, model):
         fields = backend.FieldGroup()

@@ -21,8 +21,8 @@ from .forces import altitude_gradient
 
 @backend.kernel_argument
 class SweepOrder:
-    """A model's spring and altitude-spring colourings, as one kernel argument (the team
-    steps of position-based integrators read them)."""
+    """A model's spring and altitude-spring colourings, as one kernel argument (pbd's
+    phases sweep them)."""
 
     def __init__(self, model):
         self.colours = model.spring_colouring()
