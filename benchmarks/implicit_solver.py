@@ -14,7 +14,7 @@ import numpy as np
 import taichi as ti
 
 import ti_cloth as tc
-from ti_cloth.integrators import implicit_euler as ie
+from ti_cloth.runtime import plan
 
 
 @ti.kernel
@@ -78,7 +78,9 @@ def main(argv=None):
             _assemble(model, ws, dt, builder)
             return builder.build()
 
-        ie.linearise(model, state, ws, dt, 0.0, False)   # ws.r = b of the next step
+        # ws.r = b of the next step: the first part of implicit Euler's phases
+        plan.run(sim.integrator, model, state, sim.forces, ws, dt, sim.step_count, False,
+                 "linearisation")
         b = ws.r.to_numpy().reshape(-1)
         matrix = build()
         solver.analyze_pattern(matrix)
@@ -90,7 +92,8 @@ def main(argv=None):
         llt = sum(timing.values())
         # the LLT answer checked against the matrix-free product: relative residual |A dv - b| / |b|
         ws.p.from_numpy(solver.solve(rhs).to_numpy().reshape(-1, 3))
-        ie.apply_system(model, state, ws, dt, 0.0, False)
+        plan.run(sim.integrator, model, state, sim.forces, ws, dt, sim.step_count, False,
+                 "system_product")
         residual = float(np.linalg.norm(ws.ap.to_numpy().reshape(-1) - b) / np.linalg.norm(b))
         print(f"{n:>4} {dofs:>7} {cg_time * 1e3:>11.2f} {iterations:>9} {llt * 1e3:>12.2f} "
               f"{timing['build'] * 1e3:>7.2f} {timing['factor'] * 1e3:>7.2f} {timing['solve'] * 1e3:>7.2f} "

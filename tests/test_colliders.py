@@ -164,14 +164,14 @@ def test_a_particle_started_inside_is_pushed_to_the_surface(f64, shape, inside, 
 
 
 def test_scene_without_colliders_compiles_no_collision_kernel(f64):
-    forget_compiled(colliders_module.resolve_collisions, copy_positions)
+    forget_compiled(colliders_module.resolve, copy_positions)
     sim = tc.Simulation(tc.Cloth(tc.grid_mesh(4, 4), tc.Material(), pinned=[0]), dt=1e-4)
     sim.step(3)
-    assert not compiled(colliders_module.resolve_collisions)
+    assert not compiled(colliders_module.resolve)
     assert not compiled(copy_positions)
     grounded = tc.Simulation(particle(1.0), dt=1e-3, colliders=[tc.Plane()])
     grounded.step(1)
-    assert compiled(colliders_module.resolve_collisions)
+    assert compiled(colliders_module.resolve)
 
 
 @pytest.mark.parametrize("make, field", [

@@ -8,16 +8,16 @@ from helpers import compiled, forget_compiled
 
 import ti_cloth as tc
 from ti_cloth.contact import contact_pairs
-from ti_cloth.contact.collision import resolve_collisions
+from ti_cloth.contact.collision import resolve
 from ti_cloth.integrators import implicit_euler, rk4, xpbd
-from ti_cloth.physics import constraints, handles, strain_limit, tearing, wind
+from ti_cloth.physics import handles, strain_limit, tearing, wind
 from ti_cloth.state import copy_positions
 
 OPTIONAL = {
-    "wind": wind.wind_on_triangle, "collisions": resolve_collisions,
-    "collision snapshot": copy_positions, "relaxation": constraints.relax_springs,
-    "strain-limit velocity": strain_limit.follow_velocity, "tearing": tearing.tear_springs,
-    "handles": handles.move_handles, "xpbd": xpbd.solve_spring,
+    "wind": wind.wind_on_triangle, "collisions": resolve,
+    "collision snapshot": copy_positions, "relaxation": strain_limit.relax_stretched,
+    "strain-limit velocity": strain_limit.follow_velocity, "tearing": tearing.tear_spring,
+    "handles": handles.move_held, "xpbd": xpbd.solve_spring,
     "xpbd prediction": xpbd.xpbd_predict, "implicit solve": implicit_euler.linearise_spring,
     "rk4 stages": rk4.rk4_stage, "self-collision": contact_pairs.list_pairs,
 }

@@ -11,9 +11,9 @@ from helpers import compiled, forget_compiled, report
 import ti_cloth as tc
 from ti_cloth.app.scene import load_scene
 from ti_cloth.app.scene_file import SceneError
-from ti_cloth.contact.collision import resolve_collisions
+from ti_cloth.contact.collision import resolve
 from ti_cloth.physics import wind as wind_module
-from ti_cloth.physics.constraints import relax_springs
+from ti_cloth.physics.strain_limit import relax_stretched
 
 DEMOS = Path(__file__).parents[1] / "demos"
 
@@ -146,7 +146,7 @@ def test_scene_file_problems_outside_the_keys(tmp_path):
 
 
 def test_a_scene_compiles_only_what_it_lists(tmp_path, f64):
-    kernels = (wind_module.wind_on_triangle, resolve_collisions, relax_springs)
+    kernels = (wind_module.wind_on_triangle, resolve, relax_stretched)
     forget_compiled(*kernels)
     scene = load_scene(write(tmp_path, GRID))
     sim = scene.build()

@@ -142,8 +142,11 @@ class Simulation:
             self.dt = auto_dt(cloth, self.integrator, drag, pinned if self.handles is None
                               else self.handles.pinned(permanent=True))
         self.state.reset(self.model.particle_rest_position)
+        # the pool's copy of the Tearing, its strain a constant of the kernels (pool.py)
+        self._tearing = None if self.tearing is None else POOL.keep(self.tearing)
         stages = dict(strain_limit=self.strain_limiter, colliders=self.colliders,
-                      self_collision=self.self_contact, handles=self.handles, tearing=self.tearing)
+                      self_collision=self.self_contact, handles=self.handles,
+                      tearing=self._tearing)
         self.stages = ("integrator",) + tuple(name for name in STEP_ORDER[1:]
                                               if stages[name] is not None)
         self._after = [stages[name] for name in self.stages[1:]]
@@ -294,10 +297,8 @@ class Simulation:
         """n steps in few launches (stepping.py), until one diverges; a step in which a
         handle lets go runs stage by stage."""
         while n > 0:
-            ran = self.many_steps.run(
-                self._stepper, self.model, self.state, self.forces, self.dt, self.step_count,
-                n, self.tearing, self.strain_limiter.limit if self.strain_limiter else None,
-                self.handles)
+            ran = self.many_steps.run(self._stepper, self.model, self.state, self.forces,
+                                      self.dt, self.step_count, n, self.handles)
             self.step_count += ran
             n -= ran
             if n == 0 or self.state.first_bad_step[None] != NO_BAD_STEP:
@@ -320,13 +321,11 @@ class Simulation:
         integrator that is not fused), or None when steps go launch by launch."""
         if not self._many_per_launch:
             return None
-        key = ("many_steps", self.tearing is not None, self.integrator.fused)
+        key = ("many_steps", self._tearing, self.integrator.fused)
         if key not in self._lent:
             self._lent[key] = stepping.ManySteps(stepping.TeamStages(
                 self._lent.get("handle_table"), self.strain_limiter, self.colliders,
-                self.tearing is not None,
-                self.model.spring_colouring() if self.strain_limiter is not None else None,
-                self.integrator.fused))
+                self._tearing, self.integrator.fused))
         return self._lent[key]
 
     def positions(self) -> np.ndarray:

@@ -16,13 +16,16 @@ per worker:
     ->  colliders (scripted ones placed from a table written before the launch)
     ->  tearing
 
+each stage after the integrator running its own phases (TeamStages.after), the ones its
+after_step launches in a launch per stage:
+
 the order of STEP_ORDER. What Python computes from the time (scripted paths, the
 wind's gusts) is tabled for the launch's steps; a launch ends at the step after which a
 handle lets go (its particles are free from that step's handle stage on: that step runs stage
 by stage). Self-collision steps one launch per stage, as GPUs always do.
 
 Every worker evaluates each spring and particle with the same formula and in the same order
-as a launch per phase (the integrator's phases: runtime/plan.py), and sums in fixed blocks,
+as a launch per phase (the same phases: runtime/plan.py), and sums in fixed blocks,
 with exact IEEE arithmetic (runtime/backend.py): every plan gives the same bits
 (tests/test_stepping.py). One worker and a team also run the same compiled kernel on
 chunk-aligned slices (team.py). Which plan a step takes is decided by the arch and the call
@@ -37,8 +40,6 @@ import taichi as ti
 
 from .contact.collision import resolve_particle
 from .errors import TeamStalled
-from .physics.constraints import relax_pass
-from .physics.tearing import tear_overstretched
 from .runtime import backend, limits, plan
 from .runtime.team import BARRIER_SPINS, MAX_WORKERS, TASK_SPACING, Team
 from .state import NO_BAD_STEP
@@ -59,9 +60,9 @@ TEAM_MARGIN = 1.25     # one worker takes over when the team costs more than thi
 @backend.kernel_argument
 class TeamStages:
     """The stages around the integrator that run inside a many-steps launch (None: absent,
-    compiled out): handles (their HandleTable), strain limiting, colliders, tearing; the
-    wind comes with the ForceSettings. colours: the model's spring colouring (strain
-    limiting's passes).
+    compiled out): handles (their HandleTable), strain limiting (the StrainLimiter),
+    colliders (the ColliderSet), tearing (the Tearing); the wind is the integrator's (its
+    phases). Each runs its phases (runtime/plan.py), as in a launch per stage.
 
     fused: whether the integrator is fused (its particles move independently of each other
     at the end of its step). Then, unless strain limiting moves them in between, each
@@ -71,17 +72,23 @@ class TeamStages:
     of STEP_ORDER with the same bits, without a pass over the particles of its own nor the
     copy of the step's start positions."""
 
-    def __init__(self, handles=None, strain_limiter=None, colliders=None, tearable=False,
-                 colours=None, fused=False):
-        self.handles = handles
-        self.strain_limiter = strain_limiter
+    def __init__(self, handles=None, strain_limiter=None, colliders=None, tearing=None,
+                 fused=False):
+        self.stages = {"handles": handles, "strain_limit": strain_limiter,
+                       "colliders": colliders, "tearing": tearing}
         self.colliders = colliders
-        self.tearable = tearable
-        self.colours = colours
         self.holds = handles is not None          # read at compile time
         self.limits_strain = strain_limiter is not None
         self.collides = colliders is not None
         self.collides_on_move = self.collides and fused and not self.limits_strain
+
+    def running(self, name: str) -> tuple:
+        """(stage `name`'s object,) when it runs its phases after the integrator's, else ()
+        (compile time; the object owns the phases and is their workspace)."""
+        stage = self.stages.get(name)
+        if stage is None or (name == "colliders" and self.collides_on_move):
+            return ()
+        return (stage,)
 
     @ti.func
     def collide(self, model: ti.template(), state: ti.template(), i, x0, dt):
@@ -89,99 +96,71 @@ class TeamStages:
         resolve_particle(model, state, self.colliders, i, x0, dt)
 
     @ti.func
-    def begin(self, state: ti.template(), worker, p_begin, p_end, k, settings: ti.template()):
+    def begin(self, state: ti.template(), worker, p_begin, p_end, k, moving):
         """At the start of the launch's k-th step, before the integrator: the colliders keep
         the worker's particles' positions (or, when they collide on the move, worker 0 puts
         moving ones where this step leaves them: the integrator's barrier before its particle
         loop publishes that)."""
         if ti.static(self.collides_on_move):
-            if settings.moving != 0 and worker == 0:
+            if moving != 0 and worker == 0:
                 self.colliders.place_scheduled(k)
         elif ti.static(self.collides):
             for i in range(p_begin, p_end):
                 self.colliders.step_start[i] = state.particle_position[i]
 
     @ti.func
-    def after(self, model: ti.template(), state: ti.template(), team: ti.template(), worker,
-              p_begin, p_end, s_begin, s_end, step, k, dt, settings: ti.template()):
-        """The stages of the launch's k-th step after the integrator's last barrier, in
-        STEP_ORDER (those a team launch runs: TEAM_STAGES; self-collision never does)."""
+    def after(self, model: ti.template(), state: ti.template(), forces: ti.template(),
+              team: ti.template(), worker, now: ti.template(), moving):
+        """The stages of the launch's step now.k after the integrator's last barrier, in
+        STEP_ORDER (those a team launch runs: TEAM_STAGES; self-collision never does): each
+        stage's phases, the colliders placed first when they move (by worker 0, then a
+        barrier)."""
         for name in ti.static(STEP_ORDER[1:]):
-            if ti.static(name == "handles" and self.holds):
-                h_begin, h_end = team.share(settings.held, worker)
-                self.handles.move(state, h_begin, h_end, settings.held, k, dt)
-                team.meet(worker)
-            if ti.static(name == "strain_limit" and self.limits_strain):
-                limiter = self.strain_limiter
-                for i in range(p_begin, p_end):
-                    limiter.before[i] = state.particle_position[i]
-                team.meet(worker)
-                kinds = ti.Vector([ti.cast((settings.strain_kinds >> kind) & 1, float)
-                                   for kind in ti.static(range(3))])
-                for _ in range(settings.strain_passes):
-                    relax_pass(model, state, self.colours, self.colours, kinds, 0.0,
-                               limiter.tearable, settings.strain_max, True, team, worker)
-                for i in range(p_begin, p_end):
-                    state.particle_velocity[i] = (state.particle_velocity[i]
-                                                  + (state.particle_position[i]
-                                                     - limiter.before[i]) / dt)
-                team.meet(worker)
-            if ti.static(name == "colliders" and self.collides and not self.collides_on_move):
-                if settings.moving != 0:
-                    if worker == 0:
-                        self.colliders.place_scheduled(k)
-                    team.meet(worker)
-                for i in range(p_begin, p_end):
-                    resolve_particle(model, state, self.colliders, i,
-                                     self.colliders.step_start[i], dt)
-                team.meet(worker)
-            if ti.static(name == "tearing" and self.tearable):
-                tear_overstretched(model, state, settings.tear_strain, step, s_begin, s_end)
-                team.meet(worker)
+            for stage in ti.static(self.running(name)):
+                if ti.static(name == "colliders"):
+                    if moving != 0:
+                        if worker == 0:
+                            stage.place_scheduled(now.k)
+                        team.meet(worker)
+                plan.run_team(ti.static(plan.nodes_of(stage, "phases", model, forces, stage)),
+                              model, state, forces, stage, self, team, worker, now)
 
 
 @ti.func
 def _run(integrator: ti.template(), model: ti.template(), state: ti.template(),
          forces: ti.template(), work: ti.template(), stages: ti.template(), team: ti.template(),
-         worker, dt, first, count, start, settings: ti.template()):
+         worker, dt, first, count, start, moving):
     """Worker `worker`'s share of steps first .. first + count - 1."""
     team.start(worker)
     p_begin, p_end = team.share(model.particle_count, worker)
-    s_begin, s_end = team.share(model.spring_count, worker)
     for k in range(count):
-        stages.begin(state, worker, p_begin, p_end, k, settings)
+        stages.begin(state, worker, p_begin, p_end, k, moving)
         now = ti.Struct(dt=dt, step=first + k, k=k, start=ti.i32(start != 0 and k == 0),
                         row=worker)
         plan.run_team(ti.static(plan.nodes_of(integrator, "phases", model, forces, work)),
                       model, state, forces, work, stages, team, worker, now)
-        stages.after(model, state, team, worker, p_begin, p_end, s_begin, s_end, first + k, k,
-                     dt, settings)
+        stages.after(model, state, forces, team, worker, now, moving)
 
 
 @backend.kernel
 def advance_many(integrator: ti.template(), model: ti.template(), state: ti.template(),
                  forces: ti.template(), work: ti.template(), stages: ti.template(),
                  team: ti.template(), dt: float, first: ti.i32, count: ti.i32, start: ti.i32,
-                 tear_strain: float, strain_max: float, strain_passes: ti.i32,
-                 strain_kinds: ti.i32, moving: ti.i32, held: ti.i32, serial: ti.template()):
+                 moving: ti.i32, serial: ti.template()):
     """Steps first .. first + count - 1 in one launch, shared by `team` (start: 1 when the
-    state has no history yet). The stages' settings: tearing's strain, strain limiting's
-    limit, passes and spring kinds (bit k: SpringKind k), whether a collider moves (placed from its schedule),
-    how many particles the handles hold (targets from their table)."""
-    settings = ti.Struct(tear_strain=tear_strain, strain_max=strain_max,
-                         strain_passes=strain_passes, strain_kinds=strain_kinds, moving=moving,
-                         held=held)
+    state has no history yet; moving: 1 when a collider moves, placed from its schedule;
+    held particles' targets come from the handles' table)."""
     team.arrived[None] = 0
     if ti.static(serial):        # a small launch, on the launching thread (ManySteps.serial)
         ti.loop_config(serialize=True)
         for worker in range(1):
             _run(integrator, model, state, forces, work, stages, team, worker, dt, first, count,
-                 start, settings)
+                 start, moving)
     else:
         for index in range(team.size[None] * TASK_SPACING):   # one task per worker (team.py)
             if index % TASK_SPACING == 0:
                 _run(integrator, model, state, forces, work, stages, team, index // TASK_SPACING,
-                     dt, first, count, start, settings)
+                     dt, first, count, start, moving)
 
 
 class ManySteps:
@@ -256,28 +235,27 @@ class ManySteps:
         self._cost.setdefault(workers, deque(maxlen=RECENT_LAUNCHES)).append(seconds / work)
 
     def run(self, integrator, model, state, forces, dt: float, first: int, count: int,
-            tearing=None, strain_limit=None, handles=None) -> int:
+            handles=None) -> int:
         """Up to `count` steps; stops after the launch in which a step diverged, and before
         a step in which a handle lets go (the caller runs that one stage by stage). Returns
         how many steps ran. handles: the HandleSet (whose table is this plan's stages').
         Raises TeamStalled if a barrier gave up on a worker (the state is then unusable)."""
         work = integrator.workspace(model, state)
         plan.note_launch(plan.nodes_of(integrator, "phases", model, forces, work), "team")
+        for name in STEP_ORDER[1:]:
+            for stage in self.stages.running(name):
+                plan.note_launch(plan.nodes_of(stage, "phases", model, forces, stage), "team")
         colliders = self.stages.colliders
         moving = colliders is not None and colliders.moving
-        kinds = 0
-        if strain_limit is not None:
-            kinds = sum(1 << kind for kind, on in enumerate(strain_limit.kind_mask()) if on)
         done = 0
         while done < count and (done == 0 or state.first_bad_step[None] == NO_BAD_STEP):
             step = first + done
             chunk = min(self.steps_per_launch(integrator, model, forces), count - done)
-            held = 0
             if handles is not None:
                 chunk = min(chunk, handles.steps_before_release(step, dt))
                 if chunk == 0:
                     break
-                held = handles.schedule(step, chunk, dt)
+                handles.schedule(step, chunk, dt)
             if moving:
                 colliders.schedule(step, chunk, dt)
             if forces.wind is not None:
@@ -288,11 +266,7 @@ class ManySteps:
             team.set_size(workers)
             began = time.perf_counter()
             advance_many(integrator, model, state, forces, work, self.stages, team, dt, step,
-                         chunk, not state.prev_valid,
-                         tearing.strain if tearing is not None else 0.0,
-                         strain_limit.max_strain if strain_limit is not None else 0.0,
-                         strain_limit.passes if strain_limit is not None else 0, kinds,
-                         int(moving), held, serial)
+                         chunk, not state.prev_valid, int(moving), serial)
             spring_steps = chunk * integrator.step_work(model)
             if not serial and spring_steps >= TEAM_MIN_SPRING_STEPS:
                 self.timed(workers, spring_steps, time.perf_counter() - began)

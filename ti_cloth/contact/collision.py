@@ -6,7 +6,8 @@ meshes none of the turning code."""
 import numpy as np
 import taichi as ti
 
-from ..runtime import backend, limits
+from ..runtime import backend, limits, plan
+from ..runtime.plan import Loop, Phase
 from ..runtime.transfer import upload
 from ..runtime.validation import require
 from ..state import copy_positions
@@ -108,11 +109,18 @@ class ColliderSet:
         """Keep the positions at the step start: the friction response needs the step's motion."""
         copy_positions(state, self.step_start)
 
+    def phases(self, model, forces, work) -> tuple:
+        """The collision stage as phases (runtime/plan.py; `work` is this set): every particle
+        out of the colliders where they are placed (resolve), from its position at the
+        step's start (step_start)."""
+        return (Phase(Loop(model.particle_count, resolve)),)
+
     def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
-        """The collision stage of a step ending at time t (simulation.STEP_ORDER)."""
+        """The collision stage of a step ending at time t (simulation.STEP_ORDER): the
+        colliders placed, then a launch of its phases."""
         if self.moving:
             self.place(t, dt)
-        resolve_collisions(model, state, self, dt)
+        plan.run(self, model, state, None, self, dt, step_index, False)
 
     def distance(self, points) -> tuple[np.ndarray, np.ndarray]:
         """(distance [m] of each point from each collider's surface, negative inside, shape
@@ -296,12 +304,11 @@ def resolve_particle(model: ti.template(), state: ti.template(), colliders: ti.t
             state.particle_prev_position[i] = x - v * dt
 
 
-@backend.kernel
-def resolve_collisions(model: ti.template(), state: ti.template(), colliders: ti.template(),
-                       dt: float):
-    """resolve_particle for every particle."""
-    for i in range(model.particle_count):
-        resolve_particle(model, state, colliders, i, colliders.step_start[i], dt)
+@ti.func
+def resolve(model: ti.template(), state: ti.template(), forces: ti.template(),
+            colliders: ti.template(), stages: ti.template(), i, now: ti.template()):
+    """resolve_particle for particle i, from where it was at the step's start."""
+    resolve_particle(model, state, colliders, i, colliders.step_start[i], now.dt)
 
 
 @backend.kernel

@@ -2,20 +2,14 @@
 
 Springs are visited colour by colour (Model.spring_colouring: no two springs of a colour share
 a particle), so a pass equals a sequential Gauss-Seidel sweep in colour order and is
-deterministic. The updates are per spring: pbd's and xpbd's phases sweep them
-(runtime/plan.py). Strain limiting's launch per stage sweeps with relax_springs, in two plans
-that give the same bits: `parallel` runs each colour as a parallel loop and launches one kernel
-per pass; `serial` runs every pass of every colour in one serial task of one launch, taken on
-the CPU below plan.SERIAL_SPRING_LIMIT springs (plan.serial_is_faster; the figures:
-docs/performance.md).
+deterministic. The updates are per spring: pbd's and xpbd's phases and strain limiting's
+sweep them (runtime/plan.py's Sweep).
 """
 
 
 import taichi as ti
 
 from ..runtime import backend
-from ..runtime.plan import serial_is_faster
-from ..runtime.team import SOLO
 from .forces import altitude_gradient
 
 
@@ -31,9 +25,17 @@ class SweepOrder:
 
 @ti.func
 def relax(model: ti.template(), state: ti.template(), colours: ti.template(), t, stiffness,
-           tearable: ti.template(), max_strain, stretched_only: ti.template()):
+          tearable: ti.template(), max_strain, stretched_only: ti.template()):
     """Project the spring at position t of the colour order (SpringColouring's packed
-    values)."""
+    values): the lecture's relaxation.
+
+    For a spring (p, q) with target length L = (1 + max_strain) L0:
+    delta = (|q - p| - L) / |q - p|, dx = delta (q - p),
+    p += w_p / (w_p + w_q) dx, q -= w_q / (w_p + w_q) dx, where w = 1/m and the lecture's
+    m_q / (m_p + m_q) = w_p / (w_p + w_q); pins (w = 0) do not move. stiffness[kind] scales the
+    correction (1 = the lecture's full projection; 0 leaves that kind alone). PBD uses
+    max_strain = 0; strain limiting (Provot 1995) uses stretched_only, which leaves springs no
+    longer than L."""
     alive = True
     if ti.static(tearable):
         alive = state.spring_alive[colours.order[t]] != 0
@@ -73,62 +75,6 @@ def relax_altitude(model: ti.template(), state: ti.template(), a, stiffness):
         for c in ti.static(range(4)):
             x = state.particle_position[corner[c]]
             state.particle_position[corner[c]] = x + scale * weight[c] * g[c] * n
-
-
-@ti.func
-def relax_pass(model: ti.template(), state: ti.template(), colours: ti.template(),
-               altitude_colours: ti.template(), stiffness, altitude_stiffness,
-               tearable: ti.template(), max_strain, stretched_only: ti.template(),
-               team: ti.template(), worker):
-    """Worker `worker`'s share of one relaxation pass (relax_springs), colour by colour: the
-    springs of a colour share no particle, so the team's workers project their slices of it
-    at once and meet before the next colour."""
-    for c in range(colours.count):
-        begin, end = team.share_range(colours.start[c], colours.start[c + 1], worker)
-        for t in range(begin, end):
-            relax(model, state, colours, t, stiffness, tearable, max_strain,
-                   stretched_only)
-        team.meet(worker)
-    if ti.static(model.altitude_count > 0 and not stretched_only):
-        for c in range(altitude_colours.count):
-            begin, end = team.share_range(altitude_colours.start[c],
-                                          altitude_colours.start[c + 1], worker)
-            for t in range(begin, end):
-                relax_altitude(model, state, altitude_colours.order[t], altitude_stiffness)
-            team.meet(worker)
-
-
-@backend.kernel
-def relax_springs(model: ti.template(), state: ti.template(), colours: ti.template(),
-                  altitude_colours: ti.template(), stiffness: ti.math.vec3,
-                  altitude_stiffness: float, tearable: ti.template(), max_strain: float,
-                  stretched_only: ti.template(), passes: ti.i32, serial: ti.template()):
-    """Relaxation passes over every spring (lecture, "relaxation"); `passes` of them when
-    serial, else one.
-
-    For a spring (p, q) with target length L = (1 + max_strain) L0:
-    delta = (|q - p| - L) / |q - p|, dx = delta (q - p),
-    p += w_p / (w_p + w_q) dx, q -= w_q / (w_p + w_q) dx, where w = 1/m and the lecture's
-    m_q / (m_p + m_q) = w_p / (w_p + w_q); pins (w = 0) do not move. stiffness[kind] scales the
-    correction (1 = the lecture's full projection; 0 leaves that kind alone). PBD uses
-    max_strain = 0; strain limiting (Provot 1995) uses stretched_only, which leaves springs no
-    longer than L. After the springs, each pass projects the altitude springs (relax_altitude,
-    scaled by altitude_stiffness), colour by colour too; strain limiting leaves them alone.
-    """
-    if ti.static(serial):
-        for _ in range(1):
-            for _pass in range(passes):
-                relax_pass(model, state, colours, altitude_colours, stiffness, altitude_stiffness,
-                           tearable, max_strain, stretched_only, SOLO, 0)
-    else:
-        for c in ti.static(range(colours.count)):
-            for t in range(colours.offsets[c], colours.offsets[c + 1]):
-                relax(model, state, colours, t, stiffness, tearable, max_strain,
-                       stretched_only)
-        if ti.static(model.altitude_count > 0 and not stretched_only):
-            for c in ti.static(range(altitude_colours.count)):
-                for t in range(altitude_colours.offsets[c], altitude_colours.offsets[c + 1]):
-                    relax_altitude(model, state, altitude_colours.order[t], altitude_stiffness)
 
 
 @ti.func
@@ -207,14 +153,3 @@ def damp(model: ti.template(), state: ti.template(), colours: ti.template(), t, 
         dv = (state.particle_velocity[p] - state.particle_velocity[q]) * (rate / (1.0 + rate))
         state.particle_velocity[p] = state.particle_velocity[p] - wp / (wp + wq) * dv
         state.particle_velocity[q] = state.particle_velocity[q] + wq / (wp + wq) * dv
-
-
-def sweep(kernel, model, state, passes: int, *args) -> None:
-    """Run `passes` passes of relax_springs on the model's launch plan; args are the kernel's
-    arguments after `altitude_colours` and before `passes`."""
-    colours, altitude_colours = model.spring_colouring(), model.altitude_colouring()
-    if serial_is_faster(model):
-        kernel(model, state, colours, altitude_colours, *args, passes, True)
-    else:
-        for _ in range(passes):
-            kernel(model, state, colours, altitude_colours, *args, 1, False)

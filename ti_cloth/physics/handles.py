@@ -11,7 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from ..runtime import backend, limits
+from ..runtime import backend, limits, plan
+from ..runtime.plan import Loop, Phase
 from ..runtime.transfer import upload
 from ..runtime.validation import as_array, in_range, require
 
@@ -48,32 +49,18 @@ class Handle:
         return self.release is None or t + dt <= self.release * (1 + 1e-12)
 
 
-@backend.kernel
-def move_handles(state: ti.template(), index: ti.types.ndarray(), previous: ti.types.ndarray(),
-                 target: ti.types.ndarray(), dt: float):
-    """Put held particles on their targets, with the path's history: the previous position its
-    target a step ago and velocity = (target - previous) / dt, whatever the integrator did
-    to them in between (it moves pinned particles by their velocity)."""
-    for h in range(index.shape[0]):
-        i = index[h]
-        x_old = ti.Vector([previous[h, 0], previous[h, 1], previous[h, 2]])
-        x_new = ti.Vector([target[h, 0], target[h, 1], target[h, 2]])
-        state.particle_prev_position[i] = x_old
-        state.particle_position[i] = x_new
-        state.particle_velocity[i] = (x_new - x_old) / dt
-
-
 @backend.kernel_argument
 class HandleTable:
-    """The held particles and their targets at the starts and ends of the steps of a
-    many-steps launch (stepping.py), for a simulation whose handles hold `capacity`
-    particles in all: target[(2 k + e) * held + h] is held particle h's target at the start
-    (e = 0) and at the end (e = 1) of the launch's k-th step, as HandleSet.after_step
-    computes them."""
+    """The held particles and their targets at the starts and ends of the steps of a launch
+    (one step, or many: stepping.py), for a simulation whose handles hold `capacity`
+    particles in all: `held` of them now, target[(2 k + e) * held + h] held particle h's
+    target at the start (e = 0) and at the end (e = 1) of the launch's k-th step
+    (HandleSet.schedule)."""
 
     def __init__(self, capacity: int):
         self.capacity = max(capacity, 1)
         fields = backend.FieldGroup()
+        self.held = fields.scalar(ti.i32, 1)
         self.index = fields.scalar(ti.i32, self.capacity)
         self.target = fields.vector(3, backend.real(),
                                     2 * limits.SCHEDULED_STEPS * self.capacity)
@@ -86,17 +73,9 @@ class HandleTable:
     def load(self, capacity: int) -> None:
         """Nothing to load: schedule() writes the table before each launch."""
 
-    @ti.func
-    def move(self, state: ti.template(), begin, end, held, k, dt):
-        """Held particles begin .. end - 1 to their targets of the launch's k-th step, as
-        move_handles does."""
-        for h in range(begin, end):
-            i = self.index[h]
-            x_old = self.target[2 * k * held + h]
-            x_new = self.target[(2 * k + 1) * held + h]
-            state.particle_prev_position[i] = x_old
-            state.particle_position[i] = x_new
-            state.particle_velocity[i] = (x_new - x_old) / dt
+    def phases(self, model, forces, work) -> tuple:
+        """The handle stage as phases (runtime/plan.py; `work` is this table)."""
+        return (Phase(Loop(self.capacity, move_held)),)
 
 
 class HandleSet:
@@ -153,7 +132,8 @@ class HandleSet:
         handles whose release falls before the next step's end let go (model.set_pinned)."""
         if not self.holding:
             return
-        self._move(state, self.targets(max(t - dt, 0.0)), self.targets(t), dt)
+        self.schedule(step_index, 1, dt)
+        plan.run(self.table, model, state, None, self.table, dt, step_index, False)
         self.let_go(model, t, dt)
 
     def steps_before_release(self, first: int, dt: float) -> int:
@@ -173,16 +153,26 @@ class HandleSet:
         """Table the targets of the held particles for steps first .. first + count - 1
         (count at most limits.SCHEDULED_STEPS) in `table` (a HandleTable); returns how many
         particles are held."""
+        if not len(self.index):
+            return self._table([])
+        rows = []
+        for k in range(count):
+            t = (first + k + 1) * dt
+            rows += [self.targets(max(t - dt, 0.0)), self.targets(t)]
+        return self._table(rows)
+
+    def _table(self, rows) -> int:
+        """Write the held particles and `rows` (start and end targets of each step, in
+        turn) into the HandleTable; returns how many particles are held."""
         held = len(self.index)
-        if held:
-            real = backend.numpy_real()
-            rows = []
-            for k in range(count):
-                t = (first + k + 1) * dt
-                rows += [self.targets(max(t - dt, 0.0)), self.targets(t)]
-            target = np.zeros((2 * limits.SCHEDULED_STEPS * self.table.capacity, 3), real)
-            target[:2 * count * held] = np.concatenate(rows).astype(real)
-            upload(((self.table.index, self.index), (self.table.target, target)))
+        if not held:
+            upload(((self.table.held, [0]),))
+            return 0
+        real = backend.numpy_real()
+        target = np.zeros((2 * limits.SCHEDULED_STEPS * self.table.capacity, 3), real)
+        target[:len(rows) * held] = np.concatenate(rows).astype(real)
+        upload(((self.table.index, self.index), (self.table.target, target),
+                (self.table.held, [held])))
         return held
 
     def let_go(self, model, t: float, dt: float) -> None:
@@ -198,7 +188,8 @@ class HandleSet:
         go at once by a handle whose release is before the first step's end)."""
         self._hold(self.handles)
         target = self.targets(0.0)
-        self._move(state, target, target, dt)
+        if self._table([target, target]):
+            plan.run(self.table, model, state, None, self.table, dt, 0, False)
         still = [h for h in self.holding if h.holds_after(0.0, dt)]
         self._hold(still)
         model.set_pinned(self.pinned())
@@ -209,6 +200,19 @@ class HandleSet:
         self._hold([h for h in self.handles if h.holds_after(t, dt)])
         model.set_pinned(self.pinned())
 
-    def _move(self, state, previous: np.ndarray, target: np.ndarray, dt: float) -> None:
-        real = backend.numpy_real()
-        move_handles(state, self.index, previous.astype(real), target.astype(real), dt)
+
+@ti.func
+def move_held(model: ti.template(), state: ti.template(), forces: ti.template(),
+              table: ti.template(), stages: ti.template(), h, now: ti.template()):
+    """Held particle h (if that many are held) on its target of the launch's step now.k, with
+    the path's history: the previous position its target a step ago and velocity =
+    (target - previous) / dt, whatever the integrator did to it in between (it moves pinned
+    particles by their velocity)."""
+    held = table.held[0]
+    if h < held:
+        i = table.index[h]
+        x_old = table.target[2 * now.k * held + h]
+        x_new = table.target[(2 * now.k + 1) * held + h]
+        state.particle_prev_position[i] = x_old
+        state.particle_position[i] = x_new
+        state.particle_velocity[i] = (x_new - x_old) / now.dt

@@ -8,10 +8,10 @@ from dataclasses import dataclass
 import taichi as ti
 
 from ..body.material import SpringKind
-from ..runtime import backend, limits
+from ..runtime import backend, limits, plan
+from ..runtime.plan import Loop, Phase, Repeat, Sweep
 from ..runtime.validation import count, finite_number, require
-from ..state import copy_positions
-from .constraints import relax_springs, sweep
+from .constraints import relax
 
 
 @dataclass(frozen=True)
@@ -54,26 +54,50 @@ class StrainLimiter:
 
     @staticmethod
     def structure(limit: StrainLimit, particle_count: int, tearable: bool) -> tuple:
-        """What the kernels of a StrainLimiter read at compile time (pool.py); its `limit`
-        is passed to them as arguments, so limiters of one structure take any limit."""
-        return ("StrainLimiter", particle_count, tearable)
+        """What the kernels of a StrainLimiter read at compile time (pool.py): the limit
+        too (its strain, passes and kinds are constants of the phases)."""
+        return ("StrainLimiter", limit, particle_count, tearable)
 
     def load(self, limit: StrainLimit, particle_count: int, tearable: bool) -> None:
-        """Limit strains to `limit` from now on (a limiter of this structure)."""
+        """Limit strains to `limit` (equal to the one it was built with: structure)."""
         self.limit = limit
+        self.kinds = tuple(self.limit.kind_mask())
+
+    def phases(self, model, forces, work) -> tuple:
+        """The stage as phases (runtime/plan.py; `work` is this limiter): keep the positions,
+        `passes` of the lecture's relaxation on stretched springs colour by colour
+        (constraints.relax with stretched_only), then velocities follow the correction."""
+        colours = model.spring_colouring()
+        return (Phase(Loop(model.particle_count, keep_position)),
+                Repeat(self.limit.passes, Sweep(colours, relax_stretched, colours)),
+                Phase(Loop(model.particle_count, follow_velocity)))
 
     def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
-        copy_positions(state, self.before)
-        # the lecture's relaxation, for stretched springs only
-        sweep(relax_springs, model, state, self.limit.passes, self.limit.kind_mask(), 0.0,
-              self.tearable, self.limit.max_strain, True)
-        follow_velocity(state, self, dt)
+        """The strain-limiting stage of a step (simulation.STEP_ORDER), a launch of its
+        phases."""
+        plan.run(self, model, state, None, self, dt, step_index, False)
 
 
-@backend.kernel
-def follow_velocity(state: ti.template(), limiter: ti.template(), dt: float):
+@ti.func
+def keep_position(model: ti.template(), state: ti.template(), forces: ti.template(),
+                  limiter: ti.template(), stages: ti.template(), i, now: ti.template()):
+    limiter.before[i] = state.particle_position[i]
+
+
+@ti.func
+def relax_stretched(model: ti.template(), state: ti.template(), forces: ti.template(),
+                    limiter: ti.template(), stages: ti.template(), t, now: ti.template(),
+                    colours: ti.template()):
+    """The spring at position t of the colour order `colours`, pulled back to
+    (1 + max_strain) x rest if longer (and of a limited kind)."""
+    relax(model, state, colours, t, ti.Vector(limiter.kinds),
+          limiter.tearable, limiter.limit.max_strain, True)
+
+
+@ti.func
+def follow_velocity(model: ti.template(), state: ti.template(), forces: ti.template(),
+                    limiter: ti.template(), stages: ti.template(), i, now: ti.template()):
     """v += correction / dt, so force-based integrators carry on from the corrected motion
     (Verlet-type history already does: it differences positions)."""
-    for i in limiter.before:
-        state.particle_velocity[i] = (state.particle_velocity[i]
-                                      + (state.particle_position[i] - limiter.before[i]) / dt)
+    state.particle_velocity[i] = (state.particle_velocity[i]
+                                  + (state.particle_position[i] - limiter.before[i]) / now.dt)

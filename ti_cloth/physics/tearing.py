@@ -7,10 +7,12 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from ..runtime import backend
+from ..runtime import backend, plan
+from ..runtime.plan import Loop, Phase
 from ..runtime.validation import finite_number
 
 
+@backend.kernel_argument
 @dataclass(frozen=True, init=False)
 class Tearing:
     """A spring tears when |x_i - x_j| > (1 + strain) * rest length (Stuyck 4.5).
@@ -35,9 +37,15 @@ class Tearing:
         warnings.warn("Tearing.stretch is now Tearing.strain", DeprecationWarning, stacklevel=2)
         return self.strain
 
+    def phases(self, model, forces, work) -> tuple:
+        """The tearing stage as phases (runtime/plan.py): every spring's test (tear_spring);
+        `work` is this Tearing (its strain a compile-time constant of the pooled copy a
+        simulation passes: pool.py)."""
+        return (Phase(Loop(model.spring_count, tear_spring)),)
+
     def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
-        """The tearing stage of a step (simulation.STEP_ORDER)."""
-        tear_springs(model, state, self.strain, step_index)
+        """The tearing stage of a step (simulation.STEP_ORDER), a launch of its phases."""
+        plan.run(self, model, state, None, self, dt, step_index, False)
 
 
 # A spring found stretched more than RUNAWAY_STRAIN beyond its tear strain has not torn: the
@@ -49,27 +57,21 @@ class Tearing:
 RUNAWAY_STRAIN = 0.5
 
 
-@backend.kernel
-def tear_springs(model: ti.template(), state: ti.template(), strain: float, step: ti.i32):
-    """Remove every intact spring longer than (1 + strain) x rest; record the step it tore."""
-    tear_overstretched(model, state, strain, step, 0, model.spring_count)
-
-
 @ti.func
-def tear_overstretched(model: ti.template(), state: ti.template(), strain, step, begin, end):
-    """tear_springs' loop over springs begin .. end - 1, for kernels that run whole steps
-    (integrators/fused.py). A tear more than RUNAWAY_STRAIN past the tear strain flags the
-    step as diverged (state.first_bad_step)."""
-    for s in range(begin, end):
-        rest = model.spring_rest_length[s]
-        if state.spring_alive[s] != 0 and rest > 0:
-            i, j = model.spring_indices[s][0], model.spring_indices[s][1]
-            length = (state.particle_position[i] - state.particle_position[j]).norm()
-            if length > (1.0 + strain) * rest:
-                state.spring_alive[s] = ti.i8(0)
-                state.spring_torn_step[s] = step
-                if length > (1.0 + strain + RUNAWAY_STRAIN) * rest:
-                    ti.atomic_min(state.first_bad_step[None], step)
+def tear_spring(model: ti.template(), state: ti.template(), forces: ti.template(),
+                tearing: ti.template(), stages: ti.template(), s, now: ti.template()):
+    """Remove spring s if intact and longer than (1 + strain) x rest; record the step it tore.
+    A tear more than RUNAWAY_STRAIN past the tear strain flags the step as diverged
+    (state.first_bad_step)."""
+    rest = model.spring_rest_length[s]
+    if state.spring_alive[s] != 0 and rest > 0:
+        i, j = model.spring_indices[s][0], model.spring_indices[s][1]
+        length = (state.particle_position[i] - state.particle_position[j]).norm()
+        if length > (1.0 + tearing.strain) * rest:
+            state.spring_alive[s] = ti.i8(0)
+            state.spring_torn_step[s] = now.step
+            if length > (1.0 + tearing.strain + RUNAWAY_STRAIN) * rest:
+                ti.atomic_min(state.first_bad_step[None], now.step)
 
 
 def torn_triangles(triangle_edge_spring: np.ndarray, torn: np.ndarray) -> np.ndarray:
