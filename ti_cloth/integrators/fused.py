@@ -18,7 +18,7 @@ bits.
 import taichi as ti
 
 from ..physics import wind
-from ..physics.forces import gather_force, spring_loops
+from ..physics.forces import gather_force, spring_phases
 from ..runtime import limits
 from ..runtime.plan import Loop, Phase
 
@@ -42,9 +42,7 @@ def move_particle(model: ti.template(), state: ti.template(), forces: ti.templat
 
 def phases(integrator, model, forces) -> tuple:
     """A fused integrator's step: the wind, the springs, every particle's move."""
-    loops = spring_loops(model)
-    springs = (Phase(*loops),) if loops else ()
-    return (wind.phases(model, forces) + springs
+    return (wind.phases(model, forces) + spring_phases(model)
             + (Phase(Loop(model.particle_count, move_particle, integrator)),))
 
 

@@ -6,7 +6,7 @@ import math
 import taichi as ti
 
 from ..physics import wind
-from ..physics.forces import gather_force, spring_loops
+from ..physics.forces import gather_force, spring_phases
 from ..runtime import backend
 from ..runtime.plan import Loop, Phase
 from ..state import store_particle
@@ -83,11 +83,9 @@ class RK4(Integrator):
     def phases(self, model, forces, work):
         """Four times: the wind and the springs at the stage's state, then every particle's
         stage (work: the _Stages)."""
-        loops = spring_loops(model)
-        springs = (Phase(*loops),) if loops else ()
         step = ()
         for stage in range(4):
-            step += (wind.phases(model, forces) + springs
+            step += (wind.phases(model, forces) + spring_phases(model)
                      + (Phase(Loop(model.particle_count, rk4_stage, stage)),))
         return step
 

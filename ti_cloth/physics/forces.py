@@ -165,6 +165,13 @@ def spring_loops(model) -> tuple:
     return loops
 
 
+def spring_phases(model) -> tuple:
+    """The phase that evaluates every spring and altitude spring (spring_loops), none for a
+    body without them."""
+    loops = spring_loops(model)
+    return (Phase(*loops),) if loops else ()
+
+
 @ti.func
 def gather_force(model: ti.template(), state: ti.template(), forces: ti.template(), i,
                  springs: ti.template()):
@@ -207,9 +214,7 @@ class _Evaluation:
 
     def phases(self, model, forces, work):
         """The wind, every spring, every particle's total."""
-        loops = spring_loops(model)
-        springs = (Phase(*loops),) if loops else ()
-        return (wind.phases(model, forces) + springs
+        return (wind.phases(model, forces) + spring_phases(model)
                 + (Phase(Loop(model.particle_count, total_force)),))
 
     def external(self, model, forces, work):
