@@ -55,6 +55,13 @@ def run(sim, plan, steps, monkeypatch, per_launch=100):
     sim.step(steps, plan="many steps")
 
 
+def fabric_sheet():
+    """A denim sheet (membrane and bending elements, gathered per corner), started stretched."""
+    cloth = tc.Cloth(tc.grid_mesh(6, 6, (0.3, 0.3)), tc.Fabric.preset("denim"), pinned=[30, 35])
+    centre = cloth.particle_position.mean(axis=0)
+    return cloth, centre + 1.1 * (cloth.particle_position - centre)
+
+
 def braced_strands():
     """Two hair strands with ghosts and altitude springs, started bent: they swing."""
     body = tc.hair(2, 6, 0.3, mass=1e-3, bend=tc.SpringParams(20.0, 0.02))
@@ -103,18 +110,20 @@ FEATURES = {"none": {}, "tearing": dict(tearing=0.2), "strain limit": dict(strai
                          + [("xpbd", "sheet", "moving colliders"), ("rk4", "sheet", "moving colliders"),
                             ("rk4", "sheet", "all but strain limit"),
                             ("symplectic_euler", "braced strands", "none"),
+                            ("symplectic_euler", "fabric", "colliders"), ("rk4", "fabric", "none"),
                             ("xpbd", "braced strands", "none")])
 def test_every_launch_plan_takes_the_same_steps(threads, integrator, feature, body, monkeypatch):
     """The same bits in a launch per phase, in small launches on the launching thread and in
     big launches on one worker and on a team of two, for a sheet and for strands whose
     altitude springs are evaluated per element and gathered per corner (a team of two shares
     both), with each stage a team launch runs."""
-    cloth, start = sheet() if body == "sheet" else braced_strands()
+    cloth, start = {"sheet": sheet, "braced strands": braced_strands,
+                    "fabric": fabric_sheet}[body]()
     runs = []
     kwargs = FEATURES[feature]
     position_based = integrator in ("pbd", "xpbd", "implicit_euler")   # any step: 1/480 s
     dt = (1 / 480 if position_based else 2e-5 if body == "sheet"
-          else 0.5 * tc.stable_dt(cloth, integrator, 0.3))
+          else 0.5 * tc.stable_dt(cloth, integrator, 0.3))   # strands and fabric: its own
     steps = 2 * 100 + 7 if not position_based else 2 * 20 + 7
     sim = tc.Simulation(cloth, integrator=integrator, dt=dt, drag=0.3, **kwargs)
     assert sim.many_steps is not None

@@ -5,6 +5,8 @@ Nothing here calls ti.init; call ti_cloth.init(arch=..., precision=...) first.
 import importlib
 
 from .body.bodies import hair, soft_body, string, tet_block
+from .body.fabric import PRESETS as FABRICS
+from .body.fabric import Fabric
 from .body.material import PRESETS, Material, SpringKind, SpringParams
 from .body.mesh import (
     Mesh,
@@ -50,7 +52,7 @@ __all__ = [
     "TeamStalled",
     "ForceSettings",
     "INTEGRATORS", "Integrator", "ExplicitEuler", "SymplecticEuler", "Verlet", "PBD", "XPBD",
-    "ImplicitEuler", "RK4", "PRESETS", "Material", "SpringKind", "SpringParams", "Mesh", "grid_mesh",
+    "ImplicitEuler", "RK4", "PRESETS", "FABRICS", "Fabric", "Material", "SpringKind", "SpringParams", "Mesh", "grid_mesh",
     "box_mesh", "combine_meshes", "sphere_mesh",
     "tet_grid_mesh", "load_mesh", "save_mesh", "Model", "Keyframes", "Oscillation", "Handle",
     "Simulation", "stable_dt", "auto_dt", "auto_substeps", "AUTO_MAX_DT", "State", "StrainLimit", "SelfCollision",

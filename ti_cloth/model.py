@@ -7,6 +7,7 @@ import hashlib
 import numpy as np
 import taichi as ti
 
+from .body.elements import tangents
 from .body.topology import Cloth, color_springs
 from .runtime import backend
 from .runtime.transfer import upload
@@ -39,9 +40,17 @@ class Model:
     particle_altitude_start CSR offsets, shape (particle_count + 1,): particle i is corner
                           adjacency_altitude[a] % 4 of altitude spring adjacency_altitude[a] // 4
                           for a in [start[i], start[i + 1]), in increasing order (the gather's)
+    face_indices, face_gradient (grad lambda_1, grad lambda_2 as x1 y1 x2 y2), face_area,
+    face_moduli, face_damping, face_bending (00 11 22 01 02 12), face_hinge: a Fabric's
+                          triangles (Cloth's arrays of those names; body/elements.py)
+    hinge_indices, hinge_faces, hinge_rest_tangent (tan of half the rest angle, continued as
+                          body/elements.tangents): its hinges
+    particle_face_start, adjacency_face: particle i is corner adjacency_face[a] % 3 of
+                          triangle adjacency_face[a] // 3 (CSR, as for altitude springs);
+    particle_hinge_start, adjacency_hinge: the same for hinges (4 corners)
 
     Python attributes read at compile time (fixed for the model's life):
-    particle_count, spring_count, altitude_count, relative_damping.
+    particle_count, spring_count, altitude_count, face_count, hinge_count, relative_damping.
     """
 
     def __init__(self, cloth: Cloth, pinned: np.ndarray | None = None):
@@ -49,6 +58,8 @@ class Model:
         self.particle_count = n = cloth.particle_count
         self.spring_count = s = cloth.spring_count
         self.altitude_count = a = cloth.altitude_count
+        self.face_count = faces = cloth.face_count
+        self.hinge_count = hinges = cloth.hinge_count
         self.relative_damping = cloth.damping == "relative"
         fields = backend.FieldGroup()
         s1 = max(s, 1)
@@ -70,6 +81,21 @@ class Model:
         self.altitude_damping = fields.scalar(real, max(a, 1))
         self.particle_altitude_start = fields.scalar(ti.i32, n + 1)
         self.adjacency_altitude = fields.scalar(ti.i32, max(4 * a, 1))
+        f1, h1 = max(faces, 1), max(hinges, 1)
+        self.face_indices = fields.vector(3, ti.i32, f1)
+        self.face_gradient = fields.vector(4, real, f1)
+        self.face_area = fields.scalar(real, f1)
+        self.face_moduli = fields.vector(4, real, f1)
+        self.face_damping = fields.scalar(real, f1)
+        self.face_bending = fields.vector(6, real, f1)
+        self.face_hinge = fields.vector(3, ti.i32, f1)
+        self.hinge_indices = fields.vector(4, ti.i32, h1)
+        self.hinge_faces = fields.vector(2, ti.i32, h1)
+        self.hinge_rest_tangent = fields.scalar(real, h1)
+        self.particle_face_start = fields.scalar(ti.i32, n + 1)
+        self.adjacency_face = fields.scalar(ti.i32, 3 * f1)
+        self.particle_hinge_start = fields.scalar(ti.i32, n + 1)
+        self.adjacency_hinge = fields.scalar(ti.i32, 4 * h1)
         fields.finalize(self)
         self._colouring = None
         self._altitude_colouring = None
@@ -83,8 +109,11 @@ class Model:
         digest = hashlib.blake2b(digest_size=16)
         digest.update(np.ascontiguousarray(cloth.spring_indices).tobytes())
         digest.update(np.ascontiguousarray(cloth.altitude_indices).tobytes())
+        digest.update(np.ascontiguousarray(cloth.face_indices).tobytes())
+        digest.update(np.ascontiguousarray(cloth.hinge_indices).tobytes())
         return ("Model", cloth.particle_count, cloth.spring_count, cloth.altitude_count,
-                cloth.damping == "relative", digest.hexdigest())
+                cloth.face_count, cloth.hinge_count, cloth.damping == "relative",
+                digest.hexdigest())
 
     def load(self, cloth: Cloth, pinned: np.ndarray | None = None) -> None:
         """Upload `cloth` (of this model's structure) with `pinned` (default: the cloth's)."""
@@ -102,9 +131,10 @@ class Model:
         order = np.lexsort((other, first_end, owner))
         start = np.concatenate([[0], np.cumsum(np.bincount(owner, minlength=n))])
         split = start[:-1] + np.bincount(ends[:, 1], minlength=n)
-        corners = cloth.altitude_indices.ravel()
-        altitude_order = np.argsort(corners, kind="stable")   # by particle, then element, corner
-        altitude_start = np.concatenate([[0], np.cumsum(np.bincount(corners, minlength=n))])
+        altitude_start, altitude_order = corner_adjacency(cloth.altitude_indices, n)
+        face_start, face_order = corner_adjacency(cloth.face_indices, n)
+        hinge_start, hinge_order = corner_adjacency(cloth.hinge_indices, n)
+        bending = cloth.face_bending[:, [0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]]
         upload(((self.particle_mass, cloth.particle_mass),
                 (self.particle_inv_mass, inv_mass),
                 (self.particle_rest_position, cloth.particle_position),
@@ -122,7 +152,21 @@ class Model:
                 (self.altitude_stiffness, cloth.altitude_stiffness),
                 (self.altitude_damping, cloth.altitude_damping),
                 (self.particle_altitude_start, altitude_start),
-                (self.adjacency_altitude, altitude_order)))
+                (self.adjacency_altitude, altitude_order),
+                (self.face_indices, cloth.face_indices),
+                (self.face_gradient, cloth.face_gradient[:, 1:].reshape(-1, 4)),
+                (self.face_area, cloth.face_area),
+                (self.face_moduli, cloth.face_moduli),
+                (self.face_damping, cloth.face_damping),
+                (self.face_bending, bending),
+                (self.face_hinge, cloth.face_hinge),
+                (self.hinge_indices, cloth.hinge_indices),
+                (self.hinge_faces, cloth.hinge_faces),
+                (self.hinge_rest_tangent, tangents(cloth.hinge_rest_angle)),
+                (self.particle_face_start, face_start),
+                (self.adjacency_face, face_order),
+                (self.particle_hinge_start, hinge_start),
+                (self.adjacency_hinge, hinge_order)))
 
     def set_pinned(self, pinned: np.ndarray) -> None:
         """Pin exactly `pinned` (N,) bool from the next step on: inverse masses 0 there and
@@ -133,7 +177,8 @@ class Model:
     def state(self, position_limit: float = 1e6) -> State:
         """A fresh State at the rest configuration, at rest, with every spring intact, whose
         divergence guard flags any |coordinate| beyond position_limit [m]."""
-        state = State(self.particle_count, self.spring_count, position_limit, self.altitude_count)
+        state = State(self.particle_count, self.spring_count, position_limit, self.altitude_count,
+                      self.face_count, self.hinge_count)
         state.reset(self.particle_rest_position)
         return state
 
@@ -154,6 +199,16 @@ class Model:
             self._altitude_colouring = SpringColouring(*color_springs(
                 self.cloth.altitude_indices, self.particle_count))
         return self._altitude_colouring
+
+
+def corner_adjacency(indices: np.ndarray, particle_count: int) -> tuple[np.ndarray, np.ndarray]:
+    """(start (N + 1,), order): the CSR of elements with k corners each ((E, k) particle
+    indices): particle i is corner order[a] % k of element order[a] // k for a in
+    [start[i], start[i + 1]), by element, then corner (the gathers' fixed order)."""
+    corners = indices.ravel()
+    order = np.argsort(corners, kind="stable")
+    start = np.concatenate([[0], np.cumsum(np.bincount(corners, minlength=particle_count))])
+    return start, order
 
 
 def inverse_masses(mass: np.ndarray, pinned: np.ndarray) -> np.ndarray:

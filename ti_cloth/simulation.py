@@ -27,7 +27,7 @@ from .body.topology import Cloth
 from .contact.collision import ColliderSet
 from .contact.self_collision import SelfCollision, SelfContact, SelfContacts, warn_if_thick
 from .errors import SimulationDiverged, StaleSimulation
-from .integrators import make_integrator
+from .integrators import INTEGRATORS, make_integrator
 from .model import Model
 from .physics.forces import ForceSettings, energies
 from .physics.handles import Handle, HandleSet, HandleTable
@@ -82,6 +82,8 @@ class Simulation:
         self._runtime = backend.generation()
         self.cloth = cloth
         self.integrator = make_integrator(integrator)
+        if cloth.fabric:
+            _check_fabric_options(self.integrator, tearing, strain_limit)
         auto = isinstance(dt, str) and dt == "auto"
         self.dt = None if auto else in_range("dt", dt, limits.DT)
         gravity = as_array("gravity", gravity, np.float64, (3,))
@@ -108,7 +110,7 @@ class Simulation:
                         strain_limit, position_limit, self_collision)
         parts = {"model": (Model, (cloth, pinned)),
                  "state": (State, (cloth.particle_count, cloth.spring_count, position_limit,
-                                   cloth.altitude_count))}
+                                   cloth.altitude_count, cloth.face_count, cloth.hinge_count))}
         if wind is not None:
             parts["wind"] = (WindField, (wind, cloth))
         if strain_limit is not None and cloth.spring_count:
@@ -165,8 +167,8 @@ class Simulation:
         (pool.py) as one set, so their kernels are compiled once per structure in a process;
         a set lent before is loaded with these args."""
         key = tuple((name, cls.structure(*args)) for name, (cls, args) in parts.items())
-        size = limits.memory_needed(self.cloth.particle_count, self.cloth.spring_count
-                                    + limits.ALTITUDE_SPRINGS * self.cloth.altitude_count)
+        size = limits.memory_needed(self.cloth.particle_count,
+                                    limits.spring_equivalents(self.cloth))
         lent, reused = POOL.lend(key, lambda: {name: cls(*args) for name, (cls, args)
                                                in parts.items()}, self, size)
         if reused:
@@ -422,6 +424,18 @@ class Simulation:
     def __repr__(self) -> str:
         return (f"Simulation({self.cloth!r}, integrator={self.integrator!r}, dt={self.dt}, "
                 f"time={self.time:.6g})")
+
+
+def _check_fabric_options(integrator, tearing, strain_limit) -> None:
+    """A Fabric's elements run on the integrators with runs_fabric, without tearing or strain
+    limiting (both act on springs) for now: refuse the rest by name rather than ignore them."""
+    able = sorted(name for name, cls in INTEGRATORS.items() if cls.runs_fabric)
+    require(integrator.runs_fabric, "integrator", integrator.name,
+            f"one of {able} for a body made of a Fabric (its elements)")
+    require(tearing is None, "tearing", tearing,
+            "None for a body made of a Fabric (tearing removes springs; a Fabric has elements)")
+    require(strain_limit is None, "strain_limit", strain_limit,
+            "None for a body made of a Fabric (strain limiting relaxes springs)")
 
 
 def _from_positional(positional: tuple, options: dict) -> dict:

@@ -24,6 +24,11 @@ class State:
                             (its second end feels the negation)
     altitude_force          force of altitude spring a on its corner c at the last evaluation
                             [N], at index 4 a + c (Selle et al. 2008; forces.py)
+    face_force              force of a Fabric's triangle f on its corner c [N], at 3 f + c
+    hinge_force             bending force of hinge e on its corner k [N], at 4 e + k
+    hinge_tangent, hinge_rate  t - t_rest of each hinge and dt/dt [1/s] (physics/elements.py)
+    face_moment             dE/dt of triangle f's bending on the hinge across its edge i [J],
+                            at 3 f + i
     spring_alive            1 while a spring exists, 0 once torn (Stuyck 4.5); lives here, not
                             in the Model, so the Model stays immutable and state() starts whole
     spring_torn_step        step index at which each spring tore, -1 if intact
@@ -37,7 +42,7 @@ class State:
     """
 
     def __init__(self, particle_count: int, spring_count: int, position_limit: float = 1e6,
-                 altitude_count: int = 0):
+                 altitude_count: int = 0, face_count: int = 0, hinge_count: int = 0):
         real = backend.real()
         fields = backend.FieldGroup()
         self.particle_position = fields.vector(3, real, particle_count)
@@ -49,6 +54,11 @@ class State:
         self.spring_alive = fields.scalar(ti.i8, max(spring_count, 1))
         self.spring_torn_step = fields.scalar(ti.i32, max(spring_count, 1))
         self.altitude_force = fields.vector(3, real, max(4 * altitude_count, 1))
+        self.face_force = fields.vector(3, real, 3 * max(face_count, 1))
+        self.face_moment = fields.scalar(real, 3 * max(face_count, 1))
+        self.hinge_force = fields.vector(3, real, 4 * max(hinge_count, 1))
+        self.hinge_tangent = fields.scalar(real, max(hinge_count, 1))
+        self.hinge_rate = fields.scalar(real, max(hinge_count, 1))
         self.first_bad_step = fields.scalar(ti.i32, ())
         self.position_limit = fields.scalar(real, ())
         fields.finalize(self)
@@ -58,12 +68,12 @@ class State:
 
     @staticmethod
     def structure(particle_count: int, spring_count: int, position_limit: float = 1e6,
-                  altitude_count: int = 0) -> tuple:
+                  altitude_count: int = 0, face_count: int = 0, hinge_count: int = 0) -> tuple:
         """What the kernels of a State read at compile time: its field shapes (pool.py)."""
-        return ("State", particle_count, spring_count, altitude_count)
+        return ("State", particle_count, spring_count, altitude_count, face_count, hinge_count)
 
     def load(self, particle_count: int, spring_count: int, position_limit: float = 1e6,
-             altitude_count: int = 0) -> None:
+             altitude_count: int = 0, face_count: int = 0, hinge_count: int = 0) -> None:
         """Guard at position_limit from the next reset() on (a State of this structure)."""
         self.limit = position_limit
 

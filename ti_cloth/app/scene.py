@@ -15,6 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from ..body import bodies as body_builders
+from ..body.fabric import PRESETS as FABRICS
+from ..body.fabric import Fabric
 from ..body.material import DAMPING_MODELS, PRESETS, Material, SpringParams
 from ..body.mesh import PLANES, Mesh, grid_mesh, load_mesh
 from ..body.topology import Cloth
@@ -114,8 +116,8 @@ class Scene:
         steps = (self.frames if frames is None else frames) * self.resolved_substeps()
         passes = getattr(self.integrator, "iterations", 1)
         passes += self.strain_limit.passes if self.strain_limit is not None else 0
-        return limits.work(self.cloth.particle_count, self.cloth.spring_count
-                           + limits.ALTITUDE_SPRINGS * self.cloth.altitude_count, steps, passes)
+        return limits.work(self.cloth.particle_count, limits.spring_equivalents(self.cloth),
+                           steps, passes)
 
     def build(self, integrator=None, dt: float | None = None, **options) -> Simulation:
         """The Simulation of this scene (call ti_cloth.init first); `integrator` and `dt`
@@ -330,7 +332,15 @@ def _altitude_springs(table: Table):
     return read
 
 
-def _material(owner: Table) -> Material:
+def _material(owner: Table) -> Material | Fabric:
+    """A surface body's `material` (Stuyck's springs: a preset name or a table) or `fabric`
+    (a measured fabric: a preset name or a [bodies.fabric] table of `preset` and any of
+    Fabric's fields), at most one of them; default Material()."""
+    if owner.has("fabric"):
+        if owner.has("material"):
+            owner.bad("fabric", owner.value("fabric"),
+                      "absent when `material` is given (a body is made of springs or of a fabric)")
+        return _fabric(owner)
     value = owner.value("material", None)
     if value is None:
         return Material()
@@ -352,6 +362,35 @@ def _material(owner: Table) -> Material:
         changes["damping"] = table.string("damping", choices=DAMPING_MODELS)
     table.finish()
     return table.build(lambda: Material(**{**base.__dict__, **changes}))
+
+
+def _fabric(owner: Table) -> Fabric:
+    """`fabric = "denim"`, or a [bodies.fabric] table: `preset` plus any of density [kg/m^2],
+    stretch and bending (a number or [warp, weft]; N/m, N m), shear [N/m], poisson, damping
+    [s], hem_mass [kg]."""
+    value = owner.value("fabric")
+    if isinstance(value, str):
+        if value not in FABRICS:
+            owner.bad("fabric", value, f"a table or one of the fabrics {sorted(FABRICS)}")
+        return Fabric.preset(value)
+    if not isinstance(value, dict):
+        owner.bad("fabric", value, f"a table or one of the fabrics {sorted(FABRICS)}")
+    table = Table(value, owner.path("fabric"), owner.source)
+    preset = table.string("preset", None, sorted(FABRICS)) if table.has("preset") else None
+    changes = {}
+    for key, unit in (("density", "kg/m^2"), ("shear", "N/m"), ("poisson", ""),
+                      ("damping", "s"), ("hem_mass", "kg")):
+        if table.has(key):
+            changes[key] = table.number(key, unit=unit)
+    for key, unit in (("stretch", "N/m"), ("bending", "N m")):
+        if table.has(key):
+            pair = isinstance(table.value(key), list)
+            changes[key] = (tuple(table.vector(key, length=2, unit=unit)) if pair
+                            else table.number(key, unit=unit))
+    table.finish()
+    if preset:
+        return table.build(Fabric.preset, preset, **changes)
+    return table.build(Fabric, **changes)
 
 
 def _hem(table: Table, mesh: Mesh):
@@ -391,12 +430,18 @@ def _body(table: Table, folder: Path, offset: int) -> tuple[Cloth, list[Handle]]
         mesh = table.build(grid_mesh, rows, cols, **options)
         names = {k: v.tolist() for k, v in mesh.named_vertices().items() if k != "boundary"}
         pinned = _indices(table, "pinned", mesh.vertex_count, names)
-        cloth = table.build(Cloth, mesh, _material(table), pinned=pinned, hem=_hem(table, mesh))
+        warp = {}
+        table.optional(warp, "warp", "vector")
+        cloth = table.build(Cloth, mesh, _material(table), pinned=pinned, hem=_hem(table, mesh),
+                            **warp)
     elif kind == "mesh":
         mesh = _mesh_file(table, folder)
         names = {}
+        warp = {}
+        table.optional(warp, "warp", "vector")
         cloth = table.build(Cloth, mesh, _material(table),
-                            pinned=_indices(table, "pinned", mesh.vertex_count), hem=_hem(table, mesh))
+                            pinned=_indices(table, "pinned", mesh.vertex_count), hem=_hem(table, mesh),
+                            **warp)
     elif kind == "string":
         n = table.integer("n", 20, within=limits.CHAIN)
         names = {"start": [0], "end": [n - 1]}

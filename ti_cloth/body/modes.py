@@ -4,13 +4,16 @@ integrator turns these into its own largest stable step (Integrator.stable_step)
 
 An altitude spring (Selle et al. 2008) linearised about rest is k G G^T with G = g (x) n, its
 altitude's gradient over its four corners (topology.altitude_frames): at rest h = h0, so the
-curvature term k (h - h0) d^2h/dx^2 vanishes and this is exact there.
+curvature term k (h - h0) d^2h/dx^2 vanishes and this is exact there. A Fabric's elements are
+sums of such rank-one terms at rest too (elements.rest_rank_one); all of them enter as
+rank_one_groups.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from .elements import rest_rank_one
 from .topology import altitude_frames
 
 LANCZOS_STEPS = 100
@@ -32,24 +35,38 @@ def row_bounds(cloth, drag: float, pinned) -> tuple[np.ndarray, np.ndarray]:
     for a, b in ((i, j), (j, i)):
         np.add.at(omega2, a, cloth.spring_stiffness * (inv[a] + cross))
         np.add.at(gamma, a, cloth.spring_damping * (inv[a] + cross))
-    if cloth.altitude_count:
-        # Row of corner c of k G G^T, scaled: k |g_c| sqrt(inv_c) sum_l |g_l| sqrt(inv_l).
-        _, _, g = altitude_frames(cloth.particle_position, cloth.altitude_indices)
-        weight = np.abs(g) * np.sqrt(inv[cloth.altitude_indices])
-        total = weight.sum(axis=1)
-        for corner in range(4):
-            at = cloth.altitude_indices[:, corner]
-            np.add.at(omega2, at, cloth.altitude_stiffness * weight[:, corner] * total)
-            np.add.at(gamma, at, cloth.altitude_damping * weight[:, corner] * total)
+    for indices, stiff, damp in rank_one_groups(cloth):
+        # Row of slot c of g g^T, scaled: |g_c| sqrt(inv_c) sum_l |g_l| sqrt(inv_l) (a bound:
+        # slots of one particle add their vectors, whose norm is at most the sum of theirs).
+        for vectors, out in ((stiff, omega2), (damp, gamma)):
+            weight = np.linalg.norm(vectors, axis=2) * np.sqrt(inv[indices])
+            total = weight.sum(axis=1)
+            for corner in range(indices.shape[1]):
+                np.add.at(out, indices[:, corner], weight[:, corner] * total)
     return omega2, np.where(pinned, 0.0, gamma + drag)
+
+
+def rank_one_groups(cloth) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """The body's multi-particle terms linearised about rest as rank-one g g^T, in groups of
+    (indices (R, k), stiffness vectors (R, k, 3), damping vectors (R, k, 3)): altitude springs
+    (g = sqrt(k) g_c n, damping sqrt(kd) g_c n) and a Fabric's elements
+    (elements.rest_rank_one)."""
+    groups = []
+    if cloth.altitude_count:
+        n, _, g = altitude_frames(cloth.particle_position, cloth.altitude_indices)
+        vectors = g[:, :, None] * n[:, None, :]
+        groups.append((cloth.altitude_indices,
+                       np.sqrt(cloth.altitude_stiffness)[:, None, None] * vectors,
+                       np.sqrt(cloth.altitude_damping)[:, None, None] * vectors))
+    return groups + rest_rank_one(cloth)
 
 
 def stiffest_mode(cloth, drag: float = 0.0, pinned=None, steps: int = LANCZOS_STEPS):
     """(w^2 [1/s^2], g [1/s]): the largest angular frequency^2 and damping rate of the
     springs linearised about rest.
 
-    Lanczos on A = M^-1/2 K M^-1/2 (K_s = k n n^T per spring at rest, k G G^T per altitude
-    spring, pins removed), started
+    Lanczos on A = M^-1/2 K M^-1/2 (K_s = k n n^T per spring at rest, and the rank-one terms
+    of rank_one_groups: k G G^T per altitude spring, a Fabric's elements; pins removed), started
     from a fixed random vector: w^2 is the largest Ritz value, which grows towards the largest
     eigenvalue from below (stopped after `steps` or once it grew by less than
     LANCZOS_TOLERANCE in LANCZOS_WINDOW steps). Within 1e-6 of a dense eigensolver on the
@@ -65,7 +82,7 @@ def stiffest_mode(cloth, drag: float = 0.0, pinned=None, steps: int = LANCZOS_ST
     """
     pinned = cloth.pinned if pinned is None else pinned
     free = ~np.asarray(pinned, bool)
-    if not free.any() or cloth.spring_count + cloth.altitude_count == 0:
+    if not free.any() or cloth.spring_count + cloth.altitude_count + cloth.face_count == 0:
         return 0.0, 0.0
     scale = np.where(free, 1.0 / np.sqrt(np.where(cloth.particle_mass > 0, cloth.particle_mass, 1.0)), 0.0)
     i, j = cloth.spring_indices.T
@@ -76,36 +93,35 @@ def stiffest_mode(cloth, drag: float = 0.0, pinned=None, steps: int = LANCZOS_ST
     # Component-major (3, S) and (3, N) arrays: 1-D gathers and bincounts over contiguous
     # rows run faster than over the columns of (S, 3) ones (docs/performance.md).
     n_i, n_j = n.T * scale[i], n.T * scale[j]        # M^-1/2 folded into n
-    corners = cloth.altitude_indices.T                                  # (4, A)
-    altitude_n, _, g = altitude_frames(cloth.particle_position, cloth.altitude_indices)
-    altitude_g = g.T * scale[corners]                                  # M^-1/2 folded into g
+    # (k, R) corner indices and (k, 3, R) vectors with M^-1/2 folded in, per group
+    groups = [(indices.T, [np.moveaxis(v * scale[indices][:, :, None], 0, -1) for v in (stiff, damp)])
+              for indices, stiff, damp in rank_one_groups(cloth)]
     relative = cloth.damping == "relative"
     count = cloth.particle_count
 
-    def product(x, coefficient, altitude_coefficient, isotropic=False):
+    def product(x, coefficient, which, isotropic=False):
         """M^-1/2 K M^-1/2 x, x of shape (3, N), for K of `coefficient` n n^T per spring
-        (isotropic: coefficient I) and `altitude_coefficient` G G^T per altitude spring."""
+        (isotropic: coefficient I) and g g^T of each rank-one term, g its stiffness vectors
+        (which = 0) or damping vectors (1)."""
         if isotropic:
             f = [coefficient * (scale[i] * x[c][i] - scale[j] * x[c][j]) for c in range(3)]
             out = np.stack([np.bincount(i, scale[i] * f[c], count)
-                            - np.bincount(j, scale[j] * f[c], count) for c in range(3)])
+                            - np.bincount(j, scale[j] * f[c], count)
+                            for c in range(3)]).astype(np.float64)
         else:
             t = coefficient * sum(n_i[c] * x[c][i] - n_j[c] * x[c][j] for c in range(3))
             out = np.stack([np.bincount(i, t * n_i[c], count) - np.bincount(j, t * n_j[c], count)
-                            for c in range(3)])
-        if cloth.altitude_count:
-            t = altitude_coefficient * sum(altitude_g[k] * sum(altitude_n[:, c] * x[c][corners[k]]
-                                                               for c in range(3))
-                                           for k in range(4))
-            out += np.stack([sum(np.bincount(corners[k], t * altitude_g[k] * altitude_n[:, c],
-                                             count) for k in range(4)) for c in range(3)])
+                            for c in range(3)]).astype(np.float64)   # (int without springs)
+        for corners, vectors in groups:
+            g = vectors[which]
+            t = sum(g[k, c] * x[c][corners[k]] for k in range(len(corners)) for c in range(3))
+            out += np.stack([sum(np.bincount(corners[k], t * g[k, c], count)
+                                 for k in range(len(corners))) for c in range(3)])
         return out
 
     start = (np.random.default_rng(0).normal(size=(count, 3)) * free[:, None]).T.copy()
-    omega2 = largest_ritz(lambda x: product(x, cloth.spring_stiffness, cloth.altitude_stiffness),
-                          start, steps)
-    gamma = largest_ritz(lambda x: product(x, cloth.spring_damping, cloth.altitude_damping,
-                                           relative), start, steps)
+    omega2 = largest_ritz(lambda x: product(x, cloth.spring_stiffness, 0), start, steps)
+    gamma = largest_ritz(lambda x: product(x, cloth.spring_damping, 1, relative), start, steps)
     return omega2, gamma + drag
 
 

@@ -24,6 +24,8 @@ from collections.abc import Mapping
 import numpy as np
 
 from ..runtime.validation import as_array, finite_number, require
+from . import elements
+from .fabric import Fabric
 from .material import Material, SpringKind, SpringParams
 from .mesh import Mesh, triangle_edges, unique_rows
 
@@ -203,6 +205,20 @@ class Cloth:
       altitude_stiffness (A,) [N/m], altitude_damping (A,) [kg/s]
       body_offsets       particle ranges of the bodies joined by `combine` ((0, N) for one)
 
+    A body made of a Fabric has no springs but elements (elements.py): its triangles
+      face_indices       (F, 3) int: the membrane and bending triangles (the mesh's)
+      face_gradient      (F, 3, 2): barycentric gradients in each one's rest warp/weft frame
+      face_area          (F,) rest areas [m^2]
+      face_moduli        (F, 4): (C11, C12, C22, C33) [N/m] (Fabric.membrane)
+      face_damping       (F,) Rayleigh damping time [s] (Fabric.damping)
+      face_bending       (F, 3, 3): B of the bending energy 1/2 dt^T B dt [N m]
+      face_hinge         (F, 3): the hinge across each edge (edge i opposite corner i), or -1
+    and its interior edges, the hinges
+      hinge_indices      (H, 4) int [a, b, c, d]: edge a-b, c and d opposite it
+      hinge_faces        (H, 2): 3 f + i of its two triangles
+      hinge_rest_angle   (H,) dihedral angles of the rest mesh [rad]
+    (all empty for a body of springs).
+
     pinned: particle indices or an (N,) bool mask. springs: explicit springs (see module doc).
     hem: the particles on the hem (Stuyck 4.2: the edge "folded double and stitched" carries
     material.hem_mass each): a name of mesh.named_vertices() ("boundary", a grid's "bottom",
@@ -214,14 +230,22 @@ class Cloth:
     springs of Selle et al. 2008 (a corner kept at its rest height over the opposite face,
     signed, so the tetrahedron resists flattening and cannot invert without work) with the
     constants `altitude` (a SpringParams). Default none.
+    material: a Material (Stuyck's springs) or a Fabric (elements). warp: a Fabric's warp
+    direction (default a grid's columns, else x), projected into each triangle.
     """
 
-    def __init__(self, mesh: Mesh, material: Material, pinned=(), springs=None,
+    def __init__(self, mesh: Mesh, material: Material | Fabric, pinned=(), springs=None,
                  particle_mass_override: Mapping[int, float] | None = None,
                  particle_mass=None, hem=None, ghost=None, altitude_tetrahedra=None,
-                 altitude: SpringParams | None = None):
+                 altitude: SpringParams | None = None, warp=None):
         require(isinstance(mesh, Mesh), "mesh", mesh, "a ti_cloth.Mesh")
-        require(isinstance(material, Material), "material", material, "a ti_cloth.Material")
+        require(isinstance(material, (Material, Fabric)), "material", material,
+                "a ti_cloth.Material or a ti_cloth.Fabric")
+        fabric = isinstance(material, Fabric)
+        require(not fabric or (springs is None and altitude_tetrahedra is None), "springs",
+                springs, "None for a Fabric body (its forces come from its triangles)")
+        require(not fabric or mesh.triangle_count > 0, "mesh.triangles", mesh.triangles.shape,
+                "at least one triangle for a Fabric body")
         self.mesh = mesh
         self.material = material
         n = mesh.vertex_count
@@ -250,7 +274,9 @@ class Cloth:
                 f"{massless[:5].tolist()}...); pin them, give them triangles or set their mass")
         self.particle_mass = mass
 
-        if springs is not None:
+        if fabric:
+            pairs, kind = np.zeros((0, 2), np.int64), np.zeros(0, np.int64)
+        elif springs is not None:
             pairs, kind = _explicit_springs(springs, n)
         elif mesh.grid_shape is not None:
             pairs, kind = unique_springs(grid_springs(*mesh.grid_shape))
@@ -262,7 +288,8 @@ class Cloth:
         self.spring_kind = kind
         x = self.particle_position
         self.spring_rest_length = np.linalg.norm(x[pairs[:, 0]] - x[pairs[:, 1]], axis=1)
-        params = [material.springs(k) for k in SpringKind]
+        params = ([material.springs(k) for k in SpringKind] if not fabric
+                  else [SpringParams(0.0)] * len(SpringKind))
         self.spring_stiffness = np.array([p.k for p in params])[kind]
         self.spring_damping = np.array([p.kd for p in params])[kind]
         self.triangle_edge_spring = _edge_springs(mesh.triangles, pairs, n)
@@ -275,12 +302,37 @@ class Cloth:
         self.altitude_stiffness = np.full(self.altitude_count, altitude.k)
         self.altitude_damping = np.full(self.altitude_count, altitude.kd)
         self.body_offsets = (0, n)
+        self._build_elements(material if fabric else None, warp)
         self._freeze()
+
+    def _build_elements(self, fabric: Fabric | None, warp) -> None:
+        """The face_* and hinge_* arrays (class doc): a Fabric's triangles and hinges, or none."""
+        triangles = self.mesh.triangles if fabric is not None else np.zeros((0, 3), np.int64)
+        count = len(triangles)
+        self.face_indices = triangles
+        x = self.particle_position
+        if count:
+            self.face_gradient, self.face_area = elements.material_frames(
+                x, triangles, elements.warp_directions(self.mesh, warp))
+        else:
+            self.face_gradient, self.face_area = np.zeros((0, 3, 2)), np.zeros(0)
+        self.face_moduli = np.tile(fabric.membrane if count else np.zeros(4), (count, 1))
+        self.face_damping = np.full(count, fabric.damping if count else 0.0)
+        (self.hinge_indices, self.hinge_faces, self.face_hinge,
+         face_sign) = elements.hinges(triangles)
+        self.face_bending = elements.bending_matrices(
+            self.face_gradient, self.face_area, face_sign,
+            np.tile(fabric.flexural if count else np.zeros(3), (count, 1)))
+        self.hinge_rest_angle = elements.hinge_angles(x, self.hinge_indices)
+
+    ELEMENT_ARRAYS = ("face_indices", "face_gradient", "face_area", "face_moduli", "face_damping",
+                      "face_bending", "face_hinge", "hinge_indices", "hinge_faces",
+                      "hinge_rest_angle")
 
     def _freeze(self) -> None:
         for name in ("particle_mass", "pinned", "hem", "ghost", "spring_indices", "spring_kind", "spring_rest_length",
                      "spring_stiffness", "spring_damping", "triangle_edge_spring", "altitude_indices",
-                     "altitude_rest_length", "altitude_stiffness", "altitude_damping"):
+                     "altitude_rest_length", "altitude_stiffness", "altitude_damping") + self.ELEMENT_ARRAYS:
             getattr(self, name).flags.writeable = False
 
     @classmethod
@@ -322,8 +374,16 @@ class Cloth:
         body.spring_damping = joined("spring_damping")
         body.triangle_edge_spring = joined("triangle_edge_spring", spring_offsets)
         body.altitude_indices = joined("altitude_indices", particle_offsets)
-        for name in ("altitude_rest_length", "altitude_stiffness", "altitude_damping"):
+        for name in ("altitude_rest_length", "altitude_stiffness", "altitude_damping",
+                     "face_gradient", "face_area", "face_moduli", "face_damping", "face_bending",
+                     "hinge_rest_angle"):
             setattr(body, name, joined(name))
+        face_offsets = np.cumsum([0] + [b.face_count for b in bodies])
+        hinge_offsets = np.cumsum([0] + [b.hinge_count for b in bodies])
+        body.face_indices = joined("face_indices", particle_offsets)
+        body.hinge_indices = joined("hinge_indices", particle_offsets)
+        body.face_hinge = joined("face_hinge", hinge_offsets)
+        body.hinge_faces = joined("hinge_faces", 3 * face_offsets)
         body.body_offsets = tuple(int(o) for o in particle_offsets)
         body._freeze()
         return body
@@ -352,8 +412,22 @@ class Cloth:
         return len(self.altitude_indices)
 
     @property
+    def face_count(self) -> int:
+        return len(self.face_indices)
+
+    @property
+    def hinge_count(self) -> int:
+        return len(self.hinge_indices)
+
+    @property
+    def fabric(self) -> bool:
+        """Whether the body has elements (a Fabric's) rather than springs only."""
+        return self.face_count > 0
+
+    @property
     def damping(self) -> str:
-        return self.material.damping
+        """The springs' damping model ("axial" for a Fabric's body, which has none)."""
+        return self.material.damping if isinstance(self.material, Material) else "axial"
 
     def spring_count_by_kind(self) -> dict[str, int]:
         return {k.name.lower(): int(np.sum(self.spring_kind == k)) for k in SpringKind}

@@ -31,6 +31,7 @@ class Integrator:
     step_limited: ClassVar[bool] = True     # False: stable at any step (stable_dt is inf)
     fused: ClassVar[bool] = False           # True: defines move(), fused.py writes the phases
     records_history: ClassVar[bool] = False  # True: a step leaves x_n in particle_prev_position
+    runs_fabric: ClassVar[bool] = True      # False: steps springs only, not a Fabric's elements
 
     def phases(self, model, forces, work) -> tuple:
         """One step as runtime/plan.py's nodes; `work` is workspace()'s object."""

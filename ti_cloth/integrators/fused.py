@@ -47,5 +47,5 @@ def phases(integrator, model, forces) -> tuple:
 
 
 def spring_work(model) -> int:
-    """A step's work in springs (limits.ALTITUDE_SPRINGS per altitude spring)."""
-    return model.spring_count + limits.ALTITUDE_SPRINGS * model.altitude_count
+    """A step's work in springs (limits.spring_equivalents)."""
+    return limits.spring_equivalents(model)

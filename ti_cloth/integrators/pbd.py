@@ -76,6 +76,7 @@ class PBD(Integrator):
     """
 
     name = "pbd"
+    runs_fabric = False   # a Fabric's elements need constraints (and Hessians): not yet
     order = 1
     position_based = True
     step_limited = False

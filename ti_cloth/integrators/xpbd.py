@@ -89,6 +89,7 @@ class XPBD(Integrator):
     """
 
     name = "xpbd"
+    runs_fabric = False   # a Fabric's elements need constraints (and Hessians): not yet
     order = 1
     position_based = True
     step_limited = False

@@ -19,11 +19,12 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
+from ..body import elements as host_elements
 from ..body.material import SpringKind
 from ..body.topology import altitude_frames
 from ..runtime import backend, plan
 from ..runtime.plan import Loop, Phase
-from . import wind
+from . import elements, wind
 
 
 @backend.kernel_argument
@@ -166,17 +167,19 @@ def spring_loops(model) -> tuple:
 
 
 def spring_phases(model) -> tuple:
-    """The phase that evaluates every spring and altitude spring (spring_loops), none for a
-    body without them."""
-    loops = spring_loops(model)
-    return (Phase(*loops),) if loops else ()
+    """The phases that evaluate every spring and altitude spring (spring_loops) and a Fabric's
+    elements (physics/elements.py: the membranes and hinge angles beside the springs, then the
+    bending moments and forces), none for a body without them."""
+    loops = spring_loops(model) + elements.element_loops(model)
+    return ((Phase(*loops),) if loops else ()) + elements.bending_phases(model)
 
 
 @ti.func
 def gather_force(model: ti.template(), state: ti.template(), forces: ti.template(), i,
                  springs: ti.template()):
-    """Total force on particle i: m g (Stuyck eq. 4.3) - drag m v + its springs' forces, as
-    spring_forces left them (springs=False: external loads only) + the wind's share."""
+    """Total force on particle i: m g (Stuyck eq. 4.3) - drag m v + its springs' and elements'
+    forces, as spring_phases left them (springs=False: external loads only) + the wind's
+    share."""
     f = model.particle_mass[i] * ti.Vector(forces.gravity)
     if ti.static(forces.drag > 0):
         f -= forces.drag * model.particle_mass[i] * state.particle_velocity[i]
@@ -189,6 +192,8 @@ def gather_force(model: ti.template(), state: ti.template(), forces: ti.template
         if ti.static(model.altitude_count > 0):
             for a in range(model.particle_altitude_start[i], model.particle_altitude_start[i + 1]):
                 f += state.altitude_force[model.adjacency_altitude[a]]
+        if ti.static(model.face_count > 0):
+            f += elements.gather_elements(model, state, i)
     if ti.static(forces.has_wind):
         f += forces.wind.particle_wind_force[i]
     return f
@@ -238,8 +243,9 @@ def energies(cloth, positions: np.ndarray, velocities: np.ndarray, gravity,
 
     kinetic = sum 1/2 m |v|^2; gravity = -sum m g . x (Stuyck 4.3.1, zero at the origin);
     spring = sum 1/2 k (|x_i - x_j| - L)^2 (Stuyck eq. 4.4) over intact springs, plus
-    sum 1/2 k (h - h0)^2 over altitude springs; also per kind as spring_stretch, spring_shear,
-    spring_bend and spring_altitude; total = kinetic + gravity + spring.
+    sum 1/2 k (h - h0)^2 over altitude springs, plus a Fabric's membrane and bending energies
+    (body/elements.py); also per kind as spring_stretch, spring_shear, spring_bend,
+    spring_altitude, membrane and bending; total = kinetic + gravity + spring.
     """
     m = cloth.particle_mass
     kinetic = 0.5 * float(np.sum(m * np.sum(velocities * velocities, axis=1)))
@@ -251,9 +257,14 @@ def energies(cloth, positions: np.ndarray, velocities: np.ndarray, gravity,
         per_spring = per_spring * alive
     by_kind = np.bincount(cloth.spring_kind, weights=per_spring, minlength=len(SpringKind))
     altitude = altitude_energy(cloth, positions)
-    result = {"kinetic": kinetic, "gravity": potential, "spring": float(by_kind.sum()) + altitude}
+    membrane = host_elements.membrane_energy(cloth, positions)
+    bending = host_elements.bending_energy(cloth, positions)
+    result = {"kinetic": kinetic, "gravity": potential,
+              "spring": float(by_kind.sum()) + altitude + membrane + bending}
     result.update({f"spring_{k.name.lower()}": float(by_kind[k]) for k in SpringKind})
     result["spring_altitude"] = altitude
+    result["membrane"] = membrane
+    result["bending"] = bending
     result["total"] = kinetic + potential + result["spring"]
     return result
 

@@ -80,5 +80,6 @@ def torn_triangles(triangle_edge_spring: np.ndarray, torn: np.ndarray) -> np.nda
     torn: boolean mask over springs.
     """
     edge = triangle_edge_spring
-    hit = np.where(edge >= 0, torn[np.maximum(edge, 0)], False)
+    padded = np.append(np.asarray(torn, bool), False)      # edge -1 (no spring) reads False
+    hit = padded[np.where(edge >= 0, edge, len(padded) - 1)]
     return np.flatnonzero(hit.any(axis=1))

@@ -75,6 +75,8 @@ TABLE = (STIFFNESS, DAMPING, DENSITY, MASS, LENGTH, SCALE, COORDINATE, ACCELERAT
 BYTES_PER_PARTICLE = 250
 BYTES_PER_SPRING = 400
 ALTITUDE_SPRINGS = 4   # an altitude spring (four corners' forces, adjacency) costs about four
+FACE_SPRINGS = 3       # a Fabric's triangle (membrane, moments, three corners' forces): three
+HINGE_SPRINGS = 4      # and its hinge (angle, gradient, four corners' forces): four
                        # springs, in memory and in work
 MEMORY_SHARE = 0.75            # refuse a body needing more than this share of physical memory
 
@@ -154,3 +156,11 @@ def markdown() -> str:
     rows.append(f"| memory of one simulation | {BYTES_PER_PARTICLE} B per particle + "
                 f"{BYTES_PER_SPRING} B per spring, .. {MEMORY_SHARE:.0%} of physical memory | - |")
     return "\n".join(rows)
+
+
+def spring_equivalents(body) -> int:
+    """What a body (a Cloth or a Model) costs in springs, in memory and in a step's work:
+    its springs, ALTITUDE_SPRINGS per altitude spring, FACE_SPRINGS per Fabric triangle and
+    HINGE_SPRINGS per hinge."""
+    return (body.spring_count + ALTITUDE_SPRINGS * body.altitude_count
+            + FACE_SPRINGS * body.face_count + HINGE_SPRINGS * body.hinge_count)

@@ -38,7 +38,7 @@ tasks, and with exact IEEE arithmetic (backend.py) they give the same bits
 
 import taichi as ti
 
-from . import backend
+from . import backend, limits
 from .team import SOLO
 
 SERIAL_SPRING_LIMIT = 50_000   # serial launches faster at 24k springs, parallel ones at 97k
@@ -183,7 +183,7 @@ def _holds(owner: ti.template(), part: ti.template(), model: ti.template(), stat
 def serial_is_faster(model) -> bool:
     """Whether a step of this model runs faster as one serial launch (CPU, few springs)."""
     return (backend.config().arch == "cpu"
-            and model.spring_count + model.altitude_count <= SERIAL_SPRING_LIMIT)
+            and limits.spring_equivalents(model) <= SERIAL_SPRING_LIMIT)
 
 
 @backend.kernel

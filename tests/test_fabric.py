@@ -1,0 +1,325 @@
+"""Fabrics (body/fabric.py, body/elements.py, physics/elements.py) against closed forms: the
+elements' forces are their energy's gradient; a homogeneous stretch gives the plane-stress
+orthotropic law exactly (Poisson contraction, the strip's stiffness); a hanging strip
+stretches by the continuum's W L^2 / (2E); bending a sheet to a cylinder of radius R costs
+G A / (2 R^2) at every resolution and in every direction, on a jittered mesh too; a cantilever
+settles onto the heavy elastica, closer at every refinement; warp and weft bend with their own
+rigidities; a curved rest shape is kept; every explicit integrator settles to the same
+equilibrium; reruns give the same bits."""
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_bvp
+
+import ti_cloth as tc
+from ti_cloth.body import elements
+from ti_cloth.physics.forces import compute_forces, energies
+
+pytestmark = pytest.mark.usefixtures("f64")
+trapezoid = getattr(np, "trapezoid", None) or np.trapz     # numpy < 2 names it trapz
+
+EXPLICIT = ("explicit_euler", "symplectic_euler", "verlet", "rk4")
+
+
+def jittered(mesh: tc.Mesh, amount: float, seed: int = 1) -> tc.Mesh:
+    """`mesh` (a grid) with its interior vertices moved by up to +-amount/2 of the spacing in
+    its plane (the same triangles: an irregular mesh of the same sheet)."""
+    rows, cols = mesh.grid_shape
+    x = mesh.vertices.copy()
+    spacing = np.linalg.norm(x[1] - x[0])
+    r, c = np.divmod(np.arange(rows * cols), cols)
+    interior = (r > 0) & (r < rows - 1) & (c > 0) & (c < cols - 1)
+    axes = np.flatnonzero(np.ptp(x, axis=0) > 0)
+    shift = np.random.default_rng(seed).uniform(-0.5, 0.5, (int(interior.sum()), 2))
+    x[np.ix_(interior, axes)] += amount * spacing * shift
+    return tc.Mesh(x, mesh.triangles)
+
+
+def rolled(x: np.ndarray, radius: float, angle: float) -> np.ndarray:
+    """Points of the z = 0 plane rolled onto a cylinder of `radius` whose axis lies in the
+    plane at `angle` to the y axis: the sheet's length is kept (an isometry)."""
+    along = np.array([np.cos(angle), np.sin(angle), 0.0])
+    across = np.array([-np.sin(angle), np.cos(angle), 0.0])
+    s, t = x @ along, x @ across
+    return (radius * np.sin(s / radius)[:, None] * along + t[:, None] * across
+            + (radius * (1 - np.cos(s / radius)))[:, None] * np.array([0.0, 0.0, 1.0]))
+
+
+def test_element_forces_are_the_gradient_of_their_energy():
+    """The kernels' forces (membrane with Poisson and orthotropy, bending with a curved rest
+    shape) against central differences of the float64 energies: the difference is the
+    differences' own error, O(h^2) of the third derivatives."""
+    fabric = tc.Fabric(stretch=(100.0, 300.0), shear=20.0, bending=(1e-3, 2e-3), poisson=0.3,
+                       damping=0.0)
+    mesh = tc.grid_mesh(5, 6, (0.1, 0.12), plane="xz")
+    curved = mesh.vertices + np.outer(0.02 * np.sin(20 * mesh.vertices[:, 0]), [0, 1, 0])
+    cloth = tc.Cloth(tc.Mesh(curved, mesh.triangles), fabric)
+    sim = tc.Simulation(cloth, gravity=(0.0, 0.0, 0.0))
+    x = curved + 0.01 * np.random.default_rng(0).normal(size=curved.shape)
+    sim.set_positions(x)
+    compute_forces(sim.model, sim.state, sim.forces)
+    force = sim.state.particle_force.to_numpy()
+
+    def energy(y):
+        e = energies(cloth, y, np.zeros_like(y), (0.0, 0.0, 0.0))
+        return e["membrane"] + e["bending"]
+
+    h = 1e-6
+    gradient = np.zeros_like(x)
+    for i in range(len(x)):
+        for c in range(3):
+            step = np.zeros_like(x)
+            step[i, c] = h
+            gradient[i, c] = (energy(x + step) - energy(x - step)) / (2 * h)
+    assert np.abs(gradient).max() > 10.0
+    np.testing.assert_allclose(force, -gradient, atol=1e-6 * np.abs(gradient).max())
+
+
+def test_a_homogeneous_stretch_is_the_orthotropic_plane_stress_law():
+    """Stretch a sheet along the warp by Green strain E11 and let the weft take
+    E22 = -nu12 E11 (the plane-stress solution, S22 = 0): every interior particle feels no
+    force, the sides none across them, and the pulled edges the traction
+    T = stretch_warp E11 per width times the stretch ratio (the membrane pulls them back by
+    T: the traction that would hold the stretch), on a jittered mesh too (linear triangles
+    hold any homogeneous strain exactly)."""
+    fabric = tc.Fabric(stretch=(400.0, 100.0), shear=30.0, poisson=0.4, bending=0.0, damping=0.0)
+    mesh = jittered(tc.grid_mesh(7, 9, (0.4, 0.3), plane="xy"), 0.3)
+    cloth = tc.Cloth(mesh, fabric)
+    sim = tc.Simulation(cloth, gravity=(0.0, 0.0, 0.0))
+    e11 = 0.02
+    e22 = -fabric.poisson * e11
+    stretch = np.sqrt(1 + 2 * np.array([e11, e22]))
+    x = mesh.vertices * np.array([stretch[0], stretch[1], 1.0])
+    sim.set_positions(x)
+    compute_forces(sim.model, sim.state, sim.forces)
+    force = sim.state.particle_force.to_numpy()
+    rows, cols = 7, 9
+    c = np.arange(rows * cols) % cols
+    traction = fabric.stretch[0] * e11 * stretch[0]           # P11 = F11 S11, S11 = E1 E11
+    scale = traction * 0.3
+    left, right = c == 0, c == cols - 1
+    inside = ~left & ~right
+    np.testing.assert_allclose(force[inside], 0.0, atol=1e-10 * scale)
+    np.testing.assert_allclose(force[right, 0].sum(), -traction * 0.3, rtol=1e-10)
+    np.testing.assert_allclose(force[left, 0].sum(), traction * 0.3, rtol=1e-10)
+    np.testing.assert_allclose(force[:, 1], 0.0, atol=1e-10 * scale)   # the weft is free
+
+
+def settle(cloth, integrator="symplectic_euler", seconds=1.2, drag=20.0, gravity=(0, -9.81, 0)):
+    """The positions `cloth` comes to rest at, released from rest under gravity and drag:
+    checked settled (an RMS speed below 0.1 mm/s: its slowest mode, decaying at w^2 / drag,
+    has then at most microns left to go)."""
+    sim = tc.Simulation(cloth, integrator=integrator, dt="auto", drag=drag, gravity=gravity)
+    sim.step(int(np.ceil(seconds / sim.dt)))
+    assert sim.energy()["kinetic"] < 0.5 * cloth.particle_mass.sum() * 1e-4 ** 2, "settled"
+    return sim.positions()
+
+
+def test_a_hanging_strip_stretches_by_the_continuum_answer_at_every_resolution():
+    """A strip of length L hanging from its top edge stretches by W L^2 / (2 E) (W its weight
+    per area, E the stretch modulus) to first order; the elements' exact answer for the Green
+    strain law, E lambda (lambda^2 - 1) / 2 = W (L - s), is what a settled strip must give at
+    4, 8 and 16 segments. (Springs of one constant gave 0.95 mm at 16 segments and 3.33 mm at
+    48 for 6.13 mm.)"""
+    fabric = tc.Fabric(density=0.2, stretch=40.0, shear=10.0, bending=0.0, damping=1e-4)
+    length, width, w = 0.5, 0.02, 0.2 * 9.81
+    s = np.linspace(0.0, length, 20001)
+    tension = w * (length - s)
+    ratio = np.array([np.roots([0.5 * 40.0, 0.0, -0.5 * 40.0, -t]).real.max() for t in tension])
+    exact = trapezoid(ratio - 1.0, s)
+    assert abs(exact / (w * length ** 2 / (2 * 40.0)) - 1) < 0.05     # first order: W L^2/(2E)
+    for segments in (4, 8, 16):
+        mesh = tc.grid_mesh(segments + 1, 3, (width, length), plane="xy", origin=(0, -length, 0))
+        top = np.flatnonzero(mesh.vertices[:, 1] == 0.0)
+        cloth = tc.Cloth(mesh, fabric, pinned=top, hem=[])
+        x = settle(cloth, seconds=1.5, drag=60.0)
+        elongation = -x[:, 1].min() - length
+        print(segments, elongation, exact)
+        # a linear element's error in a linearly varying strain: ~ (h/L)^2 / 12 of it
+        assert abs(elongation - exact) < 0.02 * exact
+
+
+def elastica_tip(length, rigidity, weight):
+    """Tip (x, y) of the heavy elastica: a strip clamped level at s = 0, free at s = L,
+    G theta'' = -W (L - s) cos(theta), theta(0) = 0, theta'(L) = 0 (per width)."""
+    def slope(s, y):
+        return np.vstack([y[1], -weight / rigidity * (length - s) * np.cos(y[0])])
+
+    s = np.linspace(0.0, length, 200)
+    solution = solve_bvp(slope, lambda a, b: np.array([a[0], b[1]]), s, np.zeros((2, 200)),
+                         tol=1e-8, max_nodes=100_000)
+    assert solution.success
+    s = np.linspace(0.0, length, 20001)
+    theta = solution.sol(s)[0]
+    return trapezoid(np.cos(theta), s), -trapezoid(np.sin(theta), s)
+
+
+def cantilever(fabric, segments, mesh_of=lambda m: m, length=0.1, width=0.025, rows=5,
+               along="x"):
+    """A strip of `length` past its clamp (two pinned columns at x <= 0), free: its settled
+    tip (mean of its last column), in the strip's own (along, down) coordinates."""
+    h = length / segments
+    cols = segments + 2
+    size = (length + h, width) if along == "x" else (width, length + h)
+    grid = tc.grid_mesh(rows if along == "x" else cols, cols if along == "x" else rows, size,
+                        plane="xz", origin=(-h, 0, 0) if along == "x" else (0, 0, -h))
+    axis = 0 if along == "x" else 2
+    x = grid.vertices
+    clamped = np.flatnonzero(x[:, axis] <= 1e-12)
+    cloth = tc.Cloth(mesh_of(grid), fabric, pinned=clamped, warp=(1.0, 0.0, 0.0))
+    settled = settle(cloth)
+    tip = np.isclose(x[:, axis], length)
+    return settled[tip, axis].mean(), settled[tip, 1].mean()
+
+
+@pytest.mark.slow
+def test_a_cantilever_settles_onto_the_heavy_elastica_closer_at_every_refinement():
+    """Denim's warp-wise strip, 10 cm out: its tip against the heavy elastica (scipy's BVP
+    solver) at 8, 16 and 32 segments: the distance shrinks at each refinement (about as h:
+    the clamp's two pinned columns hold the strip's slope over a cell) and is within
+    2.5 mm at 32. (Bend springs moved away from it: 14.7, 26.0, 30.8 mm at 8, 16, 32.)"""
+    fabric = tc.Fabric.preset("denim")
+    exact = np.array(elastica_tip(0.1, fabric.bending[0], fabric.density * 9.81))
+    errors = []
+    for segments in (8, 16, 32):
+        errors.append(float(np.hypot(*(np.array(cantilever(fabric, segments)) - exact))))
+    print("elastica", exact, "errors [m]", errors)
+    assert errors[0] > errors[1] > errors[2]
+    assert errors[2] < 2.5e-3
+
+
+def test_bending_a_sheet_to_a_cylinder_costs_the_continuum_energy_in_every_direction():
+    """A flat sheet rolled onto a cylinder of radius R (an isometry: no membrane energy) has
+    bending energy G A / (2 R^2) (isotropic G). The mid-edge operator gives it within the
+    boundary's share (one row of triangles along the edges parallel to the axis carry no
+    curvature across the free edge: O(h)), in every direction, and within 6 % on a jittered
+    mesh; a hinge energy of the same constant (sum of G/2 theta^2 |e|^2 / (A1 + A2), exact on
+    equilateral meshes) is three times too stiff across a grid's diagonals."""
+    fabric = tc.Fabric(bending=2e-4, damping=0.0)
+    radius = 0.8
+    for n in (11, 21, 41):
+        grid = tc.grid_mesh(n, n, (1.0, 1.0))
+        for mesh, tolerance in ((grid, 1.2 / (n - 1)), (jittered(grid, 0.3), 1.2 / (n - 1) + 0.06)):
+            cloth = tc.Cloth(mesh, fabric)
+            expected = 2e-4 * cloth.face_area.sum() / (2 * radius ** 2)
+            for angle in (0.0, np.pi / 4, np.pi / 2, 0.3):
+                got = elements.bending_energy(cloth, rolled(mesh.vertices, radius, angle))
+                assert abs(got / expected - 1) < tolerance, (n, angle, got / expected)
+    theta = elements.hinge_angles(rolled(grid.vertices, radius, np.pi / 4), cloth.hinge_indices)
+    a, b, c, d = (grid.vertices[cloth.hinge_indices[:, k]] for k in range(4))
+    areas = 0.5 * (np.linalg.norm(np.cross(b - a, c - a), axis=1)
+                   + np.linalg.norm(np.cross(d - a, b - a), axis=1))
+    hinge = np.sum(0.5 * 2e-4 * theta ** 2 * np.sum((b - a) ** 2, 1) / areas)
+    assert hinge / expected > 2.5
+
+
+def test_a_strip_bent_to_an_arc_has_energy_g_l_w_over_2_r_squared():
+    """A 50 cm x 4 cm warp-wise strip bent to radius R along its length: G L w / (2 R^2) with
+    G the warp rigidity (the weft's does not enter), converging as h: the triangles along the
+    strip's two free ends carry no curvature across the end edges (no hinge there), so the
+    discrete strip bends like one a cell shorter, (L - h) / L of the energy (the
+    long sides, along the bend, lose nothing)."""
+    fabric = tc.Fabric(bending=(3e-4, 1e-5), damping=0.0)
+    length, width, radius = 0.5, 0.04, 0.3
+    expected = 3e-4 * length * width / (2 * radius ** 2)
+    for segments in (8, 16, 32, 64):
+        mesh = tc.grid_mesh(4, segments + 1, (length, width))
+        cloth = tc.Cloth(mesh, fabric)
+        got = elements.bending_energy(cloth, rolled(mesh.vertices, radius, 0.0))
+        np.testing.assert_allclose(got, expected * (1 - 1 / segments), rtol=0.1 / segments)
+
+
+def test_warp_and_weft_bend_with_their_own_rigidity():
+    """Two short cantilevers, one cut along the warp, one along the weft, of a fabric whose
+    warp is 8 times stiffer: in the small-deflection limit the tip drops W L^4 / (8 G), so the
+    drops are in the ratio G_warp / G_weft, and the bending lengths c = (G / W)^(1/3) in the
+    ratio 2. Tolerance: the small-deflection formula's own error (the tip slope, 0.03 rad)
+    and the mesh's O(h) at 16 segments."""
+    fabric = tc.Fabric(density=0.1, stretch=500.0, bending=(8e-4, 1e-4), damping=1e-5)
+    length, weight = 0.05, 0.1 * 9.81
+    drops = {}
+    for along in ("x", "z"):
+        _, down = cantilever(fabric, 16, length=length, width=0.02, rows=3, along=along)
+        drops[along] = -down
+    rigidity = {along: weight * length ** 4 / (8 * drops[along]) for along in drops}
+    print(drops, rigidity)
+    np.testing.assert_allclose(rigidity["x"], 8e-4, rtol=0.12)
+    np.testing.assert_allclose(rigidity["z"], 1e-4, rtol=0.12)
+    np.testing.assert_allclose(drops["z"] / drops["x"], 8.0, rtol=0.05)
+
+
+def test_a_curved_rest_shape_is_kept():
+    """A sheet whose rest shape is a quarter cylinder, clamped along one straight edge (its
+    first two columns) and released without gravity from a flattened start, springs back to
+    its curved rest shape (its hinges' rest angles); its rest shape is an equilibrium (zero
+    force). Without rest angles it would end flat."""
+    fabric = tc.Fabric(stretch=200.0, bending=1e-3, damping=1e-4)
+    flat = tc.grid_mesh(9, 9, (0.2, 0.2))
+    curved = rolled(flat.vertices, 0.2 / (np.pi / 2), 0.0)
+    left = np.flatnonzero(flat.vertices[:, 0] < 0.03)
+    cloth = tc.Cloth(tc.Mesh(curved, flat.triangles), fabric, pinned=left)
+    sim = tc.Simulation(cloth, dt="auto", drag=10.0, gravity=(0.0, 0.0, 0.0))
+    compute_forces(sim.model, sim.state, sim.forces)
+    assert np.abs(sim.state.particle_force.to_numpy()).max() < 1e-9
+    flattened = curved.copy()
+    flattened[:, 2] *= 0.2
+    flattened[left] = curved[left]                       # the clamp holds the rest slope
+    sim.set_positions(flattened)
+    sim.step(int(2.0 / sim.dt))
+    assert np.abs(sim.positions() - curved).max() < 1e-4 * 0.2
+
+
+def test_every_explicit_integrator_settles_to_the_same_equilibrium():
+    """The same cantilever settled by each integrator that runs fabrics: the same equilibrium
+    within the settling's tolerance; the others refuse a Fabric by name."""
+    fabric = tc.Fabric.preset("interlock")
+    tips = [cantilever_with(fabric, integrator) for integrator in EXPLICIT]
+    for tip in tips[1:]:
+        np.testing.assert_allclose(tip, tips[0], atol=1e-6)
+    cloth = tc.Cloth(tc.grid_mesh(3, 3, (0.1, 0.1)), fabric)
+    for name in ("pbd", "xpbd", "implicit_euler"):
+        with pytest.raises(ValueError, match=f"integrator must be one of .* Fabric .*'{name}'"):
+            tc.Simulation(cloth, integrator=name)
+    with pytest.raises(ValueError, match="tearing"):
+        tc.Simulation(cloth, tearing=0.3)
+
+
+def cantilever_with(fabric, integrator):
+    mesh = tc.grid_mesh(3, 10, (0.05, 0.01), plane="xz")
+    clamped = np.flatnonzero(np.arange(30) % 10 < 2)
+    return settle(tc.Cloth(mesh, fabric, pinned=clamped), integrator, seconds=1.0)[9]
+
+
+def test_reruns_give_the_same_bits():
+    """A fabric sheet swung by gravity from two corners, run twice from scratch."""
+    cloth = tc.Cloth(tc.grid_mesh(8, 8, (0.3, 0.3), plane="xz"), tc.Fabric.preset("denim"),
+                     pinned=[0, 7])
+    runs = []
+    for _ in range(2):
+        sim = tc.Simulation(cloth, dt="auto")
+        sim.step(300)
+        runs.append(sim.positions())
+    assert np.abs(runs[0] - cloth.particle_position).max() > 1e-3
+    np.testing.assert_array_equal(runs[0], runs[1])
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(stretch=-1.0), r"Fabric\.stretch must be a finite number in \[0\.001"),
+    (dict(stretch=(100.0, 0.0)), r"Fabric\.stretch\[1\] \(weft\)"),
+    (dict(bending=float("nan")), r"Fabric\.bending"),
+    (dict(stretch=(100.0, 400.0), poisson=0.6), r"Fabric\.poisson.*below sqrt"),
+    (dict(density=0.0), r"Fabric\.density"),
+    (dict(damping=2.0), r"Fabric\.damping"),
+])
+def test_a_bad_fabric_names_the_field_and_the_range(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        tc.Fabric(**kwargs)
+
+
+def test_presets_are_the_measured_fabrics():
+    """Denim's preset is Wang et al. 2011's 11 oz denim: 324 g/m^2, rigidity 64-97 uN m."""
+    denim = tc.Fabric.preset("denim")
+    assert denim.density == 0.324 and 6e-5 < denim.bending[0] < denim.bending[1] < 1e-4
+    assert tc.Fabric.preset("denim", bending=1e-4).bending == (1e-4, 1e-4)
+    with pytest.raises(ValueError, match="preset"):
+        tc.Fabric.preset("tweed")

@@ -1,0 +1,261 @@
+"""The elements a Fabric body is made of (numpy, on the host): membrane triangles and bending
+hinges, their rest data, and their energies in float64 (the kernels' twins are in
+physics/elements.py).
+
+Membrane: constant-strain triangles (linear FEM) with the plane-stress orthotropic
+Saint Venant-Kirchhoff law. Each triangle has a rest material frame (warp, weft) in its plane;
+F = sum_c x_c (x) grad(lambda_c) is the deformation gradient from that frame (3 x 2,
+lambda_c the barycentric coordinates, their gradients constant on the rest triangle), the
+Green strain is E = 1/2 (F^T F - I), and the energy A/2 e^T C e with e = (E11, E22, 2 E12)
+and C = Fabric.membrane (Bonet & Wood, "Nonlinear continuum mechanics for finite element
+analysis", 2008, eq. 6.11 and 7.13 with plane-stress orthotropy; Volino, Magnenat-Thalmann &
+Faure, "A simple approach to nonlinear tensile stiffness for accurate cloth simulation",
+ACM TOG 28(4), 2009, sec. 3).
+
+Bending: the mid-edge shape operator of Grinspun, Gingold, Reisman & Zorin, "Computing
+discrete shape operators on general meshes", Eurographics 2006 (eq. 4), in the tangent form of
+Weischedel, "A discrete geometric view on shear-deformable shell models" (2012) and
+Chen, Sastry, van Rees & Vouga, "Physical simulation of environmentally induced thin shell
+deformation", ACM TOG 37(4), 2018 (eq. 5, "MidedgeTan"). Across each interior edge e
+(a hinge: the edge a-b and the vertices c, d opposite it) the dihedral angle theta_e is
+measured between the two face normals; a triangle's curvature in its rest frame is
+
+    k = sum_i t_i K_i,   t_i = tan(theta_i / 2),   K_i = -2 |grad lambda_i| u_i u_i^T,
+
+over its three edges i (edge i is opposite corner i; u_i = grad(lambda_i) / |grad lambda_i|,
+the inward normal of edge i; a boundary edge has t_i = 0). The energy is
+A/2 (k - k_rest) : D : (k - k_rest) with D = Fabric.flexural, i.e. 1/2 dt^T B dt with
+dt_i = t_i - t_rest_i and B_ij = A <K_i, K_j>_D, a 3 x 3 positive semi-definite matrix per
+triangle. The rest angles come from the rest mesh, so a curved rest shape is kept. Unlike a
+bending spring, or an energy on each hinge alone (Bridson, Marino & Fedkiw 2003; Grinspun et
+al. 2003, "Discrete shells"), which on a regular grid is three times stiffer across the
+diagonals than along the axes, this operator bends a grid the same way in every direction
+(tests/test_fabric.py measures both).
+
+The dihedral angle: with (a, b) the edge as the first face winds it and c, d the opposite
+vertices, n1 = (b - a) x (c - a) / |.|, n2 = (d - a) x (b - a) / |.|, e = (b - a) / |b - a|:
+theta = atan2((n1 x n2) . e, n1 . n2). Its gradient (Bridson et al. 2003; Tamstorf &
+Grinspun, "Discrete bending forces and their Jacobians", Graphical Models 75, 2013, eq. 8):
+grad_c = -n1 / h1, grad_d = -n2 / h2 (h the heights of c and d over the edge's line),
+grad_a = -(1 - s1) grad_c - (1 - s2) grad_d, grad_b = -s1 grad_c - s2 grad_d, with s the
+parameter of c's (d's) foot along a -> b. A face whose winding runs against the first face's
+across the edge gets the hinge's t with the opposite sign (face_sign).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..runtime.validation import as_array, require
+from .mesh import Mesh
+
+# |theta / 2| past which t = tan(theta / 2) continues along its tangent line (a crease folded
+# flat, theta -> pi, would make t and its slope unbounded)
+HALF_ANGLE_LIMIT = 0.45 * np.pi
+
+
+def material_frames(positions: np.ndarray, triangles: np.ndarray, warp) -> tuple:
+    """(gradients (T, 3, 2), areas (T,)): each triangle's barycentric gradients in its rest
+    material frame, and its rest area [m^2]. The frame's first axis is `warp` (one (3,)
+    direction, or (T, 3) per triangle) projected into the triangle's plane; where it is
+    (nearly) normal to the triangle, the triangle's first edge."""
+    p = positions[triangles]
+    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    normal = np.cross(e1, e2)
+    area2 = np.linalg.norm(normal, axis=1)
+    n = normal / area2[:, None]
+    warp = np.broadcast_to(np.asarray(warp, np.float64), p[:, 0].shape)
+    u = warp - np.sum(warp * n, axis=1, keepdims=True) * n
+    length = np.linalg.norm(u, axis=1)
+    fallback = length < 1e-6 * np.linalg.norm(warp, axis=1)
+    u[fallback] = e1[fallback]
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    w = np.cross(n, u)
+    # rest edges in the frame, as the columns of Dm; grad lambda_1, lambda_2 are Dm^-1's rows
+    dm = np.stack([np.stack([np.sum(e1 * u, 1), np.sum(e2 * u, 1)], 1),
+                   np.stack([np.sum(e1 * w, 1), np.sum(e2 * w, 1)], 1)], 1)       # (T, 2, 2)
+    inverse = np.linalg.inv(dm)
+    gradients = np.stack([-inverse[:, 0] - inverse[:, 1], inverse[:, 0], inverse[:, 1]], 1)
+    return gradients, 0.5 * area2
+
+
+def deformation_gradients(positions: np.ndarray, triangles: np.ndarray,
+                          gradients: np.ndarray) -> np.ndarray:
+    """F (T, 3, 2) = sum_c x_c (x) grad lambda_c."""
+    return np.einsum("tci,tcj->tij", positions[triangles], gradients)
+
+
+def green_strains(positions, triangles, gradients) -> np.ndarray:
+    """(T, 3): (E11, E22, 2 E12) of E = 1/2 (F^T F - I), in the warp/weft frame."""
+    f = deformation_gradients(positions, triangles, gradients)
+    a, b = f[:, :, 0], f[:, :, 1]
+    return np.stack([0.5 * (np.sum(a * a, 1) - 1.0), 0.5 * (np.sum(b * b, 1) - 1.0),
+                     np.sum(a * b, 1)], 1)
+
+
+def membrane_energy(cloth, positions: np.ndarray) -> float:
+    """sum over triangles of A/2 e^T C e [J] (module doc)."""
+    if not cloth.face_count:
+        return 0.0
+    e = green_strains(positions, cloth.face_indices, cloth.face_gradient)
+    c11, c12, c22, c33 = cloth.face_moduli.T
+    density = 0.5 * (c11 * e[:, 0] ** 2 + 2 * c12 * e[:, 0] * e[:, 1] + c22 * e[:, 1] ** 2
+                     + c33 * e[:, 2] ** 2)
+    return float(np.sum(cloth.face_area * density))
+
+
+def hinges(triangles: np.ndarray) -> tuple:
+    """The interior edges of a triangle mesh as hinges (edges on exactly two triangles; a
+    boundary edge, or one on three or more triangles, has none).
+
+    Returns (indices (H, 4) [a, b, c, d]: the edge a -> b as its first triangle winds it, c
+    opposite in that triangle, d in the other; faces (H, 2): 3 f + i of the two triangles,
+    i the edge's local index (edge i is opposite corner i); face_hinge (T, 3): the hinge of
+    each triangle edge or -1; face_sign (T, 3): +1, or -1 where the triangle winds the edge
+    the same way as the hinge's first triangle (meshes not consistently oriented))."""
+    t = len(triangles)
+    local = np.arange(3)
+    start = triangles[:, (local + 1) % 3].ravel()
+    end = triangles[:, (local + 2) % 3].ravel()
+    key = np.stack([np.minimum(start, end), np.maximum(start, end)], 1)
+    order = np.lexsort((np.arange(3 * t), key[:, 1], key[:, 0]))
+    sorted_key = key[order]
+    boundary = np.concatenate([[True], np.any(sorted_key[1:] != sorted_key[:-1], axis=1), [True]])
+    group_start = np.flatnonzero(boundary[:-1])
+    group_size = np.diff(np.flatnonzero(boundary))
+    pair = group_start[group_size == 2]
+    first, second = order[pair], order[pair + 1]                  # codes 3 f + i, f in order
+    face_hinge = np.full(3 * t, -1, np.int64)
+    face_hinge[first] = face_hinge[second] = np.arange(len(pair))
+    face_sign = np.ones(3 * t, np.int64)
+    face_sign[second] = np.where(start[second] == start[first], -1, 1)
+    f1, i1 = np.divmod(first, 3)
+    f2, i2 = np.divmod(second, 3)
+    indices = np.stack([start[first], end[first], triangles[f1, i1], triangles[f2, i2]], 1)
+    return (indices.astype(np.int64), np.stack([first, second], 1).astype(np.int64),
+            face_hinge.reshape(t, 3), face_sign.reshape(t, 3))
+
+
+def hinge_angles(positions: np.ndarray, indices: np.ndarray, gradient: bool = False):
+    """Dihedral angles theta (H,) of hinges [a, b, c, d] at `positions` (module doc), and with
+    `gradient` their gradients (H, 4, 3) too."""
+    a, b, c, d = (positions[indices[:, k]] for k in range(4))
+    edge = b - a
+    length = np.linalg.norm(edge, axis=1)
+    m1, m2 = np.cross(edge, c - a), np.cross(d - a, edge)
+    area1, area2 = np.linalg.norm(m1, axis=1), np.linalg.norm(m2, axis=1)
+    n1, n2 = m1 / area1[:, None], m2 / area2[:, None]
+    theta = np.arctan2(np.sum(np.cross(n1, n2) * edge, 1) / length, np.sum(n1 * n2, 1))
+    if not gradient:
+        return theta
+    grad_c = -n1 * (length / area1)[:, None]           # h1 = area1 / length
+    grad_d = -n2 * (length / area2)[:, None]
+    s1 = (np.sum((c - a) * edge, 1) / length ** 2)[:, None]
+    s2 = (np.sum((d - a) * edge, 1) / length ** 2)[:, None]
+    grad = np.stack([-(1 - s1) * grad_c - (1 - s2) * grad_d, -s1 * grad_c - s2 * grad_d,
+                     grad_c, grad_d], 1)
+    return theta, grad
+
+
+def curvature_bases(gradients: np.ndarray) -> np.ndarray:
+    """K_i (T, 3, 2, 2) = -2 |grad lambda_i| u_i u_i^T (module doc)."""
+    length = np.linalg.norm(gradients, axis=2)
+    return -2.0 * np.einsum("tci,tcj->tcij", gradients, gradients) / length[:, :, None, None]
+
+
+def bending_matrices(gradients: np.ndarray, areas: np.ndarray, face_sign: np.ndarray,
+                     flexural: np.ndarray) -> np.ndarray:
+    """B (T, 3, 3) = A s_i s_j <K_i, K_j>_D, D = (D11, D22, D12) per triangle (T, 3)."""
+    k = curvature_bases(gradients)
+    d11, d22, d12 = flexural.T
+    inner = (d11[:, None, None] * k[:, :, None, 0, 0] * k[:, None, :, 0, 0]
+             + d22[:, None, None] * k[:, :, None, 1, 1] * k[:, None, :, 1, 1]
+             + 2 * d12[:, None, None] * k[:, :, None, 0, 1] * k[:, None, :, 0, 1])
+    sign = face_sign[:, :, None] * face_sign[:, None, :]
+    return areas[:, None, None] * sign * inner
+
+
+def tangents(theta: np.ndarray) -> np.ndarray:
+    """t = tan(theta / 2), continued along its tangent line past |theta / 2| =
+    HALF_ANGLE_LIMIT."""
+    half = 0.5 * np.asarray(theta, np.float64)
+    limit = HALF_ANGLE_LIMIT
+    beyond = np.sign(half) * (np.tan(limit) + (np.abs(half) - limit) / np.cos(limit) ** 2)
+    return np.where(np.abs(half) > limit, beyond, np.tan(half))
+
+
+def hinge_tangents(cloth, positions: np.ndarray) -> np.ndarray:
+    """dt_e = t(theta_e) - t(theta_rest_e) per hinge (H,) (tangents)."""
+    theta = hinge_angles(positions, cloth.hinge_indices)
+    return tangents(theta) - tangents(cloth.hinge_rest_angle)
+
+
+def face_tangents(cloth, values: np.ndarray) -> np.ndarray:
+    """A per-hinge quantity (H,) on each triangle's three edges (T, 3), 0 on boundary edges."""
+    padded = np.concatenate([values, [0.0]])
+    return padded[cloth.face_hinge]                    # face_hinge = -1 reads the 0 at the end
+
+
+def bending_energy(cloth, positions: np.ndarray) -> float:
+    """sum over triangles of 1/2 dt^T B dt [J] (module doc)."""
+    if not cloth.hinge_count:
+        return 0.0
+    dt = face_tangents(cloth, hinge_tangents(cloth, positions))
+    return float(0.5 * np.einsum("ti,tij,tj->", dt, cloth.face_bending, dt))
+
+
+def warp_directions(mesh: Mesh, warp) -> np.ndarray:
+    """The warp direction of Cloth(warp=...): given, or a grid's first axis (its columns), or
+    x."""
+    if warp is not None:
+        direction = as_array("warp", warp, np.float64, (3,))
+        require(np.linalg.norm(direction) > 0, "warp", direction.tolist(), "a non-zero direction")
+        return direction
+    if mesh.grid_shape is not None:
+        return mesh.vertices[1] - mesh.vertices[0]
+    return np.array([1.0, 0.0, 0.0])
+
+
+def rest_rank_one(cloth) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """The elements' stiffness linearised about rest as sums of rank-one terms g g^T, for the
+    stability analyses (modes.py): [(indices (R, k), stiffness vectors g (R, k, 3), damping
+    vectors (R, k, 3))], one group for the membranes (k = 3) and one for bending (k = 12: a
+    triangle's three hinges, four corners each; a particle may appear in several slots, whose
+    vectors add). At rest the stress and moments vanish, so the Gauss-Newton terms are the
+    exact Hessian: membrane A J^T C J = sum_m g_m g_m^T with g = sqrt(A) L^T J (C = L L^T, J the
+    Green strain's gradient); bending sum_ij B_ij G_i G_j^T = sum_m g_m g_m^T with
+    g_m = sqrt(lambda_m) sum_i V_im G_i (B = V diag(lambda) V^T, G_i = t'(theta) grad theta of
+    hinge i). Rayleigh damping is beta times the same: its vectors are sqrt(beta) g."""
+    if not cloth.face_count:
+        return []
+    x = cloth.particle_position
+    gradients, area = cloth.face_gradient, cloth.face_area
+    f = deformation_gradients(x, cloth.face_indices, gradients)       # (T, 3, 2) at rest
+    warp, weft = f[:, :, 0], f[:, :, 1]
+    gx, gy = gradients[:, :, 0:1], gradients[:, :, 1:2]               # (T, 3 corners, 1)
+    jacobian = np.stack([warp[:, None] * gx, weft[:, None] * gy,
+                         warp[:, None] * gy + weft[:, None] * gx], 1)  # (T, 3 strains, 3, 3)
+    c11, c12, c22, c33 = cloth.face_moduli.T
+    moduli = np.zeros((cloth.face_count, 3, 3))
+    moduli[:, 0, 0], moduli[:, 0, 1], moduli[:, 1, 0] = c11, c12, c12
+    moduli[:, 1, 1], moduli[:, 2, 2] = c22, c33
+    factor = np.linalg.cholesky(moduli)                                # C = L L^T
+    membrane = np.sqrt(area)[:, None, None, None] * np.einsum("tsm,tscx->tmcx", factor, jacobian)
+    beta = np.sqrt(cloth.face_damping)
+    groups = [(np.repeat(cloth.face_indices, 3, axis=0), membrane.reshape(-1, 3, 3),
+               np.repeat(beta, 3)[:, None, None] * membrane.reshape(-1, 3, 3))]
+    if cloth.hinge_count:
+        theta, grad = hinge_angles(x, cloth.hinge_indices, gradient=True)
+        half = 0.5 * theta
+        slope = np.where(np.abs(half) > HALF_ANGLE_LIMIT, 0.5 / np.cos(HALF_ANGLE_LIMIT) ** 2,
+                         0.5 / np.cos(half) ** 2)
+        hinge_vectors = np.concatenate([slope[:, None, None] * grad, np.zeros((1, 4, 3))])
+        hinge_corners = np.concatenate([cloth.hinge_indices, np.zeros((1, 4), np.int64)])
+        per_face = hinge_vectors[cloth.face_hinge]                      # (T, 3 hinges, 4, 3)
+        values, vectors = np.linalg.eigh(cloth.face_bending)
+        weights = vectors * np.sqrt(np.maximum(values, 0.0))[:, None, :]   # V sqrt(lambda)
+        bending = np.einsum("tim,tikx->tmikx", weights, per_face).reshape(-1, 3, 12, 3)
+        corners = np.repeat(hinge_corners[cloth.face_hinge].reshape(-1, 12), 3, axis=0)
+        bending = bending.reshape(-1, 12, 3)
+        groups.append((corners, bending, np.repeat(beta, 3)[:, None, None] * bending))
+    return groups

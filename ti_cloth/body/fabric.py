@@ -1,0 +1,131 @@
+"""Fabric: a cloth's material in the units a textile lab measures, independent of the mesh.
+
+Where a Material gives every spring its own constant (Stuyck ch. 4, which change meaning when
+the mesh is refined), a Fabric gives the sheet's moduli, and the elements of elements.py turn
+them into forces that converge as the mesh is refined:
+
+  density   surface density [kg/m^2]
+  stretch   2-D Young's modulus E h [N/m]: a strip under a tension T per metre of width
+            strains T / stretch. A number, or (warp, weft).
+  shear     in-plane shear modulus times thickness, G12 h [N/m].
+  bending   flexural rigidity [N m] (moment per width per curvature; ASTM D1388's
+            G = W c^3, W the weight per area [N/m^2] and c the bending length [m]).
+            A number, or (warp, weft).
+  poisson   nu_12: the weft's contraction per unit strain when stretched along the warp;
+            nu_21 = nu_12 E_weft / E_warp (plane-stress orthotropy). Needs
+            nu_12 nu_21 < 1 (a positive definite sheet).
+  damping   stiffness-proportional (Rayleigh) damping time beta [s]: the stress
+            C (strain + beta d(strain)/dt), the same for bending; rigid motions are not
+            damped, and beta is the same at every resolution.
+  hem_mass  extra mass [kg] on each hem particle, as in Material (Stuyck 4.2).
+
+The warp runs along a grid's columns (its first axis); for other meshes along the `warp`
+direction Cloth is given, projected into each triangle.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+from ..runtime import limits
+from ..runtime.validation import finite_number, in_range, require
+
+STRETCH = limits.Range(1e-3, 1e9, "N/m", "fabric stretch and shear moduli")
+BENDING = limits.Range(0.0, 1e2, "N m", "fabric flexural rigidity (0 allowed: no bending)")
+DAMPING_TIME = limits.Range(0.0, 1.0, "s", "fabric damping time beta")
+
+
+def _pair(name: str, value, allowed: limits.Range) -> tuple[float, float]:
+    """(warp, weft) from a number or a pair of numbers, each in `allowed`."""
+    if isinstance(value, (tuple, list)):
+        require(len(value) == 2, f"Fabric.{name}", value, "a number or a (warp, weft) pair")
+        return (in_range(f"Fabric.{name}[0] (warp)", value[0], allowed),
+                in_range(f"Fabric.{name}[1] (weft)", value[1], allowed))
+    number = in_range(f"Fabric.{name}", value, allowed)
+    return number, number
+
+
+@dataclass(frozen=True)
+class Fabric:
+    """A cloth's material in textile units (module doc). `stretch` and `bending` are kept as
+    (warp, weft) pairs."""
+
+    density: float = 0.2
+    stretch: tuple = (1e3, 1e3)
+    shear: float = 50.0
+    bending: tuple = (1e-5, 1e-5)
+    poisson: float = 0.0
+    damping: float = 1e-4
+    hem_mass: float = 0.0
+
+    def __post_init__(self):
+        set_ = object.__setattr__
+        set_(self, "density", in_range("Fabric.density", self.density, limits.DENSITY))
+        set_(self, "stretch", _pair("stretch", self.stretch, STRETCH))
+        set_(self, "shear", in_range("Fabric.shear", self.shear, STRETCH))
+        set_(self, "bending", _pair("bending", self.bending, BENDING))
+        poisson = finite_number("Fabric.poisson", self.poisson, 0.0)
+        warp, weft = self.stretch
+        require(poisson * poisson * weft / warp < 1.0, "Fabric.poisson", poisson,
+                f"below sqrt(stretch warp / weft) = {(warp / weft) ** 0.5:.4g} (nu_12 nu_21 < 1: "
+                "a sheet that resists every stretch)")
+        set_(self, "poisson", poisson)
+        set_(self, "damping", in_range("Fabric.damping", self.damping, DAMPING_TIME))
+        hem_mass = finite_number("Fabric.hem_mass", self.hem_mass, 0.0, unit="kg")
+        set_(self, "hem_mass", hem_mass and in_range("Fabric.hem_mass", hem_mass, limits.MASS))
+
+    @property
+    def membrane(self) -> tuple[float, float, float, float]:
+        """(C11, C12, C22, C33) [N/m] of the plane-stress orthotropic law
+        S = C (G11, G22, 2 G12) on the Green strain, warp = 1, weft = 2:
+        C11 = E1 / (1 - nu12 nu21), C22 = E2 / (1 - nu12 nu21), C12 = nu12 C22, C33 = shear."""
+        warp, weft = self.stretch
+        nu12 = self.poisson
+        nu21 = nu12 * weft / warp
+        scale = 1.0 / (1.0 - nu12 * nu21)
+        return warp * scale, nu12 * weft * scale, weft * scale, self.shear
+
+    @property
+    def flexural(self) -> tuple[float, float, float]:
+        """(D11, D22, D12) [N m] of the bending energy 1/2 (D11 k11^2 + D22 k22^2 + 2 D12 k12^2)
+        per area, k the change of curvature in the warp/weft frame: D11, D22 the warp and weft
+        rigidities, D12 = sqrt(D11 D22) for the twist (an isotropic sheet of Poisson ratio 0
+        when they are equal: 1/2 D |k|^2)."""
+        warp, weft = self.bending
+        return warp, weft, (warp * weft) ** 0.5
+
+    @classmethod
+    def preset(cls, name: str, **overrides) -> "Fabric":
+        """A measured fabric (PRESETS); keyword arguments replace single fields."""
+        require(name in PRESETS, "preset", name, f"one of {sorted(PRESETS)}")
+        known = {f.name for f in fields(cls)}
+        for key in overrides:
+            require(key in known, "Fabric field", key, f"one of {sorted(known)}")
+        return cls(**{**PRESETS[name], **overrides})
+
+
+# Measured fabrics. Source: H. Wang, J. F. O'Brien, R. Ramamoorthi, "Data-driven elastic models
+# for cloth: modeling and measurement", ACM Trans. Graph. 30(4), 2011 (SIGGRAPH), as the
+# database is distributed with ArcSim (materials/<name>.json). From each sample: its density
+# [kg/m^2]; stretch = (c11, c22) of the lowest-strain row of its piecewise-linear stretching
+# table [N/m]; shear = that row's c33 [N/m]; poisson = c12 / c22 of that row (0 where the fit
+# gave c12 < 0); bending = the lowest-curvature samples of its 0 and 90 degree rows [N m]
+# (warp = the sample's first axis). The tables are piecewise linear: these are the
+# small-strain, small-curvature moduli, which is what a drape and a cantilever test probe.
+PRESETS: dict[str, dict] = {
+    # "11oz-black-denim": a cotton twill, 324 g/m^2
+    "denim": dict(density=0.324, stretch=(205.35, 1013.89), shear=53.39, poisson=0.0101,
+                  bending=(64.20e-6, 96.95e-6)),
+    # "gray-interlock": an interlock knit, 187 g/m^2
+    "interlock": dict(density=0.187, stretch=(16.59, 34.48), shear=36.86, poisson=0.0,
+                      bending=(23.19e-6, 14.27e-6)),
+    # "tango-red-jet-set": a light knit, 113 g/m^2
+    "jet_set": dict(density=0.113, stretch=(43.07, 171.42), shear=14.31, poisson=0.317,
+                    bending=(14.29e-6, 20.35e-6)),
+    # "white-dots-on-blk": a light woven, 128 g/m^2
+    "dots": dict(density=0.128, stretch=(2002.09, 2027.49), shear=19.19, poisson=0.00017,
+                 bending=(51.71e-6, 31.28e-6)),
+    # "royal-target": a woven suiting, 220 g/m^2
+    "royal_target": dict(density=0.220, stretch=(2016.55, 2034.98), shear=104.76,
+                         poisson=0.0045, bending=(125.41e-6, 125.41e-6)),
+}

@@ -1,0 +1,173 @@
+"""A Fabric's elements as Taichi functions: membrane triangles and the mid-edge bending
+operator (the model, its equations and sources: body/elements.py, whose float64 energies these
+forces are the negative gradients of).
+
+As for springs (forces.py), each element's forces are computed once per evaluation into a
+force per corner, which every particle gathers in a fixed order (Model adjacency): no float
+atomics, the same bits in every plan. Bending takes three loops: every hinge's angle (its
+tangent t = tan(theta / 2), rate and gradient), every triangle's moments dE/dt_i, and every
+hinge's corner forces -(M_1 + M_2) grad t from the moments of its two triangles.
+"""
+
+import taichi as ti
+
+from ..body.elements import HALF_ANGLE_LIMIT
+from ..runtime.plan import Loop, Phase
+
+
+@ti.func
+def membrane_forces(model: ti.template(), state: ti.template(), forces: ti.template(),
+                    work: ti.template(), stages: ti.template(), f, now: ti.template()):
+    """face_force[3 f + c] = force of triangle f's membrane on its corner c:
+    -A (F S) grad lambda_c, S = C (e + beta de/dt) with e = (E11, E22, 2 E12) the Green strain
+    in the warp/weft frame (body/elements.py; Bonet & Wood eq. 6.11, 7.13) and beta the
+    Rayleigh damping time."""
+    corner = model.face_indices[f]
+    g = model.face_gradient[f]                 # (grad lambda_1, grad lambda_2), x y each
+    x0 = state.particle_position[corner[0]]
+    d1 = state.particle_position[corner[1]] - x0
+    d2 = state.particle_position[corner[2]] - x0
+    v0 = state.particle_velocity[corner[0]]
+    u1 = state.particle_velocity[corner[1]] - v0
+    u2 = state.particle_velocity[corner[2]] - v0
+    warp = d1 * g[0] + d2 * g[2]               # the columns of F
+    weft = d1 * g[1] + d2 * g[3]
+    warp_rate = u1 * g[0] + u2 * g[2]
+    weft_rate = u1 * g[1] + u2 * g[3]
+    beta = model.face_damping[f]
+    e11 = 0.5 * (warp.dot(warp) - 1.0) + beta * warp.dot(warp_rate)
+    e22 = 0.5 * (weft.dot(weft) - 1.0) + beta * weft.dot(weft_rate)
+    shear = warp.dot(weft) + beta * (warp.dot(weft_rate) + weft.dot(warp_rate))
+    c = model.face_moduli[f]
+    s11 = c[0] * e11 + c[1] * e22
+    s22 = c[1] * e11 + c[2] * e22
+    s12 = c[3] * shear
+    area = model.face_area[f]
+    along_warp = area * (s11 * warp + s12 * weft)      # A (F S), by column
+    along_weft = area * (s12 * warp + s22 * weft)
+    f1 = -(along_warp * g[0] + along_weft * g[1])
+    f2 = -(along_warp * g[2] + along_weft * g[3])
+    state.face_force[3 * f] = -(f1 + f2)
+    state.face_force[3 * f + 1] = f1
+    state.face_force[3 * f + 2] = f2
+
+
+@ti.func
+def _tangent(theta):
+    """(t, dt/dtheta) of t = tan(theta / 2), continued along its tangent line past
+    HALF_ANGLE_LIMIT."""
+    half = 0.5 * theta
+    limit = ti.static(HALF_ANGLE_LIMIT)
+    t = ti.tan(half)
+    slope = 0.5 / (ti.cos(half) ** 2)
+    if ti.abs(half) > limit:
+        edge_slope = 0.5 / (ti.cos(limit) ** 2)
+        sign = 1.0 if half > 0 else -1.0
+        t = sign * (ti.tan(limit) + 2.0 * edge_slope * (ti.abs(half) - limit))
+        slope = edge_slope
+    return t, slope
+
+
+@ti.func
+def hinge_angles(model: ti.template(), state: ti.template(), forces: ti.template(),
+                 work: ti.template(), stages: ti.template(), e, now: ti.template()):
+    """Hinge e [a, b, c, d]: hinge_tangent = t - t_rest, hinge_rate = dt/dt, and the gradient
+    of t on each corner into hinge_force[4 e + k] (hinge_forces scales it). The dihedral angle
+    and its gradient: body/elements.py (Tamstorf & Grinspun 2013, eq. 8). A hinge with an
+    edge or face of zero length or area has no angle: all zero."""
+    corner = model.hinge_indices[e]
+    xa = state.particle_position[corner[0]]
+    edge = state.particle_position[corner[1]] - xa
+    to_c = state.particle_position[corner[2]] - xa
+    to_d = state.particle_position[corner[3]] - xa
+    m1 = edge.cross(to_c)
+    m2 = to_d.cross(edge)
+    length2 = edge.dot(edge)
+    area1 = m1.norm()
+    area2 = m2.norm()
+    zero = ti.Vector([0.0, 0.0, 0.0])
+    grad_a, grad_b, grad_c, grad_d = zero, zero, zero, zero
+    strain, rate = 0.0, 0.0
+    if length2 > 0 and area1 > 0 and area2 > 0:
+        length = ti.sqrt(length2)
+        n1 = m1 / area1
+        n2 = m2 / area2
+        theta = ti.atan2(n1.cross(n2).dot(edge) / length, n1.dot(n2))
+        t, slope = _tangent(theta)
+        grad_c = -(slope * length / area1) * n1
+        grad_d = -(slope * length / area2) * n2
+        s1 = to_c.dot(edge) / length2
+        s2 = to_d.dot(edge) / length2
+        grad_a = -(1.0 - s1) * grad_c - (1.0 - s2) * grad_d
+        grad_b = -s1 * grad_c - s2 * grad_d
+        strain = t - model.hinge_rest_tangent[e]
+        rate = (grad_a.dot(state.particle_velocity[corner[0]])
+                + grad_b.dot(state.particle_velocity[corner[1]])
+                + grad_c.dot(state.particle_velocity[corner[2]])
+                + grad_d.dot(state.particle_velocity[corner[3]]))
+    state.hinge_tangent[e] = strain
+    state.hinge_rate[e] = rate
+    state.hinge_force[4 * e] = grad_a
+    state.hinge_force[4 * e + 1] = grad_b
+    state.hinge_force[4 * e + 2] = grad_c
+    state.hinge_force[4 * e + 3] = grad_d
+
+
+@ti.func
+def face_moments(model: ti.template(), state: ti.template(), forces: ti.template(),
+                 work: ti.template(), stages: ti.template(), f, now: ti.template()):
+    """face_moment[3 f + i] = dE_f/dt_i = sum_j B_ij (dt_j + beta rate_j), the moment of
+    triangle f's bending energy 1/2 dt^T B dt on the hinge across its edge i (0 across a
+    boundary edge, which has no hinge)."""
+    hinge = model.face_hinge[f]
+    beta = model.face_damping[f]
+    q = ti.Vector([0.0, 0.0, 0.0])
+    for i in ti.static(range(3)):
+        if hinge[i] >= 0:
+            q[i] = state.hinge_tangent[hinge[i]] + beta * state.hinge_rate[hinge[i]]
+    b = model.face_bending[f]                  # symmetric: 00, 11, 22, 01, 02, 12
+    state.face_moment[3 * f] = b[0] * q[0] + b[3] * q[1] + b[4] * q[2]
+    state.face_moment[3 * f + 1] = b[3] * q[0] + b[1] * q[1] + b[5] * q[2]
+    state.face_moment[3 * f + 2] = b[4] * q[0] + b[5] * q[1] + b[2] * q[2]
+
+
+@ti.func
+def hinge_forces(model: ti.template(), state: ti.template(), forces: ti.template(),
+                 work: ti.template(), stages: ti.template(), e, now: ti.template()):
+    """hinge_force[4 e + k] = -(M_1 + M_2) grad_k t: the bending force of hinge e on its
+    corner k, M the moments of its two triangles (face_moments)."""
+    faces = model.hinge_faces[e]
+    moment = state.face_moment[faces[0]] + state.face_moment[faces[1]]
+    for k in ti.static(range(4)):
+        state.hinge_force[4 * e + k] = -moment * state.hinge_force[4 * e + k]
+
+
+@ti.func
+def gather_elements(model: ti.template(), state: ti.template(), i):
+    """The force of particle i's triangles and hinges, in the Model's fixed order."""
+    f = ti.Vector([0.0, 0.0, 0.0])
+    if ti.static(model.face_count > 0):
+        for a in range(model.particle_face_start[i], model.particle_face_start[i + 1]):
+            f += state.face_force[model.adjacency_face[a]]
+    if ti.static(model.hinge_count > 0):
+        for a in range(model.particle_hinge_start[i], model.particle_hinge_start[i + 1]):
+            f += state.hinge_force[model.adjacency_hinge[a]]
+    return f
+
+
+def element_loops(model) -> tuple:
+    """The loops of the first force phase: every membrane triangle and every hinge's angle."""
+    loops = ()
+    if model.face_count:
+        loops += (Loop(model.face_count, membrane_forces),)
+    if model.hinge_count:
+        loops += (Loop(model.hinge_count, hinge_angles),)
+    return loops
+
+
+def bending_phases(model) -> tuple:
+    """The phases after the first: the triangles' moments, then the hinges' forces."""
+    if not model.hinge_count:
+        return ()
+    return (Phase(Loop(model.face_count, face_moments)),
+            Phase(Loop(model.hinge_count, hinge_forces)))
