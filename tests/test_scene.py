@@ -100,6 +100,32 @@ def test_auto_substeps_keep_dt_under_half_the_stable_step(tmp_path):
     assert dt <= 0.5 * stable and scene.frame_dt / (n - 1) > min(0.5 * stable, 1 / 240)
 
 
+def test_a_fabric_scene_builds_the_api_fabric(tmp_path, f64):
+    """fabric = "denim", and a [bodies.fabric] table of a preset and fields (pairs for warp and
+    weft), give the API's Fabric bodies; a scene may not give both material and fabric."""
+    named = GRID.replace('material = { preset = "cotton", hem_mass = 0.001, stretch = { k = 900.0, kd = 0.2 } }',
+                         'fabric = "denim"')
+    assert load_scene(write(tmp_path, named)).cloth.material == tc.Fabric.preset("denim")
+    table = named.replace('fabric = "denim"', '[bodies.fabric]\npreset = "interlock"\n'
+                          'stretch = [300.0, 100.0]\nbending = 2e-5\nwarp = [0, 1, 0]')
+    with pytest.raises(SceneError, match=r"bodies\[0\]\.fabric\.warp is not a known key"):
+        load_scene(write(tmp_path, table))
+    table = table.replace("\nwarp = [0, 1, 0]", "").replace('fabric = "denim"', "")
+    table = table.replace('plane = "xy"', 'plane = "xy"\nwarp = [0, 1, 0]')
+    scene = load_scene(write(tmp_path, table))
+    expected = tc.Fabric.preset("interlock", stretch=(300.0, 100.0), bending=2e-5)
+    assert scene.cloth.material == expected
+    api = tc.Cloth(tc.grid_mesh(6, 5, size=(0.5, 0.4)), expected, pinned=[25, 29, 3],
+                   warp=(0, 1, 0))
+    np.testing.assert_array_equal(scene.cloth.face_gradient, api.face_gradient)
+    both = named.replace('fabric = "denim"', 'fabric = "denim"\nmaterial = "cotton"')
+    with pytest.raises(SceneError, match=r"bodies\[0\]\.fabric must be absent when `material`"):
+        load_scene(write(tmp_path, both))
+    bad = named.replace('fabric = "denim"', 'fabric = { preset = "denim", poisson = 40.0 }')
+    with pytest.raises(SceneError, match=r"Fabric\.poisson must be below"):
+        load_scene(write(tmp_path, bad))
+
+
 @pytest.mark.parametrize("change, message", [
     (("[forces]", "[forces]\ngravty = [0, -9.81, 0]"), r"forces\.gravty is not a known key .*allowed here: .*gravity"),
     (("rows = 6", "rows = 6\nrowz = 4"), r"bodies\[0\]\.rowz is not a known key"),

@@ -171,7 +171,8 @@ def test_a_team_shares_big_launches_and_one_worker_takes_small_ones(threads):
         assert many.workers_for(sim.integrator, model, small + 1) == many.workers
         assert many.steps_per_launch(sim.integrator, model) == stepping.MAX_STEPS_PER_LAUNCH
     assert work == 7 * cloth.spring_count          # iterations + prediction and velocities
-    big = SimpleNamespace(spring_count=stepping.SPRING_STEPS_PER_LAUNCH // 10, altitude_count=0)
+    big = SimpleNamespace(spring_count=stepping.SPRING_STEPS_PER_LAUNCH // 10, altitude_count=0,
+                          face_count=0, hinge_count=0)
     assert many.steps_per_launch(tc.SymplecticEuler(), big) == 10
     moving = tc.Simulation(cloth, dt=1e-4, colliders=contact_scene(True)).many_steps
     assert moving.steps_per_launch(tc.SymplecticEuler(), model) == limits.SCHEDULED_STEPS
