@@ -307,22 +307,23 @@ class Cloth:
 
     def _build_elements(self, fabric: Fabric | None, warp) -> None:
         """The face_* and hinge_* arrays (class doc): a Fabric's triangles and hinges, or none."""
-        triangles = self.mesh.triangles if fabric is not None else np.zeros((0, 3), np.int64)
-        count = len(triangles)
-        self.face_indices = triangles
-        x = self.particle_position
-        if count:
-            self.face_gradient, self.face_area = elements.material_frames(
-                x, triangles, elements.warp_directions(self.mesh, warp))
+        if fabric is not None:
+            triangles = self.mesh.triangles
+            moduli, flexural, damping = fabric.membrane, fabric.flexural, fabric.damping
         else:
-            self.face_gradient, self.face_area = np.zeros((0, 3, 2)), np.zeros(0)
-        self.face_moduli = np.tile(fabric.membrane if count else np.zeros(4), (count, 1))
-        self.face_damping = np.full(count, fabric.damping if count else 0.0)
+            triangles = np.zeros((0, 3), np.int64)
+            moduli, flexural, damping = (0.0,) * 4, (0.0,) * 3, 0.0
+        count = len(triangles)
+        x = self.particle_position
+        self.face_indices = triangles
+        self.face_gradient, self.face_area = elements.material_frames(
+            x, triangles, elements.warp_directions(self.mesh, warp))
+        self.face_moduli = np.tile(moduli, (count, 1))
+        self.face_damping = np.full(count, damping)
         (self.hinge_indices, self.hinge_faces, self.face_hinge,
          face_sign) = elements.hinges(triangles)
-        self.face_bending = elements.bending_matrices(
-            self.face_gradient, self.face_area, face_sign,
-            np.tile(fabric.flexural if count else np.zeros(3), (count, 1)))
+        self.face_bending = elements.bending_matrices(self.face_gradient, self.face_area,
+                                                      face_sign, np.tile(flexural, (count, 1)))
         self.hinge_rest_angle = elements.hinge_angles(x, self.hinge_indices)
 
     ELEMENT_ARRAYS = ("face_indices", "face_gradient", "face_area", "face_moduli", "face_damping",

@@ -144,11 +144,11 @@ def hinge_forces(model: ti.template(), state: ti.template(), forces: ti.template
 
 @ti.func
 def gather_elements(model: ti.template(), state: ti.template(), i):
-    """The force of particle i's triangles and hinges, in the Model's fixed order."""
+    """The force of particle i's triangles and hinges, in the Model's fixed order (a body
+    with triangles: gather_force calls it only then)."""
     f = ti.Vector([0.0, 0.0, 0.0])
-    if ti.static(model.face_count > 0):
-        for a in range(model.particle_face_start[i], model.particle_face_start[i + 1]):
-            f += state.face_force[model.adjacency_face[a]]
+    for a in range(model.particle_face_start[i], model.particle_face_start[i + 1]):
+        f += state.face_force[model.adjacency_face[a]]
     if ti.static(model.hinge_count > 0):
         for a in range(model.particle_hinge_start[i], model.particle_hinge_start[i + 1]):
             f += state.hinge_force[model.adjacency_hinge[a]]

@@ -192,7 +192,7 @@ def gather_force(model: ti.template(), state: ti.template(), forces: ti.template
         if ti.static(model.altitude_count > 0):
             for a in range(model.particle_altitude_start[i], model.particle_altitude_start[i + 1]):
                 f += state.altitude_force[model.adjacency_altitude[a]]
-        if ti.static(model.face_count > 0):
+        if ti.static(model.face_count > 0):      # compiled only for a body with triangles
             f += elements.gather_elements(model, state, i)
     if ti.static(forces.has_wind):
         f += forces.wind.particle_wind_force[i]
