@@ -7,7 +7,8 @@ One Newton step of backward Euler: with K = df/dx and D = df/dv at (x_n, v_n),
 Per spring (Stuyck eq. 4.5), with n the unit direction and l the current length,
 df_i/dx_i = -k (n n^T + c (I - n n^T)), c = 1 - L / l. Under compression c < 0 makes K
 indefinite; c is clamped at 0 (Choi & Ko 2002) so the system matrix stays symmetric positive
-definite and CG applies. Damping: axial df_i/dv_i = -kd n n^T, relative (eq. 4.7) -kd I, drag
+definite and CG applies. A Fabric's triangles and hinges enter K and D through their
+Gauss-Newton Hessians, projected likewise (implicit_elements.py). Damping: axial df_i/dv_i = -kd n n^T, relative (eq. 4.7) -kd I, drag
 -drag m I. An altitude spring (Selle et al. 2008; forces.altitude_gradient) contributes
 -k G G^T to K and -kd G G^T to D, G = g (x) n its altitude's gradient: its curvature term
 -k (h - h0) d^2h/dx^2 is dropped, as c's compressed part is, keeping A positive definite. Wind is treated explicitly (it enters f_n only). Pins: dv is filtered to zero on
@@ -25,14 +26,14 @@ import math
 
 import taichi as ti
 
-from ..physics import wind
+from ..physics import elements, wind
 from ..physics.forces import altitude_gradient, gather_force, spring_loops
 from ..runtime import backend, limits
 from ..runtime.plan import Loop, Once, Phase, Until
 from ..runtime.team import MAX_WORKERS
 from ..runtime.validation import count, finite_number, require
 from ..state import store_particle
-from . import fused
+from . import fused, implicit_elements
 from .base import Integrator
 
 BLOCK = 64                      # particles per partial sum of a dot product
@@ -45,7 +46,8 @@ ROW = 16                        # slots per row (a worker's row fills its own ca
 class _Workspace:
     """CG vectors, per-spring linearisation and the partial sums of one State's solve."""
 
-    def __init__(self, particle_count: int, spring_count: int, altitude_count: int):
+    def __init__(self, particle_count: int, spring_count: int, altitude_count: int,
+                 face_count: int, hinge_count: int):
         real = backend.real()
         n = particle_count
         self.block_count = math.ceil(n / BLOCK)
@@ -70,6 +72,7 @@ class _Workspace:
         # of ROW slots per worker
         self.scalar = fields.scalar(real, MAX_WORKERS * ROW)
         self.iterations = fields.scalar(ti.i32, MAX_WORKERS * ROW)
+        implicit_elements.add_fields(self, fields, face_count, hinge_count)
         fields.finalize(self)
 
 
@@ -234,6 +237,9 @@ def _start_block(model: ti.template(), state: ti.template(), forces: ti.template
                 kv += model.altitude_stiffness[e] * g * ws.altitude_projection[e] * n
                 diagonal += ((dt * dt * model.altitude_stiffness[e]
                               + dt * model.altitude_damping[e]) * g * g * n * n)
+        if ti.static(model.face_count > 0):
+            kv += implicit_elements.stiffness_times(model, ws, i)
+            diagonal += implicit_elements.diagonal(model, ws, i)
         b = free * dt * (state.particle_force[i] - dt * kv)
         if free == 0:
             diagonal = ti.Vector([1.0, 1.0, 1.0])   # a pin's row is the identity (b = 0 there)
@@ -263,6 +269,8 @@ def _apply_block(model: ti.template(), state: ti.template(), forces: ti.template
         for a in range(model.particle_spring_start[i], model.particle_spring_start[i + 1]):
             ap += _block_times(ws.adjacency_block[a], pi - ws.p[model.adjacency_other[a]])
         ap += _altitudes_times(model, ws, i, dt)
+        if ti.static(model.face_count > 0):
+            ap += implicit_elements.stiffness_times(model, ws, i)
         ap *= free
         ws.ap[i] = ap
         pap += pi.dot(ap)
@@ -349,7 +357,6 @@ class ImplicitEuler(Integrator):
     """
 
     name = "implicit_euler"
-    runs_fabric = False   # a Fabric's elements need constraints (and Hessians): not yet
     order = 1
     step_limited = False
 
@@ -369,7 +376,8 @@ class ImplicitEuler(Integrator):
 
     def workspace(self, model, state):
         return self.buffers(state, lambda: _Workspace(model.particle_count, model.spring_count,
-                                                      model.altitude_count))
+                                                      model.altitude_count, model.face_count,
+                                                      model.hinge_count))
 
     def step_work(self, model):
         return (2 + 2 * TYPICAL_ITERATIONS) * fused.spring_work(model)
@@ -389,8 +397,10 @@ class ImplicitEuler(Integrator):
                 and ws.iterations[row * ROW] < self.max_iterations)
 
     def linearisation(self, model, forces, ws):
-        """f_n, the linearisation at x_n and the CG start (r = b, p = z = r / diagonal)."""
-        linear = spring_loops(model)
+        """f_n, the linearisation at x_n and the CG start (r = b, p = z = r / diagonal); a
+        Fabric's hinges are linearised between its bending phases (implicit_elements)."""
+        linear = (spring_loops(model) + elements.element_loops(model)
+                  + implicit_elements.linear_loops(model))
         if model.spring_count:
             linear += (Loop(model.spring_count, linearise_spring),)
         if model.altitude_count:
@@ -401,15 +411,17 @@ class ImplicitEuler(Integrator):
             begin = (Phase(gather, Loop(model.altitude_count, _project_velocity)), Phase(start))
         else:
             begin = (Phase(gather, start),)
-        return (wind.phases(model, forces) + ((Phase(*linear),) if linear else ()) + begin
-                + (Once(_begin_solve),))
+        bending = elements.bending_phases(model, *implicit_elements.bending_loops(model))
+        return (wind.phases(model, forces) + ((Phase(*linear),) if linear else ()) + bending
+                + begin + (Once(_begin_solve),))
 
     def system_product(self, model, forces, ws):
         """ap = A p and its partial sums of p . ap."""
         project = ()
         if model.altitude_count:
-            project = (Phase(Loop(model.altitude_count, _project_direction)),)
-        return project + (Phase(Loop(ws.block_count, _apply_block)),)
+            project = (Loop(model.altitude_count, _project_direction),)
+        return (implicit_elements.product_phases(model, project)
+                + (Phase(Loop(ws.block_count, _apply_block)),))
 
     def phases(self, model, forces, ws):
         """The linearisation, preconditioned CG until converged (three synchronisation points

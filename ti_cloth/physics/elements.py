@@ -16,24 +16,39 @@ from ..runtime.plan import Loop, Phase
 
 
 @ti.func
+def face_columns(model: ti.template(), vectors: ti.template(), f):
+    """The columns (warp, weft) of sum_c vectors[corner c] (x) grad lambda_c over triangle f's
+    corners: the deformation gradient F when `vectors` are positions, its rate or its
+    variation along a direction for velocities or directions."""
+    corner = model.face_indices[f]
+    g = model.face_gradient[f]                 # (grad lambda_1, grad lambda_2), x y each
+    x0 = vectors[corner[0]]
+    d1 = vectors[corner[1]] - x0
+    d2 = vectors[corner[2]] - x0
+    return d1 * g[0] + d2 * g[2], d1 * g[1] + d2 * g[3]
+
+
+@ti.func
+def store_corners(model: ti.template(), target: ti.template(), f, along_warp, along_weft):
+    """target[3 f + c] = P grad lambda_c for triangle f's corners c, P the 3 x 2 matrix of
+    columns (along_warp, along_weft) (grad lambda_0 = -grad lambda_1 - grad lambda_2)."""
+    g = model.face_gradient[f]
+    first = along_warp * g[0] + along_weft * g[1]
+    second = along_warp * g[2] + along_weft * g[3]
+    target[3 * f] = -(first + second)
+    target[3 * f + 1] = first
+    target[3 * f + 2] = second
+
+
+@ti.func
 def membrane_forces(model: ti.template(), state: ti.template(), forces: ti.template(),
                     work: ti.template(), stages: ti.template(), f, now: ti.template()):
     """face_force[3 f + c] = force of triangle f's membrane on its corner c:
     -A (F S) grad lambda_c, S = C (e + beta de/dt) with e = (E11, E22, 2 E12) the Green strain
     in the warp/weft frame (body/elements.py; Bonet & Wood eq. 6.11, 7.13) and beta the
     Rayleigh damping time."""
-    corner = model.face_indices[f]
-    g = model.face_gradient[f]                 # (grad lambda_1, grad lambda_2), x y each
-    x0 = state.particle_position[corner[0]]
-    d1 = state.particle_position[corner[1]] - x0
-    d2 = state.particle_position[corner[2]] - x0
-    v0 = state.particle_velocity[corner[0]]
-    u1 = state.particle_velocity[corner[1]] - v0
-    u2 = state.particle_velocity[corner[2]] - v0
-    warp = d1 * g[0] + d2 * g[2]               # the columns of F
-    weft = d1 * g[1] + d2 * g[3]
-    warp_rate = u1 * g[0] + u2 * g[2]
-    weft_rate = u1 * g[1] + u2 * g[3]
+    warp, weft = face_columns(model, state.particle_position, f)
+    warp_rate, weft_rate = face_columns(model, state.particle_velocity, f)
     beta = model.face_damping[f]
     e11 = 0.5 * (warp.dot(warp) - 1.0) + beta * warp.dot(warp_rate)
     e22 = 0.5 * (weft.dot(weft) - 1.0) + beta * weft.dot(weft_rate)
@@ -43,13 +58,8 @@ def membrane_forces(model: ti.template(), state: ti.template(), forces: ti.templ
     s22 = c[1] * e11 + c[2] * e22
     s12 = c[3] * shear
     area = model.face_area[f]
-    along_warp = area * (s11 * warp + s12 * weft)      # A (F S), by column
-    along_weft = area * (s12 * warp + s22 * weft)
-    f1 = -(along_warp * g[0] + along_weft * g[1])
-    f2 = -(along_warp * g[2] + along_weft * g[3])
-    state.face_force[3 * f] = -(f1 + f2)
-    state.face_force[3 * f + 1] = f1
-    state.face_force[3 * f + 2] = f2
+    store_corners(model, state.face_force, f, -area * (s11 * warp + s12 * weft),   # -A (F S)
+                  -area * (s12 * warp + s22 * weft))
 
 
 @ti.func
@@ -143,16 +153,24 @@ def hinge_forces(model: ti.template(), state: ti.template(), forces: ti.template
 
 
 @ti.func
-def gather_elements(model: ti.template(), state: ti.template(), i):
-    """The force of particle i's triangles and hinges, in the Model's fixed order (a body
-    with triangles: gather_force calls it only then)."""
-    f = ti.Vector([0.0, 0.0, 0.0])
+def gather_corners(model: ti.template(), face_values: ti.template(),
+                   hinge_values: ti.template(), i):
+    """The sum of particle i's corner values of its triangles (face_values[3 f + c]) and its
+    hinges (hinge_values[4 e + k]), in the Model's fixed order."""
+    total = ti.Vector([0.0, 0.0, 0.0])
     for a in range(model.particle_face_start[i], model.particle_face_start[i + 1]):
-        f += state.face_force[model.adjacency_face[a]]
+        total += face_values[model.adjacency_face[a]]
     if ti.static(model.hinge_count > 0):
         for a in range(model.particle_hinge_start[i], model.particle_hinge_start[i + 1]):
-            f += state.hinge_force[model.adjacency_hinge[a]]
-    return f
+            total += hinge_values[model.adjacency_hinge[a]]
+    return total
+
+
+@ti.func
+def gather_elements(model: ti.template(), state: ti.template(), i):
+    """The force of particle i's triangles and hinges (a body with triangles: gather_force
+    calls it only then)."""
+    return gather_corners(model, state.face_force, state.hinge_force, i)
 
 
 def element_loops(model) -> tuple:
@@ -165,9 +183,11 @@ def element_loops(model) -> tuple:
     return loops
 
 
-def bending_phases(model) -> tuple:
-    """The phases after the first: the triangles' moments, then the hinges' forces."""
+def bending_phases(model, with_moments: tuple = (), with_forces: tuple = ()) -> tuple:
+    """The phases after the first: the triangles' moments, then the hinges' forces (each with
+    the caller's loops that read the same inputs: with_moments read the hinges' angles and
+    gradients, with_forces everything the moments' phase wrote)."""
     if not model.hinge_count:
         return ()
-    return (Phase(Loop(model.face_count, face_moments)),
-            Phase(Loop(model.hinge_count, hinge_forces)))
+    return (Phase(Loop(model.face_count, face_moments), *with_moments),
+            Phase(Loop(model.hinge_count, hinge_forces), *with_forces))
