@@ -111,7 +111,7 @@ FEATURES = {"none": {}, "tearing": dict(tearing=0.2), "strain limit": dict(strai
                             ("rk4", "sheet", "all but strain limit"),
                             ("symplectic_euler", "braced strands", "none"),
                             ("symplectic_euler", "fabric", "colliders"), ("rk4", "fabric", "none"),
-                            ("implicit_euler", "fabric", "none"),
+                            ("implicit_euler", "fabric", "none"), ("xpbd", "fabric", "none"),
                             ("xpbd", "braced strands", "none")])
 def test_every_launch_plan_takes_the_same_steps(threads, integrator, feature, body, monkeypatch):
     """The same bits in a launch per phase, in small launches on the launching thread and in

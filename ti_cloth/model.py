@@ -7,7 +7,7 @@ import hashlib
 import numpy as np
 import taichi as ti
 
-from .body.elements import tangents
+from .body.elements import bending_stencils, tangents
 from .body.topology import Cloth, color_springs
 from .runtime import backend
 from .runtime.transfer import upload
@@ -99,6 +99,7 @@ class Model:
         fields.finalize(self)
         self._colouring = None
         self._altitude_colouring = None
+        self._element_colourings = None
         self.load(cloth, pinned)
 
     @staticmethod
@@ -199,6 +200,17 @@ class Model:
             self._altitude_colouring = SpringColouring(*color_springs(
                 self.cloth.altitude_indices, self.particle_count))
         return self._altitude_colouring
+
+    def element_colourings(self) -> tuple[SpringColouring, SpringColouring]:
+        """(membranes, bending): a Fabric's triangles grouped so that no two in a colour share
+        a particle, once by their corners and once by the particles their bending moves
+        (body/elements.bending_stencils), for position-based passes."""
+        if self._element_colourings is None:
+            self._element_colourings = tuple(
+                SpringColouring(*color_springs(indices, self.particle_count))
+                for indices in (self.cloth.face_indices,
+                                bending_stencils(self.cloth)))
+        return self._element_colourings
 
 
 def corner_adjacency(indices: np.ndarray, particle_count: int) -> tuple[np.ndarray, np.ndarray]:

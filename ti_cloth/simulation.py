@@ -431,7 +431,9 @@ def _check_fabric_options(integrator, tearing, strain_limit) -> None:
     limiting (both act on springs) for now: refuse the rest by name rather than ignore them."""
     able = sorted(name for name, cls in INTEGRATORS.items() if cls.runs_fabric)
     require(integrator.runs_fabric, "integrator", integrator.name,
-            f"one of {able} for a body made of a Fabric (its elements)")
+            f"one of {able} for a body made of a Fabric (pbd's stiffness is a fraction of "
+            "a correction per iteration, not a modulus: xpbd is pbd with the Fabric's "
+            "moduli as compliances)")
     require(tearing is None, "tearing", tearing,
             "None for a body made of a Fabric (tearing removes springs; a Fabric has elements)")
     require(strain_limit is None, "strain_limit", strain_limit,

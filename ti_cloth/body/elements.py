@@ -136,6 +136,19 @@ def hinges(triangles: np.ndarray) -> tuple:
             face_hinge.reshape(t, 3), face_sign.reshape(t, 3))
 
 
+def bending_stencils(cloth) -> np.ndarray:
+    """(F, 6): each triangle's corners, then across each edge i the vertex opposite in the
+    neighbouring triangle (corner i itself across a boundary edge): the particles its
+    bending energy moves."""
+    stencil = np.concatenate([cloth.face_indices, cloth.face_indices], axis=1)
+    face, edge = np.nonzero(cloth.face_hinge >= 0)
+    hinge = cloth.face_hinge[face, edge]
+    first = cloth.hinge_faces[hinge, 0] // 3 == face
+    stencil[face, 3 + edge] = np.where(first, cloth.hinge_indices[hinge, 3],
+                                       cloth.hinge_indices[hinge, 2])
+    return stencil
+
+
 def hinge_angles(positions: np.ndarray, indices: np.ndarray, gradient: bool = False):
     """Dihedral angles theta (H,) of hinges [a, b, c, d] at `positions` (module doc), and with
     `gradient` their gradients (H, 4, 3) too."""

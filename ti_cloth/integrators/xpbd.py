@@ -1,11 +1,14 @@
 """Extended position-based dynamics (Macklin, Mueller & Chentanez 2016): springs as compliant
-constraints with compliance 1 / k, so the cloth has its material stiffness in N/m."""
+constraints with compliance 1 / k, so the cloth has its material stiffness in N/m; a Fabric's
+triangles as strain and bending constraints with compliance from its moduli
+(physics/element_constraints.py)."""
 
 
 import taichi as ti
 
 from ..physics import wind
 from ..physics.constraints import damp, xpbd_altitude, xpbd_update
+from ..physics.element_constraints import xpbd_bending, xpbd_membrane
 from ..physics.forces import gather_force
 from ..runtime import backend, limits
 from ..runtime.plan import Loop, Phase, Repeat, Sweep
@@ -52,6 +55,25 @@ def solve_altitude(model: ti.template(), state: ti.template(), forces: ti.templa
 
 
 @ti.func
+def clear_face(model: ti.template(), state: ti.template(), forces: ti.template(),
+               work: ti.template(), stages: ti.template(), f, now: ti.template()):
+    work.membrane[f] = ti.Vector([0.0, 0.0, 0.0])
+    work.bending[f] = ti.Vector([0.0, 0.0, 0.0])
+
+
+@ti.func
+def solve_membrane(model: ti.template(), state: ti.template(), forces: ti.template(),
+                   work: ti.template(), stages: ti.template(), t, now: ti.template()):
+    xpbd_membrane(model, state, work.membrane_colours.order[t], work.membrane, now.dt)
+
+
+@ti.func
+def solve_bending(model: ti.template(), state: ti.template(), forces: ti.template(),
+                  work: ti.template(), stages: ti.template(), t, now: ti.template()):
+    xpbd_bending(model, state, work.bending_colours.order[t], work.bending, now.dt)
+
+
+@ti.func
 def damp_spring(model: ti.template(), state: ti.template(), forces: ti.template(),
                  work: ti.template(), stages: ti.template(), t, now: ti.template()):
     damp(model, state, work.colours, t, now.dt, forces.tearable)
@@ -60,15 +82,20 @@ def damp_spring(model: ti.template(), state: ti.template(), forces: ti.template(
 @backend.kernel_argument
 class _Multipliers:
     """One Lagrange multiplier per spring (in colour order) and per altitude spring [N s^2],
-    reset every step, and the model's colourings (read by the phases)."""
+    three per triangle for its strain and three for its bending (a Fabric's), reset every
+    step, and the model's colourings (read by the phases)."""
 
     def __init__(self, model):
         fields = backend.FieldGroup()
         self.value = fields.scalar(backend.real(), max(model.spring_count, 1))
         self.altitude = fields.scalar(backend.real(), max(model.altitude_count, 1))
+        self.membrane = fields.vector(3, backend.real(), max(model.face_count, 1))
+        self.bending = fields.vector(3, backend.real(), max(model.face_count, 1))
         fields.finalize(self)
         self.colours = model.spring_colouring()
         self.altitude_colours = model.altitude_colouring()
+        if model.face_count:
+            self.membrane_colours, self.bending_colours = model.element_colourings()
 
 
 class XPBD(Integrator):
@@ -78,7 +105,9 @@ class XPBD(Integrator):
 
     Unlike pbd, the result does not depend on the iteration count once converged: it is the
     backward Euler step of the same Hookean springs (compliance 1/k) the force-based
-    integrators use, with axial damping kd. On a body with relative damping (Stuyck eq. 4.7)
+    integrators use, with axial damping kd; for a Fabric, of its membrane and bending
+    energies with their Rayleigh damping (a pass sweeps the triangles' strains, then their
+    bending, element_constraints.py). On a body with relative damping (Stuyck eq. 4.7)
     the constraints are undamped and one pass of implicit relative damping on the new
     velocities follows (constraints.damp: each spring's backward Euler step in turn,
     stable at any h); positions keep their solve, as in position-based damping (Mueller et al.
@@ -89,7 +118,6 @@ class XPBD(Integrator):
     """
 
     name = "xpbd"
-    runs_fabric = False   # a Fabric's elements need constraints (and Hessians): not yet
     order = 1
     position_based = True
     step_limited = False
@@ -117,6 +145,11 @@ class XPBD(Integrator):
         if model.altitude_count:
             clear += (Loop(model.altitude_count, clear_altitude),)
             passes += (Sweep(work.altitude_colours, solve_altitude),)
+        if model.face_count:
+            clear += (Loop(model.face_count, clear_face),)
+            passes += (Sweep(work.membrane_colours, solve_membrane).with_big_body(),)
+        if model.hinge_count:
+            passes += (Sweep(work.bending_colours, solve_bending).with_big_body(),)
         damping = ()
         if model.spring_count and model.relative_damping:
             damping = (Sweep(work.colours, damp_spring),)

@@ -79,17 +79,16 @@ def _tangent(theta):
 
 
 @ti.func
-def hinge_angles(model: ti.template(), state: ti.template(), forces: ti.template(),
-                 work: ti.template(), stages: ti.template(), e, now: ti.template()):
-    """Hinge e [a, b, c, d]: hinge_tangent = t - t_rest, hinge_rate = dt/dt, and the gradient
-    of t on each corner into hinge_force[4 e + k] (hinge_forces scales it). The dihedral angle
-    and its gradient: body/elements.py (Tamstorf & Grinspun 2013, eq. 8). A hinge with an
-    edge or face of zero length or area has no angle: all zero."""
+def hinge_gradient(model: ti.template(), positions: ti.template(), e):
+    """(t, grad t on corners a, b, c, d) of hinge e [a, b, c, d] at `positions`, t = tan(theta /
+    2) continued (_tangent) of its dihedral angle; the angle and its gradient: body/elements.py
+    (Tamstorf & Grinspun 2013, eq. 8). A hinge with an edge or face of zero length or area
+    has no angle: t and its gradient 0."""
     corner = model.hinge_indices[e]
-    xa = state.particle_position[corner[0]]
-    edge = state.particle_position[corner[1]] - xa
-    to_c = state.particle_position[corner[2]] - xa
-    to_d = state.particle_position[corner[3]] - xa
+    xa = positions[corner[0]]
+    edge = positions[corner[1]] - xa
+    to_c = positions[corner[2]] - xa
+    to_d = positions[corner[3]] - xa
     m1 = edge.cross(to_c)
     m2 = to_d.cross(edge)
     length2 = edge.dot(edge)
@@ -97,7 +96,7 @@ def hinge_angles(model: ti.template(), state: ti.template(), forces: ti.template
     area2 = m2.norm()
     zero = ti.Vector([0.0, 0.0, 0.0])
     grad_a, grad_b, grad_c, grad_d = zero, zero, zero, zero
-    strain, rate = 0.0, 0.0
+    t = 0.0
     if length2 > 0 and area1 > 0 and area2 > 0:
         length = ti.sqrt(length2)
         n1 = m1 / area1
@@ -110,6 +109,19 @@ def hinge_angles(model: ti.template(), state: ti.template(), forces: ti.template
         s2 = to_d.dot(edge) / length2
         grad_a = -(1.0 - s1) * grad_c - (1.0 - s2) * grad_d
         grad_b = -s1 * grad_c - s2 * grad_d
+    return t, grad_a, grad_b, grad_c, grad_d
+
+
+@ti.func
+def hinge_angles(model: ti.template(), state: ti.template(), forces: ti.template(),
+                 work: ti.template(), stages: ti.template(), e, now: ti.template()):
+    """Hinge e: hinge_tangent = t - t_rest, hinge_rate = dt/dt, and the gradient of t on each
+    corner into hinge_force[4 e + k] (hinge_forces scales it); all zero for a hinge without
+    an angle."""
+    corner = model.hinge_indices[e]
+    t, grad_a, grad_b, grad_c, grad_d = hinge_gradient(model, state.particle_position, e)
+    strain, rate = 0.0, 0.0
+    if grad_c.norm_sqr() > 0:
         strain = t - model.hinge_rest_tangent[e]
         rate = (grad_a.dot(state.particle_velocity[corner[0]])
                 + grad_b.dot(state.particle_velocity[corner[1]])

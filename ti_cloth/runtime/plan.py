@@ -23,8 +23,8 @@ Two runners read the same nodes:
 
 - `run` (GPUs, a single CPU step, and steps with a stage no team runs): a launch per phase,
   every maximal run of leaves one kernel whose loops are its top-level parallel loops
-  (Taichi synchronises between them), Repeat and Until looping on the host, the test a
-  kernel; on the CPU, for a body of at most SERIAL_SPRING_LIMIT springs, one serial launch
+  (Taichi synchronises between them; a Sweep with a big body a kernel launched per
+  colour), Repeat and Until looping on the host, the test a kernel; on the CPU, for a body of at most SERIAL_SPRING_LIMIT springs, one serial launch
   of the whole step instead (a parallel loop costs tens of microseconds to start, a pass of
   xpbd is a loop per colour: docs/performance.md);
 - `run_team` (many steps per launch, CPU: stepping.py): each worker runs its slice of every
@@ -62,10 +62,20 @@ class Phase:
 class Sweep:
     """body(..., t, now, *extra) for every position t of a colouring's order, colour by colour
     (the items of one colour are independent), synchronising after each colour. colouring:
-    an object with count, start (field, count + 1) and offsets (the same, a list)."""
+    an object with count, start (field, count + 1) and offsets (the same, a list).
+
+    A launch per phase unrolls the colours into one kernel, a copy of the body per colour;
+    a Sweep made with_big_body() is instead compiled once and launched per colour (a
+    Fabric's bending constraint unrolled over 14 colours took 247 s to compile)."""
 
     def __init__(self, colouring, body, *extra):
         self.colouring, self.body, self.extra = colouring, body, extra
+        self.per_colour = False
+
+    def with_big_body(self):
+        """This Sweep, launched per colour by a launch per phase (returns self)."""
+        self.per_colour = True
+        return self
 
 
 class Once:
@@ -110,15 +120,22 @@ def nodes_of(owner, part: str, model, forces, work) -> tuple:
     return _check(getattr(owner, part)(model, forces, work))
 
 
+def _leaves(nodes, container: tuple) -> tuple:
+    """The top-level nodes (container ()) or the leaves of node i (container (i,): a Repeat
+    or an Until)."""
+    return nodes[container[0]].leaves if container else nodes
+
+
+def _alone(leaf) -> bool:
+    """Whether a launch per phase runs `leaf` colour by colour in launches of its own."""
+    return isinstance(leaf, Sweep) and leaf.per_colour
+
+
 def _segment(nodes, path):
-    """The leaves a launch per phase runs in one kernel: path (i,) the run of top-level
-    leaves from node i, (i, 0) the leaves of node i (a Repeat or an Until)."""
-    if len(path) == 2:
-        return nodes[path[0]].leaves
-    end = path[0]
-    while end < len(nodes) and isinstance(nodes[end], LEAVES):
-        end += 1
-    return nodes[path[0]:end]
+    """The leaves a launch per phase runs in one kernel: path (container, begin, end) the
+    leaves begin .. end - 1 of _leaves(nodes, container)."""
+    container, begin, end = path
+    return _leaves(nodes, container)[begin:end]
 
 
 def note_launch(nodes, key) -> None:
@@ -169,6 +186,37 @@ def launch_phases(owner: ti.template(), part: ti.template(), model: ti.template(
 
 
 @backend.kernel
+def launch_colour(owner: ti.template(), part: ti.template(), model: ti.template(),
+                  state: ti.template(), forces: ti.template(), work: ti.template(), dt: float,
+                  step: ti.i32, start: ti.i32, path: ti.template(), begin: ti.i32,
+                  end: ti.i32):
+    """Positions begin .. end - 1 (a colour) of the Sweep at `path` (container, index)."""
+    for leaf in ti.static(_leaves(nodes_of(owner, part, model, forces, work), path[0])[path[1]:path[1] + 1]):
+        for t in range(begin, end):
+            now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0)
+            leaf.body(model, state, forces, work, STAGELESS, t, now, *leaf.extra)
+
+
+def _launch_leaves(args, nodes, container: tuple, begin: int, end: int) -> None:
+    """Leaves begin .. end - 1 of _leaves(nodes, container): runs of them in one kernel,
+    split at the Sweeps that run alone, each of those a launch per colour."""
+    leaves = _leaves(nodes, container)
+    j = begin
+    while j < end:
+        if _alone(leaves[j]):
+            offsets = leaves[j].colouring.offsets
+            for c in range(leaves[j].colouring.count):
+                launch_colour(*args, (container, j), offsets[c], offsets[c + 1])
+            j += 1
+            continue
+        k = j
+        while k < end and not _alone(leaves[k]):
+            k += 1
+        launch_phases(*args, (container, j, k))
+        j = k
+
+
+@backend.kernel
 def _holds(owner: ti.template(), part: ti.template(), model: ti.template(), state: ti.template(),
            forces: ti.template(), work: ti.template(), dt: float, step: ti.i32, start: ti.i32,
            index: ti.template()) -> ti.i32:
@@ -213,14 +261,16 @@ def run(owner, model, state, forces, work, dt: float, step: int, start: bool,
         node = nodes[i]
         if isinstance(node, Repeat):
             for _ in range(node.count):
-                launch_phases(*args, (i, 0))
+                _launch_leaves(args, nodes, (i,), 0, len(node.leaves))
         elif isinstance(node, Until):
             while _holds(*args, i):
-                launch_phases(*args, (i, 0))
+                _launch_leaves(args, nodes, (i,), 0, len(node.leaves))
         else:
-            launch_phases(*args, (i,))
-            while i + 1 < len(nodes) and isinstance(nodes[i + 1], LEAVES):
-                i += 1
+            end = i
+            while end < len(nodes) and isinstance(nodes[end], LEAVES):
+                end += 1
+            _launch_leaves(args, nodes, (), i, end)
+            i = end - 1
         i += 1
 
 
