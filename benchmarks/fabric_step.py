@@ -8,12 +8,22 @@ particle). Both run the full simulator (Simulation.step, many steps per launch, 
 guard included). Rates are medians of --repeats runs of at least --seconds each, measured in
 the same process, and the ratio comes from this run.
 
-    python benchmarks/fabric_step.py [--sizes 32 64 128] [--precision f32] [--arch cpu]
+--newton also times Newton's semi-implicit cloth on the same mesh, particles, pins and dt:
+SolverSemiImplicit with its triangle FEM (tri_ke = tri_ka = the fabric's mean stretch / 2,
+tri_kd from its damping) and dihedral bending (edge_ke = its mean rigidity), its contacts
+reduced to nothing (ti_cloth's sheet has no self-collision either): triangle contact off and
+particles of radius 1e-5 m for its particle-particle grid (its defaults made it 18 steps/s at
+32^2), f32 (newton 1.8, benchmarks/peers.py). Its laws are not ti_cloth's, so its trajectory is not checked against
+ours; the run checks only that it stayed finite.
+
+    python benchmarks/fabric_step.py [--sizes 32 64 128] [--precision f32] [--arch cpu] [--newton]
 """
 
 import argparse
 
-from throughput import median_rate
+import numpy as np
+import peers
+from throughput import NEWTON_CHECKED, median_rate
 
 import ti_cloth as tc
 
@@ -25,6 +35,44 @@ def bodies(n: int) -> dict[str, tc.Cloth]:
             "fabric": tc.Cloth(mesh, tc.Fabric.preset("denim"), pinned=pinned)}
 
 
+class NewtonFabric:
+    """Newton's semi-implicit cloth (triangle FEM, dihedral bending) on `cloth`'s mesh."""
+
+    def __init__(self, cloth: tc.Cloth, fabric: tc.Fabric, dt: float):
+        peers.require("newton", NEWTON_CHECKED, "--newton")
+        import newton
+        import warp as wp
+        wp.config.quiet = True
+        self.wp, self.dt = wp, dt
+        builder = newton.ModelBuilder(up_axis=newton.Axis.Y, gravity=(0.0, -9.81, 0.0))
+        stretch = float(np.mean(fabric.stretch))
+        builder.add_cloth_mesh(pos=(0.0, 0.0, 0.0), rot=wp.quat_identity(), scale=1.0,
+                               vel=(0.0, 0.0, 0.0), vertices=[tuple(v) for v in cloth.mesh.vertices],
+                               indices=cloth.mesh.triangles.ravel().tolist(),
+                               density=fabric.density, tri_ke=stretch / 2, tri_ka=stretch / 2,
+                               tri_kd=fabric.damping * stretch / 2,
+                               edge_ke=float(np.mean(fabric.bending)),
+                               edge_kd=fabric.damping * float(np.mean(fabric.bending)),
+                               particle_radius=1e-5)
+        for i in np.flatnonzero(cloth.pinned):
+            builder.particle_mass[i] = 0.0
+        self.model = builder.finalize(device="cpu")
+        self.solver = newton.solvers.SolverSemiImplicit(self.model, enable_tri_contact=False)
+        self.states = [self.model.state(), self.model.state()]
+        self.control = self.model.control()
+
+    def step(self, steps: int) -> None:
+        for _ in range(steps):
+            a, b = self.states
+            a.clear_forces()
+            self.solver.step(a, b, self.control, None, self.dt)
+            self.states.reverse()
+
+    def velocities(self):
+        self.wp.synchronize_device("cpu")
+        return self.states[0].particle_qd.numpy()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[32, 64, 128])
@@ -32,11 +80,13 @@ def main() -> None:
     parser.add_argument("--arch", default="cpu")
     parser.add_argument("--seconds", type=float, default=2.0)
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--newton", action="store_true", help="also time Newton's cloth")
     args = parser.parse_args()
     tc.init(arch=args.arch, precision=args.precision)
     print(f"symplectic Euler, {args.precision}, {args.arch}, medians of {args.repeats} runs")
     print(f"{'N':>5} {'particles':>9} {'springs steps/s':>16} {'fabric steps/s':>15} "
-          f"{'fabric cost / springs':>22}")
+          f"{'fabric cost / springs':>22}" + (f" {'Newton steps/s':>15} {'fabric / Newton':>16}"
+                                              if args.newton else ""))
     for n in args.sizes:
         cloths = bodies(n)
         dt = 0.5 * min(tc.stable_dt(c, "symplectic_euler") for c in cloths.values())
@@ -44,8 +94,14 @@ def main() -> None:
         for name, cloth in cloths.items():
             sim = tc.Simulation(cloth, integrator="symplectic_euler", dt=dt)
             rates[name] = median_rate(sim.step, sim.velocities, args.seconds, args.repeats)
-        print(f"{n:>5} {n * n:>9} {rates['springs']:>16.1f} {rates['fabric']:>15.1f} "
-              f"{rates['springs'] / rates['fabric']:>22.2f}")
+        line = (f"{n:>5} {n * n:>9} {rates['springs']:>16.1f} {rates['fabric']:>15.1f} "
+                f"{rates['springs'] / rates['fabric']:>22.2f}")
+        if args.newton:
+            peer = NewtonFabric(cloths["fabric"], tc.Fabric.preset("denim"), dt)
+            rate = median_rate(peer.step, peer.velocities, args.seconds, args.repeats)
+            finite = "" if np.isfinite(peer.velocities()).all() else " (diverged)"
+            line += f" {rate:>15.1f} {rates['fabric'] / rate:>16.2f}{finite}"
+        print(line, flush=True)
 
 
 if __name__ == "__main__":

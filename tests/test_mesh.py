@@ -23,6 +23,26 @@ def test_grid_layout_and_counts():
     assert len(mesh.edges()) == rows * (cols - 1) + cols * (rows - 1) + (rows - 1) * (cols - 1)
 
 
+def test_a_disc_mesh_covers_its_polygon_with_triangles_facing_up():
+    """disc_mesh: 1 + 3 r (r + 1) vertices on rings of 6 k at radius k R / r, 6 r^2 triangles
+    wound upwards that tile the outer ring's polygon (their areas sum to it) and share every
+    interior edge with exactly one other (a manifold disc: a boundary of 6 r edges)."""
+    radius, rings, centre = 0.15, 5, np.array([0.1, 0.3, -0.2])
+    mesh = tc.disc_mesh(radius, rings, centre=centre)
+    assert mesh.vertex_count == 1 + 3 * rings * (rings + 1)
+    assert mesh.triangle_count == 6 * rings ** 2
+    offset = mesh.vertices - centre
+    np.testing.assert_allclose(offset[:, 1], 0.0)
+    ring_of = np.concatenate([[0]] + [np.full(6 * k, k) for k in range(1, rings + 1)])
+    np.testing.assert_allclose(np.hypot(offset[:, 0], offset[:, 2]), ring_of * radius / rings,
+                               atol=1e-15)
+    a, b, c = (mesh.vertices[mesh.triangles[:, k]] for k in range(3))
+    assert (np.cross(b - a, c - a)[:, 1] > 0).all()
+    polygon = 0.5 * 6 * rings * radius ** 2 * np.sin(2 * np.pi / (6 * rings))
+    np.testing.assert_allclose(mesh.triangle_areas().sum(), polygon, rtol=1e-12)
+    assert len(mesh.boundary_edges()) == 6 * rings
+
+
 def test_load_obj_splits_quads_and_save_round_trips(tmp_path):
     obj = tmp_path / "quad.obj"
     obj.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 0 0\nf 1 2 3 4\nf 2 5 3\n")

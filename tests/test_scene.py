@@ -70,9 +70,26 @@ def test_a_scene_hem_takes_grid_names_and_indices(tmp_path):
     np.testing.assert_array_equal(np.flatnonzero(default.hem), [0, 1, 2, 4])    # 3 is pinned
 
 
+def test_pins_as_a_ball_are_the_particles_within_it(tmp_path):
+    """pinned = { centre, radius } pins exactly the particles within the ball at rest (an
+    independent distance test); a ball holding none, or a bad radius, names the key."""
+    ball = 'pinned = { centre = [0.25, 0.2, 0.0], radius = 0.15 }\n#'
+    cloth = load_scene(write(tmp_path, GRID.replace("pinned =", ball))).cloth
+    x = tc.grid_mesh(6, 5, size=(0.5, 0.4)).vertices
+    inside = np.flatnonzero(np.linalg.norm(x - [0.25, 0.2, 0.0], axis=1) <= 0.15)
+    assert 0 < len(inside) < 30
+    np.testing.assert_array_equal(np.flatnonzero(cloth.pinned), inside)
+    empty = GRID.replace("pinned =", 'pinned = { centre = [5, 5, 5], radius = 0.1 }\n#')
+    with pytest.raises(SceneError, match=r"bodies\[0\]\.pinned must be a ball holding at least one"):
+        load_scene(write(tmp_path, empty))
+    negative = GRID.replace("pinned =", 'pinned = { centre = [0, 0, 0], radius = -1 }\n#')
+    with pytest.raises(SceneError, match=r"bodies\[0\]\.pinned\.radius must be a number >= 0"):
+        load_scene(write(tmp_path, negative))
+
+
 def test_every_demo_scene_loads(tmp_path):
     scenes = sorted(DEMOS.glob("*.toml"))
-    assert len(scenes) == 14   # the thirteen demos and the study's standard scene
+    assert len(scenes) == 15   # the fourteen demos and the study's standard scene
     for path in scenes:
         scene = load_scene(path)
         assert scene.cloth.particle_count > 1 and scene.frames >= 15, path.name

@@ -399,11 +399,23 @@ def _hem(table: Table, mesh: Mesh):
     if not table.has("hem"):
         return None
     named = {k: v.tolist() for k, v in mesh.named_vertices().items()}
-    return _indices(table, "hem", mesh.vertex_count, named)
+    return _indices(table, "hem", mesh.vertex_count, named, mesh.vertices)
 
 
-def _indices(table: Table, key: str, count: int, named: dict | None = None) -> list[int]:
+def _indices(table: Table, key: str, count: int, named: dict | None = None,
+             positions: np.ndarray | None = None) -> list[int]:
+    """Particle indices given as indices and names, or (a surface body: `positions`, its rest
+    positions) as a ball, { centre = [x, y, z], radius = r }: the particles within it."""
     value = table.value(key, [])
+    if isinstance(value, dict) and positions is not None:
+        ball = table.table(key)
+        centre = np.array(ball.vector("centre", unit="m"))
+        radius = ball.number("radius", minimum=0.0, unit="m")
+        ball.finish()
+        inside = np.flatnonzero(np.linalg.norm(positions - centre, axis=1) <= radius)
+        if not inside.size:
+            table.bad(key, value, "a ball holding at least one particle")
+        return inside.tolist()
     items = value if isinstance(value, list) else [value]
     result = []
     for item in items:
@@ -413,7 +425,8 @@ def _indices(table: Table, key: str, count: int, named: dict | None = None) -> l
             result.append(item)
         else:
             names = f" or one of {list(named)}" if named else ""
-            table.bad(key, item, f"particle indices in [0, {count - 1}]{names}")
+            ball = ", or a ball { centre = [x, y, z], radius = r }" if positions is not None else ""
+            table.bad(key, item, f"particle indices in [0, {count - 1}]{names}{ball}")
     return sorted(set(result))
 
 
@@ -429,7 +442,7 @@ def _body(table: Table, folder: Path, offset: int) -> tuple[Cloth, list[Handle]]
         table.optional(options, "origin", "vector", unit="m")
         mesh = table.build(grid_mesh, rows, cols, **options)
         names = {k: v.tolist() for k, v in mesh.named_vertices().items() if k != "boundary"}
-        pinned = _indices(table, "pinned", mesh.vertex_count, names)
+        pinned = _indices(table, "pinned", mesh.vertex_count, names, mesh.vertices)
         warp = {}
         table.optional(warp, "warp", "vector")
         cloth = table.build(Cloth, mesh, _material(table), pinned=pinned, hem=_hem(table, mesh),
@@ -440,7 +453,8 @@ def _body(table: Table, folder: Path, offset: int) -> tuple[Cloth, list[Handle]]
         warp = {}
         table.optional(warp, "warp", "vector")
         cloth = table.build(Cloth, mesh, _material(table),
-                            pinned=_indices(table, "pinned", mesh.vertex_count), hem=_hem(table, mesh),
+                            pinned=_indices(table, "pinned", mesh.vertex_count, None, mesh.vertices),
+                            hem=_hem(table, mesh),
                             **warp)
     elif kind == "string":
         n = table.integer("n", 20, within=limits.CHAIN)

@@ -223,6 +223,38 @@ def sphere_mesh(radius: float = 1.0, centre=(0.0, 0.0, 0.0), subdivisions: int =
     return Mesh(vertices * radius + centre, triangles)
 
 
+def disc_mesh(radius: float = 0.5, rings: int = 8, centre=(0.0, 0.0, 0.0)) -> Mesh:
+    """A horizontal disc (the xz plane through `centre` [m]) of `radius` [m]: a centre vertex
+    and `rings` concentric rings, ring k of 6 k vertices at radius k radius / rings, each
+    annulus triangulated by walking both rings in angle (triangles of nearly equal size and
+    shape, wound with normals up; 1 + 3 rings (rings + 1) vertices). Ring k's vertices are
+    numbered after ring k - 1's, from the +x axis towards -z."""
+    radius = in_range("radius", radius, limits.LENGTH)
+    rings = count("rings", rings, limits.GRID_SIDE)
+    centre = as_array("centre", centre, np.float64, (3,))
+    points, triangles = [np.zeros(2)], []
+    inner = np.array([0])
+    for k in range(1, rings + 1):
+        angle = 2 * np.pi * np.arange(6 * k) / (6 * k)
+        outer = len(points) + np.arange(6 * k)
+        points += list(k * radius / rings * np.stack([np.cos(angle), np.sin(angle)], 1))
+        i = j = 0
+        m, n = len(inner), len(outer)
+        while i < m or j < n:           # advance the ring whose next vertex comes first
+            next_inner = 2 * np.pi * (i + 1) / m if i < m else np.inf
+            if j < n and 2 * np.pi * (j + 1) / n <= next_inner:
+                triangles.append((inner[i % m], outer[j], outer[(j + 1) % n]))
+                j += 1
+            else:
+                triangles.append((inner[i % m], outer[j % n], inner[(i + 1) % m]))
+                i += 1
+        inner = outer
+    flat = np.array(points)
+    triangles = np.array([t for t in triangles if len(set(t)) == 3])   # the centre's fan
+    vertices = centre + np.stack([flat[:, 0], np.zeros(len(flat)), -flat[:, 1]], 1)
+    return Mesh(vertices, triangles)
+
+
 def combine_meshes(meshes) -> Mesh:
     """One mesh holding the vertices and triangles of `meshes`, in order."""
     meshes = list(meshes)
