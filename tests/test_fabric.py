@@ -351,6 +351,34 @@ def cantilever_with(fabric, integrator):
     return settle(tc.Cloth(mesh, fabric, pinned=clamped), integrator, seconds=3.0)[9]
 
 
+def test_strain_limiting_holds_a_fabric_s_edges_to_the_limit():
+    """A soft fabric hanging from its top edge stretches past 25 %; strain limited at 10 %,
+    no triangle edge (measured here from the positions, every edge of every triangle) is
+    longer than 1.1 rest after 1 s, within 2 % after 16 Gauss-Seidel passes (measured: 8.5,
+    3.6, 1.3 and 0.3 % over at 4, 8, 16 and 32: the weak membrane leaves the passes most of
+    gravity's pull at this step); reruns give the same bits."""
+    fabric = tc.Fabric(density=0.3, stretch=2.0, shear=1.0, bending=1e-6, damping=1e-3)
+    mesh = tc.grid_mesh(9, 9, (0.3, 0.3), plane="xy")
+    cloth = tc.Cloth(mesh, fabric, pinned=np.flatnonzero(mesh.vertices[:, 1] == 0.3))
+    edges = np.concatenate([mesh.triangles[:, [0, 1]], mesh.triangles[:, [1, 2]],
+                            mesh.triangles[:, [2, 0]]])
+    rest = np.linalg.norm(np.subtract(*mesh.vertices[edges.T]), axis=1)
+
+    def strain(limit):
+        sim = tc.Simulation(cloth, integrator="symplectic_euler", dt="auto", drag=5.0,
+                            strain_limit=limit)
+        sim.step(int(1.0 / sim.dt))
+        x = sim.positions()
+        return (np.linalg.norm(np.subtract(*x[edges.T]), axis=1) / rest - 1).max(), x
+
+    free, _ = strain(None)
+    limited, x = strain(tc.StrainLimit(max_strain=0.1, passes=16))
+    print("largest edge strain without / with the limit:", free, limited)
+    assert free > 0.25
+    assert 0.1 - 1e-3 <= limited <= 0.1 * 1.02
+    np.testing.assert_array_equal(x, strain(tc.StrainLimit(max_strain=0.1, passes=16))[1])
+
+
 def test_reruns_give_the_same_bits():
     """A fabric sheet swung by gravity from two corners, run twice from scratch."""
     cloth = tc.Cloth(tc.grid_mesh(8, 8, (0.3, 0.3), plane="xz"), tc.Fabric.preset("denim"),

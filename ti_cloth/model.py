@@ -8,6 +8,8 @@ import numpy as np
 import taichi as ti
 
 from .body.elements import bending_stencils, tangents
+from .body.material import SpringKind
+from .body.mesh import triangle_edges, unique_rows
 from .body.topology import Cloth, color_springs
 from .runtime import backend
 from .runtime.transfer import upload
@@ -100,6 +102,7 @@ class Model:
         self._colouring = None
         self._altitude_colouring = None
         self._element_colourings = None
+        self._edge_colouring = None
         self.load(cloth, pinned)
 
     @staticmethod
@@ -121,6 +124,8 @@ class Model:
         self.cloth = cloth
         if self._colouring is not None:
             self._colouring.pack(cloth)
+        if self._edge_colouring is not None:
+            self._edge_colouring.pack(FaceEdges(cloth))
         self.pinned = cloth.pinned if pinned is None else np.asarray(pinned, bool)
         inv_mass = inverse_masses(cloth.particle_mass, self.pinned)
         n, s = self.particle_count, self.spring_count
@@ -211,6 +216,33 @@ class Model:
                 for indices in (self.cloth.face_indices,
                                 bending_stencils(self.cloth)))
         return self._element_colourings
+
+
+    def edge_colouring(self) -> SpringColouring:
+        """A Fabric's triangle edges as stretch springs of zero stiffness (FaceEdges), grouped
+        so that no two in a colour share a particle: what strain limiting relaxes on a body
+        without springs."""
+        if self._edge_colouring is None:
+            edges = FaceEdges(self.cloth)
+            self._edge_colouring = SpringColouring(*color_springs(edges.spring_indices,
+                                                                  self.particle_count), edges)
+        return self._edge_colouring
+
+
+class FaceEdges:
+    """The edges of a cloth's Fabric triangles in the shape of its springs (spring_indices,
+    rest lengths at the rest positions, kind STRETCH, no stiffness or damping), for the
+    position-based passes that act on springs (strain limiting)."""
+
+    def __init__(self, cloth: Cloth):
+        self.spring_indices = unique_rows(triangle_edges(cloth.face_indices)).reshape(-1, 2)
+        x = cloth.particle_position
+        self.spring_rest_length = np.linalg.norm(x[self.spring_indices[:, 0]]
+                                                 - x[self.spring_indices[:, 1]], axis=1)
+        count = len(self.spring_indices)
+        self.spring_stiffness = np.zeros(count)
+        self.spring_damping = np.zeros(count)
+        self.spring_kind = np.full(count, int(SpringKind.STRETCH))
 
 
 def corner_adjacency(indices: np.ndarray, particle_count: int) -> tuple[np.ndarray, np.ndarray]:

@@ -83,7 +83,7 @@ class Simulation:
         self.cloth = cloth
         self.integrator = make_integrator(integrator)
         if cloth.fabric:
-            _check_fabric_options(self.integrator, tearing, strain_limit)
+            _check_fabric_options(self.integrator, tearing)
         auto = isinstance(dt, str) and dt == "auto"
         self.dt = None if auto else in_range("dt", dt, limits.DT)
         gravity = as_array("gravity", gravity, np.float64, (3,))
@@ -113,7 +113,7 @@ class Simulation:
                                    cloth.altitude_count, cloth.face_count, cloth.hinge_count))}
         if wind is not None:
             parts["wind"] = (WindField, (wind, cloth))
-        if strain_limit is not None and cloth.spring_count:
+        if strain_limit is not None and (cloth.spring_count or cloth.face_count):
             parts["strain_limiter"] = (StrainLimiter, (strain_limit, cloth.particle_count,
                                                        tearing is not None))
         if colliders:
@@ -426,9 +426,9 @@ class Simulation:
                 f"time={self.time:.6g})")
 
 
-def _check_fabric_options(integrator, tearing, strain_limit) -> None:
-    """A Fabric's elements run on the integrators with runs_fabric, without tearing or strain
-    limiting (both act on springs) for now: refuse the rest by name rather than ignore them."""
+def _check_fabric_options(integrator, tearing) -> None:
+    """A Fabric's elements run on the integrators with runs_fabric, without tearing (it
+    removes springs) for now: refuse the rest by name rather than ignore them."""
     able = sorted(name for name, cls in INTEGRATORS.items() if cls.runs_fabric)
     require(integrator.runs_fabric, "integrator", integrator.name,
             f"one of {able} for a body made of a Fabric (pbd's stiffness is a fraction of "
@@ -436,8 +436,6 @@ def _check_fabric_options(integrator, tearing, strain_limit) -> None:
             "moduli as compliances)")
     require(tearing is None, "tearing", tearing,
             "None for a body made of a Fabric (tearing removes springs; a Fabric has elements)")
-    require(strain_limit is None, "strain_limit", strain_limit,
-            "None for a body made of a Fabric (strain limiting relaxes springs)")
 
 
 def _from_positional(positional: tuple, options: dict) -> dict:

@@ -1,7 +1,8 @@
 """Strain limiting (Provot 1995): after a step, springs stretched beyond (1 + max_strain) x
 rest are pulled back to that length, mass-weighted, for a few Gauss-Seidel passes (the PBD
 relaxation kernel, one-sided), colour by colour, so deterministic. The standard cure for "too
-stretchy" cloth without tiny steps or stiff springs."""
+stretchy" cloth without tiny steps or stiff springs. A Fabric's triangle edges are limited
+the same way, as stretch springs (Model.edge_colouring)."""
 
 from dataclasses import dataclass
 
@@ -67,9 +68,15 @@ class StrainLimiter:
         """The stage as phases (runtime/plan.py; `work` is this limiter): keep the positions,
         `passes` of the lecture's relaxation on stretched springs colour by colour
         (constraints.relax with stretched_only), then velocities follow the correction."""
-        colours = model.spring_colouring()
+        sweeps = ()
+        if model.spring_count:
+            colours = model.spring_colouring()
+            sweeps += (Sweep(colours, relax_stretched, colours),)
+        if model.face_count:
+            edges = model.edge_colouring()
+            sweeps += (Sweep(edges, relax_stretched, edges),)
         return (Phase(Loop(model.particle_count, keep_position)),
-                Repeat(self.limit.passes, Sweep(colours, relax_stretched, colours)),
+                Repeat(self.limit.passes, *sweeps),
                 Phase(Loop(model.particle_count, follow_velocity)))
 
     def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
