@@ -44,7 +44,9 @@ class Model:
                           for a in [start[i], start[i + 1]), in increasing order (the gather's)
     face_indices, face_gradient (grad lambda_1, grad lambda_2 as x1 y1 x2 y2), face_area,
     face_moduli, face_damping, face_bending (00 11 22 01 02 12), face_hinge: a Fabric's
-                          triangles (Cloth's arrays of those names; body/elements.py)
+                          triangles (Cloth's arrays of those names; body/elements.py);
+                          face_edge_rest the rest length of each one's edge i (opposite
+                          corner i) [m], for tearing
     hinge_indices, hinge_faces, hinge_rest_tangent (tan of half the rest angle, continued as
                           body/elements.tangents): its hinges
     particle_face_start, adjacency_face: particle i is corner adjacency_face[a] % 3 of
@@ -91,6 +93,7 @@ class Model:
         self.face_damping = fields.scalar(real, f1)
         self.face_bending = fields.vector(6, real, f1)
         self.face_hinge = fields.vector(3, ti.i32, f1)
+        self.face_edge_rest = fields.vector(3, real, f1)
         self.hinge_indices = fields.vector(4, ti.i32, h1)
         self.hinge_faces = fields.vector(2, ti.i32, h1)
         self.hinge_rest_tangent = fields.scalar(real, h1)
@@ -166,6 +169,7 @@ class Model:
                 (self.face_damping, cloth.face_damping),
                 (self.face_bending, bending),
                 (self.face_hinge, cloth.face_hinge),
+                (self.face_edge_rest, face_edges(cloth)),
                 (self.hinge_indices, cloth.hinge_indices),
                 (self.hinge_faces, cloth.hinge_faces),
                 (self.hinge_rest_tangent, tangents(cloth.hinge_rest_angle)),
@@ -243,6 +247,13 @@ class FaceEdges:
         self.spring_stiffness = np.zeros(count)
         self.spring_damping = np.zeros(count)
         self.spring_kind = np.full(count, int(SpringKind.STRETCH))
+
+
+def face_edges(cloth: Cloth) -> np.ndarray:
+    """(F, 3): the rest length of each Fabric triangle's edge i (opposite corner i) [m]."""
+    x, corners = cloth.particle_position, cloth.face_indices
+    return np.stack([np.linalg.norm(x[corners[:, (i + 1) % 3]] - x[corners[:, (i + 2) % 3]],
+                                    axis=1) for i in range(3)], 1) if len(corners) else np.zeros((0, 3))
 
 
 def corner_adjacency(indices: np.ndarray, particle_count: int) -> tuple[np.ndarray, np.ndarray]:

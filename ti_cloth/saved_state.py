@@ -22,7 +22,8 @@ import numpy as np
 from .errors import StateMismatch
 from .runtime.files import atomic_path
 
-FORMAT = 1      # bump when what a state holds or means changes: older files are refused
+FORMAT = 2      # bump when what a state holds or means changes: older files are refused
+                # (2: a Fabric's torn triangles, face_alive and face_torn_step)
 
 
 def fingerprint(*parts) -> str:

@@ -83,7 +83,7 @@ class Simulation:
         self.cloth = cloth
         self.integrator = make_integrator(integrator)
         if cloth.fabric:
-            _check_fabric_options(self.integrator, tearing)
+            _check_fabric_integrator(self.integrator)
         auto = isinstance(dt, str) and dt == "auto"
         self.dt = None if auto else in_range("dt", dt, limits.DT)
         gravity = as_array("gravity", gravity, np.float64, (3,))
@@ -282,10 +282,13 @@ class Simulation:
         """Why step `bad` was flagged when it was a tear avalanche; None for the default."""
         if self.tearing is None:
             return None
-        torn = int(np.sum(self.spring_torn_step() == bad))
+        springs = int(np.sum(self.spring_torn_step() == bad))
+        faces = int(np.sum(self.face_torn_step() == bad))
+        torn = (f"{springs} springs" if springs else "") + (" and " if springs and faces else "")
+        torn += f"{faces} triangles" if faces else ""
         x = self.positions()
         if torn and np.isfinite(x).all() and np.abs(x).max() <= float(self.state.limit):
-            return (f"{torn} springs tore in that step, stretched more than "
+            return (f"{torn} tore in that step, stretched more than "
                     f"{RUNAWAY_STRAIN:g} rest lengths past the tear strain (a step this large "
                     "explodes and tearing hides it)")
         return None
@@ -382,9 +385,24 @@ class Simulation:
         self._check_runtime()
         return self.state.spring_torn_step.to_numpy()[: self.cloth.spring_count].astype(np.int64)
 
+    def face_alive(self) -> np.ndarray:
+        """(F,) bool: a Fabric's triangles not torn."""
+        self._check_runtime()
+        return self.state.face_alive.to_numpy()[: self.cloth.face_count].astype(bool)
+
+    def face_torn_step(self) -> np.ndarray:
+        """(F,) int: the step in which each Fabric triangle tore, -1 while it is intact."""
+        self._check_runtime()
+        return self.state.face_torn_step.to_numpy()[: self.cloth.face_count].astype(np.int64)
+
     def torn_triangles(self) -> np.ndarray:
-        """Indices of triangles that lost an edge spring (for a renderer to drop)."""
-        return torn_triangles(self.cloth.triangle_edge_spring, ~self.spring_alive())
+        """Indices of mesh triangles that lost an edge spring or, a Fabric's, tore (for a
+        renderer to drop)."""
+        torn = np.zeros(self.cloth.mesh.triangle_count, bool)
+        torn[torn_triangles(self.cloth.triangle_edge_spring, ~self.spring_alive())] = True
+        face = self.cloth.triangle_face
+        torn[face >= 0] |= ~self.face_alive()[face[face >= 0]]
+        return np.flatnonzero(torn)
 
     def pinned(self) -> np.ndarray:
         """(N,) bool: particles the integrator does not move now (the cloth's pins and the
@@ -413,9 +431,9 @@ class Simulation:
 
     def energy(self) -> dict[str, float]:
         """{"kinetic", "gravity", "spring", "spring_stretch", "spring_shear", "spring_bend",
-        "total"} [J]; torn springs hold no energy."""
+        "total"} [J]; torn springs and triangles hold no energy."""
         return energies(self.cloth, self.positions(), self.velocities(), self.forces.gravity,
-                        self.spring_alive())
+                        self.spring_alive(), self.face_alive())
 
     def stable_dt(self) -> float:
         """Predicted largest stable step [s] of this simulation's integrator."""
@@ -426,16 +444,14 @@ class Simulation:
                 f"time={self.time:.6g})")
 
 
-def _check_fabric_options(integrator, tearing) -> None:
-    """A Fabric's elements run on the integrators with runs_fabric, without tearing (it
-    removes springs) for now: refuse the rest by name rather than ignore them."""
+def _check_fabric_integrator(integrator) -> None:
+    """A Fabric's elements run on the integrators with runs_fabric: refuse the rest by name
+    rather than ignore the elements."""
     able = sorted(name for name, cls in INTEGRATORS.items() if cls.runs_fabric)
     require(integrator.runs_fabric, "integrator", integrator.name,
             f"one of {able} for a body made of a Fabric (pbd's stiffness is a fraction of "
             "a correction per iteration, not a modulus: xpbd is pbd with the Fabric's "
             "moduli as compliances)")
-    require(tearing is None, "tearing", tearing,
-            "None for a body made of a Fabric (tearing removes springs; a Fabric has elements)")
 
 
 def _from_positional(positional: tuple, options: dict) -> dict:

@@ -32,6 +32,8 @@ class State:
     spring_alive            1 while a spring exists, 0 once torn (Stuyck 4.5); lives here, not
                             in the Model, so the Model stays immutable and state() starts whole
     spring_torn_step        step index at which each spring tore, -1 if intact
+    face_alive, face_torn_step  the same for a Fabric's triangles (a hinge beside a torn
+                            triangle is gone too)
     first_bad_step          smallest step index whose result held a NaN, an inf or a coordinate
                             beyond position_limit (NO_BAD_STEP if none)
     position_limit          largest |coordinate| [m] the guard accepts: configuration, set here
@@ -59,6 +61,8 @@ class State:
         self.hinge_force = fields.vector(3, real, 4 * max(hinge_count, 1))
         self.hinge_tangent = fields.scalar(real, max(hinge_count, 1))
         self.hinge_rate = fields.scalar(real, max(hinge_count, 1))
+        self.face_alive = fields.scalar(ti.i8, max(face_count, 1))
+        self.face_torn_step = fields.scalar(ti.i32, max(face_count, 1))
         self.first_bad_step = fields.scalar(ti.i32, ())
         self.position_limit = fields.scalar(real, ())
         fields.finalize(self)
@@ -87,7 +91,7 @@ class State:
     # what a step reads from the steps before it (Simulation.save_state)
     SAVED = ("particle_position", "particle_velocity", "particle_prev_position", "particle_force",
              "spring_force", "spring_alive", "spring_torn_step", "altitude_force",
-             "first_bad_step")
+             "face_alive", "face_torn_step", "first_bad_step")
 
     def saved(self) -> dict:
         """The fields of SAVED as numpy arrays, and whether the history is valid."""
@@ -117,6 +121,9 @@ def _reset(state: ti.template(), rest_position: ti.template(), position_limit: t
     for s in state.spring_alive:
         state.spring_alive[s] = ti.i8(1)
         state.spring_torn_step[s] = -1
+    for f in state.face_alive:
+        state.face_alive[f] = ti.i8(1)
+        state.face_torn_step[f] = -1
     state.first_bad_step[None] = NO_BAD_STEP
     state.position_limit[None] = ti.cast(position_limit, state.position_limit.dtype)
 

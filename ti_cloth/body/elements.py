@@ -93,14 +93,17 @@ def green_strains(positions, triangles, gradients) -> np.ndarray:
                      np.sum(a * b, 1)], 1)
 
 
-def membrane_energy(cloth, positions: np.ndarray) -> float:
-    """sum over triangles of A/2 e^T C e [J] (module doc)."""
+def membrane_energy(cloth, positions: np.ndarray, alive: np.ndarray | None = None) -> float:
+    """sum over triangles (those `alive`, (F,) bool, when given: not torn) of A/2 e^T C e [J]
+    (module doc)."""
     if not cloth.face_count:
         return 0.0
     e = green_strains(positions, cloth.face_indices, cloth.face_gradient)
     c11, c12, c22, c33 = cloth.face_moduli.T
     density = 0.5 * (c11 * e[:, 0] ** 2 + 2 * c12 * e[:, 0] * e[:, 1] + c22 * e[:, 1] ** 2
                      + c33 * e[:, 2] ** 2)
+    if alive is not None:
+        density = density * alive
     return float(np.sum(cloth.face_area * density))
 
 
@@ -209,11 +212,15 @@ def face_tangents(cloth, values: np.ndarray) -> np.ndarray:
     return padded[cloth.face_hinge]                    # face_hinge = -1 reads the 0 at the end
 
 
-def bending_energy(cloth, positions: np.ndarray) -> float:
-    """sum over triangles of 1/2 dt^T B dt [J] (module doc)."""
+def bending_energy(cloth, positions: np.ndarray, alive: np.ndarray | None = None) -> float:
+    """sum over triangles of 1/2 dt^T B dt [J] (module doc); with `alive` ((F,) bool: not
+    torn), a torn triangle holds none and a hinge beside one has dt = 0 (it is gone)."""
     if not cloth.hinge_count:
         return 0.0
-    dt = face_tangents(cloth, hinge_tangents(cloth, positions))
+    dt = hinge_tangents(cloth, positions)
+    if alive is not None:
+        dt = dt * alive[cloth.hinge_faces // 3].all(axis=1)
+    dt = face_tangents(cloth, dt)
     return float(0.5 * np.einsum("ti,tij,tj->", dt, cloth.face_bending, dt))
 
 

@@ -199,6 +199,7 @@ class Cloth:
       spring_damping     (S,) [kg/s]
       spring_kind        (S,) SpringKind values
       triangle_edge_spring (T, 3): spring along edge (t0,t1), (t1,t2), (t2,t0), or -1
+      triangle_face      (T,): the Fabric triangle (face) each mesh triangle is, or -1
       altitude_indices   (A, 4) int: Selle et al. 2008's altitude springs, a particle p and
                          the face (a, b, c) opposite it in a tetrahedron (altitude_springs)
       altitude_rest_length (A,) [m]: rest altitude of p over its face, > 0
@@ -315,6 +316,8 @@ class Cloth:
             moduli, flexural, damping = (0.0,) * 4, (0.0,) * 3, 0.0
         count = len(triangles)
         x = self.particle_position
+        self.triangle_face = (np.arange(count) if fabric is not None
+                              else np.full(len(self.mesh.triangles), -1))
         self.face_indices = triangles
         self.face_gradient, self.face_area = elements.material_frames(
             x, triangles, elements.warp_directions(self.mesh, warp))
@@ -332,7 +335,7 @@ class Cloth:
 
     def _freeze(self) -> None:
         for name in ("particle_mass", "pinned", "hem", "ghost", "spring_indices", "spring_kind", "spring_rest_length",
-                     "spring_stiffness", "spring_damping", "triangle_edge_spring", "altitude_indices",
+                     "spring_stiffness", "spring_damping", "triangle_edge_spring", "triangle_face", "altitude_indices",
                      "altitude_rest_length", "altitude_stiffness", "altitude_damping") + self.ELEMENT_ARRAYS:
             getattr(self, name).flags.writeable = False
 
@@ -384,6 +387,7 @@ class Cloth:
         body.face_indices = joined("face_indices", particle_offsets)
         body.hinge_indices = joined("hinge_indices", particle_offsets)
         body.face_hinge = joined("face_hinge", hinge_offsets)
+        body.triangle_face = joined("triangle_face", face_offsets)
         body.hinge_faces = joined("hinge_faces", 3 * face_offsets)
         body.body_offsets = tuple(int(o) for o in particle_offsets)
         body._freeze()

@@ -139,12 +139,16 @@ def _at(model: ti.template(), state: ti.template(), i, rest_shape):
 
 @ti.func
 def torn_triangle(stage: ti.template(), state: ti.template(), t):
-    """Whether triangle t lost one of its edge springs (tearing): it no longer collides."""
+    """Whether triangle t lost one of its edge springs or, a Fabric's, tore (tearing): it no
+    longer collides."""
     springs = stage.triangle_spring[t]
     torn = False
     for k in ti.static(range(3)):
         if springs[k] >= 0 and state.spring_alive[springs[k]] == 0:
             torn = True
+    face = stage.triangle_face[t]
+    if face >= 0 and state.face_alive[ti.max(face, 0)] == 0:
+        torn = True
     return torn
 
 

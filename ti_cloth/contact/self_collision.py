@@ -146,6 +146,7 @@ class SelfContact:
         self.triangles = fields.vector(3, ti.i32, max(len(triangles), 1))
         self.edges = fields.vector(2, ti.i32, max(len(edges), 1))
         self.triangle_spring = fields.vector(3, ti.i32, max(len(triangles), 1))
+        self.triangle_face = fields.scalar(ti.i32, max(len(triangles), 1))
         self.edge_spring = fields.scalar(ti.i32, max(len(edges), 1))
         self.step_start = fields.vector(3, real, n)
         self.before = fields.vector(3, real, n)
@@ -181,7 +182,7 @@ class SelfContact:
         self.forget()
         if self.triangle_count:
             springs = np.asarray(cloth.triangle_edge_spring, np.int64).reshape(-1, 3)
-            upload(((self.triangle_spring, springs),
+            upload(((self.triangle_spring, springs), (self.triangle_face, cloth.triangle_face),
                     (self.edge_spring, _edge_springs(self.edge_rows, cloth.mesh.triangles,
                                                      springs, self.particle_count))))
 

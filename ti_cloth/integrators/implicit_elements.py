@@ -99,6 +99,10 @@ def linearise_face(model: ti.template(), state: ti.template(), forces: ti.templa
     e22 = 0.5 * (weft.dot(weft) - 1.0)
     s = _projected_stress(c[0] * e11 + c[1] * e22, c[1] * e11 + c[2] * e22,
                           c[3] * warp.dot(weft))
+    if ti.static(forces.tearable):
+        if state.face_alive[f] == 0:         # torn: no stiffness (F = 0 zeroes J and S)
+            warp, weft = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
+            s = ti.Vector([0.0, 0.0, 0.0])
     ws.face_warp[f] = warp
     ws.face_weft[f] = weft
     ws.face_stress[f] = s

@@ -64,13 +64,15 @@ def clear_face(model: ti.template(), state: ti.template(), forces: ti.template()
 @ti.func
 def solve_membrane(model: ti.template(), state: ti.template(), forces: ti.template(),
                    work: ti.template(), stages: ti.template(), t, now: ti.template()):
-    xpbd_membrane(model, state, work.membrane_colours.order[t], work.membrane, now.dt)
+    xpbd_membrane(model, state, work.membrane_colours.order[t], work.membrane, now.dt,
+                  forces.tearable)
 
 
 @ti.func
 def solve_bending(model: ti.template(), state: ti.template(), forces: ti.template(),
                   work: ti.template(), stages: ti.template(), t, now: ti.template()):
-    xpbd_bending(model, state, work.bending_colours.order[t], work.bending, now.dt)
+    xpbd_bending(model, state, work.bending_colours.order[t], work.bending, now.dt,
+                 forces.tearable)
 
 
 @ti.func

@@ -19,7 +19,7 @@ common particle), a Gauss-Seidel sweep in a fixed order, deterministic.
 
 import taichi as ti
 
-from .elements import face_columns, hinge_gradient
+from .elements import face_columns, hinge_gradient, hinge_intact
 
 
 @ti.func
@@ -36,10 +36,26 @@ def _multiplier_step(stiffness, coupling, residual, multiplier, gamma):
 
 
 @ti.func
-def xpbd_membrane(model: ti.template(), state: ti.template(), f, multiplier: ti.template(), dt):
+def xpbd_membrane(model: ti.template(), state: ti.template(), f, multiplier: ti.template(), dt,
+                  tearable: ti.template()):
     """XPBD for triangle f's strain, its multipliers in multiplier[f]. The strain's gradient
     on corner c with grad lambda_c = (g0, g1) has rows g0 F1, g1 F2, g1 F1 + g0 F2 (F1, F2
-    F's columns), so J W J^T needs only sums of w_c g_c g_c^T."""
+    F's columns), so J W J^T needs only sums of w_c g_c g_c^T. A torn triangle is no
+    constraint."""
+    if _intact(state, f, tearable):
+        _membrane(model, state, f, multiplier, dt)
+
+
+@ti.func
+def _intact(state: ti.template(), f, tearable: ti.template()):
+    intact = True
+    if ti.static(tearable):
+        intact = state.face_alive[f] != 0
+    return intact
+
+
+@ti.func
+def _membrane(model: ti.template(), state: ti.template(), f, multiplier: ti.template(), dt):
     corner = model.face_indices[f]
     g = model.face_gradient[f]
     warp, weft = face_columns(model, state.particle_position, f)
@@ -104,7 +120,8 @@ def _moved(state: ti.template(), p):
 
 
 @ti.func
-def _hinge_term(model: ti.template(), state: ti.template(), f, i: ti.template()):
+def _hinge_term(model: ti.template(), state: ti.template(), f, i: ti.template(),
+                tearable: ti.template()):
     """The hinge across triangle f's edge i: (dt, grad t on f's corners 0, 1, 2, on the other
     corner, that corner's particle, grad t . (x - x_n)); all 0 across a boundary edge (the
     hinge is then hinge 0 of the model, read, never moved) or for a hinge without an angle."""
@@ -112,6 +129,9 @@ def _hinge_term(model: ti.template(), state: ti.template(), f, i: ti.template())
     hinge = model.face_hinge[f][i]
     e = ti.max(hinge, 0)
     valid = ti.cast(hinge >= 0, float)
+    if ti.static(tearable):
+        if not hinge_intact(model, state, e):
+            valid = 0.0
     t, g0, g1, g2, other_grad, other = _hinge_on_face(model, state.particle_position, f, e)
     if other_grad.norm_sqr() == 0:      # no angle (physics/elements.hinge_angles)
         t = model.hinge_rest_tangent[e]
@@ -122,14 +142,23 @@ def _hinge_term(model: ti.template(), state: ti.template(), f, i: ti.template())
 
 
 @ti.func
-def xpbd_bending(model: ti.template(), state: ti.template(), f, multiplier: ti.template(), dt):
+def xpbd_bending(model: ti.template(), state: ti.template(), f, multiplier: ti.template(), dt,
+                 tearable: ti.template()):
     """XPBD for triangle f's bending, its multipliers in multiplier[f]: the constraint is the
-    tangents of the hinges across its three edges (0 and no gradient across a boundary)."""
+    tangents of the hinges across its three edges (0 and no gradient across a boundary or,
+    tearing, beside a torn triangle)."""
+    if _intact(state, f, tearable):
+        _bending(model, state, f, multiplier, dt, tearable)
+
+
+@ti.func
+def _bending(model: ti.template(), state: ti.template(), f, multiplier: ti.template(), dt,
+             tearable: ti.template()):
     face = model.face_indices[f]
     hinge = model.face_hinge[f]
-    t0, g00, g10, g20, o0, p0, m0 = _hinge_term(model, state, f, 0)
-    t1, g01, g11, g21, o1, p1, m1 = _hinge_term(model, state, f, 1)
-    t2, g02, g12, g22, o2, p2, m2 = _hinge_term(model, state, f, 2)
+    t0, g00, g10, g20, o0, p0, m0 = _hinge_term(model, state, f, 0, tearable)
+    t1, g01, g11, g21, o1, p1, m1 = _hinge_term(model, state, f, 1, tearable)
+    t2, g02, g12, g22, o2, p2, m2 = _hinge_term(model, state, f, 2, tearable)
     g0s, g1s, g2s = [g00, g01, g02], [g10, g11, g12], [g20, g21, g22]
     others, other_grads = [p0, p1, p2], [o0, o1, o2]
     w0 = model.particle_inv_mass[face[0]]

@@ -58,6 +58,9 @@ def membrane_forces(model: ti.template(), state: ti.template(), forces: ti.templ
     s22 = c[1] * e11 + c[2] * e22
     s12 = c[3] * shear
     area = model.face_area[f]
+    if ti.static(forces.tearable):
+        if state.face_alive[f] == 0:         # torn: no membrane
+            area = 0.0
     store_corners(model, state.face_force, f, -area * (s11 * warp + s12 * weft),   # -A (F S)
                   -area * (s12 * warp + s22 * weft))
 
@@ -113,13 +116,24 @@ def hinge_gradient(model: ti.template(), positions: ti.template(), e):
 
 
 @ti.func
+def hinge_intact(model: ti.template(), state: ti.template(), e):
+    """Whether both triangles of hinge e are intact (a torn one takes the hinge with it)."""
+    faces = model.hinge_faces[e]
+    return state.face_alive[faces[0] // 3] != 0 and state.face_alive[faces[1] // 3] != 0
+
+
+@ti.func
 def hinge_angles(model: ti.template(), state: ti.template(), forces: ti.template(),
                  work: ti.template(), stages: ti.template(), e, now: ti.template()):
     """Hinge e: hinge_tangent = t - t_rest, hinge_rate = dt/dt, and the gradient of t on each
     corner into hinge_force[4 e + k] (hinge_forces scales it); all zero for a hinge without
-    an angle."""
+    an angle or (tearing) beside a torn triangle."""
     corner = model.hinge_indices[e]
     t, grad_a, grad_b, grad_c, grad_d = hinge_gradient(model, state.particle_position, e)
+    if ti.static(forces.tearable):
+        if not hinge_intact(model, state, e):
+            zero = ti.Vector([0.0, 0.0, 0.0])
+            grad_a, grad_b, grad_c, grad_d = zero, zero, zero, zero
     strain, rate = 0.0, 0.0
     if grad_c.norm_sqr() > 0:
         strain = t - model.hinge_rest_tangent[e]

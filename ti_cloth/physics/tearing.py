@@ -1,4 +1,6 @@
-"""Tearable cloth (Stuyck 4.5): springs stretched too far are removed."""
+"""Tearable cloth (Stuyck 4.5): springs stretched too far are removed; so are a Fabric's
+triangles with an edge stretched too far, and with them the bending of the hinges beside
+them (physics/elements.py reads face_alive)."""
 
 
 import warnings
@@ -38,10 +40,16 @@ class Tearing:
         return self.strain
 
     def phases(self, model, forces, work) -> tuple:
-        """The tearing stage as phases (runtime/plan.py): every spring's test (tear_spring);
+        """The tearing stage as phases (runtime/plan.py): every spring's and every Fabric
+        triangle's test (tear_spring, tear_face);
         `work` is this Tearing (its strain a compile-time constant of the pooled copy a
         simulation passes: pool.py)."""
-        return (Phase(Loop(model.spring_count, tear_spring)),)
+        loops = ()
+        if model.spring_count:
+            loops += (Loop(model.spring_count, tear_spring),)
+        if model.face_count:
+            loops += (Loop(model.face_count, tear_face),)
+        return (Phase(*loops),)
 
     def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
         """The tearing stage of a step (simulation.STEP_ORDER), a launch of its phases."""
@@ -71,6 +79,27 @@ def tear_spring(model: ti.template(), state: ti.template(), forces: ti.template(
             state.spring_alive[s] = ti.i8(0)
             state.spring_torn_step[s] = now.step
             if length > (1.0 + tearing.strain + RUNAWAY_STRAIN) * rest:
+                ti.atomic_min(state.first_bad_step[None], now.step)
+
+
+@ti.func
+def tear_face(model: ti.template(), state: ti.template(), forces: ti.template(),
+              tearing: ti.template(), stages: ti.template(), f, now: ti.template()):
+    """Remove a Fabric's triangle f if intact and one of its edges is longer than
+    (1 + strain) x its rest length; record the step; flag a runaway as tear_spring does."""
+    if state.face_alive[f] != 0:
+        corner = model.face_indices[f]
+        rest = model.face_edge_rest[f]
+        worst = 0.0
+        for i in ti.static(range(3)):
+            length = (state.particle_position[corner[(i + 1) % 3]]
+                      - state.particle_position[corner[(i + 2) % 3]]).norm()
+            if rest[i] > 0:
+                worst = ti.max(worst, length / rest[i] - 1.0)
+        if worst > tearing.strain:
+            state.face_alive[f] = ti.i8(0)
+            state.face_torn_step[f] = now.step
+            if worst > tearing.strain + RUNAWAY_STRAIN:
                 ti.atomic_min(state.first_bad_step[None], now.step)
 
 

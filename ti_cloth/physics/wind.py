@@ -102,6 +102,7 @@ class WindField:
         fields = backend.FieldGroup()
         self.triangle = fields.vector(3, ti.i32, self.triangle_count)
         self.triangle_edge_spring = fields.vector(3, ti.i32, self.triangle_count)
+        self.triangle_face = fields.scalar(ti.i32, self.triangle_count)
         self.triangle_force = fields.vector(3, real, self.triangle_count)
         self.particle_wind_force = fields.vector(3, real, cloth.particle_count)
         self.particle_triangle_start = fields.scalar(ti.i32, cloth.particle_count + 1)
@@ -134,6 +135,7 @@ class WindField:
         wave, direction, phase = wind.turbulence_modes()
         upload(((self.triangle, triangles), (self.particle_triangle_start, start),
                 (self.triangle_edge_spring, cloth.triangle_edge_spring),
+                (self.triangle_face, cloth.triangle_face),
                 (self.adjacency_triangle, adjacent), (self.mode_wave, wave),
                 (self.mode_direction, direction), (self.mode_phase, phase)))
         self.set_time(0.0)
@@ -193,6 +195,9 @@ def wind_on_triangle(model: ti.template(), state: ti.template(), forces: ti.temp
             s = wind.triangle_edge_spring[t][e]
             if s >= 0 and state.spring_alive[s] == 0:
                 intact = False
+        face = wind.triangle_face[t]
+        if face >= 0 and state.face_alive[ti.max(face, 0)] == 0:     # a torn Fabric triangle
+            intact = False
     f = ti.Vector([0.0, 0.0, 0.0])
     if intact and area > 0 and speed > 0:
         n = area_vector / area
