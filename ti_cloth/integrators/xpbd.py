@@ -107,9 +107,9 @@ class XPBD(Integrator):
 
     Unlike pbd, the result does not depend on the iteration count once converged: it is the
     backward Euler step of the same Hookean springs (compliance 1/k) the force-based
-    integrators use, with axial damping kd; for a Fabric, of its membrane and bending
-    energies with their Rayleigh damping (a pass sweeps the triangles' strains, then their
-    bending, element_constraints.py). On a body with relative damping (Stuyck eq. 4.7)
+    integrators use, with axial damping kd; for a Fabric, nearly that of its membrane and
+    bending energies with their Rayleigh damping (a pass sweeps the triangles' strains, then
+    their bending; what XPBD leaves out there: element_constraints.py). On a body with relative damping (Stuyck eq. 4.7)
     the constraints are undamped and one pass of implicit relative damping on the new
     velocities follows (constraints.damp: each spring's backward Euler step in turn,
     stable at any h); positions keep their solve, as in position-based damping (Mueller et al.

@@ -1,8 +1,10 @@
 """A Fabric's elements as XPBD constraints (Macklin, Mueller & Chentanez 2016), each a vector
 of three: a triangle's Green strain e = (E11, E22, 2 E12) with compliance (A C)^-1, and its
 three hinges' tangents dt = t - t_rest with compliance B^-1 (body/elements.py's energies
-1/2 A e^T C e and 1/2 dt^T B dt are their elastic potentials, so at convergence a step is the
-backward Euler step of the same energies the force-based integrators use).
+1/2 A e^T C e and 1/2 dt^T B dt are their elastic potentials). Converged, a step is the
+backward Euler step of those energies except for the change of the constraints' gradients
+within the step, which XPBD leaves out (Macklin et al. 2016, section 4): the rest state is
+O(h) from the energies' (tests/test_fabric.py measures it).
 
 For a constraint vector c with Jacobian J, stiffness K = alpha^-1 and the multipliers lambda,
 XPBD's update (Macklin et al. 2016 eq. 18, with damping as their eq. 26) is
