@@ -130,12 +130,7 @@ def test_every_launch_plan_takes_the_same_steps(threads, integrator, feature, bo
     assert sim.many_steps is not None
     assert sim.many_steps.stages.collides_on_move == (
         "colliders" in kwargs and integrator in FUSED and "strain_limit" not in kwargs)
-    # a fabric's implicit and xpbd steps compile for 10-20 s per plan: the launch per phase
-    # and the team runner, on one worker and on two (the serial plans run the same run_team
-    # code with a team of one, compared on sheets above)
-    plans = (("launch per phase", "pool of one", "team")
-             if body == "fabric" and integrator in ("implicit_euler", "xpbd") else PLANS)
-    for plan in plans:                                    # restart: the same start, kernels kept
+    for plan in PLANS:                                    # restart: the same start, kernels kept
         sim.restart()
         sim.set_positions(start)
         sim.set_velocities(np.tile(THROW, (cloth.particle_count, 1)))
@@ -151,7 +146,7 @@ def test_every_launch_plan_takes_the_same_steps(threads, integrator, feature, bo
     # slices (team.py): thread counts never change a bit.
     np.testing.assert_array_equal(runs[-2][0], runs[-1][0])
     np.testing.assert_array_equal(runs[-2][1], runs[-1][1])
-    for plan, (x, v, torn, n) in zip(plans[1:], runs[1:]):
+    for plan, (x, v, torn, n) in zip(PLANS[1:], runs[1:]):
         print(f"{integrator}, {feature}, {plan}: moved {moved:.3g} m, torn {len(torn)} "
               f"springs, max |dx| against a launch per stage {np.abs(x - x0).max()}")
         assert moved > 1e-3 and n == n0 == steps and np.array_equal(torn, torn0)

@@ -62,9 +62,12 @@ def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None,
         raise ValueError(f"precision must be one of {sorted(PRECISIONS)}, got {precision!r}")
     if threads is not None:
         count("threads", threads, limits.THREADS)
+    # cfg_optimization off: Taichi's control-flow-graph passes (store forwarding, dead
+    # stores) took most of the compile of big kernels (a Fabric's implicit Euler step 16.5 s,
+    # 4.1 s without) for no measured change in steps/s (docs/performance.md)
     options = dict(arch=getattr(ti, ARCHS[arch]), default_fp=PRECISIONS[precision],
                    default_ip=ti.i32, random_seed=0, debug=debug, log_level=ti.WARN,
-                   fast_math=False)
+                   fast_math=False, cfg_optimization=False)
     if threads is not None:
         options["cpu_max_num_threads"] = threads
     for user in list(_closed_by_init):    # dead ones too, until the cycle collector runs
