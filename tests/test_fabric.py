@@ -294,6 +294,8 @@ def test_every_integrator_settles_to_the_same_equilibrium():
     cloth = tc.Cloth(tc.grid_mesh(3, 3, (0.1, 0.1)), fabric)
     with pytest.raises(ValueError, match="integrator must be one of .* Fabric .*xpbd is pbd.*'pbd'"):
         tc.Simulation(cloth, integrator="pbd")
+    with pytest.raises(ValueError, match="strain_limit must be None when a body made of a Fabric"):
+        tc.Simulation(cloth, tearing=0.3, strain_limit=tc.StrainLimit())
 
 
 def test_an_implicit_step_solves_backward_euler_with_the_elements_hessian():

@@ -84,6 +84,9 @@ class Simulation:
         self.integrator = make_integrator(integrator)
         if cloth.fabric:
             _check_fabric_integrator(self.integrator)
+            require(tearing is None or strain_limit is None, "strain_limit", strain_limit,
+                    "None when a body made of a Fabric can tear (tearing is set): the limit "
+                    "relaxes triangle edges and would hold a torn crack shut")
         auto = isinstance(dt, str) and dt == "auto"
         self.dt = None if auto else in_range("dt", dt, limits.DT)
         gravity = as_array("gravity", gravity, np.float64, (3,))
