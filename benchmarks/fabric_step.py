@@ -23,7 +23,7 @@ import argparse
 
 import numpy as np
 import peers
-from throughput import NEWTON_CHECKED, median_rate
+from throughput import NEWTON_CHECKED, NewtonCloth, median_rate
 
 import ti_cloth as tc
 
@@ -35,15 +35,16 @@ def bodies(n: int) -> dict[str, tc.Cloth]:
             "fabric": tc.Cloth(mesh, tc.Fabric.preset("denim"), pinned=pinned)}
 
 
-class NewtonFabric:
-    """Newton's semi-implicit cloth (triangle FEM, dihedral bending) on `cloth`'s mesh."""
+class NewtonFabric(NewtonCloth):
+    """Newton's semi-implicit cloth (triangle FEM, dihedral bending) on `cloth`'s mesh;
+    stepped and read as throughput.py's NewtonCloth."""
 
     def __init__(self, cloth: tc.Cloth, fabric: tc.Fabric, dt: float):
         peers.require("newton", NEWTON_CHECKED, "--newton")
         import newton
         import warp as wp
         wp.config.quiet = True
-        self.wp, self.dt = wp, dt
+        self.wp, self.device, self.dt = wp, "cpu", dt
         builder = newton.ModelBuilder(up_axis=newton.Axis.Y, gravity=(0.0, -9.81, 0.0))
         stretch = float(np.mean(fabric.stretch))
         builder.add_cloth_mesh(pos=(0.0, 0.0, 0.0), rot=wp.quat_identity(), scale=1.0,
@@ -60,17 +61,6 @@ class NewtonFabric:
         self.solver = newton.solvers.SolverSemiImplicit(self.model, enable_tri_contact=False)
         self.states = [self.model.state(), self.model.state()]
         self.control = self.model.control()
-
-    def step(self, steps: int) -> None:
-        for _ in range(steps):
-            a, b = self.states
-            a.clear_forces()
-            self.solver.step(a, b, self.control, None, self.dt)
-            self.states.reverse()
-
-    def velocities(self):
-        self.wp.synchronize_device("cpu")
-        return self.states[0].particle_qd.numpy()
 
 
 def main() -> None:
@@ -98,7 +88,7 @@ def main() -> None:
                 f"{rates['springs'] / rates['fabric']:>22.2f}")
         if args.newton:
             peer = NewtonFabric(cloths["fabric"], tc.Fabric.preset("denim"), dt)
-            rate = median_rate(peer.step, peer.velocities, args.seconds, args.repeats)
+            rate = median_rate(peer.step, peer.sync, args.seconds, args.repeats)
             finite = "" if np.isfinite(peer.velocities()).all() else " (diverged)"
             line += f" {rate:>15.1f} {rates['fabric'] / rate:>16.2f}{finite}"
         print(line, flush=True)
