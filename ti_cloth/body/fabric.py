@@ -106,26 +106,46 @@ class Fabric:
 
 # Measured fabrics. Source: H. Wang, J. F. O'Brien, R. Ramamoorthi, "Data-driven elastic models
 # for cloth: modeling and measurement", ACM Trans. Graph. 30(4), 2011 (SIGGRAPH), as the
-# database is distributed with ArcSim (materials/<name>.json). From each sample: its density
-# [kg/m^2]; stretch = (c11, c22) of the lowest-strain row of its piecewise-linear stretching
-# table [N/m]; shear = that row's c33 [N/m]; poisson = c12 / c22 of that row (0 where the fit
-# gave c12 < 0); bending = the lowest-curvature samples of its 0 and 90 degree rows [N m]
-# (warp = the sample's first axis). The tables are piecewise linear: these are the
-# small-strain, small-curvature moduli, which is what a drape and a cantilever test probe.
+# database is distributed with ArcSim (materials/<name>.json; its README gives each sample's
+# use and fibres, quoted below). From each sample: its density [kg/m^2]; the lowest-strain row
+# (c11, c12, c22, c33) of its piecewise-linear stretching table [N/m] read as this law's
+# (C11, C12, C22, C33) (Fabric.membrane): stretch = (c11 - c12^2 / c22, c22 - c12^2 / c11),
+# poisson = c12 / c22 (0 where the fit gave c12 < 0), shear = c33; bending = the
+# lowest-curvature samples of its 0 and 90 degree rows [N m] (warp = the sample's first axis).
+# The tables are piecewise linear: these are the small-strain, small-curvature moduli, which is
+# what a drape and a cantilever test probe. ArcSim itself doubles the stretching rows and bends
+# with k l^2 theta^2 / (8 (A1 + A2)) per edge (a flexural rigidity of k / 4): the paper's own
+# units could not be checked here, and these presets read the tables as the moduli
+# (docs/fabrics.md).
 PRESETS: dict[str, dict] = {
-    # "11oz-black-denim": a cotton twill, 324 g/m^2
-    "denim": dict(density=0.324, stretch=(205.35, 1013.89), shear=53.39, poisson=0.0101,
+    # "11oz-black-denim": jeans, 99% cotton 1% spandex, 324 g/m^2
+    "denim": dict(density=0.324, stretch=(205.25, 1013.38), shear=53.39, poisson=0.01009,
                   bending=(64.20e-6, 96.95e-6)),
-    # "gray-interlock": an interlock knit, 187 g/m^2
+    # "royal-target": pants, 65% cotton 35% polyester, 220 g/m^2
+    "royal_target": dict(density=0.220, stretch=(2016.51, 2034.93), shear=104.76,
+                         poisson=0.004506, bending=(125.41e-6, 125.41e-6)),
+    # "white-dots-on-blk": tablecloth, 100% polyester, 128 g/m^2
+    "dots": dict(density=0.128, stretch=(2002.09, 2027.49), shear=19.19, poisson=0.0001705,
+                 bending=(51.71e-6, 31.28e-6)),
+    # "pink-ribbon-brown": blanket, 100% polyester, 228 g/m^2
+    "ribbon": dict(density=0.228, stretch=(105.59, 170.63), shear=30.25, poisson=0.4331,
+                   bending=(117.07e-6, 59.77e-6)),
+    # "tango-red-jet-set": jacket, 100% polyester, 113 g/m^2
+    "jet_set": dict(density=0.113, stretch=(25.82, 102.78), shear=14.31, poisson=0.3172,
+                    bending=(14.29e-6, 20.35e-6)),
+    # "gray-interlock": t-shirt, an interlock knit, 60% cotton 40% polyester, 187 g/m^2
     "interlock": dict(density=0.187, stretch=(16.59, 34.48), shear=36.86, poisson=0.0,
                       bending=(23.19e-6, 14.27e-6)),
-    # "tango-red-jet-set": a light knit, 113 g/m^2
-    "jet_set": dict(density=0.113, stretch=(43.07, 171.42), shear=14.31, poisson=0.317,
-                    bending=(14.29e-6, 20.35e-6)),
-    # "white-dots-on-blk": a light woven, 128 g/m^2
-    "dots": dict(density=0.128, stretch=(2002.09, 2027.49), shear=19.19, poisson=0.00017,
-                 bending=(51.71e-6, 31.28e-6)),
-    # "royal-target": a woven suiting, 220 g/m^2
-    "royal_target": dict(density=0.220, stretch=(2016.55, 2034.98), shear=104.76,
-                         poisson=0.0045, bending=(125.41e-6, 125.41e-6)),
+    # "ivory-rib-knit": underwear, 95% cotton 5% spandex, 276 g/m^2
+    "rib_knit": dict(density=0.276, stretch=(42.87, 65.17), shear=83.18, poisson=0.0,
+                     bending=(46.24e-6, 32.24e-6)),
+    # "navy-sparkle-sweat": sweater, 96% polyester 4% spandex, 224 g/m^2
+    "sweat": dict(density=0.224, stretch=(12.49, 3.27), shear=17.62, poisson=0.0,
+                  bending=(59.47e-6, 45.63e-6)),
+    # "camel-ponte-roma": jacket, 60% polyester 40% rayon, 284 g/m^2
+    "ponte_roma": dict(density=0.284, stretch=(31.15, 44.03), shear=31.90, poisson=0.0,
+                       bending=(36.35e-6, 37.16e-6)),
+    # "white-swim-solid": swimsuit, 87% nylon 13% spandex, 204 g/m^2
+    "swim": dict(density=0.204, stretch=(47.52, 103.64), shear=60.77, poisson=0.06533,
+                 bending=(60.24e-6, 51.02e-6)),
 }

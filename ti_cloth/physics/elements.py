@@ -9,6 +9,7 @@ tangent t = tan(theta / 2), rate and gradient), every triangle's moments dE/dt_i
 hinge's corner forces -(M_1 + M_2) grad t from the moments of its two triangles.
 """
 
+import numpy as np
 import taichi as ti
 
 from ..body.elements import HALF_ANGLE_LIMIT
@@ -66,15 +67,19 @@ def membrane_forces(model: ti.template(), state: ti.template(), forces: ti.templ
 
 
 @ti.func
-def _tangent(theta):
-    """(t, dt/dtheta) of t = tan(theta / 2), continued along its tangent line past
-    HALF_ANGLE_LIMIT."""
-    half = 0.5 * theta
+def _tangent(sine, cosine, radius):
+    """(t, dt/dtheta) of t = tan(theta / 2) for the angle theta whose sine and cosine are
+    (sine, cosine) / radius (radius > 0): sine / (radius + cosine), the half-angle identity,
+    without a trigonometric call; continued along its tangent line past HALF_ANGLE_LIMIT, where
+    theta nears pi and the identity would lose its digits."""
     limit = ti.static(HALF_ANGLE_LIMIT)
-    t = ti.tan(half)
-    slope = 0.5 / (ti.cos(half) ** 2)
-    if ti.abs(half) > limit:
+    t, slope = 0.0, 0.0
+    if cosine > ti.static(np.cos(2 * HALF_ANGLE_LIMIT)) * radius:
+        t = sine / (radius + cosine)
+        slope = 0.5 * (1.0 + t * t)             # d tan(theta / 2) / d theta
+    else:
         edge_slope = 0.5 / (ti.cos(limit) ** 2)
+        half = 0.5 * ti.atan2(sine, cosine)
         sign = 1.0 if half > 0 else -1.0
         t = sign * (ti.tan(limit) + 2.0 * edge_slope * (ti.abs(half) - limit))
         slope = edge_slope
@@ -85,8 +90,10 @@ def _tangent(theta):
 def hinge_gradient(model: ti.template(), positions: ti.template(), e):
     """(t, grad t on corners a, b, c, d) of hinge e [a, b, c, d] at `positions`, t = tan(theta /
     2) continued (_tangent) of its dihedral angle; the angle and its gradient: body/elements.py
-    (Tamstorf & Grinspun 2013, eq. 8). A hinge with an edge or face of zero length or area
-    has no angle: t and its gradient 0."""
+    (Tamstorf & Grinspun 2013, eq. 8), with the face normals left unnormalised (m1 = |m1| n1):
+    theta's sine and cosine are (m1 x m2) . e / |e| and m1 . m2 over |m1| |m2| (two square
+    roots and four divisions a hinge). A hinge with an edge or face of zero length or area has
+    no angle: t and its gradient 0."""
     corner = model.hinge_indices[e]
     xa = positions[corner[0]]
     edge = positions[corner[1]] - xa
@@ -95,21 +102,20 @@ def hinge_gradient(model: ti.template(), positions: ti.template(), e):
     m1 = edge.cross(to_c)
     m2 = to_d.cross(edge)
     length2 = edge.dot(edge)
-    area1 = m1.norm()
-    area2 = m2.norm()
+    area1 = m1.dot(m1)                          # |m| = twice the triangle's area, squared
+    area2 = m2.dot(m2)
     zero = ti.Vector([0.0, 0.0, 0.0])
     grad_a, grad_b, grad_c, grad_d = zero, zero, zero, zero
     t = 0.0
     if length2 > 0 and area1 > 0 and area2 > 0:
         length = ti.sqrt(length2)
-        n1 = m1 / area1
-        n2 = m2 / area2
-        theta = ti.atan2(n1.cross(n2).dot(edge) / length, n1.dot(n2))
-        t, slope = _tangent(theta)
-        grad_c = -(slope * length / area1) * n1
-        grad_d = -(slope * length / area2) * n2
-        s1 = to_c.dot(edge) / length2
-        s2 = to_d.dot(edge) / length2
+        inverse = 1.0 / length
+        t, slope = _tangent(m1.cross(m2).dot(edge) * inverse, m1.dot(m2),
+                            ti.sqrt(area1 * area2))
+        grad_c = -(slope * length / area1) * m1
+        grad_d = -(slope * length / area2) * m2
+        s1 = to_c.dot(edge) * inverse * inverse
+        s2 = to_d.dot(edge) * inverse * inverse
         grad_a = -(1.0 - s1) * grad_c - (1.0 - s2) * grad_d
         grad_b = -s1 * grad_c - s2 * grad_d
     return t, grad_a, grad_b, grad_c, grad_d
