@@ -505,3 +505,64 @@ def test_a_saved_fabric_state_resumes_bit_for_bit(tmp_path):
     second.step(100)
     assert np.abs(first.positions() - cloth.particle_position).max() > 1e-3
     np.testing.assert_array_equal(first.positions(), second.positions())
+
+
+def test_the_warp_follows_the_meshs_texture_coordinates():
+    """warp="uv" on an irregular sheet whose uvs are its plane coordinates turned by 30
+    degrees: every triangle's material frame is the one a warp direction at 30 degrees gives
+    (d x / d u of a linear map is the same everywhere); on a cylinder with u = R phi, the warp
+    is each triangle's circumferential chord, and a hinge-free strip without uvs is refused."""
+    mesh = jittered(tc.grid_mesh(7, 9, (0.3, 0.2), plane="xz"), 0.3)
+    angle = np.radians(30.0)
+    turn = np.array([[np.cos(angle), np.sin(angle)], [-np.sin(angle), np.cos(angle)]])
+    uvs = mesh.vertices[:, [0, 2]] @ turn.T
+    textured = tc.Mesh(mesh.vertices, mesh.triangles, uvs=uvs)
+    fabric = tc.Fabric(stretch=(400.0, 100.0), bending=(2e-5, 1e-5))
+    by_uv = tc.Cloth(textured, fabric, warp="uv")
+    direction = (np.cos(angle), 0.0, np.sin(angle))           # u = cos x + sin z grows along it
+    by_direction = tc.Cloth(mesh, fabric, warp=direction)
+    np.testing.assert_allclose(by_uv.face_gradient, by_direction.face_gradient, atol=1e-9)
+    assert not np.allclose(by_uv.face_gradient, tc.Cloth(mesh, fabric).face_gradient, atol=1e-3)
+
+    radius, turns, rows = 0.1, 24, 4
+    phi = np.repeat(np.linspace(0.0, np.pi, turns)[None], rows, 0).ravel()
+    height = np.repeat(np.linspace(0.0, 0.1, rows), turns)
+    grid = tc.grid_mesh(rows, turns, (1.0, 1.0))
+    x = np.stack([radius * np.cos(phi), height, radius * np.sin(phi)], 1)
+    cylinder = tc.Mesh(x, grid.triangles, uvs=np.stack([radius * phi, height], 1))
+    warp = elements.warp_directions(cylinder, "uv")
+    corners = phi[cylinder.triangles]
+    mid = 0.5 * (corners.min(axis=1) + corners.max(axis=1))    # each triangle's two angles
+    spread = np.ptp(corners, axis=1)
+    chord = np.stack([-np.sin(mid), np.zeros_like(mid), np.cos(mid)], 1)
+    cosine = np.sum(warp * chord, 1) / np.linalg.norm(warp, axis=1)
+    assert np.all(spread > 0) and np.all(cosine > 1.0 - 1e-9)
+
+    with pytest.raises(ValueError, match="warp.*texture coordinates"):
+        tc.Cloth(mesh, fabric, warp="uv")
+    with pytest.raises(ValueError, match="warp"):
+        tc.Cloth(textured, fabric, warp="v")
+    flat = uvs.copy()
+    flat[mesh.triangles[3]] = flat[mesh.triangles[3][0]]
+    with pytest.raises(ValueError, match=r"uvs of triangles \[.*3.*\].*non-zero area"):
+        tc.Cloth(tc.Mesh(mesh.vertices, mesh.triangles, uvs=flat), fabric, warp="uv")
+
+
+def test_an_obj_with_one_uv_per_vertex_brings_them_and_a_scene_warp_follows_them(tmp_path):
+    """load_mesh keeps an OBJ's vt when there is one per vertex (not when seams make more), and
+    a scene body's `warp = "uv"` gives the frames Cloth(warp="uv") gives."""
+    mesh = tc.grid_mesh(3, 4, (0.3, 0.2), plane="xy")
+    uvs = mesh.vertices[:, [1, 0]]                                # u along y: warp along y
+    lines = [f"v {x} {y} {z}" for x, y, z in mesh.vertices]
+    lines += [f"vt {u} {v}" for u, v in uvs]
+    lines += [f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}" for a, b, c in mesh.triangles]
+    (tmp_path / "sheet.obj").write_text("\n".join(lines) + "\n")
+    (tmp_path / "seams.obj").write_text("\n".join(lines + ["vt 0 0"]) + "\n")
+    loaded = tc.load_mesh(tmp_path / "sheet.obj")
+    np.testing.assert_allclose(loaded.uvs, uvs)
+    assert tc.load_mesh(tmp_path / "seams.obj").uvs is None
+    (tmp_path / "scene.toml").write_text(
+        '[[bodies]]\ntype = "mesh"\npath = "sheet.obj"\nfabric = "denim"\nwarp = "uv"\n')
+    scene = tc.load_scene(tmp_path / "scene.toml")
+    expected = tc.Cloth(loaded, tc.Fabric.preset("denim"), warp=(0.0, 1.0, 0.0))
+    np.testing.assert_allclose(scene.cloth.face_gradient, expected.face_gradient, atol=1e-12)

@@ -332,6 +332,13 @@ def _altitude_springs(table: Table):
     return read
 
 
+def _warp(table: Table) -> dict:
+    """A body's optional `warp` as Cloth's keyword: "uv" or a direction [x, y, z]."""
+    warp = {}
+    table.optional(warp, "warp", lambda k: "uv" if table.value(k) == "uv" else table.vector(k))
+    return warp
+
+
 def _material(owner: Table) -> Material | Fabric:
     """A surface body's `material` (Stuyck's springs: a preset name or a table) or `fabric`
     (a measured fabric: a preset name or a [bodies.fabric] table of `preset` and any of
@@ -443,15 +450,13 @@ def _body(table: Table, folder: Path, offset: int) -> tuple[Cloth, list[Handle]]
         mesh = table.build(grid_mesh, rows, cols, **options)
         names = {k: v.tolist() for k, v in mesh.named_vertices().items() if k != "boundary"}
         pinned = _indices(table, "pinned", mesh.vertex_count, names, mesh.vertices)
-        warp = {}
-        table.optional(warp, "warp", "vector")
+        warp = _warp(table)
         cloth = table.build(Cloth, mesh, _material(table), pinned=pinned, hem=_hem(table, mesh),
                             **warp)
     elif kind == "mesh":
         mesh = _mesh_file(table, folder)
         names = {}
-        warp = {}
-        table.optional(warp, "warp", "vector")
+        warp = _warp(table)
         cloth = table.build(Cloth, mesh, _material(table),
                             pinned=_indices(table, "pinned", mesh.vertex_count, None, mesh.vertices),
                             hem=_hem(table, mesh),
@@ -515,7 +520,7 @@ def _mesh_file(table: Table, folder: Path) -> Mesh:
         table.fail(f"{table.path('path')}: {err}")
     scale = table.number("scale", 1.0, within=limits.SCALE)
     translate = np.asarray(table.vector("translate", (0.0, 0.0, 0.0), unit="m"))
-    return Mesh(mesh.vertices * scale + translate, mesh.triangles)
+    return Mesh(mesh.vertices * scale + translate, mesh.triangles, uvs=mesh.uvs)
 
 
 def _path(table: Table):

@@ -225,8 +225,14 @@ def bending_energy(cloth, positions: np.ndarray, alive: np.ndarray | None = None
 
 
 def warp_directions(mesh: Mesh, warp) -> np.ndarray:
-    """The warp direction of Cloth(warp=...): given, or a grid's first axis (its columns), or
-    x."""
+    """The warp direction of Cloth(warp=...): a given (3,) direction, or "uv": in each triangle
+    the direction in which its texture coordinate u grows at constant v (d x / d u, from the
+    mesh's uvs; (T, 3)); by default a grid's first axis (its columns), or x."""
+    if isinstance(warp, str):
+        require(warp == "uv", "warp", warp, '"uv" or a direction [x, y, z]')
+        require(mesh.uvs is not None, "warp", warp,
+                "a direction, or a mesh with texture coordinates (Mesh.uvs, one per vertex)")
+        return uv_warp(mesh)
     if warp is not None:
         direction = as_array("warp", warp, np.float64, (3,))
         require(np.linalg.norm(direction) > 0, "warp", direction.tolist(), "a non-zero direction")
@@ -234,6 +240,23 @@ def warp_directions(mesh: Mesh, warp) -> np.ndarray:
     if mesh.grid_shape is not None:
         return mesh.vertices[1] - mesh.vertices[0]
     return np.array([1.0, 0.0, 0.0])
+
+
+def uv_warp(mesh: Mesh) -> np.ndarray:
+    """d x / d u of each triangle (T, 3): with edges d1, d2 and their uv differences
+    (a1, b1), (a2, b2), [d1 d2] = J [[a1, a2], [b1, b2]], and J's first column is
+    (b2 d1 - b1 d2) / (a1 b2 - a2 b1) (the tangent of normal mapping). A triangle whose uvs
+    have (almost) no area has none: refused, naming it."""
+    p = mesh.vertices[mesh.triangles]
+    uv = mesh.uvs[mesh.triangles]
+    d1, d2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    (a1, b1), (a2, b2) = (uv[:, 1] - uv[:, 0]).T, (uv[:, 2] - uv[:, 0]).T
+    det = a1 * b2 - a2 * b1
+    scale = np.maximum(np.abs(uv - uv[:, :1]).max(axis=(1, 2)), np.finfo(float).tiny) ** 2
+    flat = np.flatnonzero(np.abs(det) <= 1e-9 * scale)
+    require(len(flat) == 0, f"uvs of triangles {flat[:5].tolist()}", "(no area)",
+            'a uv triangle of non-zero area for warp="uv" (or give warp a direction)')
+    return (b2[:, None] * d1 - b1[:, None] * d2) / det[:, None]
 
 
 def rest_rank_one(cloth) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:

@@ -5,6 +5,7 @@ Nothing here touches Taichi, so every function is testable without a runtime.
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import numpy as np
@@ -26,14 +27,17 @@ class Mesh:
         (vertex = row * cols + col); grid meshes get the spring pattern of Stuyck fig. 4.2.
     tetrahedra: vertex indices, shape (tet_count, 4), of a volume mesh (Stuyck 4.6.2); its
         surface is then given as `triangles` (see surface_triangles). Empty for surfaces.
+    uvs: texture coordinates, shape (vertex_count, 2), one per vertex, or None: a Fabric's
+        warp may follow them (Cloth(warp="uv")).
     """
 
     def __init__(self, vertices, triangles, grid_shape: tuple[int, int] | None = None,
-                 tetrahedra=()):
+                 tetrahedra=(), uvs=None):
         self.vertices = as_array("vertices", vertices, np.float64, (None, 3))
         self.triangles = as_array("triangles", triangles, np.int64, (None, 3))
         self.tetrahedra = as_array("tetrahedra", tetrahedra, np.int64, (None, 4))
         n = len(self.vertices)
+        self.uvs = None if uvs is None else as_array("uvs", uvs, np.float64, (n, 2))
         require(n > 0, "vertices", n, "at least 1 vertex (the mesh is empty)")
         far = np.argwhere(np.abs(self.vertices) > limits.COORDINATE.high)
         require(len(far) == 0, f"vertices[{', '.join(map(str, far[0])) if len(far) else ''}]",
@@ -100,7 +104,9 @@ class Mesh:
     def __repr__(self) -> str:
         grid = f", grid_shape={self.grid_shape}" if self.grid_shape else ""
         tets = f", tet_count={len(self.tetrahedra)}" if len(self.tetrahedra) else ""
-        return f"Mesh(vertex_count={self.vertex_count}, triangle_count={self.triangle_count}{grid}{tets})"
+        uvs = ", uvs" if self.uvs is not None else ""
+        return (f"Mesh(vertex_count={self.vertex_count}, "
+                f"triangle_count={self.triangle_count}{grid}{tets}{uvs})")
 
 
 def unique_rows(rows: np.ndarray, **options):
@@ -314,9 +320,25 @@ def grid_mesh(rows: int, cols: int, size: tuple[float, float] = (1.0, 1.0), plan
     return Mesh(vertices, triangles, grid_shape=(rows, cols))
 
 
+def _read_mesh(meshio, path: Path):
+    """meshio.read(path); an OBJ whose texture coordinates or normals are not one per vertex
+    (seams: meshio keeps no per-corner indices and refuses the file) is read again without
+    them."""
+    try:
+        return meshio.read(path)
+    except ValueError as err:
+        if path.suffix.lower() != ".obj" or "point_data" not in str(err):
+            raise
+    text = path.read_text(errors="replace").splitlines(keepends=True)
+    kept = "".join(line for line in text if not line.lstrip().startswith(("vt ", "vn ")))
+    return meshio.read(io.StringIO(kept), file_format="obj")
+
+
 def load_mesh(path) -> Mesh:
     """Read a mesh (OBJ, PLY, STL, VTK, MSH, ... anything meshio reads); quads are split in
-    two. A volume mesh's tetrahedra are kept, with its outer surface as the triangles.
+    two. A volume mesh's tetrahedra are kept, with its outer surface as the triangles. An OBJ's
+    texture coordinates become Mesh.uvs when there is one per vertex (meshio keeps no
+    per-corner indices, so a file whose UVs have seams, more vt than v, is read without).
     Raises FileNotFoundError, or ValueError for a file that holds no usable mesh."""
     import meshio
 
@@ -324,7 +346,7 @@ def load_mesh(path) -> Mesh:
     if not path.is_file():
         raise FileNotFoundError(f"mesh file not found: {path}")
     try:
-        data = meshio.read(path)
+        data = _read_mesh(meshio, path)
     except Exception as err:   # meshio raises ReadError, but its parsers also KeyError, IndexError...
         raise ValueError(f"{path}: not a mesh meshio can read ({type(err).__name__}: "
                          f"{str(err)[:200]})") from None
@@ -349,8 +371,12 @@ def load_mesh(path) -> Mesh:
     if not triangles:
         raise ValueError(f"{path}: no triangle, quad or tetra cells found (cell types: "
                          f"{[b.type for b in data.cells]})")
+    uvs = data.point_data.get("obj:vt")
+    if uvs is not None and (uvs.ndim != 2 or len(uvs) != len(data.points) or uvs.shape[1] < 2):
+        uvs = None
     try:
-        return Mesh(data.points, np.concatenate(triangles))
+        return Mesh(data.points, np.concatenate(triangles),
+                    uvs=None if uvs is None else uvs[:, :2])
     except ValueError as err:
         raise ValueError(f"{path}: {err}") from None
 

@@ -232,7 +232,8 @@ class Cloth:
     signed, so the tetrahedron resists flattening and cannot invert without work) with the
     constants `altitude` (a SpringParams). Default none.
     material: a Material (Stuyck's springs) or a Fabric (elements). warp: a Fabric's warp
-    direction (default a grid's columns, else x), projected into each triangle.
+    direction (default a grid's columns, else x), projected into each triangle, or "uv": along
+    the mesh's texture coordinate u in each triangle (Mesh.uvs).
     """
 
     def __init__(self, mesh: Mesh, material: Material | Fabric, pinned=(), springs=None,
@@ -320,7 +321,7 @@ class Cloth:
                               else np.full(len(self.mesh.triangles), -1))
         self.face_indices = triangles
         self.face_gradient, self.face_area = elements.material_frames(
-            x, triangles, elements.warp_directions(self.mesh, warp))
+            x, triangles, elements.warp_directions(self.mesh, warp if fabric else None))
         self.face_moduli = np.tile(moduli, (count, 1))
         self.face_damping = np.full(count, damping)
         (self.hinge_indices, self.hinge_faces, self.face_hinge,
