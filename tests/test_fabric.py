@@ -472,8 +472,9 @@ MEASURED = {
 @pytest.mark.parametrize("name", sorted(MEASURED))
 def test_presets_are_the_measured_fabrics(name):
     """Each preset's plane-stress law (Fabric.membrane) is the database row it was read from:
-    C11, C12, C22 and C33 to the four digits the preset keeps (E and nu are inverted from the row, so a preset
-    that took c11 for E would miss C11 by a factor 1 / (1 - nu12 nu21): 1.7 for jet_set)."""
+    C11, C12, C22 and C33 to the four digits the preset keeps (E and nu are inverted from the
+    row, so a preset that took c11 for E would miss C11 by 1 / (1 - nu12 nu21): 1.7 for
+    jet_set)."""
     density, row, bending = MEASURED[name]
     fabric = tc.Fabric.preset(name)
     assert fabric.density == density
