@@ -91,9 +91,9 @@ def hinge_gradient(model: ti.template(), positions: ti.template(), e):
     """(t, grad t on corners a, b, c, d) of hinge e [a, b, c, d] at `positions`, t = tan(theta /
     2) continued (_tangent) of its dihedral angle; the angle and its gradient: body/elements.py
     (Tamstorf & Grinspun 2013, eq. 8), with the face normals left unnormalised (m1 = |m1| n1):
-    theta's sine and cosine are (m1 x m2) . e / |e| and m1 . m2 over |m1| |m2| (two square
-    roots and four divisions a hinge). A hinge with an edge or face of zero length or area has
-    no angle: t and its gradient 0."""
+    theta's sine and cosine are (m1 x m2) . e / |e| and m1 . m2 over |m1| |m2| (three square
+    roots and four divisions a hinge, no trigonometric call). A hinge with an edge or face of
+    zero length or area has no angle: t and its gradient 0."""
     corner = model.hinge_indices[e]
     xa = positions[corner[0]]
     edge = positions[corner[1]] - xa
@@ -102,7 +102,7 @@ def hinge_gradient(model: ti.template(), positions: ti.template(), e):
     m1 = edge.cross(to_c)
     m2 = to_d.cross(edge)
     length2 = edge.dot(edge)
-    area1 = m1.dot(m1)                          # |m| = twice the triangle's area, squared
+    area1 = m1.dot(m1)                          # (twice the triangle's area)^2
     area2 = m2.dot(m2)
     zero = ti.Vector([0.0, 0.0, 0.0])
     grad_a, grad_b, grad_c, grad_d = zero, zero, zero, zero
@@ -111,7 +111,7 @@ def hinge_gradient(model: ti.template(), positions: ti.template(), e):
         length = ti.sqrt(length2)
         inverse = 1.0 / length
         t, slope = _tangent(m1.cross(m2).dot(edge) * inverse, m1.dot(m2),
-                            ti.sqrt(area1 * area2))
+                            ti.sqrt(area1) * ti.sqrt(area2))   # their product ~ h^8
         grad_c = -(slope * length / area1) * m1
         grad_d = -(slope * length / area2) * m2
         s1 = to_c.dot(edge) * inverse * inverse
