@@ -2,6 +2,7 @@
 
 import importlib.util
 from pathlib import Path
+from types import SimpleNamespace
 
 import imageio.v3 as iio
 import numpy as np
@@ -26,9 +27,7 @@ def test_every_system_of_the_source_texts_has_a_demo_with_a_scene_file():
 
 @pytest.mark.parametrize("script", DEMOS, ids=[d.stem for d in DEMOS])
 def test_demo_writes_frames(script, tmp_path):
-    spec = importlib.util.spec_from_file_location(script.stem, script)
-    demo = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(demo)
+    demo = _load(script)
     frames = demo.main(["--test", "--no-progress", "--out-dir", str(tmp_path)])
     images = [iio.imread(f).astype(float) for f in frames]
     assert len(images) >= 2
@@ -40,8 +39,8 @@ def test_demo_writes_frames(script, tmp_path):
     assert list(tmp_path.glob("*.gif"))
 
 
-def _cusick():
-    script = Path(__file__).parents[1] / "demos" / "cusick_drape.py"
+def _load(script: Path):
+    """The demo script as a module."""
     spec = importlib.util.spec_from_file_location(script.stem, script)
     demo = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(demo)
@@ -54,7 +53,7 @@ def test_the_drape_measures_read_a_cone_and_a_fluted_disc():
     ((a + (R - a) cos 45)^2 - a^2) / (R^2 - a^2) (to the 0.5 mm raster: |d DC| <= 2 r dr /
     (R^2 - a^2) = 0.01); the flat disc gives 1; a hem fluted as R (1 + e cos 6 phi) has 6 folds
     when its peak-to-trough 2 e R passes FOLD_DEPTH and none when it does not."""
-    cusick = _cusick()
+    cusick = _load(Path(__file__).parents[1] / "demos" / "cusick_drape.py")
     radius, stand = 0.15, cusick.SUPPORT_RADIUS
     mesh = tc.disc_mesh(radius, 20)
     rest = mesh.vertices
@@ -64,7 +63,7 @@ def test_the_drape_measures_read_a_cone_and_a_fluted_disc():
     scale = np.where(r > 0, folded / np.maximum(r, 1e-12), 1.0)
     cone = rest * np.stack([scale, np.ones_like(r), scale], 1)
     cone[:, 1] -= out * np.sin(np.pi / 4)
-    scene = type("Scene", (), {"cloth": tc.Cloth(mesh, tc.Fabric())})()
+    scene = SimpleNamespace(cloth=tc.Cloth(mesh, tc.Fabric()))       # what measure reads
     shadow = stand + (radius - stand) * np.cos(np.pi / 4)
     expected = (shadow ** 2 - stand ** 2) / (radius ** 2 - stand ** 2)
     coefficient, _ = cusick.measure(scene, cone)
