@@ -69,7 +69,7 @@ class Exporter:
         self.folder, self.formats, self.name = Path(folder), formats, name
         self.fps = finite_number("fps", fps, 0.0, strict=True, unit="frames/s")
         self.cloth = cloth
-        self.bodies = [_Body(cloth, b) for b in range(len(cloth.body_offsets) - 1)]
+        self.bodies = [_Body(cloth, b) for b in range(cloth.body_count)]
         self._shown = np.concatenate([body.points for body in self.bodies])   # npz order
         ends = np.cumsum([len(body.points) for body in self.bodies])
         self._slices = [slice(end - len(body.points), end) for body, end in zip(self.bodies, ends)]
@@ -229,18 +229,15 @@ class _Body:
     stretch springs renumbered to them, and which of the Cloth's triangles / springs they are."""
 
     def __init__(self, cloth, b: int):
-        lo, hi = cloth.body_offsets[b], cloth.body_offsets[b + 1]
         self.name = f"body{b}"
-        self.points = np.flatnonzero(~cloth.ghost[lo:hi]) + lo
+        self.points = np.flatnonzero(~cloth.ghost & (cloth.particle_body == b))
         local = np.full(cloth.particle_count, -1, np.int64)
         local[self.points] = np.arange(len(self.points))
         triangles = cloth.mesh.triangles
-        self.triangle_index = np.flatnonzero(np.all((triangles >= lo) & (triangles < hi), axis=1)
-                                             & np.all(local[triangles] >= 0, axis=1))
+        self.triangle_index = np.flatnonzero(np.all(local[triangles] >= 0, axis=1))
         self.triangles = local[triangles[self.triangle_index]]
         springs = cloth.spring_indices
-        mine = (np.all(local[springs] >= 0, axis=1) & np.all((springs >= lo) & (springs < hi), axis=1)
-                & (cloth.spring_kind == SpringKind.STRETCH))
+        mine = np.all(local[springs] >= 0, axis=1) & (cloth.spring_kind == SpringKind.STRETCH)
         self.segment_index = np.flatnonzero(mine) if not len(self.triangle_index) else np.zeros(0, int)
         self.segments = local[springs[self.segment_index]]
 

@@ -5,13 +5,16 @@
     advice.write("renders/advise_cloth")            # advise.md, advise.csv
 
 The pilot study sweeps the candidates (integrator x dt x precision x iterations) over the
-scene's first `window` seconds against the rk4/f64 reference. A candidate passes when it did
-not diverge and its error (`metric`: max or RMS position error over the cloth size, as the
-study reports them) is within the tolerance; the choice is the passing one with the least
+scene's first `window` seconds against the rk4/f64 reference, at each of `resolutions` (the
+scene's bodies refined; the reference then finer than all of them, study.py). A candidate
+passes when it did not diverge and its error (`metric`: max or RMS position error over the
+cloth size, as the study reports them, plus, when resolution is swept, the reference's own
+estimated error: study.StudyResult.reference_error) is within the tolerance; the choice is the passing one with the least
 measured cost (wall seconds per simulated second). The passing runs within RETIME_SPAN of the
 cheapest (at most RETIME_MOST) are timed again, here and alone, `repeats` times, and compared
 on the medians: one timing decides nothing on a shared machine. When none passes, the advice
-says so and names the closest.
+says so, names the closest and, from the observed order of spatial convergence, the
+resolution it estimates would meet the tolerance.
 """
 
 from __future__ import annotations
@@ -49,8 +52,15 @@ class Advice:
     closest: Run | None
     study: StudyResult
 
+    @property
+    def margin(self) -> float:
+        """What is added to a run's error before it is compared with the tolerance: the
+        reference's own estimated error when resolution is swept (its error against the
+        converged cloth, not only against the reference), else 0."""
+        return _margin(self.study)
+
     def passes(self, run: Run) -> bool:
-        return meets(run, self.metric, self.tolerance)
+        return meets(run, self.metric, self.tolerance - self.margin)
 
     def ranked(self) -> list[Run]:
         """Every run that did not diverge, cheapest first."""
@@ -69,15 +79,22 @@ class Advice:
         """One sentence: what was chosen and why."""
         passing = sum(self.passes(r) for r in self.study.runs)
         runs = len(self.study.runs)
+        margin = (f" (with the reference's own estimated {self.margin:.1e})" if self.margin
+                  else "")
         if self.choice is None:
             closest = (f"; the closest is {describe(self.closest)} at {self.metric} "
-                       f"{getattr(self.closest, self.metric):.2e}" if self.closest else "")
+                       f"{getattr(self.closest, self.metric):.2e}{margin}" if self.closest else "")
+            needed = self.study.resolution_for(self.tolerance)
+            estimate = (f"; at the observed order of spatial convergence, resolution "
+                        f"{math.ceil(needed)} or finer would meet it" if math.isfinite(needed)
+                        and self.study.converged else "")
             return (f"no candidate meets {self.metric} <= {self.tolerance:g} over the first "
-                    f"{self.window:g} s ({runs} runs){closest}")
+                    f"{self.window:g} s ({runs} runs){closest}{estimate}")
         c = self.choice
-        return (f"{describe(c)}: {self.metric} {getattr(c, self.metric):.2e} <= "
-                f"{self.tolerance:g} at {c.cost:.3g} s per simulated second, the cheapest of "
-                f"{passing} of {runs} runs that meet it over the first {self.window:g} s")
+        return (f"{describe(c)}: {self.metric} {getattr(c, self.metric) + self.margin:.2e}"
+                f"{margin} <= {self.tolerance:g} at {c.cost:.3g} s per simulated second, the "
+                f"cheapest of {passing} of {runs} runs that meet it over the first "
+                f"{self.window:g} s")
 
     def simulation_block(self, frame_dt: float) -> str:
         """A [simulation] table of the choice, ready to paste into the scene file."""
@@ -89,7 +106,10 @@ class Advice:
         return ("[simulation]\n"
                 f"integrator = {integrator}\n"
                 f"substeps = {round(frame_dt / c.dt)}             # dt = {c.dt:.6g} s\n"
-                f'precision = "{c.precision}"\n')
+                f'precision = "{c.precision}"\n'
+                + (f"resolution = {c.resolution}             # {c.particles} particles\n"
+                   if self.study.converged and len(self.study.converged) > 1
+                   or c.resolution != 1 else ""))
 
     def markdown(self, frame_dt: float) -> str:
         lines = [f"Advice for `{self.scene_name}`: {self.metric} <= {self.tolerance:g} over the "
@@ -97,11 +117,12 @@ class Advice:
         block = self.simulation_block(frame_dt)
         if block:
             lines += ["```toml", block.rstrip("\n"), "```", ""]
-        lines += ["| integrator | precision | dt [s] | max error | RMS error | cost [s/s] | meets | |",
-                  "|---|---|---|---|---|---|---|---|"]
+        lines += ["| resolution | integrator | precision | dt [s] | max error | RMS error | "
+                  "cost [s/s] | meets | |", "|---|---|---|---|---|---|---|---|---|"]
         for run in self.nearby():
             mark = "chosen" if run is self.choice else "closest" if run is self.closest else ""
-            lines.append(f"| {describe_integrator(run)} | {run.precision} | {run.dt:.3g} | "
+            lines.append(f"| {run.resolution} | {describe_integrator(run)} | {run.precision} | "
+                         f"{run.dt:.3g} | "
                          f"{run.max_error:.2e} | {run.rms_error:.2e} | {run.cost:.3g} | "
                          f"{'yes' if self.passes(run) else 'no'} | {mark} |")
         if self.study.timing != "serial":
@@ -141,7 +162,13 @@ def describe_integrator(run: Run) -> str:
 
 
 def describe(run: Run) -> str:
-    return f"{describe_integrator(run)} {run.precision} at dt = {run.dt:.3g} s"
+    where = f" at resolution {run.resolution}" if run.resolution != 1 else ""
+    return f"{describe_integrator(run)} {run.precision}{where} at dt = {run.dt:.3g} s"
+
+
+def _margin(study: StudyResult) -> float:
+    estimate = study.reference_error()
+    return estimate if math.isfinite(estimate) else 0.0
 
 
 def choose(runs, metric: str, tolerance: float) -> tuple[Run | None, Run | None]:
@@ -156,10 +183,11 @@ def choose(runs, metric: str, tolerance: float) -> tuple[Run | None, Run | None]
 def advise(scene, tolerance: float, *, metric: str = "max_error", window: float | None = None,
            precisions=("f64", "f32"), integrators=DEFAULT_INTEGRATORS,
            iterations=DEFAULT_ITERATIONS, dts=None, arch: str = "cpu", repeats: int = REPEATS,
-           executor=None, progress: bool = True) -> Advice:
-    """The cheapest (integrator, dt, precision, iterations) whose `metric` stays within
-    `tolerance` (a fraction of the cloth size) over the first `window` seconds (default: the
-    scene's duration), from a pilot study (run_study: `dts`, `executor` as there)."""
+           resolutions=None, executor=None, progress: bool = True) -> Advice:
+    """The cheapest (resolution, integrator, dt, precision, iterations) whose `metric` stays
+    within `tolerance` (a fraction of the cloth size) over the first `window` seconds
+    (default: the scene's duration), from a pilot study (run_study: `dts`, `resolutions`,
+    `executor` as there)."""
     if metric not in METRICS:
         raise ValueError(f"metric must be one of {METRICS}, got {metric!r}")
     if not (isinstance(tolerance, (int, float)) and not isinstance(tolerance, bool)
@@ -171,13 +199,14 @@ def advise(scene, tolerance: float, *, metric: str = "max_error", window: float 
         raise ValueError(f"window must be in (0, {duration:g}] s (the scene's duration), "
                          f"got {window!r}")
     pilot = run_study(scene, integrators=integrators, dts=dts, precisions=precisions,
-                      iterations=iterations, duration=window, arch=arch, executor=executor,
-                      progress=progress)
-    passing = sorted((r for r in pilot.runs if meets(r, metric, tolerance)), key=lambda r: r.cost)
+                      iterations=iterations, duration=window, arch=arch, resolutions=resolutions,
+                      executor=executor, progress=progress)
+    within = tolerance - _margin(pilot)
+    passing = sorted((r for r in pilot.runs if meets(r, metric, within)), key=lambda r: r.cost)
     contenders = [r for r in passing if r.cost <= RETIME_SPAN * passing[0].cost][:RETIME_MOST]
-    retimed = {id(r): retime(scene, r, pilot.reference, repeats, arch) for r in contenders}
+    retimed = {id(r): retime(scene, r, pilot, repeats, arch) for r in contenders}
     pilot.runs = [retimed.get(id(r), r) for r in pilot.runs]
-    choice, closest = choose(pilot.runs, metric, tolerance)
+    choice, closest = choose(pilot.runs, metric, within)
     return Advice(scene.name, float(tolerance), metric, float(pilot.reference.times[-1]),
                   choice, closest, pilot)
 
@@ -188,8 +217,8 @@ MOTION_FIELDS = ("cloth", "fps", "gravity", "drag", "wind", "tearing", "strain_l
 
 
 def resolve(scene, folder, *, arch: str = "cpu", progress: bool = True):
-    """(the scene with integrator = "auto" made concrete, a sentence saying what was chosen
-    and why). The choice comes from `<name>.advice.json` in `folder` when that was made for
+    """(the scene with integrator = "auto" made concrete, at the resolution chosen, a
+    sentence saying what was chosen and why). The choice comes from `<name>.advice.json` in `folder` when that was made for
     this scene and request (a hash of both), else from advise() and is cached there.
     SceneError when no candidate meets the tolerance."""
     request = scene.advice
@@ -200,14 +229,14 @@ def resolve(scene, folder, *, arch: str = "cpu", progress: bool = True):
         advice = advise(scene, request.tolerance, metric=request.metric, window=request.window,
                         precisions=request.precisions,
                         integrators=request.integrators or DEFAULT_INTEGRATORS, arch=arch,
-                        progress=progress)
+                        resolutions=request.resolutions, progress=progress)
         if advice.choice is None:
             raise SceneError(f"{scene.source}: integrator = \"auto\": {advice.summary()}; accept "
                              "a larger tolerance or other integrators")
         c = advice.choice
         cached = {"key": key, "integrator": c.integrator, "iterations": c.iterations,
                   "substeps": round(scene.frame_dt / c.dt), "precision": c.precision,
-                  "why": advice.summary()}
+                  "resolution": c.resolution, "why": advice.summary()}
         with atomic_path(path) as tmp:
             tmp.write_text(json.dumps(cached, indent=1))
         note = cached["why"]
@@ -216,12 +245,12 @@ def resolve(scene, folder, *, arch: str = "cpu", progress: bool = True):
     name, iterations = cached["integrator"], cached["iterations"]
     integrator = (INTEGRATORS[name](iterations=iterations) if iterations is not None
                   else make_integrator(name))
-    resolved = replace(scene, integrator=integrator, substeps=cached["substeps"],
-                       precision=cached["precision"], advice=None)
+    resolved = replace(scene.refined(cached["resolution"]), integrator=integrator,
+                       substeps=cached["substeps"], precision=cached["precision"], advice=None)
     return resolved, note
 
 
-FORMAT = 1     # of the cached advice: bump when its meaning changes
+FORMAT = 2     # of the cached advice: bump when its meaning changes
 
 
 def _read_cache(path: Path, key: str) -> dict | None:

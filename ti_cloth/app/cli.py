@@ -10,7 +10,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from ..export import FORMATS
-from ..runtime import backend
+from ..runtime import backend, limits
 
 TEST_FRAMES, TEST_SIZE = 4, (160, 96)
 
@@ -187,11 +187,12 @@ def _sweep(scene_path, jobs, scheduler, compute, write, lost: str):
 
 def study(scene_path, *, out=None, integrators=None, dts=None, precisions=("f64", "f32"),
           iterations=None, duration=None, arch="cpu", plot=True, progress=True, jobs=None,
-          scheduler=None) -> int:
+          scheduler=None, resolutions=None) -> int:
     """Run the speed/accuracy study of a scene and write study.csv, study.md, study.png."""
     from . import study as study_module
 
-    options = {"integrators": integrators, "dts": dts, "iterations": iterations}
+    options = {"integrators": integrators, "dts": dts, "iterations": iterations,
+               "resolutions": resolutions}
     options = {k: v for k, v in options.items() if v is not None}
     start = time.perf_counter()
     code, _, result, written = _sweep(
@@ -212,13 +213,13 @@ def study(scene_path, *, out=None, integrators=None, dts=None, precisions=("f64"
 
 def advise(scene_path, *, tolerance: float, metric="max_error", window=None, out=None,
            integrators=None, precisions=("f64", "f32"), iterations=None, arch="cpu",
-           progress=True, jobs=None, scheduler=None) -> int:
+           progress=True, jobs=None, scheduler=None, resolutions=None) -> int:
     """Pick the cheapest integrator, step and precision for a tolerance; write advise.md and
     advise.csv; print the candidates and a [simulation] block. Exit code 1 when no candidate
     meets the tolerance."""
     from . import advisor
 
-    options = {"integrators": integrators, "iterations": iterations}
+    options = {"integrators": integrators, "iterations": iterations, "resolutions": resolutions}
     options = {k: v for k, v in options.items() if v is not None}
     code, scene, advice, written = _sweep(
         scene_path, jobs, scheduler,
@@ -264,16 +265,33 @@ def main(argv=None) -> int:
         return study(args.scene, out=args.out, integrators=args.integrators, dts=args.dts,
                      precisions=args.precisions, iterations=args.iterations, duration=args.duration,
                      arch=args.arch, plot=not args.no_plot, progress=not args.no_progress,
-                     jobs=args.jobs, scheduler=args.scheduler)
+                     jobs=args.jobs, scheduler=args.scheduler, resolutions=args.resolutions)
     if args.command == "advise":
         return advise(args.scene, tolerance=args.tolerance, metric=args.metric, window=args.window,
                       out=args.out, integrators=args.integrators, precisions=args.precisions,
                       iterations=args.iterations, arch=args.arch, progress=not args.no_progress,
-                      jobs=args.jobs, scheduler=args.scheduler)
+                      jobs=args.jobs, scheduler=args.scheduler, resolutions=args.resolutions)
     code, _ = run(args.scene, out=args.out, frames=args.frames, arch=args.arch,
                   precision=args.precision, progress=not args.no_progress, export=args.export,
                   resume=args.resume, checkpoint_every=args.checkpoint_every)
     return code
+
+
+def _resolution_argument(parser) -> None:
+    parser.add_argument("--resolutions", nargs="+", type=_resolution, metavar="F",
+                        help="also sweep the bodies' resolution: each refined F times (e.g. "
+                             "1 2 4); the reference is then twice the finest")
+
+
+def _resolution(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = None
+    if value is None or not limits.RESOLUTION.low <= value <= limits.RESOLUTION.high:
+        raise argparse.ArgumentTypeError(f"a resolution is an integer "
+                                         f"{limits.RESOLUTION.text()}, got {text!r}")
+    return value
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -301,6 +319,7 @@ def build_parser() -> argparse.ArgumentParser:
     study_parser.add_argument("--duration", type=float, help="simulated seconds (default: the scene's)")
     study_parser.add_argument("--arch", choices=sorted(backend.ARCHS), default="cpu")
     study_parser.add_argument("--no-plot", action="store_true", help="skip study.png (no matplotlib)")
+    _resolution_argument(study_parser)
     _sweep_arguments(study_parser)
     advise_parser = commands.add_parser("advise", help="the cheapest integrator, step and "
                                         "precision whose error meets a tolerance (a pilot study)")
@@ -319,6 +338,7 @@ def build_parser() -> argparse.ArgumentParser:
     advise_parser.add_argument("--iterations", nargs="+", type=_positive, metavar="N",
                                help="pbd/xpbd passes per step to try (default 4 16)")
     advise_parser.add_argument("--arch", choices=sorted(backend.ARCHS), default="cpu")
+    _resolution_argument(advise_parser)
     _sweep_arguments(advise_parser)
     commands.add_parser("info", help="versions, architecture and threads")
     return parser

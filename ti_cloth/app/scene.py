@@ -14,28 +14,21 @@ from pathlib import Path
 
 import numpy as np
 
-from ..body import bodies as body_builders
-from ..body.fabric import PRESETS as FABRICS
-from ..body.fabric import Fabric
-from ..body.material import DAMPING_MODELS, PRESETS, Material, SpringParams
-from ..body.mesh import PLANES, Mesh, grid_mesh, load_mesh
 from ..body.topology import Cloth
 from ..contact.colliders import Box, Capsule, Collider, Plane, Sphere
 from ..contact.mesh_collider import MeshCollider
 from ..contact.self_collision import SelfCollision
 from ..integrators import INTEGRATORS
-from ..physics.handles import Handle
-from ..physics.paths import INTERPOLATIONS, Keyframes, Oscillation
 from ..physics.strain_limit import StrainLimit
 from ..physics.wind import Wind
 from ..render.camera import Camera
 from ..runtime import backend, limits
 from ..simulation import Simulation
 from ..stability import auto_substeps
+from .scene_bodies import build_bodies, read_body, read_mesh_file, read_path
 from .scene_file import SceneError, Table, load_toml
 from .scene_output import Output, read_camera, read_output
 
-BODY_TYPES = ("grid", "mesh", "string", "hair", "tet_block")
 COLLIDER_TYPES = {"plane": Plane, "sphere": Sphere, "box": Box, "capsule": Capsule,
                   "mesh": MeshCollider}
 NAME_FORBIDDEN = r"[^\w .-]"
@@ -47,13 +40,14 @@ ADVICE_WINDOW = 1.0   # s: integrator = "auto" advises on at most this much of t
 class AdviceRequest:
     """integrator = "auto" in [simulation]: the largest error accepted (`tolerance`, a fraction
     of the cloth size, in `metric`), over the first `window` seconds, among `integrators`
-    (None: all) and `precisions`."""
+    (None: all), `precisions` and `resolutions` (None: the scene's own)."""
 
     tolerance: float
     metric: str
     window: float
     integrators: tuple | None
     precisions: tuple
+    resolutions: tuple | None = None
 
 
 @dataclass
@@ -81,6 +75,35 @@ class Scene:
     camera_fit: dict
     output: Output
     advice: AdviceRequest | None = None   # integrator = "auto": what the advisor is asked
+    bodies: tuple = ()                    # the [[bodies]] read (scene_bodies.Body)
+    resolution: int = 1                   # `cloth` is the bodies refined this many times
+    file_particles: int = 0               # particles of the bodies as the file gives them
+
+    @property
+    def own_particles(self) -> np.ndarray:
+        """The particles of the scene file (the first file_particles at every resolution)
+        that are drawn (not hair's ghosts): where the study measures errors."""
+        count = self.file_particles or self.cloth.particle_count
+        return np.flatnonzero(~self.cloth.ghost[:count])
+
+    def refined(self, resolution: int) -> "Scene":
+        """This scene with every body `resolution` times as fine as the file gives it
+        (scene_bodies: the file's particles first, pins, hems and handles carried over); the
+        same scene when it is at that resolution already."""
+        if not (isinstance(resolution, (int, np.integer)) and not isinstance(resolution, bool)
+                and limits.RESOLUTION.low <= resolution <= limits.RESOLUTION.high):
+            raise ValueError(f"resolution must be an integer {limits.RESOLUTION.text()}, "
+                             f"got {resolution!r}")
+        if resolution == self.resolution:
+            return self
+        if not self.bodies:
+            raise ValueError("resolution: this scene keeps no body descriptions to refine "
+                             "(read it with load_scene)")
+        try:
+            cloth, handles, _ = build_bodies(self.bodies, int(resolution))
+        except ValueError as err:
+            raise SceneError(f"{self.source}: resolution = {resolution}: {err}") from None
+        return replace(self, cloth=cloth, handles=handles, resolution=int(resolution))
 
     @property
     def automatic(self) -> bool:
@@ -119,11 +142,16 @@ class Scene:
         return limits.work(self.cloth.particle_count, limits.spring_equivalents(self.cloth),
                            steps, passes)
 
-    def build(self, integrator=None, dt: float | None = None, **options) -> Simulation:
+    def build(self, integrator=None, dt: float | None = None, resolution: int | None = None,
+              **options) -> Simulation:
         """The Simulation of this scene (call ti_cloth.init first); `integrator` and `dt`
-        replace the scene's (the speed/accuracy study sweeps them); options: further
-        Simulation arguments. The divergence guard's box (position_limit) reaches GUARD_SIZES
-        body sizes beyond the rest positions: anything further has left the scene."""
+        replace the scene's (the speed/accuracy study sweeps them), `resolution` its bodies'
+        (refined(): particle i of the scene file is particle i of the simulation); options:
+        further Simulation arguments. The divergence guard's box (position_limit) reaches
+        GUARD_SIZES body sizes beyond the rest positions: anything further has left the
+        scene."""
+        if resolution is not None and resolution != self.resolution:
+            return self.refined(resolution).build(integrator, dt, **options)
         options.setdefault("position_limit", GUARD_SIZES * self.size
                            + float(np.abs(self.cloth.particle_position).max()))
         integrator = self.integrator if integrator is None else integrator
@@ -173,6 +201,7 @@ def load_scene(path, note=None) -> Scene:
                      "substeps and dt")
         advice = replace(advice, precisions=(precision,) if sim.has("precision")
                          else tuple(sorted(backend.PRECISIONS, reverse=True)))
+    resolution = sim.integer("resolution", 1, within=limits.RESOLUTION)
     tearing = sim.number("tearing", 0.0, 0.0, strict=True) if sim.has("tearing") else None
     limit = sim.table("strain_limit")
     strain_limit = None
@@ -204,13 +233,14 @@ def load_scene(path, note=None) -> Scene:
     body_tables = root.tables("bodies")
     if not body_tables:
         root.fail("bodies: a scene needs at least one [[bodies]] table")
-    built, handles, offset = [], [], 0
-    for table in body_tables:
-        cloth, body_handles = _body(table, path.parent, offset)
-        built.append(cloth)
-        handles += body_handles
-        offset += cloth.particle_count
-    cloth = built[0] if len(built) == 1 else root.build(Cloth.combine, built)
+    bodies, made = zip(*(read_body(table, path.parent) for table in body_tables))
+    if len(made) > 1:
+        root.build(Cloth.combine, [cloth for cloth, _, _ in made])   # checks they can join
+    try:
+        cloth, handles, file_particles = build_bodies(bodies, resolution,
+                                                      made if resolution == 1 else None)
+    except ValueError as err:
+        sim.fail(f"simulation.resolution = {resolution}: {err}")
     colliders = [_collider(t, path.parent) for t in root.tables("colliders")]
 
     camera_table = root.table("camera")
@@ -222,7 +252,8 @@ def load_scene(path, note=None) -> Scene:
                   precision=precision, gravity=gravity, drag=drag, wind=wind, tearing=tearing,
                   strain_limit=strain_limit, self_collision=self_collision, handles=handles,
                   colliders=colliders, camera=camera,
-                  camera_fit=camera_fit, output=output, advice=advice)
+                  camera_fit=camera_fit, output=output, advice=advice, bodies=bodies,
+                  resolution=resolution, file_particles=file_particles)
     if note is not None and cloth.spring_count > limits.LARGE_BODY:
         note(f"'{name}' has {cloth.particle_count:,} particles and {cloth.spring_count:,} "
              "springs: finding its stable step takes a while")
@@ -246,8 +277,17 @@ def _advice_request(sim: Table, fps: float, frames: int) -> AdviceRequest:
     if candidates is not None and (not isinstance(candidates, list) or not candidates
                                    or not set(candidates) <= set(INTEGRATORS)):
         sim.bad("integrators", candidates, f"a list of some of {sorted(INTEGRATORS)}")
+    resolutions = sim.value("resolutions", None)
+    if resolutions is not None and (
+            not isinstance(resolutions, list) or not resolutions
+            or not all(isinstance(f, int) and not isinstance(f, bool)
+                       and limits.RESOLUTION.low <= f <= limits.RESOLUTION.high
+                       for f in resolutions)):
+        sim.bad("resolutions", resolutions,
+                f"a list of resolutions, integers {limits.RESOLUTION.text()} (e.g. [1, 2, 4])")
     return AdviceRequest(tolerance, metric, window,
-                         tuple(candidates) if candidates is not None else None, ())
+                         tuple(candidates) if candidates is not None else None, (),
+                         tuple(resolutions) if resolutions is not None else None)
 
 
 def _name(meta: Table, stem: str) -> str:
@@ -304,238 +344,6 @@ def _integrator(sim: Table):
     return table.build(INTEGRATORS[name], **options)
 
 
-def _springs(table: Table | None, default: SpringParams | None) -> SpringParams | None:
-    if table is None:
-        return default
-    params = table.build(SpringParams, k=table.number("k", unit="N/m"),
-                         kd=table.number("kd", 0.0, unit="kg/s"))
-    table.finish()
-    return params
-
-
-def _spring_options(table: Table, options: dict, *keys: str) -> None:
-    """Spring constants tables ({ k, kd }) among `keys`, into options (absent: the builder's)."""
-    for key in keys:
-        table.optional(options, key, lambda k: _springs(table.table(k), None))
-
-
-def _altitude_springs(table: Table):
-    """Reads a hair's `altitude` key: true (the twist constants), false (none) or { k, kd }."""
-    def read(key):
-        value = table.value(key, None)
-        if isinstance(value, bool):
-            return value
-        if not isinstance(value, dict):
-            table.fail(f"{table.path(key)} must be true, false or a table {{ k, kd }}, "
-                       f"got {value!r:.80}")
-        return _springs(table.table(key), None)
-    return read
-
-
-def _warp(table: Table) -> dict:
-    """A body's optional `warp` as Cloth's keyword: "uv" or a direction [x, y, z]."""
-    warp = {}
-    table.optional(warp, "warp", lambda k: "uv" if table.value(k) == "uv" else table.vector(k))
-    return warp
-
-
-def _material(owner: Table) -> Material | Fabric:
-    """A surface body's `material` (Stuyck's springs: a preset name or a table) or `fabric`
-    (a measured fabric: a preset name or a [bodies.fabric] table of `preset` and any of
-    Fabric's fields), at most one of them; default Material()."""
-    if owner.has("fabric"):
-        if owner.has("material"):
-            owner.bad("fabric", owner.value("fabric"),
-                      "absent when `material` is given (a body is made of springs or of a fabric)")
-        return _fabric(owner)
-    value = owner.value("material", None)
-    if value is None:
-        return Material()
-    if isinstance(value, str):
-        if value not in PRESETS:
-            owner.bad("material", value, f"a table or one of the presets {sorted(PRESETS)}")
-        return Material.preset(value)
-    table = Table(value, owner.path("material"), owner.source)
-    preset = table.string("preset", None, sorted(PRESETS)) if table.has("preset") else None
-    base = Material.preset(preset) if preset else Material()
-    changes = {}
-    for key in ("density", "hem_mass"):
-        if table.has(key):
-            changes[key] = table.number(key, unit="kg/m^2" if key == "density" else "kg")
-    for key in ("stretch", "shear", "bend"):
-        if table.has(key):
-            changes[key] = _springs(table.table(key), None)
-    if table.has("damping"):
-        changes["damping"] = table.string("damping", choices=DAMPING_MODELS)
-    table.finish()
-    return table.build(lambda: Material(**{**base.__dict__, **changes}))
-
-
-def _fabric(owner: Table) -> Fabric:
-    """`fabric = "denim"`, or a [bodies.fabric] table: `preset` plus any of density [kg/m^2],
-    stretch and bending (a number or [warp, weft]; N/m, N m), shear [N/m], poisson, damping
-    [s], hem_mass [kg]."""
-    value = owner.value("fabric")
-    if isinstance(value, str):
-        if value not in FABRICS:
-            owner.bad("fabric", value, f"a table or one of the fabrics {sorted(FABRICS)}")
-        return Fabric.preset(value)
-    if not isinstance(value, dict):
-        owner.bad("fabric", value, f"a table or one of the fabrics {sorted(FABRICS)}")
-    table = Table(value, owner.path("fabric"), owner.source)
-    preset = table.string("preset", None, sorted(FABRICS)) if table.has("preset") else None
-    changes = {}
-    for key, unit in (("density", "kg/m^2"), ("shear", "N/m"), ("poisson", ""),
-                      ("damping", "s"), ("hem_mass", "kg")):
-        if table.has(key):
-            changes[key] = table.number(key, unit=unit)
-    for key, unit in (("stretch", "N/m"), ("bending", "N m")):
-        if table.has(key):
-            pair = isinstance(table.value(key), list)
-            changes[key] = (tuple(table.vector(key, length=2, unit=unit)) if pair
-                            else table.number(key, unit=unit))
-    table.finish()
-    if preset:
-        return table.build(Fabric.preset, preset, **changes)
-    return table.build(Fabric, **changes)
-
-
-def _hem(table: Table, mesh: Mesh):
-    """A surface body's `hem` key: names of mesh.named_vertices() and indices, or None (the
-    default of Cloth: a grid's bottom edge, a mesh's boundary)."""
-    if not table.has("hem"):
-        return None
-    named = {k: v.tolist() for k, v in mesh.named_vertices().items()}
-    return _indices(table, "hem", mesh.vertex_count, named, mesh.vertices)
-
-
-def _indices(table: Table, key: str, count: int, named: dict | None = None,
-             positions: np.ndarray | None = None) -> list[int]:
-    """Particle indices given as indices and names, or (a surface body: `positions`, its rest
-    positions) as a ball, { centre = [x, y, z], radius = r }: the particles within it."""
-    value = table.value(key, [])
-    if isinstance(value, dict) and positions is not None:
-        ball = table.table(key)
-        centre = np.array(ball.vector("centre", unit="m"))
-        radius = ball.number("radius", minimum=0.0, unit="m")
-        ball.finish()
-        inside = np.flatnonzero(np.linalg.norm(positions - centre, axis=1) <= radius)
-        if not inside.size:
-            table.bad(key, value, "a ball holding at least one particle")
-        return inside.tolist()
-    items = value if isinstance(value, list) else [value]
-    result = []
-    for item in items:
-        if isinstance(item, str) and named and item in named:
-            result += named[item]
-        elif isinstance(item, int) and not isinstance(item, bool) and 0 <= item < count:
-            result.append(item)
-        else:
-            names = f" or one of {list(named)}" if named else ""
-            ball = ", or a ball { centre = [x, y, z], radius = r }" if positions is not None else ""
-            table.bad(key, item, f"particle indices in [0, {count - 1}]{names}{ball}")
-    return sorted(set(result))
-
-
-def _body(table: Table, folder: Path, offset: int) -> tuple[Cloth, list[Handle]]:
-    """One [[bodies]] table -> (Cloth, its handles with particle indices shifted by `offset`)."""
-    kind = table.string("type", choices=BODY_TYPES)
-    options = {}
-    if kind == "grid":
-        rows = table.integer("rows", 16, within=limits.GRID_SIDE)
-        cols = table.integer("cols", 16, within=limits.GRID_SIDE)
-        table.optional(options, "size", "vector", length=2, unit="m")
-        table.optional(options, "plane", "string", choices=sorted(PLANES))
-        table.optional(options, "origin", "vector", unit="m")
-        mesh = table.build(grid_mesh, rows, cols, **options)
-        names = {k: v.tolist() for k, v in mesh.named_vertices().items() if k != "boundary"}
-        pinned = _indices(table, "pinned", mesh.vertex_count, names, mesh.vertices)
-        warp = _warp(table)
-        cloth = table.build(Cloth, mesh, _material(table), pinned=pinned, hem=_hem(table, mesh),
-                            **warp)
-    elif kind == "mesh":
-        mesh = _mesh_file(table, folder)
-        names = {}
-        warp = _warp(table)
-        cloth = table.build(Cloth, mesh, _material(table),
-                            pinned=_indices(table, "pinned", mesh.vertex_count, None, mesh.vertices),
-                            hem=_hem(table, mesh),
-                            **warp)
-    elif kind == "string":
-        n = table.integer("n", 20, within=limits.CHAIN)
-        names = {"start": [0], "end": [n - 1]}
-        length = table.number("length", 1.0, unit="m")
-        table.optional(options, "mass", unit="kg")
-        _spring_options(table, options, "stretch", "bend")
-        table.optional(options, "start", "vector", unit="m")
-        table.optional(options, "direction", "vector")
-        table.optional(options, "fixed", "string", choices=body_builders.STRING_ENDS)
-        table.optional(options, "end_mass", "string", choices=body_builders.END_MASSES)
-        cloth = table.build(body_builders.string, n, length, **options)
-    elif kind == "hair":
-        strands = table.integer("strands", 64, within=limits.STRANDS)
-        segments = table.integer("segments", 12, within=limits.SEGMENTS)
-        length = table.number("length", 0.3, unit="m")
-        table.optional(options, "anchor", "vector", unit="m")
-        table.optional(options, "radius", unit="m")
-        table.optional(options, "mass", unit="kg")
-        table.optional(options, "ghosts", "boolean")
-        table.optional(options, "curl", "vector", length=2, unit="m")
-        _spring_options(table, options, "stretch", "bend", "twist")
-        table.optional(options, "altitude", _altitude_springs(table))
-        cloth = table.build(body_builders.hair, strands, segments, length, **options)
-        names = {"roots": np.flatnonzero(cloth.pinned).tolist()}
-    else:
-        names = {}
-        table.optional(options, "cells", "vector", unit="cubes")
-        table.optional(options, "size", "vector", unit="m")
-        table.optional(options, "origin", "vector", unit="m")
-        table.optional(options, "density", unit="kg/m^3")
-        _spring_options(table, options, "stretch")
-        cloth = table.build(body_builders.tet_block, **options)
-    handles = []
-    for h in table.tables("handles"):
-        particles = _indices(h, "particles", cloth.particle_count, names)
-        if not particles:
-            h.fail(f"{h.path('particles')} must list at least one particle")
-        release = {}
-        h.optional(release, "release", unit="s")
-        handles.append(h.build(Handle, [p + offset for p in particles], _path(h.table("path", True)),
-                               **release))
-        h.finish()
-    table.finish()
-    return cloth, handles
-
-
-def _mesh_file(table: Table, folder: Path) -> Mesh:
-    """The mesh of a `path` key, relative to the scene file's folder, scaled by `scale` and
-    then moved by `translate` [m]."""
-    path = folder / table.string("path")
-    if not path.is_file():
-        table.fail(f"{table.path('path')}: no mesh file at {path} (OBJ, PLY, STL, ... anything "
-                   "meshio reads, relative to the scene file)")
-    try:
-        mesh = load_mesh(path)
-    except ValueError as err:
-        table.fail(f"{table.path('path')}: {err}")
-    scale = table.number("scale", 1.0, within=limits.SCALE)
-    translate = np.asarray(table.vector("translate", (0.0, 0.0, 0.0), unit="m"))
-    return Mesh(mesh.vertices * scale + translate, mesh.triangles, uvs=mesh.uvs)
-
-
-def _path(table: Table):
-    kind = table.string("type", choices=("keyframes", "oscillation"))
-    if kind == "keyframes":
-        path = table.build(Keyframes, table.value("times"), table.value("values"),
-                           table.string("interpolation", "linear", INTERPOLATIONS))
-    else:
-        path = table.build(Oscillation, table.vector("amplitude", unit="m"),
-                           table.number("frequency", unit="Hz"), table.number("phase", 0.0),
-                           table.number("start", 0.0, unit="s"))
-    table.finish()
-    return path
-
-
 def _collider(table: Table, folder: Path):
     """One [[colliders]] table. A mesh's `path` is its file (relative to the scene file, as
     for mesh bodies), so its motion is `motion`; other shapes move along `path`."""
@@ -545,16 +353,16 @@ def _collider(table: Table, folder: Path):
     table.optional(options, "static_friction")
     table.optional(options, "kinetic_friction")
     if kind == "mesh":
-        mesh = _mesh_file(table, folder)
+        mesh = read_mesh_file(table, folder)
         motion = {}
-        table.optional(motion, "motion", lambda k: _path(table.table(k)))
+        table.optional(motion, "motion", lambda k: read_path(table.table(k)))
         options |= {"path": motion["motion"]} if motion else {}
-        table.optional(options, "rotation", lambda k: _path(table.table(k)))
+        table.optional(options, "rotation", lambda k: read_path(table.table(k)))
         table.optional(options, "resolution", "integer", within=limits.SDF_RESOLUTION)
         table.optional(options, "solid", "boolean")
         collider = table.build(MeshCollider, mesh, **options)
     else:
-        table.optional(options, "path", lambda k: _path(table.table(k)))
+        table.optional(options, "path", lambda k: read_path(table.table(k)))
         shape = COLLIDER_TYPES[kind]
         common = {f.name for f in fields(Collider)}
         for f in fields(shape):

@@ -6,8 +6,18 @@ where each one blows up, for one scene.
     result.write("renders/study_cloth")              # study.csv, study.md, study.png
 
 Every run starts the scene from rest and samples positions at each frame time; errors are
-against the reference at the same times, as a fraction of the cloth size (the diagonal of its
-rest bounding box). Cost is wall time per simulated second of the stepping alone (kernels are
+against the reference at the same times, at the scene file's own particles (the first ones at
+every resolution, scene.own_particles), as a fraction of the cloth size (the diagonal of its
+rest bounding box).
+
+Resolution is an axis too (`resolutions=(1, 2, 4)`: the scene's bodies refined that many
+times, scene.refined). The reference is then the scene at a finer resolution than any swept
+(default twice the finest), and each run's error splits into discretisation (its
+resolution's converged run, rk4/f64 as the reference, against the reference) and integration
+(the run against its resolution's converged run). Orders of spatial convergence come from the
+discretisation errors of successive resolutions (spatial_orders), and with them an estimate
+of the reference's own error and of the resolution a tolerance needs. With one resolution
+only, the reference is that resolution's own converged run (integration error alone). Cost is wall time per simulated second of the stepping alone (kernels are
 compiled before timing; one Simulation per integrator and precision is restarted for each dt),
 the median of `repeats` timings. Each configuration (precision, integrator, iterations) is one
 task: run here one after the other, or on local processes or a Dask cluster (sweep.py; the
@@ -30,7 +40,7 @@ import numpy as np
 
 from ..errors import SimulationDiverged
 from ..integrators import INTEGRATORS, make_integrator
-from ..runtime import backend
+from ..runtime import backend, limits
 from ..runtime.files import atomic_path
 from ..stability import stable_dt
 from .sweep import Failure, as_workers, run_tasks
@@ -46,9 +56,10 @@ ENERGY_BLOWUP = 1.0            # a run is diverged once its energy is off the re
 
 @dataclass(frozen=True)
 class Reference:
-    """Positions (samples, N, 3) [m] and total energies [J] at `times` [s], computed with rk4 in
-    f64 at step `dt`; `change` is the largest position change (fraction of `size`) of the last
-    halving."""
+    """Positions (samples, P, 3) [m] of the scene's own particles and total energies [J] at
+    `times` [s], computed with rk4 in f64 at step `dt` on the scene at `resolution` (with
+    `particles` in all); `change` is the largest position change (fraction of `size`) of the
+    last halving."""
 
     times: np.ndarray
     positions: np.ndarray
@@ -57,6 +68,8 @@ class Reference:
     change: float
     size: float
     energy_scale: float
+    resolution: int = 1
+    particles: int = 0
 
 
 @dataclass(frozen=True)
@@ -88,11 +101,15 @@ class Run:
     energy_drift: float
     max_strain: float
     predicted_stable_dt: float
+    resolution: int = 1
+    particles: int = 0
+    discretisation_error: float = math.nan
+    integration_error: float = math.nan
 
     @property
     def label(self) -> str:
         name = self.integrator if self.iterations is None else f"{self.integrator}({self.iterations})"
-        return f"{name} {self.precision}"
+        return f"{name} {self.precision}" + (f" x{self.resolution}" if self.resolution != 1 else "")
 
 
 def sample_times(scene, duration: float | None = None) -> np.ndarray:
@@ -130,10 +147,12 @@ def reference_trajectory(scene, duration: float | None = None, arch: str = "cpu"
                          tolerance: float = REFERENCE_TOLERANCE) -> Reference:
     """rk4 in f64 from the largest frame_dt / 2^k below half its stable step, halved until the
     positions at every sample change by less than tolerance x cloth size (at most
-    MAX_REFERENCE_HALVINGS halvings; then RuntimeError names the change reached)."""
+    MAX_REFERENCE_HALVINGS halvings; then RuntimeError names the change reached). Positions
+    are kept at the scene's own particles."""
     backend.ensure(arch=arch, precision="f64")
     times = sample_times(scene, duration)
     size = scene.size
+    own = scene.own_particles
     limit = 0.5 * stable_dt(scene.cloth, "rk4", scene.drag)
     substeps = 2 ** max(0, math.ceil(math.log2(scene.frame_dt / limit))) if math.isfinite(limit) else 1
     sim = scene.build(integrator="rk4", dt=scene.frame_dt / substeps)
@@ -144,11 +163,46 @@ def reference_trajectory(scene, duration: float | None = None, arch: str = "cpu"
         positions, energies, _ = _trajectory(sim, times, substeps)
         change = float(np.abs(positions - previous).max()) / size
         if change < tolerance:
-            return Reference(times, positions, energies, sim.dt, change, size,
-                             _energy_scale(scene, energies, size))
+            return Reference(times, positions[:, own], energies, sim.dt, change, size,
+                             _energy_scale(scene, energies, size), scene.resolution,
+                             scene.cloth.particle_count)
         previous = positions
     raise RuntimeError(f"reference: halving rk4's step to {sim.dt:.3g} s still changes positions by "
                        f"{change:.3g} of the cloth size (asked: < {tolerance:g})")
+
+
+def distance(a: Reference, b: Reference) -> tuple[float, float]:
+    """(max, RMS) distance between two trajectories of the same scene's own particles, as
+    fractions of the cloth size."""
+    error = np.linalg.norm(a.positions - b.positions, axis=2) / a.size
+    return float(error.max()), rms(error)
+
+
+def rms(values: np.ndarray) -> float:
+    """Root mean square of `values`, summed exactly (math.fsum): numpy's pairwise sums take
+    another order for another memory alignment, and a study's rows must be the same bits in
+    every process."""
+    return math.sqrt(math.fsum((values ** 2).ravel()) / values.size)
+
+
+def order_between(a: int, error_a: float, b: int, error_b: float, r: int) -> float:
+    """The order p of spatial convergence that resolutions a < b with discretisation errors
+    error_a, error_b against a reference at resolution r > b give, when the error at f is
+    C (f^-p - r^-p) (the reference's own error C r^-p taken out); NaN when they do not shrink
+    (bisection on p in (0, 8])."""
+    if not (error_b > 0 and error_a > error_b and math.isfinite(error_a)):
+        return math.nan
+
+    def ratio(p):
+        return (a ** -p - r ** -p) / (b ** -p - r ** -p)
+
+    if ratio(8.0) < error_a / error_b:
+        return 8.0
+    lo, hi = 1e-6, 8.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if ratio(mid) < error_a / error_b else (lo, mid)
+    return 0.5 * (lo + hi)
 
 
 def _energy_scale(scene, reference_energies: np.ndarray, size: float) -> float:
@@ -171,9 +225,9 @@ def _max_strain(cloth, positions: np.ndarray) -> float:
 def default_dts(scene, integrators) -> list[float]:
     """frame_dt / 2^k from one step per frame down to the first step at or below half the
     smallest predicted stable step of the step-limited integrators (at least 6 steps)."""
-    limits = [stable_dt(scene.cloth, name, scene.drag) for name in integrators]
-    limits = [s for s in limits if 0 < s < math.inf]
-    smallest = 0.5 * min(limits) if limits else scene.frame_dt / 32
+    stable = [stable_dt(scene.cloth, name, scene.drag) for name in integrators]
+    stable = [s for s in stable if 0 < s < math.inf]
+    smallest = 0.5 * min(stable) if stable else scene.frame_dt / 32
     count = max(6, math.ceil(math.log2(scene.frame_dt / smallest)) + 1)
     return [scene.frame_dt / 2 ** k for k in range(count)]
 
@@ -191,6 +245,42 @@ class StudyResult:
     timing: str = "serial"
     failed: dict[str, str] = field(default_factory=dict)
     incidents: dict[str, tuple[str, bool]] = field(default_factory=dict)
+    converged: dict[int, Reference] = field(default_factory=dict)   # by resolution
+
+    def discretisation(self) -> dict[int, tuple[float, float]]:
+        """{resolution: (max, RMS) distance of its converged run from the reference}, for the
+        swept resolutions coarser than the reference's."""
+        return {f: distance(ref, self.reference) for f, ref in sorted(self.converged.items())
+                if f != self.reference.resolution}
+
+    def spatial_orders(self) -> list[tuple[int, int, float]]:
+        """(a, b, p) for successive swept resolutions a < b: the observed order of spatial
+        convergence of the max error (order_between)."""
+        errors = [(f, e[0]) for f, e in self.discretisation().items()]
+        return [(a, b, order_between(a, ea, b, eb, self.reference.resolution))
+                for (a, ea), (b, eb) in zip(errors, errors[1:])]
+
+    def reference_error(self) -> float:
+        """The reference's own max error against the converged cloth, estimated from the
+        finest observed order: C r^-p with C from the finest swept resolution (NaN without
+        two resolutions that converge)."""
+        orders = self.spatial_orders()
+        if not orders or not math.isfinite(orders[-1][2]):
+            return math.nan
+        _, b, p = orders[-1]
+        r = self.reference.resolution
+        return self.discretisation()[b][0] * r ** -p / (b ** -p - r ** -p)
+
+    def resolution_for(self, error: float) -> float:
+        """The resolution whose discretisation error the observed order puts at `error`
+        (C f^-p = error; NaN when the order is unknown)."""
+        orders = self.spatial_orders()
+        if not orders or not math.isfinite(orders[-1][2]):
+            return math.nan
+        _, b, p = orders[-1]
+        r = self.reference.resolution
+        constant = self.discretisation()[b][0] / (b ** -p - r ** -p)
+        return (constant / error) ** (1.0 / p)
 
     def largest_stable_dt(self) -> dict[str, float]:
         """Per configuration (label): the largest dt of the sweep such that it and every
@@ -227,15 +317,26 @@ class StudyResult:
                  "| integrator | precision | dt [s] | max error | RMS error | energy drift | "
                  "max strain | cost [s/s] | Pareto |",
                  "|---|---|---|---|---|---|---|---|---|"]
+        swept = self.converged and set(self.converged) != {ref.resolution}
+        if swept:
+            lines[2:2] = self._resolution_lines()
+            lines[-2] = ("| resolution | particles | integrator | precision | dt [s] | max error | "
+                         "discretisation | integration | RMS error | energy drift | max strain | "
+                         "cost [s/s] | Pareto |")
+            lines[-1] = "|---" * 13 + "|"
         front = {id(r) for r in pareto_front(self.runs)}
-        for run in sorted(self.runs, key=lambda r: (r.label, -r.dt)):
+        for run in sorted(self.runs, key=lambda r: (r.resolution, r.label, -r.dt)):
             name = run.integrator if run.iterations is None else f"{run.integrator} ({run.iterations} it)"
+            split = (f"{run.discretisation_error:.2e} | {run.integration_error:.2e} | " if swept
+                     else "")
             if run.diverged:
-                metrics = f"diverged at step {run.diverged_step} | | | | {run.cost:.3g} |"
+                metrics = (f"diverged at step {run.diverged_step} | {'| | ' if swept else ''}"
+                           f"| | | {run.cost:.3g} |")
             else:
-                metrics = (f"{run.max_error:.2e} | {run.rms_error:.2e} | {run.energy_drift:.2e} | "
-                           f"{run.max_strain:.3f} | {run.cost:.3g} |")
-            lines.append(f"| {name} | {run.precision} | {run.dt:.3g} | {metrics} "
+                metrics = (f"{run.max_error:.2e} | {split}{run.rms_error:.2e} | "
+                           f"{run.energy_drift:.2e} | {run.max_strain:.3f} | {run.cost:.3g} |")
+            where = f"{run.resolution} | {run.particles} | " if swept else ""
+            lines.append(f"| {where}{name} | {run.precision} | {run.dt:.3g} | {metrics} "
                          f"{'yes' if id(run) in front else ''} |")
         for label, error in self.failed.items():
             lines.append(f"| {label} | failed: {error} | | | | | | | |")
@@ -250,10 +351,31 @@ class StudyResult:
             lines.append(f"| {label} | {dt:.3g} | {predicted[label]:.3g} |")
         return "\n".join(lines) + "\n"
 
+    def _resolution_lines(self) -> list[str]:
+        """The resolution axis: each resolution's discretisation error, the observed orders,
+        the reference's estimated own error."""
+        ref = self.reference
+        lines = [f"Resolution: the reference is the scene refined {ref.resolution} times "
+                 f"({ref.particles} particles); errors are at the scene file's own particles.", "",
+                 "| resolution | particles | discretisation: max error | RMS error | "
+                 "converged step [s] |", "|---|---|---|---|---|"]
+        for f, (worst, rms) in self.discretisation().items():
+            converged = self.converged[f]
+            lines.append(f"| {f} | {converged.particles} | {worst:.2e} | {rms:.2e} | "
+                         f"{converged.dt:.3g} |")
+        orders = ", ".join(f"{p:.2f} from {a} to {b}" for a, b, p in self.spatial_orders())
+        estimate = self.reference_error()
+        lines += ["", f"Observed order of spatial convergence (max error): {orders or 'n/a'}."
+                  + (f" At that order the reference itself is about {estimate:.1e} of the cloth "
+                     "size from the converged cloth: add it to an error below for the error "
+                     "against the continuum." if math.isfinite(estimate) else ""), ""]
+        return lines
+
     def plot(self, path) -> Path:
         """Log-log max error against cost, one line per configuration (colour: integrator;
-        dashed: f32; squares: the most pbd/xpbd iterations), the Pareto front outlined (needs
-        matplotlib: pip install "ti_cloth[study]")."""
+        dashed: f32; marker: resolution, o ^ v D ... from the coarsest, or squares for the most
+        pbd/xpbd iterations; the label ends in xN at resolution N), the Pareto front outlined
+        (needs matplotlib: pip install "ti_cloth[study]")."""
         try:
             import matplotlib
         except ImportError as err:
@@ -263,6 +385,7 @@ class StudyResult:
         import matplotlib.pyplot as plt
 
         fig, ax = plt.subplots(figsize=(8, 5.5), dpi=100)
+        markers = dict(zip(sorted({r.resolution for r in self.runs}), "o^vDPX*"))
         colours = {name: f"C{i}" for i, name in enumerate(dict.fromkeys(r.integrator for r in self.runs))}
         counts = {name: sorted({r.iterations or 0 for r in self.runs if r.integrator == name}) for name in colours}
         for label in dict.fromkeys(r.label for r in self.runs):
@@ -272,7 +395,7 @@ class StudyResult:
                 most = len(counts[first.integrator]) > 1 and first.iterations == counts[first.integrator][-1]
                 ax.plot([r.cost for r in runs], [max(r.max_error, 1e-16) for r in runs], label=label,
                         color=colours[first.integrator], ls="--" if first.precision == "f32" else "-",
-                        marker="s" if most else "o", ms=4, lw=1)
+                        marker="s" if most else markers[first.resolution], ms=4, lw=1)
         front = sorted(pareto_front(self.runs), key=lambda r: r.cost)
         if front:
             ax.plot([r.cost for r in front], [max(r.max_error, 1e-16) for r in front], "k-", lw=3,
@@ -328,10 +451,12 @@ def _configurations(integrators, iterations):
 @dataclass(frozen=True)
 class Configuration:
     """One task of a study: every dt of one integrator (with `iterations` passes for pbd /
-    xpbd) in one precision, against `reference`; `threads`: Taichi's CPU threads (None: all)."""
+    xpbd) in one precision on `scene` (at one resolution), against `reference` and its
+    resolution's `converged` run; `threads`: Taichi's CPU threads (None: all)."""
 
     scene: object
     reference: Reference
+    converged: Reference
     precision: str
     integrator: str
     iterations: int | None
@@ -344,7 +469,8 @@ class Configuration:
     @property
     def label(self) -> str:
         name = self.integrator if self.iterations is None else f"{self.integrator}({self.iterations})"
-        return f"{name} {self.precision}"
+        resolution = self.scene.resolution
+        return f"{name} {self.precision}" + (f" x{resolution}" if resolution != 1 else "")
 
 
 _ONE_AT_A_TIME = threading.Lock()    # Taichi runs one task at a time in a process
@@ -367,20 +493,27 @@ def measure_configuration(task: Configuration) -> list[Run]:
         return runs
 
 
-def retime(scene, run: Run, reference: Reference, repeats: int, arch: str = "cpu") -> Run:
-    """`run` measured again here, its cost the median of `repeats` timings (its errors come
-    out the same: the same bits)."""
-    task = Configuration(scene, reference, run.precision, run.integrator, run.iterations,
-                         (run.dt,), (round(scene.frame_dt / run.dt),), arch, None, repeats)
+def retime(scene, run: Run, result: "StudyResult", repeats: int, arch: str = "cpu") -> Run:
+    """`run` of `result` measured again here, its cost the median of `repeats` timings (its
+    errors come out the same: the same bits)."""
+    refined = scene.refined(run.resolution)
+    converged = result.converged.get(run.resolution, result.reference)
+    task = Configuration(refined, result.reference, converged, run.precision, run.integrator,
+                         run.iterations, (run.dt,), (round(scene.frame_dt / run.dt),), arch, None,
+                         repeats)
     return measure_configuration(task)[0]
 
 
 def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("f64", "f32"),
               iterations=DEFAULT_ITERATIONS, duration: float | None = None, arch: str = "cpu",
-              reference: Reference | None = None, repeats: int = 1,
-              executor=None, progress: bool = True) -> StudyResult:
-    """Sweep integrator x dt x precision (x iterations for pbd/xpbd) on `scene` (a Scene from
-    load_scene). dts: steps [s], each frame_dt / an integer (default: default_dts). duration:
+              reference: Reference | None = None, repeats: int = 1, resolutions=None,
+              reference_resolution: int | None = None, executor=None,
+              progress: bool = True) -> StudyResult:
+    """Sweep resolution x integrator x dt x precision (x iterations for pbd/xpbd) on `scene` (a
+    Scene from load_scene). resolutions: the bodies' refinements to sweep (default the
+    scene's own); reference_resolution: the reference's (default: twice the finest swept when
+    more than the scene's own resolution is swept, else the scene's own). dts: steps [s],
+    each frame_dt / an integer (default: default_dts of each resolution). duration:
     simulated seconds (default the scene's). repeats: timings per run (cost: their median).
     executor: where the configurations run: any concurrent.futures.Executor, or the
     sweep.Workers of sweep.local_jobs / sweep.dask_cluster (default: here, one after the
@@ -394,28 +527,36 @@ def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("
             raise ValueError(f"precisions: {p!r} is not one of {sorted(backend.PRECISIONS)}")
     if not (isinstance(repeats, int) and repeats >= 1):
         raise ValueError(f"repeats must be an integer >= 1, got {repeats!r}")
+    resolutions = _resolutions(scene, resolutions)
+    if reference_resolution is None:
+        reference_resolution = (scene.resolution if resolutions == (scene.resolution,)
+                                else 2 * resolutions[-1])
+    if not (reference_resolution > resolutions[-1] or resolutions == (reference_resolution,)):
+        raise ValueError(f"reference_resolution must be finer than every swept resolution "
+                         f"{list(resolutions)} (or the only one), got {reference_resolution!r}")
     integrators = tuple(integrators)
-    dts = sorted(default_dts(scene, integrators) if dts is None else dts, reverse=True)
-    substeps = []
-    for dt in dts:
-        ratio = scene.frame_dt / dt
-        if not (dt > 0 and abs(ratio - round(ratio)) < 1e-6 * ratio):
-            raise ValueError(f"dts: {dt!r} does not divide the frame step {scene.frame_dt:.6g} s; "
-                             "use frame_dt / n for integers n")
-        substeps.append(round(ratio))
     configurations = list(_configurations(integrators, iterations))
     workers = as_workers(executor)
     if reference is None:
-        reference = reference_trajectory(scene, duration, arch)
-    tasks = [Configuration(scene, reference, precision, name, count, tuple(dts), tuple(substeps),
-                           arch, workers.threads if workers is not None else None, repeats)
-             for precision in precisions for name, count in configurations]
-    with tqdm(total=len(tasks) * len(dts), unit="run", disable=not progress,
+        reference = reference_trajectory(scene.refined(reference_resolution), duration, arch)
+    converged = {f: reference if f == reference.resolution
+                 else reference_trajectory(scene.refined(f), duration, arch) for f in resolutions}
+    tasks = []
+    for f in resolutions:
+        refined = scene.refined(f)
+        steps = sorted(default_dts(refined, integrators) if dts is None else dts, reverse=True)
+        substeps = tuple(_substeps(scene, dt) for dt in steps)
+        tasks += [Configuration(refined, reference, converged[f], precision, name, count,
+                                tuple(steps), substeps, arch,
+                                workers.threads if workers is not None else None, repeats)
+                  for precision in precisions for name, count in configurations]
+    with tqdm(total=sum(len(t.dts) for t in tasks), unit="run", disable=not progress,
               dynamic_ncols=True) as bar:        # closed on Ctrl-C too
         results, incidents = run_tasks(measure_configuration, tasks, workers,
-                                       lambda i: bar.update(len(dts)))
+                                       lambda i: bar.update(len(tasks[i].dts)))
     result = StudyResult(scene.name, reference,
-                         timing="serial" if workers is None else workers.timing)
+                         timing="serial" if workers is None else workers.timing,
+                         converged=converged)
     for task, runs in zip(tasks, results):
         if isinstance(runs, Failure):
             result.failed[task.label] = runs.error
@@ -426,9 +567,32 @@ def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("
     return result
 
 
+def _resolutions(scene, resolutions) -> tuple[int, ...]:
+    """The swept resolutions, sorted, each an integer in limits.RESOLUTION."""
+    if resolutions is None:
+        return (scene.resolution,)
+    values = tuple(resolutions) if isinstance(resolutions, (list, tuple)) else (resolutions,)
+    for f in values:
+        if not (isinstance(f, (int, np.integer)) and not isinstance(f, bool)
+                and limits.RESOLUTION.low <= f <= limits.RESOLUTION.high):
+            raise ValueError(f"resolutions: {f!r} is not an integer {limits.RESOLUTION.text()}")
+    if not values:
+        raise ValueError("resolutions: give at least one, e.g. (1, 2, 4)")
+    return tuple(sorted({int(f) for f in values}))
+
+
+def _substeps(scene, dt: float) -> int:
+    ratio = scene.frame_dt / dt
+    if not (dt > 0 and abs(ratio - round(ratio)) < 1e-6 * ratio):
+        raise ValueError(f"dts: {dt!r} does not divide the frame step {scene.frame_dt:.6g} s; "
+                         "use frame_dt / n for integers n")
+    return round(ratio)
+
+
 def _measure(task: Configuration, sim, substeps: int, predicted: float) -> Run:
     nan = float("nan")
-    reference = task.reference
+    reference, converged = task.reference, task.converged
+    where = (task.scene.resolution, task.scene.cloth.particle_count)
     try:
         positions, energies, wall = _trajectory(sim, reference.times, substeps)
         walls = [wall]
@@ -437,14 +601,19 @@ def _measure(task: Configuration, sim, substeps: int, predicted: float) -> Run:
             walls.append(_trajectory(sim, reference.times, substeps)[2])
     except SimulationDiverged as err:
         return Run(task.integrator, task.precision, task.iterations, sim.dt, sim.step_count, nan,
-                   nan, True, err.step, nan, nan, nan, nan, predicted)
+                   nan, True, err.step, nan, nan, nan, nan, predicted, *where)
     wall = statistics.median(walls)
-    error = np.linalg.norm(positions - reference.positions, axis=2) / reference.size
-    energy_error = np.abs(energies - reference.energies) / reference.energy_scale
+    own = positions[:, task.scene.own_particles]
+    error = np.linalg.norm(own - reference.positions, axis=2) / reference.size
+    integration = np.linalg.norm(own - converged.positions, axis=2) / reference.size
+    energy_error = np.abs(energies - converged.energies) / converged.energy_scale
     blown = np.flatnonzero(energy_error > ENERGY_BLOWUP)
     diverged_step = int(round(reference.times[blown[0]] / sim.dt)) if len(blown) else -1
     simulated = reference.times[-1]
+    discretisation = (distance(converged, reference)[0] if converged is not reference
+                      else nan)
     return Run(task.integrator, task.precision, task.iterations, sim.dt, sim.step_count, wall,
                wall / simulated, len(blown) > 0, diverged_step, float(error.max()),
-               float(np.sqrt(np.mean(error ** 2))), float(energy_error.max()),
-               _max_strain(task.scene.cloth, positions), predicted)
+               rms(error), float(energy_error.max()),
+               _max_strain(task.scene.cloth, positions), predicted, *where, discretisation,
+               float(integration.max()))

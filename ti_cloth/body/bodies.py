@@ -57,7 +57,8 @@ def string(n: int, length: float, *, mass: float = 0.1, stretch=SpringParams(500
     require(fixed in STRING_ENDS, "fixed", fixed, f"one of {STRING_ENDS}")
     require(end_mass in END_MASSES, "end_mass", end_mass, f"one of {END_MASSES}")
     start = as_array("start", start, np.float64, (3,))
-    positions = start + np.linspace(0.0, length, n)[:, None] * _unit("direction", direction)
+    along = length * (np.arange(n) / (n - 1))        # the same bits at every refinement
+    positions = start + along[:, None] * _unit("direction", direction)
     springs = _chain_springs(1, n, bend is not None)
     pinned = {"start": [0], "both": [0, n - 1], "none": []}[fixed]
     material = Material(stretch=stretch, bend=bend or SpringParams(0.0))
@@ -172,7 +173,7 @@ def _strand_curves(roots, normals, segments: int, length: float, curl) -> np.nda
     """Rest positions of every strand's particles, (S, segments + 1, 3): straight along its
     direction, or a helix of curl = (radius, pitch) about it, the root on the helix, particles
     spaced evenly along the helix's arc."""
-    arc = np.linspace(0.0, length, segments + 1)
+    arc = length * (np.arange(segments + 1) / segments)     # the same bits when refined
     if curl is None:
         return roots[:, None, :] + arc[None, :, None] * normals[:, None, :]
     curl = as_array("curl", curl, np.float64, (2,))

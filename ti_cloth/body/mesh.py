@@ -166,7 +166,7 @@ def tet_grid_mesh(cells=(4, 4, 4), size=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0))
         in_range(f"size[{axis}]", size[axis], limits.LENGTH)
     origin = as_array("origin", origin, np.float64, (3,))
     nx, ny, nz = (int(c) for c in cells)
-    axes = [np.linspace(0.0, s, c + 1) for s, c in zip(size, cells)]
+    axes = [s * (np.arange(c + 1) / c) for s, c in zip(size, cells)]   # exact at refinements
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3) + origin
     index = np.arange(len(grid)).reshape(nx + 1, ny + 1, nz + 1)
     corners = np.stack([index[i:i + nx, j:j + ny, k:k + nz].ravel()
@@ -310,8 +310,8 @@ def grid_mesh(rows: int, cols: int, size: tuple[float, float] = (1.0, 1.0), plan
     a, b = PLANES[plane]
     r, c = np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij")
     vertices = np.tile(origin, (rows * cols, 1))
-    vertices[:, a] += c.ravel() * size[0] / (cols - 1)
-    vertices[:, b] += r.ravel() * size[1] / (rows - 1)
+    vertices[:, a] += size[0] * (c.ravel() / (cols - 1))     # c / (cols - 1) first: the same
+    vertices[:, b] += size[1] * (r.ravel() / (rows - 1))     # bits at every refinement
 
     q = (r[:-1, :-1] * cols + c[:-1, :-1]).ravel()  # lower-left corner of each quad
     lower = np.stack([q, q + 1, q + cols + 1], axis=1)

@@ -19,6 +19,7 @@ Rest lengths are distances in the reference configuration.
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Mapping
 
 import numpy as np
@@ -204,7 +205,8 @@ class Cloth:
                          the face (a, b, c) opposite it in a tetrahedron (altitude_springs)
       altitude_rest_length (A,) [m]: rest altitude of p over its face, > 0
       altitude_stiffness (A,) [N/m], altitude_damping (A,) [kg/s]
-      body_offsets       particle ranges of the bodies joined by `combine` ((0, N) for one)
+      particle_body      (N,) int: which of the bodies joined by `combine` each particle is
+                         in (0 for one body)
 
     A body made of a Fabric has no springs but elements (elements.py): its triangles
       face_indices       (F, 3) int: the membrane and bending triangles (the mesh's)
@@ -303,7 +305,7 @@ class Cloth:
         altitude = altitude or SpringParams(0.0)
         self.altitude_stiffness = np.full(self.altitude_count, altitude.k)
         self.altitude_damping = np.full(self.altitude_count, altitude.kd)
-        self.body_offsets = (0, n)
+        self.particle_body = np.zeros(n, np.int64)
         self._build_elements(material if fabric else None, warp)
         self._freeze()
 
@@ -335,7 +337,7 @@ class Cloth:
                       "hinge_rest_angle")
 
     def _freeze(self) -> None:
-        for name in ("particle_mass", "pinned", "hem", "ghost", "spring_indices", "spring_kind", "spring_rest_length",
+        for name in ("particle_mass", "particle_body", "pinned", "hem", "ghost", "spring_indices", "spring_kind", "spring_rest_length",
                      "spring_stiffness", "spring_damping", "triangle_edge_spring", "triangle_face", "altitude_indices",
                      "altitude_rest_length", "altitude_stiffness", "altitude_damping") + self.ELEMENT_ARRAYS:
             getattr(self, name).flags.writeable = False
@@ -344,7 +346,7 @@ class Cloth:
     def combine(cls, bodies) -> "Cloth":
         """One Cloth holding several bodies side by side (one simulation steps them all):
         particles, springs, triangles and tetrahedra renumbered in order; body b's particles
-        are body_offsets[b]:body_offsets[b + 1]. All must use the same damping model."""
+        are those with particle_body == b, in order. All must use the same damping model."""
         bodies = list(bodies)
         require(len(bodies) > 0 and all(isinstance(b, Cloth) for b in bodies), "bodies", bodies,
                 "a non-empty list of Cloth objects")
@@ -390,7 +392,33 @@ class Cloth:
         body.face_hinge = joined("face_hinge", hinge_offsets)
         body.triangle_face = joined("triangle_face", face_offsets)
         body.hinge_faces = joined("hinge_faces", 3 * face_offsets)
-        body.body_offsets = tuple(int(o) for o in particle_offsets)
+        first_body = np.cumsum([0] + [b.body_count for b in bodies])
+        body.particle_body = np.concatenate([b.particle_body + k
+                                             for b, k in zip(bodies, first_body)])
+        body._freeze()
+        return body
+
+    def renumbered(self, order) -> "Cloth":
+        """The same body with particle order[i] as particle i (a permutation of the particles):
+        every per-particle array reordered, every index array relabelled (springs keep
+        i < j), the mesh without its grid layout (its vertices are no longer row-major; the
+        springs, built from it, stay)."""
+        order = as_array("order", order, np.int64, (self.particle_count,))
+        rank = np.full(self.particle_count, -1, np.int64)
+        rank[order] = np.arange(self.particle_count)
+        require(bool((rank >= 0).all()), "order", order.tolist()[:8],
+                f"a permutation of the {self.particle_count} particles")
+        body = copy.copy(self)
+        mesh = self.mesh
+        body.mesh = Mesh(mesh.vertices[order], rank[mesh.triangles],
+                         tetrahedra=rank[mesh.tetrahedra],
+                         uvs=None if mesh.uvs is None else mesh.uvs[order])
+        body.particle_position = body.mesh.vertices
+        for name in ("particle_mass", "particle_body", "pinned", "hem", "ghost"):
+            setattr(body, name, getattr(self, name)[order])
+        body.spring_indices = np.sort(rank[self.spring_indices], axis=1)
+        for name in ("altitude_indices", "face_indices", "hinge_indices"):
+            setattr(body, name, rank[getattr(self, name)])
         body._freeze()
         return body
 
@@ -408,6 +436,10 @@ class Cloth:
     @property
     def particle_count(self) -> int:
         return len(self.particle_position)
+
+    @property
+    def body_count(self) -> int:
+        return int(self.particle_body.max()) + 1
 
     @property
     def spring_count(self) -> int:

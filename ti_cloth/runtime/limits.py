@@ -62,12 +62,14 @@ FOV = Range(1.0, 170.0, "degrees", "camera field of view")
 LINE_WIDTH = Range(0.0, 64.0, "px", "style line widths and particle sizes")
 SUBDIVISIONS = Range(0, 8, "", "sphere_mesh subdivisions (20 x 4^n triangles)")
 SDF_RESOLUTION = Range(8, 256, "", "mesh collider distance grid: cells along the longest side")
+RESOLUTION = Range(1, 64, "", "refinement of a scene's bodies (scene.build(resolution=f))")
 SAMPLES = 2**26                # width x height x supersample^2: ~1.6 GB of raster buffers
 NAME_LENGTH = 100              # scene names: letters, digits, "_", "-", "." (file names)
 
 TABLE = (STIFFNESS, DAMPING, DENSITY, MASS, LENGTH, SCALE, COORDINATE, ACCELERATION, SPEED_COMPONENT, DRAG, GUARD, DT,
          FPS, DURATION, TIME, SUBSTEPS, ITERATIONS, THREADS, GRID_SIDE, CHAIN, STRANDS, SEGMENTS, CELLS,
-         STEPS, IMAGE_SIDE, SUPERSAMPLE, FOV, LINE_WIDTH, SUBDIVISIONS, SDF_RESOLUTION)
+         STEPS, IMAGE_SIDE, SUPERSAMPLE, FOV, LINE_WIDTH, SUBDIVISIONS, SDF_RESOLUTION,
+         RESOLUTION)
 
 # Memory, measured: a 512 x 512 grid (262,144 particles, 1,567,746 springs) peaks at 663 MB
 # above the interpreter while its Cloth and Simulation are built (numpy topology, then the
