@@ -18,7 +18,7 @@ from ti_cloth.app.scene_file import SceneError
 
 BASE = {
     "scene": {"name": "fuzz"},
-    "simulation": {"integrator": "symplectic_euler", "fps": 30, "duration": 1.0,
+    "simulation": {"integrator": "symplectic_euler", "fps": 30, "duration": 1.0, "resolution": 1,
                    "strain_limit": {"max_strain": 0.1}},
     "forces": {"gravity": [0, -9.81, 0], "drag": 0.1, "wind": {"velocity": [1, 0, 0], "seed": 3}},
     "bodies": [{"type": "grid", "rows": 6, "cols": 6, "size": [1, 1], "pinned": ["top"],

@@ -87,7 +87,7 @@ class Advice:
             needed = self.study.resolution_for(self.tolerance)
             estimate = (f"; at the observed order of spatial convergence, resolution "
                         f"{math.ceil(needed)} or finer would meet it" if math.isfinite(needed)
-                        and self.study.converged else "")
+                        else "")
             return (f"no candidate meets {self.metric} <= {self.tolerance:g} over the first "
                     f"{self.window:g} s ({runs} runs){closest}{estimate}")
         c = self.choice
@@ -108,8 +108,7 @@ class Advice:
                 f"substeps = {round(frame_dt / c.dt)}             # dt = {c.dt:.6g} s\n"
                 f'precision = "{c.precision}"\n'
                 + (f"resolution = {c.resolution}             # {c.particles} particles\n"
-                   if self.study.converged and len(self.study.converged) > 1
-                   or c.resolution != 1 else ""))
+                   if self.study.swept or c.resolution != 1 else ""))
 
     def markdown(self, frame_dt: float) -> str:
         lines = [f"Advice for `{self.scene_name}`: {self.metric} <= {self.tolerance:g} over the "
@@ -127,6 +126,10 @@ class Advice:
                          f"{'yes' if self.passes(run) else 'no'} | {mark} |")
         if self.study.timing != "serial":
             lines += ["", f"Costs measured with other runs at once ({self.study.timing})."]
+        if not self.study.swept:
+            lines += ["", "Errors are integration errors on the scene's own mesh (the "
+                      "reference is rk4 on it); resolutions (--resolutions 1 2 4) measure "
+                      "the mesh's own error too and let the advice refine it."]
         return "\n".join(lines) + "\n"
 
     def csv_text(self) -> str:

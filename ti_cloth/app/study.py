@@ -247,6 +247,11 @@ class StudyResult:
     incidents: dict[str, tuple[str, bool]] = field(default_factory=dict)
     converged: dict[int, Reference] = field(default_factory=dict)   # by resolution
 
+    @property
+    def swept(self) -> bool:
+        """Whether resolution was an axis (the reference finer than a swept resolution)."""
+        return bool(self.converged) and set(self.converged) != {self.reference.resolution}
+
     def discretisation(self) -> dict[int, tuple[float, float]]:
         """{resolution: (max, RMS) distance of its converged run from the reference}, for the
         swept resolutions coarser than the reference's."""
@@ -317,7 +322,10 @@ class StudyResult:
                  "| integrator | precision | dt [s] | max error | RMS error | energy drift | "
                  "max strain | cost [s/s] | Pareto |",
                  "|---|---|---|---|---|---|---|---|---|"]
-        swept = self.converged and set(self.converged) != {ref.resolution}
+        swept = self.swept
+        if not swept:
+            lines[0] += (" Integration error only: the reference is this same mesh's; "
+                         "resolutions (--resolutions 1 2 4) measure the mesh's own error too.")
         if swept:
             lines[2:2] = self._resolution_lines()
             lines[-2] = ("| resolution | particles | integrator | precision | dt [s] | max error | "

@@ -78,8 +78,9 @@ class Material:
 
 
 # Densities are typical fabric weights; stiffnesses are per-spring constants chosen so the
-# fabrics look right at 16-64 particles per metre (a square grid's stretch constant equals the
-# sheet's 2-D stretch modulus, independent of resolution; bend and shear constants are not).
+# fabrics look right at 16-64 particles per metre (on a square grid a spring constant is a 2-D
+# modulus of the sheet, the same at every resolution for stretch and shear; no bend spring
+# gives the sheet a bending stiffness that stays: docs/integrators.md, resolution).
 PRESETS: dict[str, dict] = {
     "silk": dict(density=0.06, stretch=SpringParams(2e3, 0.2), shear=SpringParams(50.0, 0.02),
                  bend=SpringParams(0.5, 0.001)),
