@@ -392,8 +392,8 @@ class StudyResult:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
-        fig, ax = plt.subplots(figsize=(8, 5.5), dpi=100)
         markers = dict(zip(sorted({r.resolution for r in self.runs}), "o^vDPX*"))
+        fig, ax = plt.subplots(figsize=(9.5 if len(markers) > 1 else 8, 5.5), dpi=100)
         colours = {name: f"C{i}" for i, name in enumerate(dict.fromkeys(r.integrator for r in self.runs))}
         counts = {name: sorted({r.iterations or 0 for r in self.runs if r.integrator == name}) for name in colours}
         for label in dict.fromkeys(r.label for r in self.runs):
@@ -416,7 +416,17 @@ class StudyResult:
                      + ("" if self.timing == "serial" else f"\ncosts timed with {self.timing}"),
                      fontsize=10 if self.timing != "serial" else None)
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7, ncol=2)
+        if len(markers) > 1:          # one entry per colour, marker and line style
+            from matplotlib.lines import Line2D
+            keys = ([Line2D([], [], color=c, label=name) for name, c in colours.items()]
+                    + [Line2D([], [], color="grey", ls="", marker=m, label=f"resolution {f}")
+                       for f, m in markers.items()]
+                    + [Line2D([], [], color="grey", ls=ls, label=p)
+                       for p, ls in (("f64", "-"), ("f32", "--"))]
+                    + [Line2D([], [], color="k", lw=3, alpha=0.25, label="Pareto front")])
+            ax.legend(handles=keys, fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1))
+        else:
+            ax.legend(fontsize=7, ncol=2)
         fig.tight_layout()
         path = Path(path)
         with atomic_path(path) as tmp:
