@@ -82,8 +82,10 @@ class Advice:
         margin = (f" (with the reference's own estimated {self.margin:.1e})" if self.margin
                   else "")
         if self.choice is None:
+            extra = (f" + {self.margin:.1e}, the reference's own estimated error" if self.margin
+                     else "")
             closest = (f"; the closest is {describe(self.closest)} at {self.metric} "
-                       f"{getattr(self.closest, self.metric):.2e}{margin}" if self.closest else "")
+                       f"{getattr(self.closest, self.metric):.2e}{extra}" if self.closest else "")
             needed = self.study.resolution_for(self.tolerance)
             estimate = (f"; at the observed order of spatial convergence, resolution "
                         f"{math.ceil(needed)} or finer would meet it" if math.isfinite(needed)
