@@ -28,7 +28,7 @@ from ..body.topology import Cloth
 from ..physics.handles import Handle
 from ..physics.paths import INTERPOLATIONS, Keyframes, Oscillation
 from ..runtime import limits
-from .scene_file import SceneError, Table
+from .scene_file import Table
 
 BODY_TYPES = ("grid", "mesh", "string", "hair", "tet_block")
 SPRING_KEYS = {"string": ("stretch", "bend"), "hair": ("stretch", "bend", "twist", "altitude"),
@@ -377,7 +377,3 @@ def read_path(table: Table):
     table.finish()
     return path
 
-
-def refine_error(source, factor: int, err: ValueError) -> SceneError:
-    """A body that cannot be built `factor` times finer, as the scene file's error."""
-    return SceneError(f"{source}: resolution = {factor}: {err}")
