@@ -234,13 +234,12 @@ def load_scene(path, note=None) -> Scene:
     if not body_tables:
         root.fail("bodies: a scene needs at least one [[bodies]] table")
     bodies, made = zip(*(read_body(table, path.parent) for table in body_tables))
-    if len(made) > 1:
-        root.build(Cloth.combine, [cloth for cloth, _, _ in made])   # checks they can join
     try:
         cloth, handles, file_particles = build_bodies(bodies, resolution,
                                                       made if resolution == 1 else None)
-    except ValueError as err:
-        sim.fail(f"simulation.resolution = {resolution}: {err}")
+    except ValueError as err:      # bodies that cannot join, or cannot be refined
+        (root.fail(f"bodies: {err}") if resolution == 1
+         else sim.fail(f"simulation.resolution = {resolution}: {err}"))
     colliders = [_collider(t, path.parent) for t in root.tables("colliders")]
 
     camera_table = root.table("camera")

@@ -104,7 +104,7 @@ class Body:
         mesh, refinement = refine.subdivide(self.mesh, factor)
         return self._surface(mesh, refinement, {}, factor)
 
-    def _springs(self, factor: int) -> dict:
+    def _refined_options(self, factor: int) -> dict:
         builder = getattr(builders, self.kind)
         options = dict(self.options)
         for key in SPRING_KEYS[self.kind]:
@@ -113,14 +113,14 @@ class Body:
         return options
 
     def _string(self, factor: int):
-        options = self._springs(factor)
+        options = self._refined_options(factor)
         n = (options.pop("n") - 1) * factor + 1
         cloth = builders.string(n, **options)
         return (cloth, refine.chain_refinement(1, self.options["n"] - 1, factor, False),
                 {"start": [0], "end": [n - 1]})
 
     def _hair(self, factor: int):
-        options = self._springs(factor)
+        options = self._refined_options(factor)
         segments = options.pop("segments")
         cloth = builders.hair(options.pop("strands"), segments * factor, **options)
         return (cloth, refine.chain_refinement(self.options["strands"], segments, factor,
@@ -128,7 +128,7 @@ class Body:
                 {"roots": np.flatnonzero(cloth.pinned)})
 
     def _tet_block(self, factor: int):
-        options = self._springs(factor)
+        options = self._refined_options(factor)
         cells = np.asarray(options.pop("cells", _default(builders.tet_block, "cells")))
         cloth = builders.tet_block(cells * factor, **options)
         return cloth, refine.tet_refinement(cells.astype(np.int64), factor), {}

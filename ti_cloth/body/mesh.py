@@ -217,16 +217,22 @@ def sphere_mesh(radius: float = 1.0, centre=(0.0, 0.0, 0.0), subdivisions: int =
                           [8, 6, 7], [9, 8, 1]])
     vertices = vertices / np.linalg.norm(vertices, axis=1, keepdims=True)
     for _ in range(subdivisions):
-        edges, middle = unique_rows(triangle_edges(triangles), return_inverse=True)
+        edges, triangles = split_triangles(triangles, len(vertices))
         midpoints = vertices[edges].mean(axis=1)
-        middle = middle.reshape(-1, 3) + len(vertices)        # (t0t1, t1t2, t2t0) of each
         vertices = np.vstack([vertices, midpoints / np.linalg.norm(midpoints, axis=1,
                                                                    keepdims=True)])
-        a, b, c = triangles.T
-        ab, bc, ca = middle.T
-        triangles = np.concatenate([np.stack(corners, axis=1) for corners in
-                                    ((a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca))])
     return Mesh(vertices * radius + centre, triangles)
+
+
+def split_triangles(triangles: np.ndarray, vertex_count: int) -> tuple[np.ndarray, np.ndarray]:
+    """One midpoint subdivision: (the unique edges (E, 2), whose midpoints become vertices
+    vertex_count + e, and the triangles each cut into four at them, wound as before)."""
+    edges, middle = unique_rows(triangle_edges(triangles), return_inverse=True)
+    middle = middle.reshape(-1, 3) + vertex_count        # (t0t1, t1t2, t2t0) of each
+    a, b, c = triangles.T
+    ab, bc, ca = middle.T
+    return edges, np.concatenate([np.stack(corners, axis=1) for corners in
+                                  ((a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca))])
 
 
 def disc_mesh(radius: float = 0.5, rings: int = 8, centre=(0.0, 0.0, 0.0)) -> Mesh:

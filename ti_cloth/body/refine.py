@@ -28,7 +28,7 @@ import numpy as np
 
 from ..runtime.validation import require
 from .material import SpringParams
-from .mesh import Mesh, triangle_edges, unique_rows
+from .mesh import Mesh, split_triangles
 
 NONE = -1
 
@@ -130,20 +130,15 @@ def subdivide(mesh: Mesh, factor: int) -> tuple[Mesh, Refinement]:
     vertices, triangles, uvs = mesh.vertices, mesh.triangles, mesh.uvs
     carrier = np.stack([np.arange(mesh.vertex_count)] * 2, axis=1)
     while factor > 1:
-        edges, middle = unique_rows(triangle_edges(triangles), return_inverse=True)
+        edges, triangles = split_triangles(triangles, len(vertices))
         ends = carrier[edges]                                  # (E, 2 ends, 2)
         points = ends.reshape(len(edges), 4)
         lo, hi = points.min(axis=1), points.max(axis=1)
         same_edge = np.all((points == lo[:, None]) | (points == hi[:, None]), axis=1)
         carrier = np.concatenate([carrier, np.where(same_edge[:, None] & (lo[:, None] != NONE),
                                                     np.stack([lo, hi], axis=1), NONE)])
-        middle = middle.reshape(-1, 3) + len(vertices)
         vertices = np.concatenate([vertices, vertices[edges].mean(axis=1)])
         uvs = None if uvs is None else np.concatenate([uvs, uvs[edges].mean(axis=1)])
-        a, b, c = triangles.T
-        ab, bc, ca = middle.T
-        triangles = np.concatenate([np.stack(t, axis=1) for t in
-                                    ((a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca))])
         factor //= 2
     return (Mesh(vertices, triangles, tetrahedra=mesh.tetrahedra, uvs=uvs),
             Refinement(np.arange(mesh.vertex_count), carrier))
