@@ -20,6 +20,7 @@ from .body.mesh import (
     tet_grid_mesh,
 )
 from .body.topology import Cloth
+from .contact.animated_mesh import AnimatedMeshCollider
 from .contact.colliders import Box, Capsule, Collider, Plane, Sphere
 from .contact.mesh_collider import MeshCollider
 from .contact.self_collision import SelfCollision, SelfContacts
@@ -49,7 +50,7 @@ from .stability import AUTO_MAX_DT, auto_dt, auto_substeps, stable_dt
 from .state import State
 
 __all__ = [
-    "init", "Box", "Capsule", "Collider", "Exporter", "MeshCollider", "Plane", "Sphere", "SimulationDiverged", "StateMismatch",
+    "init", "AnimatedMeshCollider", "Box", "Capsule", "Collider", "Exporter", "MeshCollider", "Plane", "Sphere", "SimulationDiverged", "StateMismatch",
     "TeamStalled",
     "ForceSettings",
     "INTEGRATORS", "Integrator", "ExplicitEuler", "SymplecticEuler", "Verlet", "PBD", "XPBD",

@@ -421,13 +421,14 @@ class Simulation:
     def collider_distance(self, points) -> tuple[np.ndarray, np.ndarray]:
         """(distance [m] from each point (N, 3) [m] to the nearest collider surface as the
         collision stage measures it (negative inside; a shell mesh gives the unsigned
-        distance), shape (N,); that collider's outward normal, shape (N, 3)) at the current
-        time. Without colliders: infinite distances, zero normals."""
+        distance, an animated mesh the exact distance, signed when it is closed), shape (N,);
+        that collider's outward normal, shape (N, 3)) at the current time. Without
+        colliders: infinite distances, zero normals."""
         points = as_array("points", points, np.float64, (None, 3))
         if self.colliders is None:
             return np.full(len(points), np.inf), np.zeros((len(points), 3))
         self._check_runtime()
-        distance, normal = self.colliders.distance(points)
+        distance, normal = self.colliders.distance(points, self.time)
         nearest = np.argmin(distance, axis=1)
         rows = np.arange(len(points))
         return distance[rows, nearest], normal[rows, nearest]

@@ -65,8 +65,9 @@ class TeamStages:
     phases). Each runs its phases (runtime/plan.py), as in a launch per stage.
 
     fused: whether the integrator is fused (its particles move independently of each other
-    at the end of its step). Then, unless strain limiting moves them in between, each
-    particle meets the colliders as soon as it has moved (`collides_on_move`, called by
+    at the end of its step). Then, unless strain limiting moves them in between or an
+    animated mesh must be placed first (its phases), each particle meets the colliders as
+    soon as it has moved (`collides_on_move`, called by
     fused.move_particle): the collision stage reads and writes nothing but the particle,
     and held particles (handles, the stage in between) never collide, so this is the order
     of STEP_ORDER with the same bits, without a pass over the particles of its own nor the
@@ -80,7 +81,8 @@ class TeamStages:
         self.holds = handles is not None          # read at compile time
         self.limits_strain = strain_limiter is not None
         self.collides = colliders is not None
-        self.collides_on_move = self.collides and fused and not self.limits_strain
+        self.collides_on_move = (self.collides and fused and not self.limits_strain
+                                 and not colliders.animated)
 
     def running(self, name: str) -> tuple:
         """(stage `name`'s object,) when it runs its phases after the integrator's, else ()

@@ -22,7 +22,7 @@ import taichi as ti
 from ..runtime import limits
 from ..runtime.validation import as_array, finite_number, in_range, require
 
-PLANE, SPHERE, BOX, CAPSULE, MESH = 0, 1, 2, 3, 4   # MESH: mesh_collider.py
+PLANE, SPHERE, BOX, CAPSULE, MESH, ANIMATED = 0, 1, 2, 3, 4, 5   # mesh_collider.py, animated_mesh.py
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -1,7 +1,8 @@
-"""The collision stage: a simulation's colliders (colliders.py, mesh_collider.py) as Taichi
-fields, and the kernels that keep particles out of them with the response colliders.py
-describes. A set without mesh colliders compiles none of the mesh code, one without turning
-meshes none of the turning code."""
+"""The collision stage: a simulation's colliders (colliders.py, mesh_collider.py,
+animated_mesh.py) as Taichi fields, and the kernels that keep particles out of them with the
+response colliders.py describes. A set without mesh colliders compiles none of the mesh code,
+one without turning meshes none of the turning code, one without animated meshes none of
+theirs (animated_contact.py)."""
 
 import numpy as np
 import taichi as ti
@@ -11,9 +12,11 @@ from ..runtime.plan import Loop, Phase
 from ..runtime.transfer import upload
 from ..runtime.validation import require
 from ..state import copy_positions
-from .colliders import MESH, Collider, Plane, signed_distance
+from .animated_contact import PASSES, AnimatedBodies, worst_contact
+from .animated_mesh import AnimatedMeshCollider
+from .colliders import ANIMATED, MESH, Collider, Plane, signed_distance
 from .mesh_collider import MeshCollider
-from .sdf import layout, sample_grid
+from .sdf import layout, mesh_distance, sample_grid
 
 PLACEMENT = 30       # numbers per collider in a placement row (ColliderSet._placement)
 
@@ -24,12 +27,17 @@ class ColliderSet:
     particle positions at the start of the current step (`step_start`) the response needs.
     Mesh colliders add their distance grids, one after another in `samples`, and their pose:
     `a` the mesh centre's position and `rotation` (a 3x3 matrix, row-major) now, `a_prev` and
-    `rotation_prev` at the start of the step."""
+    `rotation_prev` at the start of the step. Animated meshes are in `bodies` (an
+    AnimatedBodies), placed by the stage's first phases every step."""
 
     def __init__(self, colliders, particle_count: int):
         real, count = backend.real(), len(colliders)
         self.nodes, self.meshes, self.turning, self.shells = self.structure(colliders,
-                                                                            particle_count)[3:]
+                                                                            particle_count)[3:7]
+        members = _animated(colliders)
+        self.animated = bool(members)
+        if self.animated:
+            self.bodies = AnimatedBodies(members, count)
         self.count = count
         fields = backend.FieldGroup()
         self.kind = fields.scalar(ti.i32, count)
@@ -66,17 +74,21 @@ class ColliderSet:
         nodes = sum(int(np.prod(layout(c.mesh.vertices, c.resolution, c.margin)[2]))
                     for c in meshes)
         return ("ColliderSet", len(colliders), particle_count, nodes, bool(meshes),
-                any(c.rotation is not None for c in meshes), any(not c.solid for c in meshes))
+                any(c.rotation is not None for c in meshes), any(not c.solid for c in meshes),
+                AnimatedBodies.structure(_animated(colliders)))
 
     def load(self, colliders, particle_count: int) -> None:
         """Upload `colliders` (as many as this set holds), placed at time 0."""
         self.colliders = tuple(colliders)
         for c in self.colliders:
             require(isinstance(c, Collider) and type(c) is not Collider, "colliders", c,
-                    "Plane, Sphere, Box, Capsule or MeshCollider objects")
+                    "Plane, Sphere, Box, Capsule, MeshCollider or AnimatedMeshCollider objects")
         packed = [c.packed() for c in self.colliders]
-        self.moving = any(c.path is not None or getattr(c, "rotation", None) is not None
-                          for c in self.colliders)
+        self.moving = self.animated or any(c.path is not None
+                                           or getattr(c, "rotation", None) is not None
+                                           for c in self.colliders)
+        if self.animated:
+            self.bodies.load(_animated(self.colliders), self.count)
         self._rest = [(p[1], p[2]) for p in packed]
         upload(((self.kind, [p[0] for p in packed]), (self.radius, [p[3] for p in packed]),
                 (self.thickness, [c.thickness for c in self.colliders]),
@@ -95,6 +107,8 @@ class ColliderSet:
         """Write the placements at the ends of steps first .. first + count - 1 (count at
         most limits.SCHEDULED_STEPS) for a many-steps launch (place_scheduled)."""
         rows = np.stack([self._placement((first + k + 1) * dt, dt) for k in range(count)])
+        if self.animated:
+            self.bodies.schedule(first, count, dt)
         table = np.zeros((limits.SCHEDULED_STEPS * self.count, PLACEMENT), backend.numpy_real())
         table[:count * self.count] = rows.reshape(-1, PLACEMENT)
         self.scheduled.from_numpy(table)
@@ -110,29 +124,39 @@ class ColliderSet:
         copy_positions(state, self.step_start)
 
     def phases(self, model, forces, work) -> tuple:
-        """The collision stage as phases (runtime/plan.py; `work` is this set): every particle
-        out of the colliders where they are placed (resolve), from its position at the
-        step's start (step_start)."""
-        return (Phase(Loop(model.particle_count, resolve)),)
+        """The collision stage as phases (runtime/plan.py; `work` is this set): the animated
+        meshes placed, then every particle out of the colliders where they are placed
+        (resolve), from its position at the step's start (step_start)."""
+        placing = self.bodies.phases() if self.animated else ()
+        return placing + (Phase(Loop(model.particle_count, resolve)),)
 
     def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
         """The collision stage of a step ending at time t (simulation.STEP_ORDER): the
         colliders placed, then a launch of its phases."""
         if self.moving:
             self.place(t, dt)
+        if self.animated:
+            self.bodies.schedule(step_index, 1, dt)
         plan.run(self, model, state, None, self, dt, step_index, False)
 
-    def distance(self, points) -> tuple[np.ndarray, np.ndarray]:
+    def distance(self, points, t: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """(distance [m] of each point from each collider's surface, negative inside, shape
-        (N, count); outward normal, shape (N, count, 3)) where the colliders are now. A shell
-        reports the unsigned distance."""
+        (N, count); outward normal, shape (N, count, 3)) where the colliders are now (the
+        animated meshes at time t [s]). A shell reports the unsigned distance, an animated
+        mesh the exact one (sdf.mesh_distance)."""
         real = backend.numpy_real()
         points = np.ascontiguousarray(points, dtype=real).reshape(-1, 3)
         distance = np.zeros((len(points), self.count), real)
         normal = np.zeros((len(points), self.count, 3), real)
         if len(points):
             measure_distances(self, points, distance, normal)
-        return distance.astype(np.float64), normal.astype(np.float64)
+        distance, normal = distance.astype(np.float64), normal.astype(np.float64)
+        for c, collider in _animated(self.colliders):
+            distance[:, c], normal[:, c] = mesh_distance(collider.vertices_at(t),
+                                                         collider.mesh.triangles,
+                                                         points.astype(np.float64),
+                                                         collider.closed)
+        return distance, normal
 
     def _grids(self) -> tuple:
         """(field, values) of the mesh colliders' grids; their samples are copied in here."""
@@ -182,6 +206,11 @@ class ColliderSet:
         return turns[t]
 
 
+
+
+def _animated(colliders) -> list:
+    """(index, collider) of the animated mesh colliders among `colliders`."""
+    return [(i, c) for i, c in enumerate(colliders) if isinstance(c, AnimatedMeshCollider)]
 
 
 @ti.func
@@ -271,33 +300,60 @@ def surface_velocity(colliders: ti.template(), c, x, dt):
 
 
 @ti.func
+def _friction(colliders: ti.template(), c, x, x0, n, depth, vc, dt):
+    """(position, velocity) of a particle just pushed out by `depth` along n to x, which was
+    at x0 at the step's start: Coulomb friction on its displacement relative to the surface
+    (moving at vc), then its velocity without approach (colliders.py)."""
+    slide = x - x0 - vc * dt
+    tangential = slide - slide.dot(n) * n
+    length = tangential.norm()
+    if length <= colliders.static_friction[c] * depth:
+        x -= tangential
+    else:
+        x -= tangential * ti.min(colliders.kinetic_friction[c] * depth / length, 1.0)
+    v = (x - x0) / dt
+    approach = (v - vc).dot(n)
+    if approach < 0:
+        v -= approach * n
+    return x, v
+
+
+@ti.func
+def _is_animated(colliders: ti.template(), c):
+    animated = False
+    if ti.static(colliders.animated):
+        animated = colliders.kind[c] == ANIMATED
+    return animated
+
+
+@ti.func
 def resolve_particle(model: ti.template(), state: ti.template(), colliders: ti.template(), i,
                      x0, dt):
     """Project particle i (if free) out of every collider, in collider order, with Coulomb
     friction on its displacement over the step (from x0, its position at the step's start)
-    relative to the surface (colliders.py)."""
+    relative to the surface (colliders.py); an animated mesh answers up to PASSES contacts
+    (animated_contact.py)."""
     if model.particle_inv_mass[i] > 0:
         x = state.particle_position[i]
         v = state.particle_velocity[i]
         touched = False
         for c in range(colliders.count):
-            d, n = collider_distance(colliders, c, x, x0)
-            depth = colliders.thickness[c] - d
-            if depth > 0:
-                x += depth * n
-                vc = surface_velocity(colliders, c, x, dt)
-                slide = x - x0 - vc * dt
-                tangential = slide - slide.dot(n) * n
-                length = tangential.norm()
-                if length <= colliders.static_friction[c] * depth:
-                    x -= tangential
-                else:
-                    x -= tangential * ti.min(colliders.kinetic_friction[c] * depth / length, 1.0)
-                v = (x - x0) / dt
-                approach = (v - vc).dot(n)
-                if approach < 0:
-                    v -= approach * n
-                touched = True
+            if _is_animated(colliders, c):
+                for _ in range(PASSES):
+                    found, n, depth, moved = worst_contact(colliders, c, x0, x,
+                                                           colliders.thickness[c])
+                    if not found:
+                        break
+                    x, v = _friction(colliders, c, x + depth * n, x0, n, depth, moved / dt, dt)
+                    touched = True
+            else:
+                d, n = collider_distance(colliders, c, x, x0)
+                depth = colliders.thickness[c] - d
+                if depth > 0:
+                    x += depth * n
+                    x, v = _friction(colliders, c, x, x0, n, depth,
+                                     surface_velocity(colliders, c, x, dt), dt)
+                    touched = True
         if touched:
             state.particle_position[i] = x
             state.particle_velocity[i] = v
@@ -319,9 +375,18 @@ def project_out(model: ti.template(), state: ti.template(), colliders: ti.templa
     for i in range(model.particle_count):
         if model.particle_inv_mass[i] > 0:
             x = state.particle_position[i]
+            x0 = colliders.step_start[i]
             for c in range(colliders.count):
-                d, n = collider_distance(colliders, c, x, colliders.step_start[i])
-                x += ti.max(colliders.thickness[c] - d, 0.0) * n
+                if _is_animated(colliders, c):
+                    for _ in range(PASSES):
+                        found, n, depth, _ = worst_contact(colliders, c, x0, x,
+                                                           colliders.thickness[c])
+                        if not found:
+                            break
+                        x += depth * n
+                else:
+                    d, n = collider_distance(colliders, c, x, x0)
+                    x += ti.max(colliders.thickness[c] - d, 0.0) * n
             state.particle_position[i] = x
 
 

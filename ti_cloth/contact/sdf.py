@@ -173,6 +173,30 @@ def build(vertices: np.ndarray, triangles: np.ndarray, resolution: int,
                         gradient.reshape(*shape, 3).astype(np.float32))
 
 
+def mesh_distance(vertices: np.ndarray, triangles: np.ndarray, points: np.ndarray,
+                  solid: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(distance [m] of each point (N, 3) from the triangles' surface, negative inside when
+    `solid` (winding number, as the grids); unit normal away from the closest point, outward
+    inside) by libigl, exactly (no grid)."""
+    try:
+        import igl
+    except ImportError as err:
+        raise ImportError("distances to meshes are measured with libigl: "
+                          "pip install 'ti_cloth[mesh]'") from err
+    vertices = np.ascontiguousarray(vertices, np.float64)
+    triangles = np.ascontiguousarray(triangles, np.int64)
+    unsigned, _, closest, _ = igl.signed_distance(points, vertices, triangles,
+                                                  sign_type=igl.SIGNED_DISTANCE_TYPE_UNSIGNED)
+    away = points - closest
+    length = np.linalg.norm(away, axis=1)
+    sign = np.ones(len(points))
+    if solid:
+        sign = np.where(np.abs(igl.fast_winding_number(vertices, triangles, points)) > INSIDE,
+                        -1.0, 1.0)
+    normal = sign[:, None] * away / np.where(length > 0, length, 1.0)[:, None]
+    return sign * np.abs(unsigned), normal
+
+
 @ti.func
 def sample_grid(samples: ti.template(), start, shape, origin, cell, q):
     """(distance [m], gradient) of the grid whose nodes are samples[start:] (DistanceGrid.samples

@@ -20,6 +20,7 @@ import taichi as ti
 
 from ..body.material import SpringKind
 from ..body.mesh import vertex_triangles
+from ..contact.animated_mesh import AnimatedMeshCollider
 from ..contact.colliders import BOX, CAPSULE, SPHERE, Box, Capsule, Plane, Sphere
 from ..contact.mesh_collider import MeshCollider
 from ..runtime import backend, limits
@@ -338,7 +339,7 @@ class Renderer:
                 self.draw_box(c.lo, c.hi)
             elif isinstance(c, Capsule):
                 self.draw_capsule(c.a, c.b, c.radius)
-            elif isinstance(c, MeshCollider):
+            elif isinstance(c, (MeshCollider, AnimatedMeshCollider)):
                 self.draw_mesh(c.mesh.vertices, c.mesh.triangles, colours=COLLIDER_COLOUR,
                                style=COLLIDER_STYLE)
 

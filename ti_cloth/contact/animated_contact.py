@@ -1,0 +1,427 @@
+"""Contact with animated (deforming) meshes (animated_mesh.py): the Taichi side.
+
+Every step, before the particles are resolved (collision.py), four loops place the bodies:
+each vertex where the motion has it at the step's start and end (samples interpolated in the
+kernel, or a callable's values tabled on the host for the launch's steps), each triangle's
+swept box (the box of its six positions, grown by the collider's thickness), and two levels
+of boxes over runs of BLOCK triangles and of BLOCK such blocks. The runs follow the triangles
+sorted along a Morton curve of their rest centroids, so a run stays a compact patch of
+surface however the body moves (a bounding volume hierarchy of fixed shape, refitted each
+step, as Bridson et al. 2002 refit theirs for moving cloth).
+
+A particle that moved from x0 to x in the step meets the triangles whose boxes meet the box of
+its path, each in two ways:
+- continuous: the first time t in (0, 1] at which the particle, moving linearly, lies in the
+  plane of the triangle, moving linearly (the roots of a cubic, Provot 1997 / Bridson et al.
+  2002 eq. 1), with its point at that time inside the triangle: it passed through;
+- proximity: at the step's end its foot is inside the triangle and its height on the side it
+  started on is below the thickness (and above minus the thickness: deeper is a crossing,
+  which the first test finds); or, on that side with its foot outside, its distance to the
+  nearest point of the triangle's edges is below the thickness (the wedge over a convex edge
+  or corner, which no triangle's foot covers), pushed away from that point.
+The worst contact (the earliest crossing, else the deepest) is answered as every collider's
+(colliders.py: out to the thickness along the triangle's normal on the particle's side, Coulomb
+friction against the surface point's own motion over the step), then the particle's new path
+is tested again, up to PASSES times. Each answer is a function of the set of contacts found,
+visited in a fixed order: reruns and thread counts give the same bits.
+"""
+
+
+import numpy as np
+import taichi as ti
+
+from ..runtime import backend, limits
+from ..runtime.plan import Loop, Phase
+from ..runtime.transfer import upload
+
+BLOCK = 16          # triangles per block, blocks per group
+PASSES = 4          # contacts answered per particle and body in a step, at most
+INSIDE = 1e-4       # a point this far outside a triangle (barycentric) still meets it
+BISECTIONS = 40     # halvings of a crossing's time interval
+
+
+def morton_order(points: np.ndarray) -> np.ndarray:
+    """The order of points (N, 3) along a Morton (Z-order) curve of their bounding box."""
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    scaled = ((points - lo) / np.maximum(hi - lo, 1e-30) * 1023).astype(np.int64)
+    code = np.zeros(len(points), np.int64)
+    for bit in range(10):
+        for axis in range(3):
+            code |= ((scaled[:, axis] >> bit) & 1) << (3 * bit + axis)
+    return np.argsort(code, kind="stable")
+
+
+def _runs(sizes: list[int]) -> np.ndarray:
+    """Starts (len + 1) of consecutive runs of BLOCK items within each of the groups of
+    `sizes` items (a run never spans two groups)."""
+    starts, first = [0], 0
+    for size in sizes:
+        starts += [first + k for k in range(BLOCK, size, BLOCK)] + [first + size]
+        first += size
+    return np.asarray(starts, np.int64)
+
+
+@backend.kernel_argument
+class AnimatedBodies:
+    """The animated mesh colliders of a ColliderSet (`members`: (index in the set, collider)):
+    their motion tables, vertices at the step's start and end, triangles and box hierarchy."""
+
+    def __init__(self, members, collider_count: int):
+        self.count = len(members)
+        colliders = [c for _, c in members]
+        vertex_counts = [c.mesh.vertex_count for c in colliders]
+        triangle_counts = [c.mesh.triangle_count for c in colliders]
+        self.rows = [len(c.motion) if c.sampled else limits.SCHEDULED_STEPS + 1
+                     for c in colliders]
+        self.vertex_total = sum(vertex_counts)
+        self.triangle_total = sum(triangle_counts)
+        blocks = _runs(triangle_counts)
+        self.block_total = len(blocks) - 1
+        block_counts = [len(_runs([n])) - 1 for n in triangle_counts]
+        groups = _runs(block_counts)
+        self.group_total = len(groups) - 1
+        group_counts = [len(_runs([n])) - 1 for n in block_counts]
+        real = backend.real()
+        fields = backend.FieldGroup()
+        self.frames = fields.vector(3, real, sum(r * v for r, v in zip(self.rows, vertex_counts)))
+        self.start = fields.vector(3, real, self.vertex_total)
+        self.end = fields.vector(3, real, self.vertex_total)
+        self.vertex_body = fields.scalar(ti.i32, self.vertex_total)
+        self.triangles = fields.vector(3, ti.i32, self.triangle_total)
+        self.triangle_body = fields.scalar(ti.i32, self.triangle_total)
+        self.lo = fields.vector(3, real, self.triangle_total + self.block_total + self.group_total)
+        self.hi = fields.vector(3, real, self.triangle_total + self.block_total + self.group_total)
+        self.block_first = fields.scalar(ti.i32, self.block_total + 1)
+        self.group_first = fields.scalar(ti.i32, self.group_total + 1)
+        self.body_groups = fields.scalar(ti.i32, self.count + 1)
+        self.collider = fields.scalar(ti.i32, self.count)
+        self.body_of = fields.scalar(ti.i32, collider_count)
+        self.vertex_start = fields.scalar(ti.i32, self.count)
+        self.vertex_count = fields.scalar(ti.i32, self.count)
+        self.frame_start = fields.scalar(ti.i32, self.count)
+        self.row_count = fields.scalar(ti.i32, self.count)
+        self.rate = fields.scalar(real, self.count)
+        self.stepped = fields.scalar(ti.i32, self.count)
+        self.first_step = fields.scalar(ti.i32, self.count)
+        fields.finalize(self)
+        upload(((self.block_first, blocks), (self.group_first, groups),
+                (self.body_groups, np.concatenate([[0], np.cumsum(group_counts)]))))
+
+    @staticmethod
+    def structure(members) -> tuple:
+        """What the kernels read at compile time (collision.ColliderSet.structure)."""
+        return tuple((c.mesh.vertex_count, c.mesh.triangle_count,
+                      len(c.motion) if c.sampled else -1) for _, c in members)
+
+    def load(self, members, collider_count: int) -> None:
+        """Upload the colliders' triangles (in Morton order) and sampled motions."""
+        self.members = tuple(members)
+        vertex_start, frame_start, triangles, owner, body_of = [], [], [], [], [-1] * collider_count
+        offset = frame = 0
+        for b, (index, c) in enumerate(self.members):
+            rest = c.vertices_at(0.0)
+            centroids = rest[c.mesh.triangles].mean(axis=1)
+            triangles.append(c.mesh.triangles[morton_order(centroids)] + offset)
+            owner += [b] * c.mesh.vertex_count
+            body_of[index] = b
+            vertex_start.append(offset)
+            frame_start.append(frame)
+            offset += c.mesh.vertex_count
+            frame += self.rows[b] * c.mesh.vertex_count
+        triangles = np.concatenate(triangles)
+        upload(((self.triangles, triangles), (self.vertex_body, owner),
+                (self.triangle_body, np.asarray(owner)[triangles[:, 0]]),
+                (self.collider, [i for i, _ in self.members]), (self.body_of, body_of),
+                (self.vertex_start, vertex_start), (self.frame_start, frame_start),
+                (self.vertex_count, [c.mesh.vertex_count for _, c in self.members]),
+                (self.row_count, self.rows),
+                (self.rate, [c.fps if c.sampled else 1.0 for _, c in self.members]),
+                (self.stepped, [int(not c.sampled) for _, c in self.members])))
+        frames = np.zeros((self.frames.shape[0], 3), backend.numpy_real())
+        for b, (_, c) in enumerate(self.members):
+            begin = frame_start[b]
+            if c.sampled:
+                frames[begin:begin + c.motion.size // 3] = c.motion.reshape(-1, 3)
+        self.frames.from_numpy(frames)
+        self._cache = {}
+        self.schedule(0, 0, None)
+
+    def schedule(self, first: int, count: int, dt: float | None) -> None:
+        """Table the callable motions at the step boundaries first .. first + count (times
+        k dt): the launch's steps read rows k - first (count <= SCHEDULED_STEPS)."""
+        stepped = [(b, c) for b, (_, c) in enumerate(self.members) if not c.sampled]
+        if not stepped:
+            return
+        frames = self.frames.to_numpy()
+        starts = self.frame_start.to_numpy()
+        for b, c in stepped:
+            v = c.mesh.vertex_count
+            for row in range(count + 1):
+                at = frames[starts[b] + row * v: starts[b] + (row + 1) * v]
+                at[:] = self._vertices(b, c, (first + row) * dt if dt else 0.0)
+        self.frames.from_numpy(frames)
+        self.first_step.from_numpy(np.full(self.count, first, np.int32))
+
+    def _vertices(self, b: int, c, t: float) -> np.ndarray:
+        """Body b's vertices at time t (a launch's last boundary is the next one's first)."""
+        key = (b, t)
+        if key not in self._cache:
+            if len(self._cache) > 2 * self.count:
+                self._cache.pop(next(iter(self._cache)))
+            self._cache[key] = c.vertices_at(t)
+        return self._cache[key]
+
+    def phases(self) -> tuple:
+        """Place every vertex, then every triangle's swept box, then the blocks', then the
+        groups' (before the particles' loop of the collision stage)."""
+        return (Phase(Loop(self.vertex_total, place_vertex)),
+                Phase(Loop(self.triangle_total, triangle_box)),
+                Phase(Loop(self.block_total, block_box)),
+                Phase(Loop(self.group_total, group_box)))
+
+
+@ti.func
+def _vertex_at(bodies: ti.template(), b, local, boundary, dt):
+    """Body b's vertex `local` at the step boundary `boundary` (time boundary x dt): a row of
+    the launch's table (callables), or the samples around that time, linearly."""
+    base = bodies.frame_start[b]
+    rows = bodies.row_count[b]
+    v_count = bodies.vertex_count[b]
+    position = bodies.frames[base + local]
+    if bodies.stepped[b]:
+        row = ti.math.clamp(boundary - bodies.first_step[b], 0, rows - 1)
+        position = bodies.frames[base + row * v_count + local]
+    else:
+        s = ti.max(ti.cast(boundary, float) * dt * bodies.rate[b], 0.0)
+        row = ti.min(ti.cast(ti.floor(s), ti.i32), rows - 1)
+        position = bodies.frames[base + row * v_count + local]
+        if row < rows - 1:
+            frac = s - ti.cast(row, float)
+            following = bodies.frames[base + (row + 1) * v_count + local]
+            position = position + frac * (following - position)
+    return position
+
+
+@ti.func
+def place_vertex(model: ti.template(), state: ti.template(), forces: ti.template(),
+                 colliders: ti.template(), stages: ti.template(), v, now: ti.template()):
+    """Vertex v where its body's motion has it at the step's start and end."""
+    _place_vertex(colliders.bodies, v, now.step, now.dt)
+
+
+@ti.func
+def _place_vertex(bodies: ti.template(), v, step, dt):
+    b = bodies.vertex_body[v]
+    local = v - bodies.vertex_start[b]
+    bodies.start[v] = _vertex_at(bodies, b, local, step, dt)
+    bodies.end[v] = _vertex_at(bodies, b, local, step + 1, dt)
+
+
+@ti.func
+def triangle_box(model: ti.template(), state: ti.template(), forces: ti.template(),
+                 colliders: ti.template(), stages: ti.template(), f, now: ti.template()):
+    """Triangle f's box over the step, grown by its collider's thickness."""
+    _triangle_box(colliders, colliders.bodies, f)
+
+
+@ti.func
+def _triangle_box(colliders: ti.template(), bodies: ti.template(), f):
+    corner = bodies.triangles[f]
+    lo = ti.min(bodies.start[corner[0]], bodies.end[corner[0]])
+    hi = ti.max(bodies.start[corner[0]], bodies.end[corner[0]])
+    for k in ti.static(range(1, 3)):
+        lo = ti.min(lo, bodies.start[corner[k]], bodies.end[corner[k]])
+        hi = ti.max(hi, bodies.start[corner[k]], bodies.end[corner[k]])
+    grow = colliders.thickness[bodies.collider[bodies.triangle_body[f]]]
+    bodies.lo[f] = lo - grow
+    bodies.hi[f] = hi + grow
+
+
+@ti.func
+def _union(bodies: ti.template(), target, first, end):
+    lo, hi = bodies.lo[first], bodies.hi[first]
+    for k in range(first + 1, end):
+        lo, hi = ti.min(lo, bodies.lo[k]), ti.max(hi, bodies.hi[k])
+    bodies.lo[target] = lo
+    bodies.hi[target] = hi
+
+
+@ti.func
+def block_box(model: ti.template(), state: ti.template(), forces: ti.template(),
+              colliders: ti.template(), stages: ti.template(), k, now: ti.template()):
+    """Block k's box: the union of its triangles'."""
+    bodies = colliders.bodies
+    _union(bodies, bodies.triangle_total + k, bodies.block_first[k], bodies.block_first[k + 1])
+
+
+@ti.func
+def group_box(model: ti.template(), state: ti.template(), forces: ti.template(),
+              colliders: ti.template(), stages: ti.template(), g, now: ti.template()):
+    """Group g's box: the union of its blocks'."""
+    bodies = colliders.bodies
+    offset = bodies.triangle_total
+    _union(bodies, offset + bodies.block_total + g, offset + bodies.group_first[g],
+           offset + bodies.group_first[g + 1])
+
+
+@ti.func
+def _meets(bodies: ti.template(), k, lo, hi):
+    return (bodies.lo[k] <= hi).all() and (lo <= bodies.hi[k]).all()
+
+
+@ti.func
+def _barycentric(p, a, b, c):
+    """Barycentric coordinates of p's foot on the plane of abc, and abc's unnormalised normal
+    (zero for a degenerate triangle, whose coordinates are then (1, 0, 0))."""
+    e1, e2, q = b - a, c - a, p - a
+    m = e1.cross(e2)
+    area2 = m.dot(m)
+    w = ti.Vector([1.0, 0.0, 0.0])
+    if area2 > 0:
+        u = q.cross(e2).dot(m) / area2
+        v = e1.cross(q).dot(m) / area2
+        w = ti.Vector([1.0 - u - v, u, v])
+    return w, m
+
+
+@ti.func
+def _nearest_on_edges(p, a, b, c):
+    """The point of triangle abc's edges nearest p, and its barycentric coordinates."""
+    best, weights = a, ti.Vector([1.0, 0.0, 0.0])
+    distance = (p - a).norm_sqr() + 1.0
+    corners = ti.Matrix.rows([a, b, c])
+    for k in ti.static(range(3)):
+        u, v = corners[k, :], corners[(k + 1) % 3, :]
+        d = v - u
+        s = ti.math.clamp((p - u).dot(d) / ti.max(d.dot(d), 1e-30), 0.0, 1.0)
+        q = u + s * d
+        if (p - q).norm_sqr() < distance:
+            distance = (p - q).norm_sqr()
+            best = q
+            weights = ti.Vector([0.0, 0.0, 0.0])
+            weights[k] = 1.0 - s
+            weights[(k + 1) % 3] = s
+    return best, weights
+
+
+@ti.func
+def _cubic(c0, c1, c2, c3, t):
+    return ((c3 * t + c2) * t + c1) * t + c0
+
+
+@ti.func
+def _crossing(x0, x1, a0, a1, b0, b1, c0, c1):
+    """The first time t in (0, 1] at which x lies in the plane of abc and inside the
+    triangle, all moving linearly from their step-start (0) to step-end (1) positions; 2 if
+    none. The coplanarity (b - a) x (c - a) . (x - a) = 0 is a cubic in t (Provot 1997); its
+    monotone pieces between the roots of its derivative are bisected."""
+    e1, e2, q = b0 - a0, c0 - a0, x0 - a0
+    d1, d2, dq = (b1 - a1) - e1, (c1 - a1) - e2, (x1 - a1) - q
+    n0 = e1.cross(e2)
+    n1 = e1.cross(d2) + d1.cross(e2)
+    n2 = d1.cross(d2)
+    k0 = n0.dot(q)
+    k1 = n0.dot(dq) + n1.dot(q)
+    k2 = n1.dot(dq) + n2.dot(q)
+    k3 = n2.dot(dq)
+    # the pieces' ends: 0, the derivative's roots in (0, 1) in order, 1
+    ends = ti.Vector([0.0, 1.0, 1.0, 1.0])
+    qa, qb, qc = 3.0 * k3, 2.0 * k2, k1
+    if qa != 0.0:
+        disc = qb * qb - 4.0 * qa * qc
+        if disc > 0.0:
+            root = ti.sqrt(disc)
+            r1 = (-qb - root) / (2.0 * qa)
+            r2 = (-qb + root) / (2.0 * qa)
+            ends[1], ends[2] = ti.min(r1, r2), ti.max(r1, r2)
+    elif qb != 0.0:
+        ends[1] = -qc / qb
+    for k in ti.static(range(1, 3)):
+        ends[k] = ti.math.clamp(ends[k], 0.0, 1.0)
+    found = 2.0
+    for piece in ti.static(range(3)):
+        lo, hi = ends[piece], ends[piece + 1]
+        if found > 1.0 and hi > lo:
+            f_lo = _cubic(k0, k1, k2, k3, lo)
+            f_hi = _cubic(k0, k1, k2, k3, hi)
+            if (f_lo > 0.0 and f_hi <= 0.0) or (f_lo < 0.0 and f_hi >= 0.0):
+                for _ in range(BISECTIONS):
+                    mid = 0.5 * (lo + hi)
+                    f_mid = _cubic(k0, k1, k2, k3, mid)
+                    if (f_mid > 0.0) == (f_lo > 0.0) and f_mid != 0.0:
+                        lo, f_lo = mid, f_mid
+                    else:
+                        hi = mid
+                t = hi
+                w, _ = _barycentric(x0 + t * (x1 - x0), a0 + t * (a1 - a0), b0 + t * (b1 - b0),
+                                    c0 + t * (c1 - c0))
+                if w.min() >= -INSIDE:
+                    found = t
+    return found
+
+
+@ti.func
+def worst_contact(colliders: ti.template(), c, x0, x, thickness):
+    """The worst contact of the path x0 -> x with animated collider c's triangles (module
+    doc): (found, unit normal on the particle's side at the step's end, depth to the
+    thickness [m], the surface point's displacement over the step [m])."""
+    return _worst_contact(colliders.bodies, colliders.bodies.body_of[c], x0, x, thickness)
+
+
+@ti.func
+def _worst_contact(bodies: ti.template(), b, x0, x, thickness):
+    """worst_contact for body b."""
+    lo, hi = ti.min(x0, x), ti.max(x0, x)
+    first_time, deepest = 2.0, 0.0
+    found = False
+    normal = ti.Vector([0.0, 1.0, 0.0])
+    depth = 0.0
+    moved = ti.Vector([0.0, 0.0, 0.0])
+    blocks = bodies.triangle_total
+    groups = blocks + bodies.block_total
+    for g in range(bodies.body_groups[b], bodies.body_groups[b + 1]):
+        if _meets(bodies, groups + g, lo, hi):
+            for k in range(bodies.group_first[g], bodies.group_first[g + 1]):
+                if _meets(bodies, blocks + k, lo, hi):
+                    for f in range(bodies.block_first[k], bodies.block_first[k + 1]):
+                        if _meets(bodies, f, lo, hi):
+                            corner = bodies.triangles[f]
+                            a0, b0, c0 = (bodies.start[corner[0]], bodies.start[corner[1]],
+                                          bodies.start[corner[2]])
+                            a1, b1, c1 = (bodies.end[corner[0]], bodies.end[corner[1]],
+                                          bodies.end[corner[2]])
+                            _, m0 = _barycentric(x0, a0, b0, c0)
+                            w, m1 = _barycentric(x, a1, b1, c1)
+                            length = m1.norm()
+                            if length > 0 and m0.norm() > 0:
+                                side = ti.select(m0.dot(x0 - a0) >= 0.0, 1.0, -1.0)
+                                if m0.dot(m1) < 0.0:
+                                    side = -side         # the triangle turned over in the step
+                                n = side * m1 / length
+                                height = n.dot(x - a1)
+                                gap = height
+                                over = w.min() >= -INSIDE
+                                if not over and height > 0.0:   # beside it: nearest an edge
+                                    q, w = _nearest_on_edges(x, a1, b1, c1)
+                                    gap = (x - q).norm()
+                                    if gap > 0.0:
+                                        n = (x - q) / gap
+                                    over = True
+                                t = _crossing(x0, x, a0, a1, b0, b1, c0, c1)
+                                near = over and gap < thickness and gap > -thickness
+                                if t < first_time or (first_time > 1.0 and near
+                                                      and thickness - gap > deepest):
+                                    if t > 1.0:
+                                        deepest = thickness - gap
+                                    else:
+                                        first_time = t
+                                        n = side * m1 / length
+                                    found = True
+                                    normal = n
+                                    depth = thickness - n.dot(x - a1) if t <= 1.0 \
+                                        else thickness - gap
+                                    w = ti.math.clamp(w, 0.0, 1.0)
+                                    w = w / w.sum()
+                                    moved = (w[0] * (a1 - a0) + w[1] * (b1 - b0)
+                                             + w[2] * (c1 - c0))
+    return found, normal, depth, moved

@@ -1,0 +1,130 @@
+"""A deforming triangle mesh as a collider: a walking figure, a breathing chest, a skinned
+character exported from Blender as a point cache.
+
+Its triangles stay; its vertices move: `motion` gives them at any time, as a callable or as
+samples at a frame rate. The collision stage (animated_contact.py) sweeps every triangle
+over each step and keeps particles on the side they started, thickness away, with the same
+Coulomb friction as every collider (colliders.py), measured against the surface point's own
+velocity.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..body.mesh import Mesh
+from ..runtime import limits
+from ..runtime.validation import as_array, in_range, require
+from .colliders import ANIMATED, Collider
+from .mesh_collider import closed
+
+MAX_SAMPLE_VALUES = 2**27       # samples x vertices x 3 numbers (1 GiB in float64)
+
+
+@dataclass(frozen=True, kw_only=True)
+class AnimatedMeshCollider(Collider):
+    """The triangles of `mesh` [m], their vertices moving as `motion` says.
+
+    motion: a callable t [s] -> vertex positions (V, 3) [m], V the mesh's vertex count, or an
+        array (samples, V, 3) [m] of positions sampled at `fps` from t = 0 (linear in
+        between, held at the last sample after it). None: the mesh stands still as given.
+    fps: samples per second of an array `motion` (required with one, not allowed otherwise).
+    The mesh's own vertices are its positions at t = 0 when `motion` is None or a callable
+    (a callable's value at 0 is what the collider is at 0; the mesh gives the triangles).
+
+    Particles are kept `thickness` [m] away on the side of each triangle they were on at the
+    step's start, whatever the triangle does in the step (continuous collision); a closed
+    mesh (every edge shared by two triangles) also reports distances signed negative inside
+    (Simulation.collider_distance). `path` is not taken: the motion says everything.
+    """
+
+    mesh: Mesh = field(kw_only=False)
+    motion: Callable[[float], object] | np.ndarray | None = field(default=None,
+                                                                  kw_only=False)
+    fps: float | None = None
+
+    def __post_init__(self):
+        super().__post_init__()
+        name = "AnimatedMeshCollider"
+        require(self.path is None, f"{name}.path", self.path,
+                "None (the motion moves an animated mesh: give its vertices at every time)")
+        mesh = self.mesh
+        require(isinstance(mesh, Mesh) and mesh.triangle_count > 0, f"{name}.mesh", mesh,
+                "a Mesh with at least one triangle")
+        vertices = mesh.vertex_count
+        if callable(self.motion):
+            require(self.fps is None, f"{name}.fps", self.fps,
+                    "None with a callable motion (it is called at every step's time)")
+            self.vertices_at(0.0)
+        elif self.motion is not None:
+            motion = np.asarray(self.motion) if not isinstance(self.motion, np.ndarray) \
+                else self.motion
+            require(motion.ndim == 3 and motion.shape[1:] == (vertices, 3),
+                    f"{name}.motion.shape", getattr(motion, "shape", None),
+                    f"(samples, {vertices}, 3): a position for each of the mesh's {vertices} "
+                    "vertices in every sample")
+            require(0 < motion.size <= MAX_SAMPLE_VALUES, f"{name}.motion.size", motion.size,
+                    f"at least one sample and at most {MAX_SAMPLE_VALUES} numbers")
+            motion = as_array(f"{name}.motion", motion, np.float64, (None, vertices, 3))
+            bad = np.argwhere(np.abs(motion) > limits.COORDINATE.high)
+            require(len(bad) == 0, f"{name}.motion[{', '.join(map(str, bad[0])) if len(bad) else ''}]",
+                    motion[tuple(bad[0])] if len(bad) else None,
+                    f"a coordinate {limits.COORDINATE.text()}")
+            motion.setflags(write=False)
+            object.__setattr__(self, "motion", motion)
+            object.__setattr__(self, "fps", in_range(f"{name}.fps", self.fps, limits.FPS))
+        else:
+            require(self.fps is None, f"{name}.fps", self.fps, "None without a motion")
+
+    @property
+    def sampled(self) -> bool:
+        """Whether the motion is an array of samples (else a callable or none)."""
+        return isinstance(self.motion, np.ndarray)
+
+    @property
+    def closed(self) -> bool:
+        """Whether the mesh is closed (every edge shared by two triangles): it has an inside."""
+        return closed(self.mesh)
+
+    def vertices_at(self, t: float) -> np.ndarray:
+        """The vertex positions (V, 3) [m] at time t [s]."""
+        if self.motion is None:
+            return self.mesh.vertices
+        if self.sampled:
+            return interpolate(self.motion, self.fps, t)
+        name = f"AnimatedMeshCollider.motion({t})"
+        vertices = as_array(name, self.motion(t), np.float64, (self.mesh.vertex_count, 3))
+        bad = np.argwhere(np.abs(vertices) > limits.COORDINATE.high)
+        require(len(bad) == 0, f"{name}[{', '.join(map(str, bad[0])) if len(bad) else ''}]",
+                vertices[tuple(bad[0])] if len(bad) else None,
+                f"a coordinate {limits.COORDINATE.text()}")
+        return vertices
+
+    def placed(self, t: float) -> AnimatedMeshCollider:
+        """The mesh as it is at time t [s], standing still."""
+        if self.motion is None:
+            return self
+        return replace(self, mesh=Mesh(self.vertices_at(t), self.mesh.triangles), motion=None,
+                       fps=None)
+
+    def moved(self, offset):
+        return replace(self, mesh=Mesh(self.vertices_at(0.0) + offset, self.mesh.triangles),
+                       motion=None, fps=None)
+
+    def packed(self):
+        return ANIMATED, np.zeros(3), np.zeros(3), 0.0
+
+
+def interpolate(samples: np.ndarray, fps: float, t: float) -> np.ndarray:
+    """Positions at time t [s] of samples (S, V, 3) taken at `fps` from t = 0: linear between
+    the two samples around t, the last one after it (the kernels' rule: animated_contact.py)."""
+    s = max(t, 0.0) * fps
+    first = min(int(np.floor(s)), len(samples) - 1)
+    if first == len(samples) - 1:
+        return samples[first]
+    frac = s - first
+    return samples[first] + frac * (samples[first + 1] - samples[first])
+
