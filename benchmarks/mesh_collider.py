@@ -48,10 +48,10 @@ def simulation(n, integrator, variant):
                          colliders=colliders(variant))
 
 
-def step_costs(n, integrator, variants, steps, repeats):
-    """{variant: median ms per step}, each simulation warmed up until the cloth has landed
-    (0.15 s), then timed in turn with the others."""
-    sims = {v: simulation(n, integrator, v) for v in variants}
+def step_costs(build, variants, steps, repeats):
+    """{variant: median ms per step} of the simulations build(variant) makes, each warmed up
+    until the cloth has landed (0.15 s), then timed in turn with the others."""
+    sims = {v: build(v) for v in variants}
     for sim in sims.values():
         sim.step(round(0.15 / sim.dt))
         sim.step(steps)                  # untimed: compiles what the timed launches meet
@@ -115,7 +115,8 @@ def main(argv=None):
           + f" {'mesh/sphere':>12} {'turning/moving':>15}")
     for n in args.sizes:
         for integrator in ("symplectic_euler", "xpbd"):
-            ms = step_costs(n, integrator, variants, args.steps, args.repeats)
+            ms = step_costs(lambda v: simulation(n, integrator, v), variants, args.steps,
+                            args.repeats)
             print(f"{n:>5} {integrator:>17} " + " ".join(f"{ms[v]:>14.3f}" for v in variants)
                   + f" {ms['mesh'] / ms['sphere']:>12.2f}"
                   f" {ms['mesh, turning'] / ms['sphere, moving']:>15.2f}")

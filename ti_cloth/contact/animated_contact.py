@@ -22,7 +22,10 @@ its path, each in two ways:
 The worst contact (the earliest crossing, else the deepest) is answered as every collider's
 (colliders.py: out to the thickness along the triangle's normal on the particle's side, Coulomb
 friction against the surface point's own motion over the step), then the particle's new path
-is tested again, up to PASSES times. Each answer is a function of the set of contacts found,
+is tested again, up to PASSES times (after the first answer, contacts shallower than RESOLVED
+thicknesses - rounding - are left). A path that enters and leaves a triangle within one step
+ends on the side it started, so only a path whose end is across a triangle's plane is solved
+for its crossing. Each answer is a function of the set of contacts found,
 visited in a fixed order: reruns and thread counts give the same bits.
 """
 
@@ -36,6 +39,7 @@ from ..runtime.transfer import upload
 
 BLOCK = 16          # triangles per block, blocks per group
 PASSES = 4          # contacts answered per particle and body in a step, at most
+RESOLVED = 1e-4     # after the first, contacts shallower than this (in thicknesses) are left
 INSIDE = 1e-4       # a point this far outside a triangle (barycentric) still meets it
 BISECTIONS = 40     # halvings of a crossing's time interval
 
@@ -361,18 +365,59 @@ def _crossing(x0, x1, a0, a1, b0, b1, c0, c1):
 
 
 @ti.func
-def worst_contact(colliders: ti.template(), c, x0, x, thickness):
-    """The worst contact of the path x0 -> x with animated collider c's triangles (module
-    doc): (found, unit normal on the particle's side at the step's end, depth to the
-    thickness [m], the surface point's displacement over the step [m])."""
-    return _worst_contact(colliders.bodies, colliders.bodies.body_of[c], x0, x, thickness)
+def _against(x0, x, a0, b0, c0, a1, b1, c1, thickness):
+    """The path x0 -> x against one triangle moving from a0 b0 c0 to a1 b1 c1 (module doc):
+    (t, depth, n, w): t the crossing's time (2: none), depth how far x is inside the
+    thickness along n (0: no contact), n the unit direction out on the particle's side, w
+    the barycentric coordinates of the surface point it touches at the end. Cheap tests
+    first: the heights over the planes at the start and end say whether the path can cross
+    (their signs differ) or come near (the end height below the thickness); only then the
+    cubic, the foot or the edges."""
+    m0 = (b0 - a0).cross(c0 - a0)
+    m1 = (b1 - a1).cross(c1 - a1)
+    area1 = m1.dot(m1)
+    t, depth = 2.0, 0.0
+    n = ti.Vector([0.0, 1.0, 0.0])
+    w = ti.Vector([1.0, 0.0, 0.0])
+    if area1 > 0 and m0.dot(m0) > 0:
+        side = ti.select(m0.dot(x0 - a0) >= 0.0, 1.0, -1.0)
+        if m0.dot(m1) < 0.0:
+            side = -side                       # the triangle turned over in the step
+        above = side * m1.dot(x - a1)          # the end height on the start side, x |m1|
+        if above < 0.0:                        # across the plane: through the triangle?
+            t = _crossing(x0, x, a0, a1, b0, b1, c0, c1)
+        reach = thickness * thickness * area1
+        if t <= 1.0 or above * above < reach:
+            length = ti.sqrt(area1)
+            n = side * m1 / length
+            gap = above / length
+            w, _ = _barycentric(x, a1, b1, c1)
+            if t <= 1.0 or w.min() >= -INSIDE:
+                depth = thickness - gap
+            elif gap > 0.0:                    # beside it: nearest one of its edges
+                q, w = _nearest_on_edges(x, a1, b1, c1)
+                distance = (x - q).norm()
+                if distance > 0.0 and distance < thickness:
+                    n = (x - q) / distance
+                    depth = thickness - distance
+    return t, depth, n, w
 
 
 @ti.func
-def _worst_contact(bodies: ti.template(), b, x0, x, thickness):
+def worst_contact(colliders: ti.template(), c, x0, x, thickness, least):
+    """The worst contact of the path x0 -> x with animated collider c's triangles (module
+    doc), of those deeper than `least` [m] if none crosses: (found, unit normal on the
+    particle's side at the step's end, depth to the thickness [m], the surface point's
+    displacement over the step [m])."""
+    return _worst_contact(colliders.bodies, colliders.bodies.body_of[c], x0, x, thickness,
+                          least)
+
+
+@ti.func
+def _worst_contact(bodies: ti.template(), b, x0, x, thickness, least):
     """worst_contact for body b."""
     lo, hi = ti.min(x0, x), ti.max(x0, x)
-    first_time, deepest = 2.0, 0.0
+    first_time, deepest = 2.0, least
     found = False
     normal = ti.Vector([0.0, 1.0, 0.0])
     depth = 0.0
@@ -390,38 +435,16 @@ def _worst_contact(bodies: ti.template(), b, x0, x, thickness):
                                           bodies.start[corner[2]])
                             a1, b1, c1 = (bodies.end[corner[0]], bodies.end[corner[1]],
                                           bodies.end[corner[2]])
-                            _, m0 = _barycentric(x0, a0, b0, c0)
-                            w, m1 = _barycentric(x, a1, b1, c1)
-                            length = m1.norm()
-                            if length > 0 and m0.norm() > 0:
-                                side = ti.select(m0.dot(x0 - a0) >= 0.0, 1.0, -1.0)
-                                if m0.dot(m1) < 0.0:
-                                    side = -side         # the triangle turned over in the step
-                                n = side * m1 / length
-                                height = n.dot(x - a1)
-                                gap = height
-                                over = w.min() >= -INSIDE
-                                if not over and height > 0.0:   # beside it: nearest an edge
-                                    q, w = _nearest_on_edges(x, a1, b1, c1)
-                                    gap = (x - q).norm()
-                                    if gap > 0.0:
-                                        n = (x - q) / gap
-                                    over = True
-                                t = _crossing(x0, x, a0, a1, b0, b1, c0, c1)
-                                near = over and gap < thickness and gap > -thickness
-                                if t < first_time or (first_time > 1.0 and near
-                                                      and thickness - gap > deepest):
-                                    if t > 1.0:
-                                        deepest = thickness - gap
-                                    else:
-                                        first_time = t
-                                        n = side * m1 / length
-                                    found = True
-                                    normal = n
-                                    depth = thickness - n.dot(x - a1) if t <= 1.0 \
-                                        else thickness - gap
-                                    w = ti.math.clamp(w, 0.0, 1.0)
-                                    w = w / w.sum()
-                                    moved = (w[0] * (a1 - a0) + w[1] * (b1 - b0)
-                                             + w[2] * (c1 - c0))
+                            t, d, n, w = _against(x0, x, a0, b0, c0, a1, b1, c1, thickness)
+                            if t < first_time or (first_time > 1.0 and d > deepest):
+                                if t <= 1.0:
+                                    first_time = t
+                                else:
+                                    deepest = d
+                                found = True
+                                normal, depth = n, d
+                                w = ti.math.clamp(w, 0.0, 1.0)
+                                w = w / w.sum()
+                                moved = (w[0] * (a1 - a0) + w[1] * (b1 - b0)
+                                         + w[2] * (c1 - c0))
     return found, normal, depth, moved

@@ -12,7 +12,7 @@ from ..runtime.plan import Loop, Phase
 from ..runtime.transfer import upload
 from ..runtime.validation import require
 from ..state import copy_positions
-from .animated_contact import PASSES, AnimatedBodies, worst_contact
+from .animated_contact import PASSES, RESOLVED, AnimatedBodies, worst_contact
 from .animated_mesh import AnimatedMeshCollider
 from .colliders import ANIMATED, MESH, Collider, Plane, signed_distance
 from .mesh_collider import MeshCollider
@@ -319,14 +319,6 @@ def _friction(colliders: ti.template(), c, x, x0, n, depth, vc, dt):
 
 
 @ti.func
-def _is_animated(colliders: ti.template(), c):
-    animated = False
-    if ti.static(colliders.animated):
-        animated = colliders.kind[c] == ANIMATED
-    return animated
-
-
-@ti.func
 def resolve_particle(model: ti.template(), state: ti.template(), colliders: ti.template(), i,
                      x0, dt):
     """Project particle i (if free) out of every collider, in collider order, with Coulomb
@@ -338,15 +330,21 @@ def resolve_particle(model: ti.template(), state: ti.template(), colliders: ti.t
         v = state.particle_velocity[i]
         touched = False
         for c in range(colliders.count):
-            if _is_animated(colliders, c):
-                for _ in range(PASSES):
-                    found, n, depth, moved = worst_contact(colliders, c, x0, x,
-                                                           colliders.thickness[c])
-                    if not found:
-                        break
-                    x, v = _friction(colliders, c, x + depth * n, x0, n, depth, moved / dt, dt)
-                    touched = True
-            else:
+            animated = False
+            if ti.static(colliders.animated):
+                animated = colliders.kind[c] == ANIMATED
+                if animated:
+                    least = 0.0
+                    for _ in range(PASSES):
+                        found, n, depth, moved = worst_contact(colliders, c, x0, x,
+                                                               colliders.thickness[c], least)
+                        if not found:
+                            break
+                        x, v = _friction(colliders, c, x + depth * n, x0, n, depth, moved / dt,
+                                         dt)
+                        touched = True
+                        least = RESOLVED * colliders.thickness[c]
+            if not animated:
                 d, n = collider_distance(colliders, c, x, x0)
                 depth = colliders.thickness[c] - d
                 if depth > 0:
@@ -377,14 +375,19 @@ def project_out(model: ti.template(), state: ti.template(), colliders: ti.templa
             x = state.particle_position[i]
             x0 = colliders.step_start[i]
             for c in range(colliders.count):
-                if _is_animated(colliders, c):
-                    for _ in range(PASSES):
-                        found, n, depth, _ = worst_contact(colliders, c, x0, x,
-                                                           colliders.thickness[c])
-                        if not found:
-                            break
-                        x += depth * n
-                else:
+                animated = False
+                if ti.static(colliders.animated):
+                    animated = colliders.kind[c] == ANIMATED
+                    if animated:
+                        least = 0.0
+                        for _ in range(PASSES):
+                            found, n, depth, _ = worst_contact(colliders, c, x0, x,
+                                                               colliders.thickness[c], least)
+                            if not found:
+                                break
+                            x += depth * n
+                            least = RESOLVED * colliders.thickness[c]
+                if not animated:
                     d, n = collider_distance(colliders, c, x, x0)
                     x += ti.max(colliders.thickness[c] - d, 0.0) * n
             state.particle_position[i] = x
