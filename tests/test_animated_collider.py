@@ -39,7 +39,7 @@ def falling_sheet(n=16):
                                       bend=tc.SpringParams(5.0, 0.005)))
 
 
-def frames_inside(collider, motion, seconds=0.9, fps=50):
+def frames_inside(collider, motion, seconds=0.5, fps=50):
     """Per frame, how many particles of a sheet dropped on `collider` lie inside the sphere
     as `motion` has it at the frame's time."""
     sim = tc.Simulation(falling_sheet(), integrator="symplectic_euler", dt=1e-4,
