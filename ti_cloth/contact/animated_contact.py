@@ -147,6 +147,7 @@ class AnimatedBodies:
             if c.sampled:
                 frames[begin:begin + c.motion.size // 3] = c.motion.reshape(-1, 3)
         self.frames.from_numpy(frames)
+        self._table, self._frame_start = frames, frame_start   # the host's copy (schedule)
         self._cache = {}
         self.schedule(0, 0, None)
 
@@ -156,14 +157,12 @@ class AnimatedBodies:
         stepped = [(b, c) for b, (_, c) in enumerate(self.members) if not c.sampled]
         if not stepped:
             return
-        frames = self.frames.to_numpy()
-        starts = self.frame_start.to_numpy()
         for b, c in stepped:
-            v = c.mesh.vertex_count
+            v, begin = c.mesh.vertex_count, self._frame_start[b]
             for row in range(count + 1):
-                at = frames[starts[b] + row * v: starts[b] + (row + 1) * v]
-                at[:] = self._vertices(b, c, (first + row) * dt if dt else 0.0)
-        self.frames.from_numpy(frames)
+                self._table[begin + row * v: begin + (row + 1) * v] = self._vertices(
+                    b, c, (first + row) * dt if dt else 0.0)
+        self.frames.from_numpy(self._table)
         self.first_step.from_numpy(np.full(self.count, first, np.int32))
 
     def _vertices(self, b: int, c, t: float) -> np.ndarray:

@@ -319,39 +319,54 @@ def _friction(colliders: ti.template(), c, x, x0, n, depth, vc, dt):
 
 
 @ti.func
+def _collide_with(colliders: ti.template(), c, x0, x, v, dt, with_friction: ti.template()):
+    """A particle at x, which was at x0 at the step's start, out of collider c: (position,
+    velocity, touched). with_friction: the full response (colliders.py; an animated mesh
+    answers up to PASSES contacts: animated_contact.py); else the push-out alone, v kept."""
+    touched = False
+    animated = False
+    if ti.static(colliders.animated):
+        animated = colliders.kind[c] == ANIMATED
+        if animated:
+            least = 0.0
+            for _ in range(PASSES):
+                found, n, depth, moved = worst_contact(colliders, c, x0, x,
+                                                       colliders.thickness[c], least)
+                if not found:
+                    break
+                if ti.static(with_friction):
+                    x, v = _friction(colliders, c, x + depth * n, x0, n, depth, moved / dt, dt)
+                else:
+                    x += depth * n
+                touched = True
+                least = RESOLVED * colliders.thickness[c]
+    if not animated:
+        d, n = collider_distance(colliders, c, x, x0)
+        depth = colliders.thickness[c] - d
+        if ti.static(with_friction):
+            if depth > 0:
+                x += depth * n
+                x, v = _friction(colliders, c, x, x0, n, depth,
+                                 surface_velocity(colliders, c, x, dt), dt)
+                touched = True
+        else:
+            x += ti.max(depth, 0.0) * n
+    return x, v, touched
+
+
+@ti.func
 def resolve_particle(model: ti.template(), state: ti.template(), colliders: ti.template(), i,
                      x0, dt):
     """Project particle i (if free) out of every collider, in collider order, with Coulomb
     friction on its displacement over the step (from x0, its position at the step's start)
-    relative to the surface (colliders.py); an animated mesh answers up to PASSES contacts
-    (animated_contact.py)."""
+    relative to the surface (colliders.py, _collide_with)."""
     if model.particle_inv_mass[i] > 0:
         x = state.particle_position[i]
         v = state.particle_velocity[i]
         touched = False
         for c in range(colliders.count):
-            animated = False
-            if ti.static(colliders.animated):
-                animated = colliders.kind[c] == ANIMATED
-                if animated:
-                    least = 0.0
-                    for _ in range(PASSES):
-                        found, n, depth, moved = worst_contact(colliders, c, x0, x,
-                                                               colliders.thickness[c], least)
-                        if not found:
-                            break
-                        x, v = _friction(colliders, c, x + depth * n, x0, n, depth, moved / dt,
-                                         dt)
-                        touched = True
-                        least = RESOLVED * colliders.thickness[c]
-            if not animated:
-                d, n = collider_distance(colliders, c, x, x0)
-                depth = colliders.thickness[c] - d
-                if depth > 0:
-                    x += depth * n
-                    x, v = _friction(colliders, c, x, x0, n, depth,
-                                     surface_velocity(colliders, c, x, dt), dt)
-                    touched = True
+            x, v, hit = _collide_with(colliders, c, x0, x, v, dt, True)
+            touched = touched or hit
         if touched:
             state.particle_position[i] = x
             state.particle_velocity[i] = v
@@ -373,23 +388,9 @@ def project_out(model: ti.template(), state: ti.template(), colliders: ti.templa
     for i in range(model.particle_count):
         if model.particle_inv_mass[i] > 0:
             x = state.particle_position[i]
-            x0 = colliders.step_start[i]
+            v = state.particle_velocity[i]
             for c in range(colliders.count):
-                animated = False
-                if ti.static(colliders.animated):
-                    animated = colliders.kind[c] == ANIMATED
-                    if animated:
-                        least = 0.0
-                        for _ in range(PASSES):
-                            found, n, depth, _ = worst_contact(colliders, c, x0, x,
-                                                               colliders.thickness[c], least)
-                            if not found:
-                                break
-                            x += depth * n
-                            least = RESOLVED * colliders.thickness[c]
-                if not animated:
-                    d, n = collider_distance(colliders, c, x, x0)
-                    x += ti.max(colliders.thickness[c] - d, 0.0) * n
+                x, v, _ = _collide_with(colliders, c, colliders.step_start[i], x, v, 1.0, False)
             state.particle_position[i] = x
 
 
