@@ -147,7 +147,8 @@ class AnimatedBodies:
             if c.sampled:
                 frames[begin:begin + c.motion.size // 3] = c.motion.reshape(-1, 3)
         self.frames.from_numpy(frames)
-        self._table, self._frame_start = frames, frame_start   # the host's copy (schedule)
+        self._table = frames                   # the host's copy of the table (schedule)
+        self._frame_start = frame_start
         self._cache = {}
         self.schedule(0, 0, None)
 
