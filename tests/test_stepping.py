@@ -102,7 +102,9 @@ def animated_scene():
 FEATURES = {"none": {}, "tearing": dict(tearing=0.2), "strain limit": dict(strain_limit=tc.StrainLimit(0.05)),
             "colliders": dict(colliders=contact_scene(False)),
             "moving colliders": dict(colliders=contact_scene(True)),
-            "animated colliders": dict(colliders=animated_scene()),
+            # with two particles attached to the growing sphere, let go part-way
+            "animated colliders": dict(colliders=animated_scene(), handles=[
+                tc.Attachment([0, 1], animated_scene()[0], release=0.0031)]),
             # strain limiting apart, the stages let a fused integrator's particles collide as
             # they move (stepping.TeamStages.collides_on_move)
             "all but strain limit": dict(

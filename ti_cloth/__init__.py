@@ -21,6 +21,7 @@ from .body.mesh import (
 )
 from .body.topology import Cloth
 from .contact.animated_mesh import AnimatedMeshCollider
+from .contact.attachment import Attachment
 from .contact.colliders import Box, Capsule, Collider, Plane, Sphere
 from .contact.mesh_collider import MeshCollider
 from .contact.self_collision import SelfCollision, SelfContacts
@@ -57,6 +58,7 @@ __all__ = [
     "ImplicitEuler", "RK4", "PRESETS", "FABRICS", "Fabric", "Material", "SpringKind", "SpringParams", "Mesh", "grid_mesh",
     "box_mesh", "combine_meshes", "disc_mesh", "sphere_mesh",
     "tet_grid_mesh", "load_mesh", "save_mesh", "Model", "Keyframes", "Oscillation", "Handle",
+    "Attachment",
     "Simulation", "stable_dt", "auto_dt", "auto_substeps", "AUTO_MAX_DT", "State", "StrainLimit", "SelfCollision",
     "SelfContacts",
     "Tearing", "Cloth", "Wind", "string", "hair", "soft_body", "tet_block",

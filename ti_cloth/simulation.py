@@ -24,6 +24,7 @@ import numpy as np
 
 from . import saved_state, stepping
 from .body.topology import Cloth
+from .contact.attachment import Attachment
 from .contact.collision import ColliderSet
 from .contact.self_collision import SelfCollision, SelfContact, SelfContacts, warn_if_thick
 from .errors import SimulationDiverged, StaleSimulation
@@ -56,10 +57,11 @@ class Simulation:
     gravity: [m/s^2], any vector. drag: uniform air drag [1/s], >= 0.
     tearing: None (off: the tear kernel is never compiled nor launched), a tear strain
         (float) or a Tearing.
-    handles: scripted particles (Handle); their particles are pinned while held (until a
-        handle's release time). dt="auto" treats particles that are let go as free.
-    colliders: Plane, Sphere, Box, Capsule, MeshCollider objects (none: the collision
-        kernels are never compiled nor launched).
+    handles: scripted particles (Handle) and particles carried by a collider's surface
+        (Attachment, a handle bound to the surface at t = 0); their particles are pinned
+        while held (until a release time). dt="auto" treats particles let go as free.
+    colliders: Plane, Sphere, Box, Capsule, MeshCollider, AnimatedMeshCollider objects
+        (none: the collision kernels are never compiled nor launched).
     strain_limit: None (off: never compiled nor launched) or a StrainLimit (Provot 1995).
     position_limit: the divergence guard flags any |coordinate| beyond this [m].
 
@@ -97,9 +99,11 @@ class Simulation:
             tearing = Tearing(tearing)
         self.tearing = tearing
         require(isinstance(handles, (list, tuple)), "handles", handles,
-                "a list of Handle objects (handles=[Handle(...)])")
+                "a list of Handle and Attachment objects (handles=[Handle(...)])")
         handles = tuple(handles)
-        self.handles = (HandleSet(handles, cloth.particle_position, cloth.pinned) if handles
+        held = [h.handle(cloth.particle_position) if isinstance(h, Attachment) else h
+                for h in handles]
+        self.handles = (HandleSet(held, cloth.particle_position, cloth.pinned) if handles
                         else None)
         pinned = self.handles.pinned() if self.handles is not None else cloth.pinned
         position_limit = in_range("position_limit", position_limit, limits.GUARD)

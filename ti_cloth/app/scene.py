@@ -14,7 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..body.mesh import Mesh
 from ..body.topology import Cloth
+from ..contact.animated_mesh import AnimatedMeshCollider
+from ..contact.animation_files import read_animation
 from ..contact.colliders import Box, Capsule, Collider, Plane, Sphere
 from ..contact.mesh_collider import MeshCollider
 from ..contact.self_collision import SelfCollision
@@ -30,7 +33,7 @@ from .scene_file import SceneError, Table, load_toml
 from .scene_output import Output, read_camera, read_output
 
 COLLIDER_TYPES = {"plane": Plane, "sphere": Sphere, "box": Box, "capsule": Capsule,
-                  "mesh": MeshCollider}
+                  "mesh": MeshCollider, "animated_mesh": AnimatedMeshCollider}
 NAME_FORBIDDEN = r"[^\w .-]"
 GUARD_SIZES = 100.0   # a run has diverged once a coordinate is this many body sizes out
 ADVICE_WINDOW = 1.0   # s: integrator = "auto" advises on at most this much of the scene by default
@@ -230,17 +233,17 @@ def load_scene(path, note=None) -> Scene:
     wind = _wind(wind_table) if wind_table is not None else None
     forces.finish()
 
+    colliders = [_collider(t, path.parent) for t in root.tables("colliders")]
     body_tables = root.tables("bodies")
     if not body_tables:
         root.fail("bodies: a scene needs at least one [[bodies]] table")
-    bodies, made = zip(*(read_body(table, path.parent) for table in body_tables))
+    bodies, made = zip(*(read_body(table, path.parent, colliders) for table in body_tables))
     try:
         cloth, handles, file_particles = build_bodies(bodies, resolution,
                                                       made if resolution == 1 else None)
     except ValueError as err:      # bodies that cannot join, or cannot be refined
         (root.fail(f"bodies: {err}") if resolution == 1
          else sim.fail(f"simulation.resolution = {resolution}: {err}"))
-    colliders = [_collider(t, path.parent) for t in root.tables("colliders")]
 
     camera_table = root.table("camera")
     camera, camera_fit = read_camera(camera_table) if camera_table is not None else (None, {})
@@ -345,7 +348,9 @@ def _integrator(sim: Table):
 
 def _collider(table: Table, folder: Path):
     """One [[colliders]] table. A mesh's `path` is its file (relative to the scene file, as
-    for mesh bodies), so its motion is `motion`; other shapes move along `path`."""
+    for mesh bodies), so its motion is `motion`; an animated mesh's `path` is its animation
+    file (npz, PC2 with its `rest` mesh, "name_*.obj", USD: animation_files.py); other shapes
+    move along `path`."""
     kind = table.string("type", choices=sorted(COLLIDER_TYPES))
     options = {}
     table.optional(options, "thickness", unit="m")
@@ -360,6 +365,17 @@ def _collider(table: Table, folder: Path):
         table.optional(options, "resolution", "integer", within=limits.SDF_RESOLUTION)
         table.optional(options, "solid", "boolean")
         collider = table.build(MeshCollider, mesh, **options)
+    elif kind == "animated_mesh":
+        files = {"path": folder / table.string("path")}
+        table.optional(files, "rest", lambda k: folder / table.string(k))
+        table.optional(files, "fps", unit="frames/s")
+        table.optional(files, "prim", "string")
+        mesh, samples, fps = table.build(read_animation, **files)
+        scale = table.number("scale", 1.0, within=limits.SCALE)
+        translate = np.asarray(table.vector("translate", (0.0, 0.0, 0.0), unit="m"))
+        collider = table.build(AnimatedMeshCollider, Mesh(mesh.vertices * scale + translate,
+                                                          mesh.triangles),
+                               samples * scale + translate, fps=fps, **options)
     else:
         table.optional(options, "path", lambda k: read_path(table.table(k)))
         shape = COLLIDER_TYPES[kind]

@@ -25,9 +25,12 @@ from ..body.fabric import Fabric
 from ..body.material import DAMPING_MODELS, PRESETS, Material, SpringParams
 from ..body.mesh import PLANES, Mesh, grid_mesh, load_mesh
 from ..body.topology import Cloth
+from ..contact.attachment import Attachment
+from ..contact.colliders import Collider
 from ..physics.handles import Handle
 from ..physics.paths import INTERPOLATIONS, Keyframes, Oscillation
 from ..runtime import limits
+from ..runtime.limits import Range
 from .scene_file import Table
 
 BODY_TYPES = ("grid", "mesh", "string", "hair", "tet_block")
@@ -56,9 +59,19 @@ class Selection:
 
 @dataclass(frozen=True)
 class HandleSpec:
+    """A [[bodies.handles]] table (its `path`) or a [[bodies.attachments]] one (its
+    `collider`), read."""
+
     particles: Selection
-    path: object
+    path: object = None
     release: float | None = None
+    collider: Collider | None = None
+
+    def make(self, particles: np.ndarray) -> Handle | Attachment:
+        """The Handle or Attachment holding `particles` of the built body."""
+        if self.collider is not None:
+            return Attachment(particles, self.collider, self.release)
+        return Handle(particles, self.path, self.release)
 
 
 @dataclass(frozen=True)
@@ -81,9 +94,9 @@ class Body:
         return getattr(self, f"_{self.kind}")(factor)
 
     def held(self, cloth: Cloth, refinement, names: dict) -> list:
-        """Its handles on `cloth` (made by make()) as (particles, path, release)."""
-        return [(h.particles.resolve(names, cloth.particle_position, refinement), h.path,
-                 h.release) for h in self.handles]
+        """Its handles and attachments on `cloth` (made by make()) as (particles, spec)."""
+        return [(h.particles.resolve(names, cloth.particle_position, refinement), h)
+                for h in self.handles]
 
     def _surface(self, mesh: Mesh, refinement, names: dict, factor: int):
         everything = mesh.named_vertices() | names
@@ -155,14 +168,15 @@ def build_bodies(bodies, factor: int = 1, made=None) -> tuple[Cloth, list[Handle
     rank[order] = np.arange(len(order))
     if not np.array_equal(order, np.arange(len(order))):
         cloth = cloth.renumbered(order)
-    handles = [Handle(np.sort(rank[particles + offset]), path, release)
+    handles = [spec.make(np.sort(rank[particles + offset]))
                for body, m, offset in zip(bodies, made, offsets)
-               for particles, path, release in body.held(*m)]
+               for particles, spec in body.held(*m)]
     return cloth, handles, sum(coarse)
 
 
-def read_body(table: Table, folder: Path) -> tuple[Body, tuple]:
-    """One [[bodies]] table -> (its Body, its make(1): built as the file describes it)."""
+def read_body(table: Table, folder: Path, colliders=()) -> tuple[Body, tuple]:
+    """One [[bodies]] table -> (its Body, its make(1): built as the file describes it);
+    `colliders`: the scene's, which its attachments name by index."""
     kind = table.string("type", choices=BODY_TYPES)
     options = {}
     if kind in ("grid", "mesh"):
@@ -221,10 +235,27 @@ def read_body(table: Table, folder: Path) -> tuple[Body, tuple]:
         release = {}
         h.optional(release, "release", unit="s")
         spec = HandleSpec(particles, read_path(h.table("path", True)), release.get("release"))
-        h.build(Handle, particles.resolve(names, cloth.particle_position, refinement), spec.path,
-                **release)
+        h.build(spec.make, particles.resolve(names, cloth.particle_position, refinement))
         specs.append(spec)
         h.finish()
+    for a in table.tables("attachments"):
+        particles = _selection(a, "particles", cloth.particle_count, names,
+                               cloth.particle_position)
+        if not (particles.names or particles.indices or particles.ball):
+            a.fail(f"{a.path('particles')} must list at least one particle")
+        if not colliders:
+            a.fail(f"{a.path('collider')}: a body's attachments need [[colliders]] to attach "
+                   "to (none in this scene)")
+        index = a.integer("collider", within=Range(0, len(colliders) - 1, "",
+                                                      "the index of a [[colliders]] table"))
+        release = {}
+        a.optional(release, "release", unit="s")
+        spec = HandleSpec(particles, release=release.get("release"), collider=colliders[index])
+        attachment = a.build(spec.make, particles.resolve(names, cloth.particle_position,
+                                                           refinement))
+        a.build(attachment.handle, cloth.particle_position)
+        specs.append(spec)
+        a.finish()
     table.finish()
     return replace(body, handles=tuple(specs)), made
 

@@ -18,10 +18,9 @@ import numpy as np
 from ..body.mesh import Mesh
 from ..runtime import limits
 from ..runtime.validation import as_array, in_range, require
+from .animation_files import read_animation
 from .colliders import ANIMATED, Collider
 from .mesh_collider import closed
-
-MAX_SAMPLE_VALUES = 2**27       # samples x vertices x 3 numbers (1 GiB in float64)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -66,8 +65,8 @@ class AnimatedMeshCollider(Collider):
                     f"{name}.motion.shape", getattr(motion, "shape", None),
                     f"(samples, {vertices}, 3): a position for each of the mesh's {vertices} "
                     "vertices in every sample")
-            require(0 < motion.size <= MAX_SAMPLE_VALUES, f"{name}.motion.size", motion.size,
-                    f"at least one sample and at most {MAX_SAMPLE_VALUES} numbers")
+            require(0 < motion.size <= limits.MOTION_VALUES, f"{name}.motion.size", motion.size,
+                    f"at least one sample and at most {limits.MOTION_VALUES} numbers")
             motion = as_array(f"{name}.motion", motion, np.float64, (None, vertices, 3))
             bad = np.argwhere(np.abs(motion) > limits.COORDINATE.high)
             require(len(bad) == 0, f"{name}.motion[{', '.join(map(str, bad[0])) if len(bad) else ''}]",
@@ -78,6 +77,17 @@ class AnimatedMeshCollider(Collider):
             object.__setattr__(self, "fps", in_range(f"{name}.fps", self.fps, limits.FPS))
         else:
             require(self.fps is None, f"{name}.fps", self.fps, "None without a motion")
+
+    @classmethod
+    def load(cls, path, rest=None, fps: float | None = None, prim: str | None = None,
+             **options) -> AnimatedMeshCollider:
+        """The animated mesh of a file: an npz (`triangles`, `positions`, `fps`), a PC2 cache
+        with its `rest` mesh file, an OBJ sequence ("walk_*.obj", ordered by the number in
+        the names) or a USD stage (a Mesh prim's time-sampled points, `prim` choosing among
+        several); `fps` is required for PC2 and OBJ sequences and replaces an npz's or USD
+        stage's own rate (animation_files.py). options: thickness and friction."""
+        mesh, samples, fps = read_animation(path, rest, fps, prim)
+        return cls(mesh, samples, fps=fps, **options)
 
     @property
     def sampled(self) -> bool:
@@ -109,6 +119,10 @@ class AnimatedMeshCollider(Collider):
             return self
         return replace(self, mesh=Mesh(self.vertices_at(t), self.mesh.triangles), motion=None,
                        fps=None)
+
+    def carried(self, points, t):
+        raise TypeError("an animated mesh carries points by its triangles, not rigidly: "
+                        "tc.Attachment binds them to it")
 
     def moved(self, offset):
         return replace(self, mesh=Mesh(self.vertices_at(0.0) + offset, self.mesh.triangles),

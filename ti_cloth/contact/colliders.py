@@ -64,6 +64,10 @@ class Collider:
             return self
         return self.moved(self.offset(t))
 
+    def carried(self, points: np.ndarray, t: float) -> np.ndarray:
+        """Where points (N, 3) [m] fixed to the shape as it is at t = 0 are at time t [s]."""
+        return points + self.offset(t) - self.offset(0.0)
+
     def moved(self, offset: np.ndarray) -> "Collider":
         """A copy translated by `offset` [m], without a path."""
         raise NotImplementedError

@@ -97,6 +97,10 @@ class MeshCollider(Collider):
         vertices = (self.mesh.vertices - centre) @ self.turn(t).T + centre + self.offset(t)
         return replace(self, mesh=Mesh(vertices, self.mesh.triangles), path=None, rotation=None)
 
+    def carried(self, points, t):
+        centre, turn = self.centre, self.turn(t) @ self.turn(0.0).T
+        return (points - centre - self.offset(0.0)) @ turn.T + centre + self.offset(t)
+
     def moved(self, offset):
         return replace(self, mesh=Mesh(self.mesh.vertices + offset, self.mesh.triangles), path=None)
 

@@ -197,6 +197,20 @@ def mesh_distance(vertices: np.ndarray, triangles: np.ndarray, points: np.ndarra
     return sign * np.abs(unsigned), normal
 
 
+def nearest_triangles(vertices: np.ndarray, triangles: np.ndarray, points: np.ndarray
+                      ) -> np.ndarray:
+    """The index of the triangle nearest each point (N, 3), by libigl (an AABB tree)."""
+    try:
+        import igl
+    except ImportError as err:
+        raise ImportError("nearest triangles are found with libigl: "
+                          "pip install 'ti_cloth[mesh]'") from err
+    _, index, _ = igl.point_mesh_squared_distance(np.ascontiguousarray(points, np.float64),
+                                                  np.ascontiguousarray(vertices, np.float64),
+                                                  np.ascontiguousarray(triangles, np.int64))
+    return np.asarray(index, np.int64)
+
+
 @ti.func
 def sample_grid(samples: ti.template(), start, shape, origin, cell, q):
     """(distance [m], gradient) of the grid whose nodes are samples[start:] (DistanceGrid.samples

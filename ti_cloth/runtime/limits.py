@@ -64,6 +64,7 @@ SUBDIVISIONS = Range(0, 8, "", "sphere_mesh subdivisions (20 x 4^n triangles)")
 SDF_RESOLUTION = Range(8, 256, "", "mesh collider distance grid: cells along the longest side")
 RESOLUTION = Range(1, 64, "", "refinement of a scene's bodies (scene.build(resolution=f))")
 SAMPLES = 2**26                # width x height x supersample^2: ~1.6 GB of raster buffers
+MOTION_VALUES = 2**27          # an animated mesh: samples x vertices x 3 numbers (1 GiB float64)
 NAME_LENGTH = 100              # scene names: letters, digits, "_", "-", "." (file names)
 
 TABLE = (STIFFNESS, DAMPING, DENSITY, MASS, LENGTH, SCALE, COORDINATE, ACCELERATION, SPEED_COMPONENT, DRAG, GUARD, DT,
