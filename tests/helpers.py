@@ -106,3 +106,18 @@ def assert_matches_golden(image, name: str, failure_dir: Path) -> None:
         raise AssertionError(f"{name}: {outliers:.2%} of pixels differ by more than "
                              f"{GOLDEN_PIXEL_TOLERANCE * 255:.0f}/255 from {path} "
                              f"(max {diff.max() * 255:.0f}/255); diff image: {diff_path}")
+
+
+def winding_numbers(points, vertices, triangles, chunk=64):
+    """The winding number of the closed triangle mesh around each point: the sum of the
+    triangles' signed solid angles over 4 pi (Van Oosterom & Strackee 1983)."""
+    found = []
+    for start in range(0, len(points), chunk):
+        p = points[start:start + chunk]
+        a, b, c = (vertices[triangles[:, k]][None] - p[:, None] for k in range(3))
+        la, lb, lc = (np.linalg.norm(r, axis=2) for r in (a, b, c))
+        numerator = np.sum(a * np.cross(b, c), axis=2)
+        denominator = (la * lb * lc + np.sum(a * b, axis=2) * lc + np.sum(b * c, axis=2) * la
+                       + np.sum(c * a, axis=2) * lb)
+        found.append(2.0 * np.arctan2(numerator, denominator).sum(axis=1) / (4.0 * np.pi))
+    return np.concatenate(found)

@@ -5,7 +5,7 @@ by friction, and the same motion as samples and as a callable."""
 
 import numpy as np
 import pytest
-from helpers import report
+from helpers import report, winding_numbers
 
 import ti_cloth as tc
 
@@ -18,18 +18,6 @@ SPHERE = tc.sphere_mesh(RADIUS, CENTRE, subdivisions=3)
 def breathing(t):
     """The sphere's vertices at time t: radius RADIUS (1 + 0.3 sin 2 pi t)."""
     return CENTRE + (SPHERE.vertices - CENTRE) * (1.0 + 0.3 * np.sin(2 * np.pi * t))
-
-
-def winding_numbers(points, vertices, triangles):
-    """The winding number of the closed triangle mesh around each point: the sum of the
-    triangles' signed solid angles over 4 pi (Van Oosterom & Strackee 1983)."""
-    a, b, c = (vertices[triangles[:, k]][None] - points[:, None] for k in range(3))
-    la, lb, lc = (np.linalg.norm(r, axis=2) for r in (a, b, c))
-    numerator = np.sum(a * np.cross(b, c), axis=2)
-    denominator = (la * lb * lc + np.sum(a * b, axis=2) * lc + np.sum(b * c, axis=2) * la
-                   + np.sum(c * a, axis=2) * lb)
-    total = 2.0 * np.arctan2(numerator, denominator).sum(axis=1)
-    return total / (4.0 * np.pi)
 
 
 def falling_sheet(n=16):

@@ -89,7 +89,7 @@ def test_pins_as_a_ball_are_the_particles_within_it(tmp_path):
 
 def test_every_demo_scene_loads(tmp_path):
     scenes = sorted(DEMOS.glob("*.toml"))
-    assert len(scenes) == 16   # the fourteen demos and the study's two scenes (springs, fabric)
+    assert len(scenes) == 17   # the fifteen demos and the study's two scenes (springs, fabric)
     for path in scenes:
         scene = load_scene(path)
         assert scene.cloth.particle_count > 1 and scene.frames >= 15, path.name
@@ -267,10 +267,14 @@ def test_the_scene_reference_is_a_valid_scene(tmp_path, f64):
     reference = (Path(__file__).parents[1] / "docs" / "scenes.md").read_text()
     block = reference.split("```toml\n", 1)[1].split("```", 1)[0]
     (tmp_path / "assets").mkdir()
-    shutil.copy(Path(__file__).parents[1] / "demos" / "assets" / "table.obj", tmp_path / "assets")
+    for asset in ("table.obj", "figure_turn.npz"):
+        shutil.copy(Path(__file__).parents[1] / "demos" / "assets" / asset, tmp_path / "assets")
     scene = load_scene(write(tmp_path, block))
-    assert scene.name == "flag" and scene.wind is not None and len(scene.handles) == 1
-    assert isinstance(scene.colliders[-1], tc.MeshCollider) and scene.colliders[-1].solid
+    assert scene.name == "flag" and scene.wind is not None and len(scene.handles) == 2
+    assert isinstance(scene.handles[1], tc.Attachment)
+    assert scene.handles[1].collider is scene.colliders[2]
+    assert isinstance(scene.colliders[1], tc.MeshCollider) and scene.colliders[1].solid
+    assert isinstance(scene.colliders[2], tc.AnimatedMeshCollider)
     assert scene.strain_limit is not None and scene.tearing == 0.3
     scene.build().step(2)
 
