@@ -17,7 +17,7 @@ pytestmark = pytest.mark.usefixtures("f32")
 DEMOS = sorted((Path(__file__).parents[1] / "demos").glob("*.py"))
 EXPECTED = {"hanging_cloth", "curtain_hem", "flag_in_wind", "tearing", "verlet_pbd_cloth",
             "string_wall", "hair", "soft_block", "stuyck_explicit", "cloth_pile", "two_layers", "tablecloth", "turntable",
-            "cusick_drape", "cape"}
+            "cusick_drape", "cape", "skirt_walk"}
 
 
 def test_every_system_of_the_source_texts_has_a_demo_with_a_scene_file():

@@ -89,7 +89,7 @@ def test_pins_as_a_ball_are_the_particles_within_it(tmp_path):
 
 def test_every_demo_scene_loads(tmp_path):
     scenes = sorted(DEMOS.glob("*.toml"))
-    assert len(scenes) == 17   # the fifteen demos and the study's two scenes (springs, fabric)
+    assert len(scenes) == 18   # the sixteen demos and the study's two scenes (springs, fabric)
     for path in scenes:
         scene = load_scene(path)
         assert scene.cloth.particle_count > 1 and scene.frames >= 15, path.name

@@ -19,6 +19,7 @@ from .body.mesh import (
     sphere_mesh,
     tet_grid_mesh,
 )
+from .body.panels import Garment, Panel, panel
 from .body.topology import Cloth
 from .contact.animated_mesh import AnimatedMeshCollider
 from .contact.attachment import Attachment
@@ -42,6 +43,7 @@ from .model import Model
 from .physics.forces import ForceSettings
 from .physics.handles import Handle
 from .physics.paths import Keyframes, Oscillation
+from .physics.sewing import Sewing
 from .physics.strain_limit import StrainLimit
 from .physics.tearing import Tearing
 from .physics.wind import Wind
@@ -58,7 +60,7 @@ __all__ = [
     "ImplicitEuler", "RK4", "PRESETS", "FABRICS", "Fabric", "Material", "SpringKind", "SpringParams", "Mesh", "grid_mesh",
     "box_mesh", "combine_meshes", "disc_mesh", "sphere_mesh",
     "tet_grid_mesh", "load_mesh", "save_mesh", "Model", "Keyframes", "Oscillation", "Handle",
-    "Attachment",
+    "Attachment", "panel", "Panel", "Garment", "Sewing",
     "Simulation", "stable_dt", "auto_dt", "auto_substeps", "AUTO_MAX_DT", "State", "StrainLimit", "SelfCollision",
     "SelfContacts",
     "Tearing", "Cloth", "Wind", "string", "hair", "soft_body", "tet_block",

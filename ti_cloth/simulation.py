@@ -2,7 +2,7 @@
 
 One step, in this order (STEP_ORDER), the same in every launch plan:
 
-    integrator (forces, move)  ->  handles  ->  strain limiting  ->  colliders
+    integrator (forces, move)  ->  handles  ->  sewing  ->  strain limiting  ->  colliders
         ->  self-collision  ->  tearing
 
 (held particles are on their paths before strain limiting and the colliders see them)
@@ -32,6 +32,7 @@ from .integrators import INTEGRATORS, make_integrator
 from .model import Model
 from .physics.forces import ForceSettings, energies
 from .physics.handles import Handle, HandleSet, HandleTable
+from .physics.sewing import Seams, Sewing
 from .physics.strain_limit import StrainLimit, StrainLimiter
 from .physics.tearing import RUNAWAY_STRAIN, Tearing, torn_triangles
 from .physics.wind import WindField
@@ -45,7 +46,7 @@ from .stepping import STEP_ORDER
 PLANS = ("per stage", "many steps")   # Simulation.step's launch plans
 # Simulation's options, in the order of the positional form kept for one release
 OPTIONS = ("integrator", "dt", "gravity", "drag", "wind", "tearing", "handles", "colliders",
-           "strain_limit", "position_limit", "self_collision")
+           "strain_limit", "position_limit", "self_collision", "sewing")
 
 
 class Simulation:
@@ -64,6 +65,8 @@ class Simulation:
         (none: the collision kernels are never compiled nor launched).
     strain_limit: None (off: never compiled nor launched) or a StrainLimit (Provot 1995).
     position_limit: the divergence guard flags any |coordinate| beyond this [m].
+    sewing: how a garment's seams close (a Sewing); default Sewing() when the cloth has
+        seams (Cloth.seam_indices), none otherwise (never compiled nor launched).
 
     Each step runs the stages of STEP_ORDER (module doc); the wind is held at its value at the
     step start.
@@ -72,14 +75,15 @@ class Simulation:
     def __init__(self, cloth: Cloth, *positional, integrator="symplectic_euler",
                  dt: float = 1e-3, gravity=(0.0, -9.81, 0.0), drag: float = 0.0, wind=None,
                  tearing=None, handles: Sequence[Handle] = (), colliders=(), strain_limit=None,
-                 position_limit: float = 1e6, self_collision: SelfCollision | None = None):
+                 position_limit: float = 1e6, self_collision: SelfCollision | None = None,
+                 sewing: Sewing | None = None):
         options = {name: value for name, value in locals().items() if name in OPTIONS}
         if positional:
             options = _from_positional(positional, options)
         self._build(cloth, **options)
 
     def _build(self, cloth, integrator, dt, gravity, drag, wind, tearing, handles, colliders,
-               strain_limit, position_limit, self_collision) -> None:
+               strain_limit, position_limit, self_collision, sewing) -> None:
         require(isinstance(cloth, Cloth), "cloth", cloth, "a ti_cloth.Cloth")
         self._runtime = backend.generation()
         self.cloth = cloth
@@ -112,9 +116,15 @@ class Simulation:
         require(isinstance(colliders, (list, tuple)), "colliders", colliders,
                 "a list of colliders (colliders=[Plane(...)])")
         colliders = tuple(colliders)
+        require(sewing is None or isinstance(sewing, Sewing), "sewing", sewing,
+                "None or a Sewing(speed=...)")
+        require(sewing is None or len(cloth.seam_indices), "sewing", sewing,
+                "None for a cloth without seams (Cloth(seams=...), a Garment's seam_pairs)")
+        if len(cloth.seam_indices) and sewing is None:
+            sewing = Sewing()
         # what decides the motion besides the integrator and dt (fingerprint)
         self._inputs = (cloth, tuple(gravity), drag, wind, tearing, handles, colliders,
-                        strain_limit, position_limit, self_collision)
+                        strain_limit, position_limit, self_collision, sewing)
         parts = {"model": (Model, (cloth, pinned)),
                  "state": (State, (cloth.particle_count, cloth.spring_count, position_limit,
                                    cloth.altitude_count, cloth.face_count, cloth.hinge_count))}
@@ -125,6 +135,8 @@ class Simulation:
                                                        tearing is not None))
         if colliders:
             parts["colliders"] = (ColliderSet, (colliders, cloth.particle_count))
+        if sewing is not None:
+            parts["seams"] = (Seams, (sewing, cloth.seam_indices, cloth.particle_position))
         require(self_collision is None or isinstance(self_collision, SelfCollision),
                 "self_collision", self_collision, "None or a SelfCollision(thickness=...)")
         if self_collision is not None:
@@ -137,6 +149,7 @@ class Simulation:
         self.wind = self._lent.get("wind")
         self.strain_limiter = self._lent.get("strain_limiter")
         self.colliders = self._lent.get("colliders")
+        self.seams = self._lent.get("seams")
         self.self_contact = self._lent.get("self_contact")
         if self.handles is not None:
             self.handles.table = self._lent["handle_table"]
@@ -153,7 +166,8 @@ class Simulation:
         self.state.reset(self.model.particle_rest_position)
         # the pool's copy of the Tearing, its strain a constant of the kernels (pool.py)
         self._tearing = None if self.tearing is None else POOL.keep(self.tearing)
-        stages = dict(strain_limit=self.strain_limiter, colliders=self.colliders,
+        stages = dict(sewing=self.seams, strain_limit=self.strain_limiter,
+                      colliders=self.colliders,
                       self_collision=self.self_contact, handles=self.handles,
                       tearing=self._tearing)
         self.stages = ("integrator",) + tuple(name for name in STEP_ORDER[1:]
@@ -337,7 +351,7 @@ class Simulation:
         if key not in self._lent:
             self._lent[key] = stepping.ManySteps(stepping.TeamStages(
                 self._lent.get("handle_table"), self.strain_limiter, self.colliders,
-                self._tearing, self.integrator.fused))
+                self._tearing, self.integrator.fused, self.seams))
         return self._lent[key]
 
     def positions(self) -> np.ndarray:

@@ -12,6 +12,7 @@ per worker:
     stage starts (the colliders keep the positions at the step start)
     ->  the integrator's phases (Integrator.phases, run by plan.run_team: their barriers)
     ->  handles (their particles put on targets tabled before the launch)
+    ->  sewing (seam particles pulled towards their partners)
     ->  strain limiting (relaxation passes, colour by colour)
     ->  colliders (scripted ones placed from a table written before the launch)
     ->  tearing
@@ -47,7 +48,8 @@ from .state import NO_BAD_STEP
 # One step, in this order, in every launch plan (Simulation's launch per stage and the
 # many-steps launches here); held particles are on their paths before strain limiting and the
 # colliders see them.
-STEP_ORDER = ("integrator", "handles", "strain_limit", "colliders", "self_collision", "tearing")
+STEP_ORDER = ("integrator", "handles", "sewing", "strain_limit", "colliders", "self_collision",
+              "tearing")
 TEAM_STAGES = tuple(name for name in STEP_ORDER if name != "self_collision")   # in a launch
 MAX_STEPS_PER_LAUNCH = 4096    # bounds one launch (Ctrl-C and the divergence check wait for it)
 SPRING_STEPS_PER_LAUNCH = 25_000_000   # about 0.1 s of one core's work: fewer steps for big cloths
@@ -60,13 +62,14 @@ TEAM_MARGIN = 1.25     # one worker takes over when the team costs more than thi
 @backend.kernel_argument
 class TeamStages:
     """The stages around the integrator that run inside a many-steps launch (None: absent,
-    compiled out): handles (their HandleTable), strain limiting (the StrainLimiter),
+    compiled out): handles (their HandleTable), sewing (the Seams), strain limiting (the
+    StrainLimiter),
     colliders (the ColliderSet), tearing (the Tearing); the wind is the integrator's (its
     phases). Each runs its phases (runtime/plan.py), as in a launch per stage.
 
     fused: whether the integrator is fused (its particles move independently of each other
-    at the end of its step). Then, unless strain limiting moves them in between or an
-    animated mesh must be placed first (its phases), each particle meets the colliders as
+    at the end of its step). Then, unless sewing or strain limiting moves them in between
+    or an animated mesh must be placed first (its phases), each particle meets the colliders as
     soon as it has moved (`collides_on_move`, called by
     fused.move_particle): the collision stage reads and writes nothing but the particle,
     and held particles (handles, the stage in between) never collide, so this is the order
@@ -74,15 +77,15 @@ class TeamStages:
     copy of the step's start positions."""
 
     def __init__(self, handles=None, strain_limiter=None, colliders=None, tearing=None,
-                 fused=False):
-        self.stages = {"handles": handles, "strain_limit": strain_limiter,
+                 fused=False, seams=None):
+        self.stages = {"handles": handles, "sewing": seams, "strain_limit": strain_limiter,
                        "colliders": colliders, "tearing": tearing}
         self.colliders = colliders
         self.holds = handles is not None          # read at compile time
         self.limits_strain = strain_limiter is not None
         self.collides = colliders is not None
         self.collides_on_move = (self.collides and fused and not self.limits_strain
-                                 and not colliders.animated)
+                                 and seams is None and not colliders.animated)
 
     def running(self, name: str) -> tuple:
         """(stage `name`'s object,) when it runs its phases after the integrator's, else ()

@@ -42,7 +42,7 @@ BONES = {
     "foot_r": ("shin_r", (-0.095, 0.07, -0.02), (-0.095, 0.04, 0.14), 0.04, 0.035),
 }
 NAMES = list(BONES)
-DEPTH = {"pelvis": 0.7, "spine": 0.65}      # the trunk is flatter front to back
+DEPTH = {"pelvis": 0.85, "spine": 0.7}      # the trunk is flatter front to back
 
 
 def capsule(head, tail, r0, r1, depth=1.0):

@@ -22,6 +22,7 @@ from ..contact.colliders import Box, Capsule, Collider, Plane, Sphere
 from ..contact.mesh_collider import MeshCollider
 from ..contact.self_collision import SelfCollision
 from ..integrators import INTEGRATORS
+from ..physics.sewing import Sewing
 from ..physics.strain_limit import StrainLimit
 from ..physics.wind import Wind
 from ..render.camera import Camera
@@ -81,6 +82,7 @@ class Scene:
     bodies: tuple = ()                    # the [[bodies]] read (scene_bodies.Body)
     resolution: int = 1                   # `cloth` is the bodies refined this many times
     file_particles: int = 0               # particles of the bodies as the file gives them
+    sewing: Sewing | None = None          # how a garment's seams close ([simulation.sewing])
 
     @property
     def own_particles(self) -> np.ndarray:
@@ -163,7 +165,7 @@ class Scene:
                           drag=self.drag, wind=self.wind, tearing=self.tearing,
                           handles=self.handles, colliders=self.colliders,
                           strain_limit=self.strain_limit, self_collision=self.self_collision,
-                          **options)
+                          sewing=self.sewing, **options)
 
 
 def load_scene(path, note=None) -> Scene:
@@ -224,6 +226,13 @@ def load_scene(path, note=None) -> Scene:
         contact.optional(options, "iterations", "integer", minimum=1)
         self_collision = contact.build(SelfCollision, **options)
         contact.finish()
+    sewing_table = sim.table("sewing")
+    sewing = None
+    if sewing_table is not None:
+        options = {}
+        sewing_table.optional(options, "speed", unit="m/s")
+        sewing = sewing_table.build(Sewing, **options)
+        sewing_table.finish()
     sim.finish()
 
     forces = root.table("forces") or Table({}, "forces", str(path))
@@ -255,7 +264,7 @@ def load_scene(path, note=None) -> Scene:
                   strain_limit=strain_limit, self_collision=self_collision, handles=handles,
                   colliders=colliders, camera=camera,
                   camera_fit=camera_fit, output=output, advice=advice, bodies=bodies,
-                  resolution=resolution, file_particles=file_particles)
+                  resolution=resolution, file_particles=file_particles, sewing=sewing)
     if note is not None and cloth.spring_count > limits.LARGE_BODY:
         note(f"'{name}' has {cloth.particle_count:,} particles and {cloth.spring_count:,} "
              "springs: finding its stable step takes a while")
@@ -312,6 +321,8 @@ def check_runnable(scene: Scene, root: Table) -> None:
     if scene.wind is not None and scene.cloth.mesh.triangle_count == 0:
         root.fail("forces.wind: wind acts on triangles, and these bodies have none (strings and "
                   "hair: use forces.drag)")
+    if scene.sewing is not None and not len(scene.cloth.seam_indices):
+        root.fail("simulation.sewing: no body has seams to sew (a garment body's `seams`)")
     substeps = 1 if scene.automatic else scene.resolved_substeps()   # "auto": the advisor's
     if substeps > limits.SUBSTEPS.high:
         root.fail(f"simulation.substeps = \"auto\" needs {substeps:_} steps per frame (a stable "

@@ -24,6 +24,7 @@ from ..body.fabric import PRESETS as FABRICS
 from ..body.fabric import Fabric
 from ..body.material import DAMPING_MODELS, PRESETS, Material, SpringParams
 from ..body.mesh import PLANES, Mesh, grid_mesh, load_mesh
+from ..body.panels import Garment, panel
 from ..body.topology import Cloth
 from ..contact.attachment import Attachment
 from ..contact.colliders import Collider
@@ -31,9 +32,10 @@ from ..physics.handles import Handle
 from ..physics.paths import INTERPOLATIONS, Keyframes, Oscillation
 from ..runtime import limits
 from ..runtime.limits import Range
+from ..runtime.validation import require
 from .scene_file import Table
 
-BODY_TYPES = ("grid", "mesh", "string", "hair", "tet_block")
+BODY_TYPES = ("grid", "mesh", "garment", "string", "hair", "tet_block")
 SPRING_KEYS = {"string": ("stretch", "bend"), "hair": ("stretch", "bend", "twist", "altitude"),
                "tet_block": ("stretch",)}
 DIMENSION = {"string": 1, "hair": 1, "tet_block": 3}
@@ -98,12 +100,12 @@ class Body:
         return [(h.particles.resolve(names, cloth.particle_position, refinement), h)
                 for h in self.handles]
 
-    def _surface(self, mesh: Mesh, refinement, names: dict, factor: int):
+    def _surface(self, mesh: Mesh, refinement, names: dict, factor: int, seams=None):
         everything = mesh.named_vertices() | names
         hem = None if self.hem is None else self.hem.resolve(everything, mesh.vertices, refinement)
         cloth = Cloth(mesh, refine.material_at(self.material, factor),
                       pinned=self.pinned.resolve(everything, mesh.vertices, refinement), hem=hem,
-                      **self.warp)
+                      seams=seams, **self.warp)
         return cloth, refinement, names
 
     def _grid(self, factor: int):
@@ -116,6 +118,14 @@ class Body:
     def _mesh(self, factor: int):
         mesh, refinement = refine.subdivide(self.mesh, factor)
         return self._surface(mesh, refinement, {}, factor)
+
+    def _garment(self, factor: int):
+        garment = self.options["garment"]
+        require(factor == 1, "resolution", factor, "1 for a scene with a garment (refine a "
+                "garment by its panels' edge_length)")
+        mesh, refinement = refine.subdivide(garment.mesh, 1)
+        return self._surface(mesh, refinement, garment_names(garment), factor,
+                             seams=garment.seam_pairs)
 
     def _refined_options(self, factor: int) -> dict:
         builder = getattr(builders, self.kind)
@@ -150,6 +160,17 @@ class Body:
 def grid_names(mesh: Mesh) -> dict:
     """A grid's named vertex sets a scene's pins and handles may use (all but "boundary")."""
     return {k: v for k, v in mesh.named_vertices().items() if k != "boundary"}
+
+
+def garment_names(garment: Garment) -> dict:
+    """A garment's named particle sets: "panel<p>" (a whole panel) and "panel<p>_edge<e>"
+    (outline edge e of panel p: a waistband, a hem)."""
+    names = {}
+    for p, piece in enumerate(garment.panels):
+        names[f"panel{p}"] = garment.particles(p)
+        for e in range(len(piece.edges)):
+            names[f"panel{p}_edge{e}"] = garment.particles(p, e)
+    return names
 
 
 def build_bodies(bodies, factor: int = 1, made=None) -> tuple[Cloth, list[Handle], int]:
@@ -195,6 +216,17 @@ def read_body(table: Table, folder: Path, colliders=()) -> tuple[Body, tuple]:
         hem = (_selection(table, "hem", mesh.vertex_count, mesh.named_vertices(), mesh.vertices)
                if table.has("hem") else None)
         body = Body(kind, options, _material(table), mesh if kind == "mesh" else None,
+                    _selection(table, "pinned", mesh.vertex_count, names, mesh.vertices), hem, warp)
+    elif kind == "garment":
+        garment = _garment(table)
+        options["garment"] = garment
+        names = garment_names(garment)
+        mesh = garment.mesh
+        warp = {}
+        table.optional(warp, "warp", lambda k: "uv" if table.value(k) == "uv" else table.vector(k))
+        hem = (_selection(table, "hem", mesh.vertex_count, names, mesh.vertices)
+               if table.has("hem") else None)
+        body = Body(kind, options, _material(table), None,
                     _selection(table, "pinned", mesh.vertex_count, names, mesh.vertices), hem, warp)
     elif kind == "string":
         options["n"] = table.integer("n", 20, within=limits.CHAIN)
@@ -258,6 +290,29 @@ def read_body(table: Table, folder: Path, colliders=()) -> tuple[Body, tuple]:
         a.finish()
     table.finish()
     return replace(body, handles=tuple(specs)), made
+
+
+def _garment(table: Table) -> Garment:
+    """A garment body's [[bodies.panels]] (outline, edge_length, wrap, rotate, translate) and
+    `seams` ([panel_a, edge_a, panel_b, edge_b] each)."""
+    pieces = []
+    for p in table.tables("panels"):
+        piece = p.build(panel, p.value("outline"), p.number("edge_length", unit="m",
+                                                            within=limits.LENGTH))
+        if p.has("wrap"):
+            piece = p.build(piece.wrapped, p.number("wrap", unit="m", within=limits.LENGTH),
+                            p.number("flare", 0.0, minimum=0.0))
+        piece = p.build(piece.moved, p.vector("translate", (0.0, 0.0, 0.0), unit="m"),
+                        p.vector("rotate", (0.0, 0.0, 0.0), unit="rad"))
+        p.finish()
+        pieces.append(piece)
+    if not pieces:
+        table.fail(f"{table.path('panels')}: a garment needs at least one [[bodies.panels]] "
+                   "table")
+    seams = table.value("seams", [])
+    if not isinstance(seams, list):
+        table.bad("seams", seams, "a list of [panel_a, edge_a, panel_b, edge_b]")
+    return table.build(Garment, pieces, seams)
 
 
 def _default(constructor, name: str):

@@ -207,6 +207,8 @@ class Cloth:
       altitude_stiffness (A,) [N/m], altitude_damping (A,) [kg/s]
       particle_body      (N,) int: which of the bodies joined by `combine` each particle is
                          in (0 for one body)
+      seam_indices       (P, 2) int, i < j: particle pairs a garment's seams pull together
+                         (physics/sewing.py; body/panels.py makes them)
 
     A body made of a Fabric has no springs but elements (elements.py): its triangles
       face_indices       (F, 3) int: the membrane and bending triangles (the mesh's)
@@ -236,12 +238,13 @@ class Cloth:
     material: a Material (Stuyck's springs) or a Fabric (elements). warp: a Fabric's warp
     direction (default a grid's columns, else x), projected into each triangle, or "uv": along
     the mesh's texture coordinate u in each triangle (Mesh.uvs).
+    seams: (P, 2) particle pairs sewn together (Garment.seam_pairs); default none.
     """
 
     def __init__(self, mesh: Mesh, material: Material | Fabric, pinned=(), springs=None,
                  particle_mass_override: Mapping[int, float] | None = None,
                  particle_mass=None, hem=None, ghost=None, altitude_tetrahedra=None,
-                 altitude: SpringParams | None = None, warp=None):
+                 altitude: SpringParams | None = None, warp=None, seams=None):
         require(isinstance(mesh, Mesh), "mesh", mesh, "a ti_cloth.Mesh")
         require(isinstance(material, (Material, Fabric)), "material", material,
                 "a ti_cloth.Material or a ti_cloth.Fabric")
@@ -306,6 +309,7 @@ class Cloth:
         self.altitude_stiffness = np.full(self.altitude_count, altitude.k)
         self.altitude_damping = np.full(self.altitude_count, altitude.kd)
         self.particle_body = np.zeros(n, np.int64)
+        self.seam_indices = _seam_pairs(seams, n)
         self._build_elements(material if fabric else None, warp)
         self._freeze()
 
@@ -339,7 +343,8 @@ class Cloth:
     def _freeze(self) -> None:
         for name in ("particle_mass", "particle_body", "pinned", "hem", "ghost", "spring_indices", "spring_kind", "spring_rest_length",
                      "spring_stiffness", "spring_damping", "triangle_edge_spring", "triangle_face", "altitude_indices",
-                     "altitude_rest_length", "altitude_stiffness", "altitude_damping") + self.ELEMENT_ARRAYS:
+                     "altitude_rest_length", "altitude_stiffness", "altitude_damping",
+                     "seam_indices") + self.ELEMENT_ARRAYS:
             getattr(self, name).flags.writeable = False
 
     @classmethod
@@ -381,6 +386,7 @@ class Cloth:
         body.spring_damping = joined("spring_damping")
         body.triangle_edge_spring = joined("triangle_edge_spring", spring_offsets)
         body.altitude_indices = joined("altitude_indices", particle_offsets)
+        body.seam_indices = joined("seam_indices", particle_offsets)
         for name in ("altitude_rest_length", "altitude_stiffness", "altitude_damping",
                      "face_gradient", "face_area", "face_moduli", "face_damping", "face_bending",
                      "hinge_rest_angle"):
@@ -417,6 +423,7 @@ class Cloth:
         for name in ("particle_mass", "particle_body", "pinned", "hem", "ghost"):
             setattr(body, name, getattr(self, name)[order])
         body.spring_indices = np.sort(rank[self.spring_indices], axis=1)
+        body.seam_indices = np.sort(rank[self.seam_indices], axis=1)
         for name in ("altitude_indices", "face_indices", "hinge_indices"):
             setattr(body, name, rank[getattr(self, name)])
         body._freeze()
@@ -523,6 +530,18 @@ def _explicit_springs(springs, n: int) -> tuple[np.ndarray, np.ndarray]:
     require(len(pairs) == total, "springs", f"{total - len(pairs)} repeated particle pair(s)",
             "each particle pair connected at most once")
     return pairs, kind
+
+
+def _seam_pairs(seams, n: int) -> np.ndarray:
+    """Seam pairs (P, 2) as sorted, distinct pairs of distinct particles."""
+    if seams is None:
+        return np.zeros((0, 2), np.int64)
+    pairs = as_array("seams", seams, np.int64, (None, 2))
+    bad = np.flatnonzero((pairs < 0).any(axis=1) | (pairs >= n).any(axis=1)
+                        | (pairs[:, 0] == pairs[:, 1]))
+    require(len(bad) == 0, f"seams[{bad[:1].tolist()}]", pairs[bad[:1]].tolist(),
+            f"two different particle indices in [0, {n - 1}]")
+    return np.unique(np.sort(pairs, axis=1), axis=0)
 
 
 def _edge_springs(triangles: np.ndarray, pairs: np.ndarray, n: int) -> np.ndarray:

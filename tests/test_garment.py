@@ -1,0 +1,264 @@
+"""Garments (body/panels.py, physics/sewing.py): pattern panels triangulated and checked
+against their outline's own area and edges, wrapped with the lengths a cylinder keeps, seams
+paired along their edges, and sewing that closes each seam no faster than its speed,
+conserves momentum, stays shut and resumes with the same bits."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from helpers import report
+
+import ti_cloth as tc
+from ti_cloth.app.scene import load_scene
+from ti_cloth.app.scene_file import SceneError
+
+ROUNDING = 1e-12
+TRAPEZOID = [(-0.3, 0.0), (0.3, 0.0), (0.2, 0.5), (-0.2, 0.5)]
+NOTCHED = [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.6, 1.0), (0.5, 0.4), (0.4, 1.0), (0.0, 1.0)]
+
+
+def shoelace(outline):
+    x, y = np.asarray(outline, float).T
+    return 0.5 * abs(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+def signed_areas(points, triangles):
+    a, b, c = (points[triangles[:, k]] for k in range(3))
+    return 0.5 * ((b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0])
+
+
+@pytest.mark.parametrize("outline, h", [(TRAPEZOID, 0.02), (NOTCHED, 0.05),
+                                        (TRAPEZOID[::-1], 0.1)])
+def test_a_panel_fills_its_outline_with_near_equilateral_triangles(outline, h):
+    """The triangles cover exactly the outline's area (every one counter-clockwise, none
+    overlapping: their signed areas sum to the polygon's), the outline's points lie on its
+    edges no more than h apart, and the triangles are near equilateral, about h on a side
+    (quality 4 sqrt(3) A / sum of squared sides: 1 for equilateral)."""
+    piece = tc.panel(outline, h)
+    points, triangles = piece.flat, piece.mesh.triangles
+    areas = signed_areas(points, triangles)
+    assert (areas > 0).all()
+    assert abs(areas.sum() - shoelace(outline)) < ROUNDING
+    corners = np.asarray(outline, float)
+    for k, edge in enumerate(piece.edges):
+        p, q = corners[k], corners[(k + 1) % len(corners)]
+        along = points[edge]
+        np.testing.assert_allclose(along[[0, -1]], [p, q], atol=ROUNDING)
+        cross = (q - p)[0] * (along - p)[:, 1] - (q - p)[1] * (along - p)[:, 0]
+        assert np.abs(cross).max() < ROUNDING
+        assert np.linalg.norm(np.diff(along, axis=0), axis=1).max() <= h * (1 + 1e-9)
+    sides = np.stack([np.linalg.norm(points[triangles[:, i]] - points[triangles[:, j]], axis=1)
+                      for i, j in ((0, 1), (1, 2), (2, 0))], axis=1)
+    quality = 4 * np.sqrt(3) * areas / (sides ** 2).sum(axis=1)
+    report("panel quality min, mean; mean side / h", (quality.min(), quality.mean(),
+                                                      sides.mean() / h), "> 0.5, > 0.9, ~1")
+    assert quality.min() > 0.5 and quality.mean() > 0.9 and 0.85 < sides.mean() / h < 1.15
+    again = tc.panel(outline, h)
+    np.testing.assert_array_equal(again.flat, points)
+    np.testing.assert_array_equal(again.mesh.triangles, triangles)
+
+
+def test_wrapping_onto_a_cylinder_keeps_every_length_to_the_chords_sag():
+    """Each triangle side of length L that turns through theta round a cylinder of radius R
+    becomes a chord at most L theta^2 / 24 shorter (2 R sin(theta / 2) against R theta); the
+    vertical lines keep their length; a cone's top stays on its circle."""
+    piece = tc.panel(TRAPEZOID, 0.02)
+    radius = 0.2
+    wrapped = piece.wrapped(radius)
+    flat, curved = piece.flat, wrapped.mesh.vertices
+    np.testing.assert_allclose(np.hypot(curved[:, 0], curved[:, 2]), radius, atol=ROUNDING)
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        a, b = piece.mesh.triangles[:, i], piece.mesh.triangles[:, j]
+        length = np.linalg.norm(flat[a] - flat[b], axis=1)
+        chord = np.linalg.norm(curved[a] - curved[b], axis=1)
+        theta = np.abs(flat[a, 0] - flat[b, 0]) / radius
+        assert (chord <= length + ROUNDING).all()
+        assert (length - chord <= length * theta ** 2 / 24 + ROUNDING).all()
+    cone = piece.wrapped(radius, flare=0.25).mesh.vertices
+    top = np.isclose(flat[:, 1], 0.5)
+    np.testing.assert_allclose(np.hypot(cone[top, 0], cone[top, 2]), radius, atol=ROUNDING)
+    hem = np.isclose(flat[:, 1], 0.0)
+    np.testing.assert_allclose(np.hypot(cone[hem, 0], cone[hem, 2]),
+                               radius + 0.5 * np.sin(np.arctan(0.25)), atol=ROUNDING)
+    with pytest.raises(ValueError, match="Panel.wrapped must be called once"):
+        wrapped.wrapped(radius)
+
+
+def test_seams_pair_each_point_with_the_one_at_its_place_along_the_other_edge():
+    """Equal edges: one pair per point, a's start with b's end; edges of different lengths
+    (so different counts): every point of both has a partner at about its place."""
+    left = tc.panel([(0, 0), (0.3, 0), (0.3, 0.4), (0, 0.4)], 0.05)
+    right = left.moved(translate=(0.35, 0.0, 0.0))
+    garment = tc.Garment([left, right], [(0, 1, 1, 3)])
+    a, b = garment.particles(0, 1), garment.particles(1, 3)
+    pairs = garment.seam_pairs
+    assert len(a) == len(b) == len(pairs)
+    expected = np.sort(np.column_stack([a, b[::-1]]), axis=1)
+    np.testing.assert_array_equal(pairs, expected[np.lexsort(expected.T[::-1])])
+    mesh = garment.mesh
+    np.testing.assert_allclose(mesh.vertices[pairs[:, 1], 1], mesh.vertices[pairs[:, 0], 1],
+                               atol=ROUNDING)
+    short = tc.panel([(0, 0), (0.3, 0), (0.3, 0.25), (0, 0.25)], 0.05).moved((0.35, 0, 0))
+    uneven = tc.Garment([left, short], [(0, 1, 1, 3)])
+    pairs = uneven.seam_pairs
+    a, b = uneven.particles(0, 1), uneven.particles(1, 3)
+    assert set(pairs.ravel()) == set(a) | set(b) and len(a) != len(b)
+    places = uneven.mesh.uvs[:, 1]
+    fraction = np.where(np.isin(pairs, a), places[pairs] / 0.4, places[pairs] / 0.25)
+    assert np.abs(fraction[:, 0] - fraction[:, 1]).max() <= 0.5 * 0.05 / 0.25 + ROUNDING
+
+
+def two_panels(gap=0.05, h=0.05):
+    left = tc.panel([(0, 0), (0.3, 0), (0.3, 0.4), (0, 0.4)], h)
+    garment = tc.Garment([left, left.moved(translate=(0.3 + gap, 0.0, 0.0))], [(0, 1, 1, 3)])
+    return garment
+
+
+def test_sewing_closes_a_seam_at_its_speed_conserving_momentum_and_keeps_it_shut(f64):
+    """Two free panels 5 cm apart, no gravity: after the step ending at t every seam gap is
+    at most max(0, 5 cm - speed t) (the sewing stage is the step's last), total momentum
+    stays 0 (each pair's corrections are equal and opposite), and once shut the seam stays
+    shut while the sheet falls from one pinned corner. Without sewing the gap stays."""
+    garment = two_panels()
+    pairs = garment.seam_pairs
+    cloth = tc.Cloth(garment.mesh, tc.Material(), seams=pairs)
+    speed = 0.4
+    sim = tc.Simulation(cloth, integrator="xpbd", dt=1 / 600, gravity=(0.0, 0.0, 0.0),
+                        sewing=tc.Sewing(speed=speed))
+    mass = cloth.particle_mass[:, None]
+    worst_excess, worst_momentum, gaps = 0.0, 0.0, []
+    for _ in range(120):
+        sim.step(1)
+        x = sim.positions()
+        gap = np.linalg.norm(x[pairs[:, 0]] - x[pairs[:, 1]], axis=1)
+        gaps.append(gap.max())
+        worst_excess = max(worst_excess, (gap - max(0.0, 0.05 - speed * sim.time)).max())
+        worst_momentum = max(worst_momentum, np.abs((mass * sim.velocities()).sum(axis=0)).max())
+    shut = next(k for k, g in enumerate(gaps) if g < ROUNDING) + 1
+    report("gap above the sewn length (m), momentum (kg m/s), first gap, steps to shut",
+           (worst_excess, worst_momentum, gaps[0], shut), f"<= 0, 0, {0.05 - speed / 600}, "
+           f"<= {0.05 * 600 / speed}")
+    assert worst_excess < ROUNDING and worst_momentum < ROUNDING
+    # at rest, the first step moves nothing but the seams: each closes by speed x dt
+    assert abs(gaps[0] - (0.05 - speed / 600)) < ROUNDING
+    assert shut <= round(0.05 * 600 / speed) and max(gaps[shut - 1:]) < ROUNDING
+    hanging = tc.Cloth(garment.mesh, tc.Material(), seams=pairs, pinned=[0])
+    sim = tc.Simulation(hanging, integrator="xpbd", dt=1 / 600, sewing=tc.Sewing(speed))
+    unsewn = tc.Simulation(tc.Cloth(garment.mesh, tc.Material(), pinned=[0]),
+                           integrator="xpbd", dt=1 / 600)
+    sim.step(120)
+    unsewn.step(120)
+    widest = 0.0
+    for _ in range(4):
+        sim.step(60)
+        x = sim.positions()
+        widest = max(widest, np.linalg.norm(x[pairs[:, 0]] - x[pairs[:, 1]], axis=1).max())
+    x = unsewn.positions()
+    report("seam gap while falling, sewn; unsewn after 0.2 s", (widest, np.linalg.norm(
+        x[pairs[:, 0]] - x[pairs[:, 1]], axis=1).max()), "rounding; ~5 cm or more")
+    assert widest < 1e-9
+    assert np.linalg.norm(x[pairs[:, 0]] - x[pairs[:, 1]], axis=1).max() > 0.04
+
+
+def test_a_sewing_run_resumes_with_the_same_bits(f64, tmp_path):
+    garment = two_panels()
+    cloth = tc.Cloth(garment.mesh, tc.Fabric.preset("dots"), seams=garment.seam_pairs,
+                     pinned=garment.particles(0, 2))
+    make = lambda: tc.Simulation(cloth, integrator="xpbd", dt=1 / 600,  # noqa: E731
+                                 sewing=tc.Sewing(0.4))
+    whole = make()
+    whole.step(90)
+    half = make()
+    half.step(45)
+    half.save_state(tmp_path / "half.npz")
+    resumed = make()
+    resumed.load_state(tmp_path / "half.npz")
+    resumed.step(45)
+    np.testing.assert_array_equal(resumed.positions(), whole.positions())
+    np.testing.assert_array_equal(resumed.velocities(), whole.velocities())
+    other = tc.Simulation(cloth, integrator="xpbd", dt=1 / 600, sewing=tc.Sewing(0.5))
+    with pytest.raises(tc.StateMismatch):
+        other.load_state(tmp_path / "half.npz")
+
+
+def test_bad_panels_seams_and_sewing_are_refused_by_name():
+    piece = tc.panel(TRAPEZOID, 0.1)
+    cloth = tc.Cloth(piece.mesh, tc.Material())
+    cases = [
+        (lambda: tc.panel([(0, 0), (1, 0)], 0.1), "outline must be at least 3 points"),
+        (lambda: tc.panel([(0, 0), (1, 1), (1, 0), (0, 1)], 0.1),
+         "outline must be a polygon that does not cross itself (edges (0, 2) cross)"),
+        (lambda: tc.panel([(0, 0), (0, 0), (1, 0), (0, 1)], 0.1), "outline[[0]] must be a point"),
+        (lambda: tc.panel(TRAPEZOID, 0.0), "edge_length must be a finite number > 0.0 m"),
+        (lambda: tc.panel(TRAPEZOID, 1e-5), "edge_length must be at least"),
+        (lambda: tc.panel([(0.347, 0.47), (0.169, -0.347), (0.551, -0.636), (0.723, -0.599),
+                           (0.398, -0.11), (0.622, -0.108), (0.55, -0.065)], 0.28),
+         "outline edge 4 must be kept by the triangulation"),
+        (lambda: tc.Garment([piece], [(0, 1, 1, 3)]), "seams[0] panel must be a panel index"),
+        (lambda: tc.Garment([piece, piece], [(0, 1, 1, 9)]), "seams[0] edge of panel 1"),
+        (lambda: tc.Garment([piece, piece], [(0, 1, 1, 3), (1, 3, 0, 2)]),
+         "seams[1] must be edges sewn once"),
+        (lambda: tc.Cloth(piece.mesh, tc.Material(), seams=[(0, 0)]),
+         "seams[[0]] must be two different particle indices"),
+        (lambda: tc.Simulation(cloth, sewing=tc.Sewing()),
+         "sewing must be None for a cloth without seams"),
+        (lambda: tc.Sewing(speed=-1.0), "Sewing.speed must be"),
+    ]
+    for make, message in cases:
+        with pytest.raises(ValueError) as caught:
+            make()
+        report("message", str(caught.value)[:160], message)
+        assert message in str(caught.value)
+
+
+SKIRT = Path(__file__).parents[1] / "demos" / "skirt_walk.toml"
+
+
+def test_the_skirt_demo_sews_shut_stays_out_of_the_walking_figure_and_on_the_hips(f32):
+    """demos/skirt_walk.toml for 0.8 s: the side seams shut to within the collider's
+    thickness by 0.3 s and stay so, no particle is ever inside the walking figure (libigl's
+    winding number: not our code), and the waistband rides the hips."""
+    igl = pytest.importorskip("igl")
+    scene = load_scene(SKIRT)
+    figure = scene.colliders[0]
+    sim = scene.build(dt=1 / 240)
+    pairs = scene.cloth.seam_indices
+    held = np.concatenate([a.particles for a in scene.handles])
+    free = np.setdiff1d(np.arange(scene.cloth.particle_count), held)
+    inside, open_after = [], 0.0
+    for frame in range(24):
+        sim.step(8)
+        x = sim.positions()
+        w = igl.fast_winding_number(figure.vertices_at(sim.time),
+                                    figure.mesh.triangles.astype(np.int64), x[free])
+        inside.append(int((np.abs(w) > 0.5).sum()))
+        if sim.time > 0.3:
+            open_after = max(open_after,
+                             np.linalg.norm(x[pairs[:, 0]] - x[pairs[:, 1]], axis=1).max())
+    report("skirt particles inside the figure per frame; widest seam after 0.3 s (m)",
+           (inside, open_after), "all 0; < 0.01")
+    assert sum(inside) == 0 and open_after < figure.thickness
+
+
+def test_scene_files_build_a_garment_and_refuse_bad_panels(tmp_path):
+    scene = load_scene(SKIRT)
+    assert len(scene.cloth.seam_indices) > 0 and scene.sewing == tc.Sewing(0.3)
+    assert scene.cloth.fabric and scene.cloth.particle_count == sum(
+        p.mesh.vertex_count for p in scene.bodies[0].options["garment"].panels)
+    text = SKIRT.read_text().replace('path = "assets/', f'path = "{SKIRT.parent}/assets/')
+    for old, new, message in (
+            ("seams = [[0, 1, 1, 3], [0, 3, 1, 1]]", "seams = [[0, 1, 2, 3]]",
+             r"bodies\[0\]: seams\[0\] panel must be a panel index in \[0, 1\], got 2"),
+            ("edge_length = 0.025\nwrap = 0.165\nflare = 0.25\nrotate",
+             "edge_length = -1\nwrap = 0.165\nflare = 0.25\nrotate",
+             r"bodies\[0\]\.panels\[1\]\.edge_length must be"),
+            ('particles = ["panel0_edge2", "panel1_edge2"]', 'particles = ["panel0_edge7"]',
+             r"bodies\[0\]\.attachments\[0\]\.particles must be particle indices"),
+            ("duration = 3.3", "duration = 3.3\nresolution = 2",
+             r"resolution must be 1 for a scene with a garment")):
+        assert old in text
+        path = tmp_path / "skirt.toml"
+        path.write_text(text.replace(old, new))
+        with pytest.raises(SceneError, match=message):
+            load_scene(path)
