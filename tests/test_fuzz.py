@@ -101,8 +101,8 @@ def scaled(value, factor: float):
     return type(value)(value * factor) if isinstance(value, float) else round(value * factor)
 
 
-def mutated(changes) -> tuple[dict, list[str]]:
-    scene = json.loads(json.dumps(BASE))
+def mutated(changes, base=BASE) -> tuple[dict, list[str]]:
+    scene = json.loads(json.dumps(base))
     touched = []
     for path, value, new_key in changes:
         owner = scene
@@ -169,10 +169,80 @@ def test_a_generated_scene_file_runs_a_frame_or_is_refused_naming_a_key(tmp_path
     assert np.isfinite(sim.positions()).all()
 
 
+SQUARE = [[0.0, 0.0], [0.2, 0.0], [0.2, 0.2], [0.0, 0.2]]
+GARMENT = {
+    "scene": {"name": "fuzz_garment"},
+    "simulation": {"integrator": "xpbd", "fps": 30, "duration": 1.0, "sewing": {"speed": 0.5}},
+    "bodies": [{"type": "garment", "material": {"density": 0.2}, "seams": [[0, 1, 1, 3]],
+                "warp": "uv", "pinned": ["panel1_edge2"],
+                "panels": [{"outline": SQUARE, "edge_length": 0.1, "wrap": 0.3, "flare": 0.1,
+                            "translate": [0, 0.5, 0]},
+                           {"outline": SQUARE, "edge_length": 0.1, "rotate": [0, 0.1, 0],
+                            "translate": [0.25, 0.5, 0]}],
+                "attachments": [{"particles": ["panel0_edge2"], "collider": 0,
+                                 "release": 0.5}]}],
+    "colliders": [{"type": "animated_mesh", "path": "body.npz", "fps": 10, "scale": 1.0,
+                   "translate": [0, 0, 0], "thickness": 0.01, "static_friction": 0.3}],
+    "camera": {"fov": 40, "direction": [0.5, 0.4, 1]},
+    "output": {"width": 64, "height": 48, "supersample": 1},
+}
+GARMENT_PATHS = [p for p in paths(GARMENT) if isinstance(p[-1], str)]
+GARMENT_KEYS = sorted({p[-1] for p in GARMENT_PATHS} | set(KEY_NAMES) | {"outline", "fps"})
+
+
+def write_body(folder) -> None:
+    """The animated collider of GARMENT: a tetrahedron rising under the panels."""
+    corners = np.array([[0.0, 0.0, 0.0], [0.3, 0.0, 0.0], [0.0, 0.3, 0.0], [0.0, 0.0, 0.3]])
+    np.savez(folder / "body.npz", triangles=[[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+             positions=np.stack([corners + (0.0, 0.02 * k, 0.0) for k in range(11)]))
+
+
+garment_changes = st.lists(st.tuples(st.sampled_from(GARMENT_PATHS),
+                                     st.one_of(values, factors, factors),
+                                     st.one_of(st.none(), st.none(),
+                                               st.text(min_size=1, max_size=6))),
+                           min_size=1, max_size=3)
+
+
+@settings(max_examples=60, deadline=FRAME_DEADLINE_MS, derandomize=True,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(changes=garment_changes)
+def test_a_generated_garment_scene_runs_a_frame_or_is_refused_naming_a_key(tmp_path, changes):
+    """The same for the keys of garments, sewing, attachments and animated mesh colliders."""
+    write_body(tmp_path)
+    scene, touched = mutated(changes, GARMENT)
+    path = tmp_path / "scene.toml"
+    path.write_text(document(scene), encoding="utf-8")
+    try:
+        loaded = load_scene(path)
+    except SceneError as err:
+        message = str(err)
+        assert ("not valid TOML" in message or any(k in message for k in touched)
+                or any(re.search(rf"\b{re.escape(k)}\b", message) for k in GARMENT_KEYS)), \
+            message
+        return
+    work = loaded.work(frames=1)
+    if work.seconds > FRAME_SECONDS:
+        return
+    use(loaded.precision)
+    sim = loaded.build()
+    try:
+        sim.step(work.steps)
+    except tc.SimulationDiverged as err:
+        assert re.match(r"simulation diverged at step \d+ ", str(err)), str(err)
+        return
+    assert np.isfinite(sim.positions()).all()
+
+
 def test_the_unmutated_fuzz_scene_loads(tmp_path):
     path = tmp_path / "scene.toml"
     path.write_text(document(BASE))
     assert load_scene(path).cloth.particle_count == 36
+    write_body(tmp_path)
+    path.write_text(document(GARMENT))
+    garment = load_scene(path)
+    assert len(garment.cloth.seam_indices) > 0 and len(garment.handles) == 1
+    assert isinstance(garment.colliders[0], tc.AnimatedMeshCollider)
 
 
 numbers = st.one_of(st.floats(allow_nan=True, allow_infinity=True),
@@ -202,6 +272,18 @@ API = {
     "Tearing": (lambda a, b: tc.Tearing(a), ("Tearing",), (numbers, numbers)),
     "stable_dt": (lambda a, b: tc.stable_dt(tc.string(4, 1.0), "verlet", drag=a), ("drag",),
                   (numbers, numbers)),
+    "panel": (lambda a, b: tc.panel([(0, 0), (a, 0), (0.2, 0.2)], b), ("outline", "edge_length"),
+              (numbers, numbers)),
+    "Panel.wrapped": (lambda a, b: tc.panel(SQUARE, 0.1).wrapped(a, b), ("Panel.wrapped",),
+                      (numbers, numbers)),
+    "Garment": (lambda a, b: tc.Garment([tc.panel(SQUARE, 0.1)] * 2, [(0, a, 1, b)]),
+                ("seams",), (small_counts, small_counts)),
+    "Sewing": (lambda a, b: tc.Sewing(a), ("Sewing",), (numbers, numbers)),
+    "Attachment": (lambda a, b: tc.Attachment([a], tc.Sphere(), release=b), ("Attachment",),
+                   (small_counts, numbers)),
+    "AnimatedMeshCollider": (lambda a, b: tc.AnimatedMeshCollider(
+        tc.sphere_mesh(0.1, subdivisions=0), [[[a, 0.0, 0.0]] * 12] * 2, fps=b),
+        ("AnimatedMeshCollider",), (numbers, numbers)),
 }
 
 

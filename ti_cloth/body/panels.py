@@ -98,6 +98,7 @@ def panel(outline, edge_length: float) -> Panel:
         for axis in range(2):
             in_range(f"outline[{k}][{axis}]", point[axis], limits.COORDINATE)
     h = finite_number("edge_length", edge_length, 0.0, strict=True, unit="m")
+    in_range("edge_length", h, limits.LENGTH)
     ends = np.roll(outline, -1, axis=0)
     lengths = np.linalg.norm(ends - outline, axis=1)
     short = np.flatnonzero(lengths <= 0)

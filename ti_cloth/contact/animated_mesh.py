@@ -59,8 +59,12 @@ class AnimatedMeshCollider(Collider):
                     "None with a callable motion (it is called at every step's time)")
             self.vertices_at(0.0)
         elif self.motion is not None:
-            motion = np.asarray(self.motion) if not isinstance(self.motion, np.ndarray) \
-                else self.motion
+            try:
+                motion = np.asarray(self.motion, dtype=np.float64)
+            except (TypeError, ValueError, OverflowError):
+                raise ValueError(f"{name}.motion must be None, a callable t -> (V, 3) or an "
+                                 f"array (samples, {vertices}, 3) of numbers, got "
+                                 f"{self.motion!r:.80}") from None
             require(motion.ndim == 3 and motion.shape[1:] == (vertices, 3),
                     f"{name}.motion.shape", getattr(motion, "shape", None),
                     f"(samples, {vertices}, 3): a position for each of the mesh's {vertices} "
