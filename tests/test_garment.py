@@ -254,11 +254,55 @@ def test_scene_files_build_a_garment_and_refuse_bad_panels(tmp_path):
              "edge_length = -1\nwrap = 0.165\nflare = 0.25\nrotate",
              r"bodies\[0\]\.panels\[1\]\.edge_length must be"),
             ('particles = ["panel0_edge2", "panel1_edge2"]', 'particles = ["panel0_edge7"]',
-             r"bodies\[0\]\.attachments\[0\]\.particles must be particle indices"),
-            ("duration = 3.3", "duration = 3.3\nresolution = 2",
-             r"resolution must be 1 for a scene with a garment")):
+             r"bodies\[0\]\.attachments\[0\]\.particles must be particle indices")):
+
         assert old in text
         path = tmp_path / "skirt.toml"
         path.write_text(text.replace(old, new))
         with pytest.raises(SceneError, match=message):
             load_scene(path)
+
+
+def test_a_garment_refines_with_its_seams_and_waistband():
+    """The skirt at resolutions 1, 2 and 4 (midpoint subdivision): each side seam of n pairs
+    becomes one of f (n - 1) + 1, every pair joins points at the same height of the pattern
+    (the two panels are the same shape), the points along the seams are all sewn, and the
+    waistband holds the refined edges (f (n - 1) + 1 points each)."""
+    scene = load_scene(SKIRT)
+    coarse = len(scene.cloth.seam_indices)
+    waist = len(scene.handles[0].particles)
+    for factor in (1, 2, 4):
+        refined = scene.refined(factor)
+        cloth = refined.cloth
+        pairs = cloth.seam_indices
+        heights = cloth.mesh.uvs[:, 1]
+        report(f"resolution {factor}: seam pairs, waistband", (len(pairs),
+               len(refined.handles[0].particles)), (factor * (coarse - 2) + 2,
+                                                    factor * (waist - 2) + 2))
+        assert len(pairs) == factor * (coarse - 2) + 2        # two seams of n pairs each
+        assert len(refined.handles[0].particles) == factor * (waist - 2) + 2   # two edges
+        np.testing.assert_allclose(heights[pairs[:, 0]], heights[pairs[:, 1]], atol=1e-12)
+        x, flat = cloth.particle_position, cloth.mesh.uvs
+        side = np.isclose(np.abs(flat[:, 0]), 0.3855 - (0.3855 - 0.2592) * flat[:, 1] / 0.42)
+        assert set(np.flatnonzero(side)) == set(pairs.ravel())
+        assert (np.linalg.norm(x[pairs[:, 0]] - x[pairs[:, 1]], axis=1) < 0.07).all()
+
+
+def test_a_sewn_garment_exports_as_one_body(f64, tmp_path):
+    """OBJ and PC2 of a garment hold every panel's triangles and points as one body."""
+    import meshio
+
+    from ti_cloth.export import read_pc2
+    garment = two_panels()
+    cloth = tc.Cloth(garment.mesh, tc.Material(), seams=garment.seam_pairs,
+                     pinned=garment.particles(0, 2))
+    sim = tc.Simulation(cloth, integrator="xpbd", dt=1 / 600)
+    with tc.Exporter(tmp_path, ["obj", "pc2"], name="garment", cloth=cloth, fps=30) as export:
+        for _ in range(3):
+            sim.step(20)
+            export.write(sim)
+    read = meshio.read(tmp_path / "garment_body0_00002.obj")
+    np.testing.assert_allclose(read.points, sim.positions(), atol=1e-12)
+    np.testing.assert_array_equal(read.cells_dict["triangle"], garment.mesh.triangles)
+    header, cached = read_pc2(tmp_path / "garment_body0.pc2")
+    assert header["points"] == garment.mesh.vertex_count and header["samples"] == 3

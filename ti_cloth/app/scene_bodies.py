@@ -32,7 +32,6 @@ from ..physics.handles import Handle
 from ..physics.paths import INTERPOLATIONS, Keyframes, Oscillation
 from ..runtime import limits
 from ..runtime.limits import Range
-from ..runtime.validation import require
 from .scene_file import Table
 
 BODY_TYPES = ("grid", "mesh", "garment", "string", "hair", "tet_block")
@@ -121,11 +120,11 @@ class Body:
 
     def _garment(self, factor: int):
         garment = self.options["garment"]
-        require(factor == 1, "resolution", factor, "1 for a scene with a garment (refine a "
-                "garment by its panels' edge_length)")
-        mesh, refinement = refine.subdivide(garment.mesh, 1)
-        return self._surface(mesh, refinement, garment_names(garment), factor,
-                             seams=garment.seam_pairs)
+        mesh, refinement = refine.subdivide(garment.mesh, factor)
+        names = {k: refinement.carry(v) for k, v in garment_names(garment).items()}
+        return self._surface(mesh, refinement, names, factor,
+                             seams=refine.seams_at(garment.seam_pairs, refinement,
+                                                   mesh.vertices))
 
     def _refined_options(self, factor: int) -> dict:
         builder = getattr(builders, self.kind)

@@ -144,6 +144,42 @@ def subdivide(mesh: Mesh, factor: int) -> tuple[Mesh, Refinement]:
             Refinement(np.arange(mesh.vertex_count), carrier))
 
 
+def seams_at(pairs: np.ndarray, refinement: Refinement, vertices: np.ndarray) -> np.ndarray:
+    """A garment's seam pairs (P, 2) on the subdivided body (subdivide: vertices its refined
+    positions): the coarse pairs, and along every coarse edge (i, k) whose ends are sewn to
+    j and l, its new points paired in order with those of the coarse edge (j, l), or all
+    with j when j = l (an edge eased onto one point)."""
+    pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
+    coarse = refinement.coarse
+    a, b = refinement.carrier.T
+    new = np.flatnonzero((a != NONE) & (a != b))
+    on_edge = {}
+    for v in new:
+        on_edge.setdefault((int(min(a[v], b[v])), int(max(a[v], b[v]))), []).append(int(v))
+    partners = {}
+    for i, j in pairs.tolist():
+        partners.setdefault(i, set()).add(j)
+        partners.setdefault(j, set()).add(i)
+
+    def along(start: int, end: int) -> list:
+        """The new points of coarse edge (start, end), from start to end."""
+        points = on_edge.get((min(start, end), max(start, end)), [])
+        origin = vertices[coarse[start]]
+        return sorted(points, key=lambda v: float(np.sum((vertices[v] - origin) ** 2)))
+
+    refined = [coarse[pairs]]
+    for (i, k), points in on_edge.items():
+        for j in sorted(partners.get(i, ())):
+            for l in sorted(partners.get(k, ())):
+                if {j, l} == {i, k}:
+                    continue
+                if j == l:
+                    refined.append(np.column_stack([points, np.full(len(points), coarse[j])]))
+                elif (min(j, l), max(j, l)) in on_edge:
+                    refined.append(np.column_stack([along(i, k), along(j, l)]))
+    return np.unique(np.sort(np.concatenate(refined), axis=1), axis=0)
+
+
 def springs_at(params: SpringParams | None, factor: int, dimension: int):
     """Constants of springs of a `dimension`-D body refined `factor` times that stand for the
     same modulus, k h^(2 - d) (module doc); None stays None."""
