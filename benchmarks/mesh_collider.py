@@ -50,9 +50,12 @@ def simulation(n, integrator, variant):
 
 def step_costs(build, variants, steps, repeats):
     """{variant: median ms per step} of the simulations build(variant) makes, each warmed up
-    until the cloth has landed (0.15 s), then timed in turn with the others."""
+    until the cloth has landed (0.15 s), then timed in turn with the others (big launches on
+    the team always, so that no round takes the other plan)."""
     sims = {v: build(v) for v in variants}
     for sim in sims.values():
+        if sim.many_steps is not None:
+            sim.many_steps.adaptive = False   # the team always: no plan flips between rounds
         sim.step(round(0.15 / sim.dt))
         sim.step(steps)                  # untimed: compiles what the timed launches meet
     times = {v: [] for v in variants}

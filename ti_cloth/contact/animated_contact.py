@@ -27,6 +27,16 @@ thicknesses - rounding - are left). A path that enters and leaves a triangle wit
 ends on the side it started, so only a path whose end is across a triangle's plane is solved
 for its crossing. Each answer is a function of the set of contacts found,
 visited in a fixed order: reruns and thread counts give the same bits.
+
+Candidate lists (a Verlet list per particle and body, as molecular dynamics keeps): a
+particle's traversal also writes down, in index order, the triangles whose boxes meet its
+path's box grown by 3 x SKIN x thickness, and it tests only those while it stays within SKIN x
+thickness of where it was then and the body's vertices stay within SKIN x thickness of the
+reference they were at (body_drift: beyond it, a new epoch makes every list stale). Any
+triangle whose box meets a later path's box was then within reach (the particle moved at most
+one skin, each triangle corner at most two), so the list holds every triangle a traversal
+would visit, in the same order: the answers are the same bits as a traversal every step.
+More than LISTED candidates, and the particle traverses until its next list.
 """
 
 
@@ -42,6 +52,9 @@ PASSES = 4          # contacts answered per particle and body in a step, at most
 RESOLVED = 1e-4     # after the first, contacts shallower than this (in thicknesses) are left
 INSIDE = 1e-4       # a point this far outside a triangle (barycentric) still meets it
 BISECTIONS = 40     # halvings of a crossing's time interval
+SKIN = 0.5          # candidate lists hold while particle and body move less than this x thickness
+LISTED = 32         # candidates a particle keeps per body (more: it traverses every time)
+FAR = 1e30          # an anchor no particle is near: its list is made on first use
 
 
 def morton_order(points: np.ndarray) -> np.ndarray:
@@ -70,8 +83,10 @@ class AnimatedBodies:
     """The animated mesh colliders of a ColliderSet (`members`: (index in the set, collider)):
     their motion tables, vertices at the step's start and end, triangles and box hierarchy."""
 
-    def __init__(self, members, collider_count: int):
+    def __init__(self, members, collider_count: int, particle_count: int):
         self.count = len(members)
+        self.particle_count = particle_count
+        self.skin, self.listed_size = SKIN, LISTED     # read at compile time (structure)
         colliders = [c for _, c in members]
         vertex_counts = [c.mesh.vertex_count for c in colliders]
         triangle_counts = [c.mesh.triangle_count for c in colliders]
@@ -107,15 +122,23 @@ class AnimatedBodies:
         self.rate = fields.scalar(real, self.count)
         self.stepped = fields.scalar(ti.i32, self.count)
         self.first_step = fields.scalar(ti.i32, self.count)
+        slots = max(particle_count, 1) * self.count
+        self.listed = fields.scalar(ti.i32, slots * self.listed_size)
+        self.listed_count = fields.scalar(ti.i32, slots)
+        self.anchor = fields.vector(3, real, slots)
+        self.listed_epoch = fields.scalar(ti.i32, slots)
+        self.reference = fields.vector(3, real, self.vertex_total)
+        self.epoch = fields.scalar(ti.i32, self.count)
         fields.finalize(self)
         upload(((self.block_first, blocks), (self.group_first, groups),
                 (self.body_groups, np.concatenate([[0], np.cumsum(group_counts)]))))
 
     @staticmethod
     def structure(members) -> tuple:
-        """What the kernels read at compile time (collision.ColliderSet.structure)."""
+        """What the kernels read at compile time (collision.ColliderSet.structure, which
+        adds the particle count)."""
         return tuple((c.mesh.vertex_count, c.mesh.triangle_count,
-                      len(c.motion) if c.sampled else -1) for _, c in members)
+                      len(c.motion) if c.sampled else -1) for _, c in members) + (SKIN, LISTED)
 
     def load(self, members, collider_count: int) -> None:
         """Upload the colliders' triangles (in Morton order) and sampled motions."""
@@ -148,6 +171,10 @@ class AnimatedBodies:
                 frames[begin:begin + c.motion.size // 3] = c.motion.reshape(-1, 3)
         self.frames.from_numpy(frames)
         self._table = frames                   # the host's copy of the table (schedule)
+        self.anchor.fill(FAR)                  # every list made again on first use
+        self.listed_epoch.fill(-1)
+        self.reference.fill(FAR)
+        self.epoch.fill(0)
         self._frame_start = frame_start
         self._cache = {}
         self.schedule(0, 0, None)
@@ -181,7 +208,8 @@ class AnimatedBodies:
         return (Phase(Loop(self.vertex_total, place_vertex)),
                 Phase(Loop(self.triangle_total, triangle_box)),
                 Phase(Loop(self.block_total, block_box)),
-                Phase(Loop(self.group_total, group_box)))
+                Phase(Loop(self.group_total, group_box)),
+                Phase(Loop(self.count, body_drift)))
 
 
 @ti.func
@@ -266,6 +294,24 @@ def group_box(model: ti.template(), state: ti.template(), forces: ti.template(),
     offset = bodies.triangle_total
     _union(bodies, offset + bodies.block_total + g, offset + bodies.group_first[g],
            offset + bodies.group_first[g + 1])
+
+
+@ti.func
+def body_drift(model: ti.template(), state: ti.template(), forces: ti.template(),
+               colliders: ti.template(), stages: ti.template(), b, now: ti.template()):
+    """Body b's vertices against where they were when its candidate lists were made: once
+    one has moved more than SKIN x thickness, every particle's list of it is stale (a new
+    epoch) and the positions now are the new reference."""
+    bodies = colliders.bodies
+    skin = bodies.skin * colliders.thickness[bodies.collider[b]]
+    first = bodies.vertex_start[b]
+    drift = 0.0
+    for v in range(first, first + bodies.vertex_count[b]):
+        drift = ti.max(drift, (bodies.end[v] - bodies.reference[v]).norm())
+    if drift > skin or skin <= 0.0:
+        bodies.epoch[b] += 1
+        for v in range(first, first + bodies.vertex_count[b]):
+            bodies.reference[v] = bodies.end[v]
 
 
 @ti.func
@@ -404,24 +450,56 @@ def _against(x0, x, a0, b0, c0, a1, b1, c1, thickness):
 
 
 @ti.func
-def worst_contact(colliders: ti.template(), c, x0, x, thickness, least):
-    """The worst contact of the path x0 -> x with animated collider c's triangles (module
-    doc), of those deeper than `least` [m] if none crosses: (found, unit normal on the
+def worst_contact(colliders: ti.template(), c, i, x0, x, thickness, least):
+    """The worst contact of particle i's path x0 -> x with animated collider c's triangles
+    (module doc), of those deeper than `least` [m] if none crosses: (found, unit normal on the
     particle's side at the step's end, depth to the thickness [m], the surface point's
     displacement over the step [m])."""
-    return _worst_contact(colliders.bodies, colliders.bodies.body_of[c], x0, x, thickness,
-                          least)
-
-
-@ti.func
-def _worst_contact(bodies: ti.template(), b, x0, x, thickness, least):
-    """worst_contact for body b."""
+    bodies = colliders.bodies
+    b = bodies.body_of[c]
+    slot = i * bodies.count + b
     lo, hi = ti.min(x0, x), ti.max(x0, x)
-    first_time, deepest = 2.0, least
+    skin = bodies.skin * thickness
+    anchor = bodies.anchor[slot]
+    if (bodies.listed_epoch[slot] != bodies.epoch[b] or (x0 - anchor).norm() > skin
+            or (x - anchor).norm() > skin):
+        _make_list(bodies, b, slot, lo - 3.0 * skin, hi + 3.0 * skin)
+        bodies.anchor[slot] = x
+        bodies.listed_epoch[slot] = bodies.epoch[b]
     found = False
     normal = ti.Vector([0.0, 1.0, 0.0])
     depth = 0.0
     moved = ti.Vector([0.0, 0.0, 0.0])
+    best = ti.Vector([2.0, least])             # the earliest crossing, the deepest contact
+    count = bodies.listed_count[slot]
+    if count >= 0:
+        for k in range(count):
+            f = bodies.listed[slot * bodies.listed_size + k]
+            if _meets(bodies, f, lo, hi):
+                found, normal, depth, moved, best = _consider(
+                    bodies, f, x0, x, thickness, found, normal, depth, moved, best)
+    else:
+        blocks = bodies.triangle_total
+        groups = blocks + bodies.block_total
+        for g in range(bodies.body_groups[b], bodies.body_groups[b + 1]):
+            if _meets(bodies, groups + g, lo, hi):
+                for k in range(bodies.group_first[g], bodies.group_first[g + 1]):
+                    if _meets(bodies, blocks + k, lo, hi):
+                        for f in range(bodies.block_first[k], bodies.block_first[k + 1]):
+                            if _meets(bodies, f, lo, hi):
+                                found, normal, depth, moved, best = _consider(
+                                    bodies, f, x0, x, thickness, found, normal, depth, moved,
+                                    best)
+    return found, normal, depth, moved
+
+
+@ti.func
+def _make_list(bodies: ti.template(), b, slot, lo, hi):
+    """The candidate list of `slot` (a particle and body b): body b's triangles whose boxes
+    meet [lo, hi], in increasing index (the order of the hierarchy's traversal, so a list and
+    a traversal visit the triangles of any smaller box in the same order); -1 when they are
+    more than LISTED (the particle then traverses the hierarchy until its next list)."""
+    count = 0
     blocks = bodies.triangle_total
     groups = blocks + bodies.block_total
     for g in range(bodies.body_groups[b], bodies.body_groups[b + 1]):
@@ -430,21 +508,30 @@ def _worst_contact(bodies: ti.template(), b, x0, x, thickness, least):
                 if _meets(bodies, blocks + k, lo, hi):
                     for f in range(bodies.block_first[k], bodies.block_first[k + 1]):
                         if _meets(bodies, f, lo, hi):
-                            corner = bodies.triangles[f]
-                            a0, b0, c0 = (bodies.start[corner[0]], bodies.start[corner[1]],
-                                          bodies.start[corner[2]])
-                            a1, b1, c1 = (bodies.end[corner[0]], bodies.end[corner[1]],
-                                          bodies.end[corner[2]])
-                            t, d, n, w = _against(x0, x, a0, b0, c0, a1, b1, c1, thickness)
-                            if t < first_time or (first_time > 1.0 and d > deepest):
-                                if t <= 1.0:
-                                    first_time = t
-                                else:
-                                    deepest = d
-                                found = True
-                                normal, depth = n, d
-                                w = ti.math.clamp(w, 0.0, 1.0)
-                                w = w / w.sum()
-                                moved = (w[0] * (a1 - a0) + w[1] * (b1 - b0)
-                                         + w[2] * (c1 - c0))
-    return found, normal, depth, moved
+                            if count >= 0 and count < bodies.listed_size:
+                                bodies.listed[slot * bodies.listed_size + count] = f
+                                count += 1
+                            else:
+                                count = -1
+    bodies.listed_count[slot] = count
+
+
+@ti.func
+def _consider(bodies: ti.template(), f, x0, x, thickness, found, normal, depth, moved, best):
+    """Triangle f against the path x0 -> x: the contact so far replaced when f's crossing is
+    earlier, or (no crossing yet) its contact deeper (best: earliest time, deepest depth)."""
+    corner = bodies.triangles[f]
+    a0, b0, c0 = bodies.start[corner[0]], bodies.start[corner[1]], bodies.start[corner[2]]
+    a1, b1, c1 = bodies.end[corner[0]], bodies.end[corner[1]], bodies.end[corner[2]]
+    t, d, n, w = _against(x0, x, a0, b0, c0, a1, b1, c1, thickness)
+    if t < best[0] or (best[0] > 1.0 and d > best[1]):
+        if t <= 1.0:
+            best[0] = t
+        else:
+            best[1] = d
+        found = True
+        normal, depth = n, d
+        w = ti.math.clamp(w, 0.0, 1.0)
+        w = w / w.sum()
+        moved = w[0] * (a1 - a0) + w[1] * (b1 - b0) + w[2] * (c1 - c0)
+    return found, normal, depth, moved, best

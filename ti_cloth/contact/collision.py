@@ -37,7 +37,7 @@ class ColliderSet:
         members = _animated(colliders)
         self.animated = bool(members)
         if self.animated:
-            self.bodies = AnimatedBodies(members, count)
+            self.bodies = AnimatedBodies(members, count, particle_count)
         self.count = count
         fields = backend.FieldGroup()
         self.kind = fields.scalar(ti.i32, count)
@@ -319,8 +319,8 @@ def _friction(colliders: ti.template(), c, x, x0, n, depth, vc, dt):
 
 
 @ti.func
-def _collide_with(colliders: ti.template(), c, x0, x, v, dt, with_friction: ti.template()):
-    """A particle at x, which was at x0 at the step's start, out of collider c: (position,
+def _collide_with(colliders: ti.template(), c, i, x0, x, v, dt, with_friction: ti.template()):
+    """Particle i at x, which was at x0 at the step's start, out of collider c: (position,
     velocity, touched). with_friction: the full response (colliders.py; an animated mesh
     answers up to PASSES contacts: animated_contact.py); else the push-out alone, v kept."""
     touched = False
@@ -330,7 +330,7 @@ def _collide_with(colliders: ti.template(), c, x0, x, v, dt, with_friction: ti.t
         if animated:
             least = 0.0
             for _ in range(PASSES):
-                found, n, depth, moved = worst_contact(colliders, c, x0, x,
+                found, n, depth, moved = worst_contact(colliders, c, i, x0, x,
                                                        colliders.thickness[c], least)
                 if not found:
                     break
@@ -365,7 +365,7 @@ def resolve_particle(model: ti.template(), state: ti.template(), colliders: ti.t
         v = state.particle_velocity[i]
         touched = False
         for c in range(colliders.count):
-            x, v, hit = _collide_with(colliders, c, x0, x, v, dt, True)
+            x, v, hit = _collide_with(colliders, c, i, x0, x, v, dt, True)
             touched = touched or hit
         if touched:
             state.particle_position[i] = x
@@ -390,7 +390,8 @@ def project_out(model: ti.template(), state: ti.template(), colliders: ti.templa
             x = state.particle_position[i]
             v = state.particle_velocity[i]
             for c in range(colliders.count):
-                x, v, _ = _collide_with(colliders, c, colliders.step_start[i], x, v, 1.0, False)
+                x, v, _ = _collide_with(colliders, c, i, colliders.step_start[i], x, v, 1.0,
+                                        False)
             state.particle_position[i] = x
 
 
