@@ -161,23 +161,22 @@ def test_an_animated_collider_is_refused_with_the_field_named():
 
 
 def test_candidate_lists_give_the_bits_of_a_traversal_at_every_step(f64, monkeypatch):
-    """The sheet on the breathing sphere with the lists as they are, with a skin of 0 (every
-    list made again at every step: a traversal each time) and with room for one candidate
-    (every particle overflows and traverses): the same positions to the bit."""
+    """The sheet dropped on the breathing sphere with the lists as they are, and with a skin
+    of 0 and room for one candidate (every list made again at every step, and overflowing:
+    a traversal each time): the same positions to the bit."""
     from ti_cloth.contact import animated_contact
     runs = []
-    for skin, listed in ((animated_contact.SKIN, animated_contact.LISTED), (0.0, 32), (0.5, 1)):
+    for skin, listed in ((animated_contact.SKIN, animated_contact.LISTED), (0.0, 1)):
         monkeypatch.setattr(animated_contact, "SKIN", skin)
         monkeypatch.setattr(animated_contact, "LISTED", listed)
-        collider = tc.AnimatedMeshCollider(SPHERE, breathing, thickness=THICKNESS,
-                                           static_friction=0.3)
-        sim = tc.Simulation(falling_sheet(), integrator="xpbd", dt=1 / 240, colliders=[collider])
-        sim.step(90)
+        collider = tc.AnimatedMeshCollider(SPHERE, breathing, thickness=THICKNESS)
+        sim = tc.Simulation(falling_sheet(), integrator="symplectic_euler", dt=1e-4,
+                            colliders=[collider])
+        sim.step(2500)
         runs.append(sim.positions())
         distance, _ = sim.collider_distance(runs[-1])
-        assert (distance < 2 * THICKNESS).sum() > 20, "the sheet lies on the sphere"
+        assert (distance < 2 * THICKNESS).sum() > 5, "the sheet lies on the sphere"
     np.testing.assert_array_equal(runs[0], runs[1])
-    np.testing.assert_array_equal(runs[0], runs[2])
 
 
 def test_every_valid_candidate_list_holds_every_triangle_a_traversal_would_visit(f64):
