@@ -163,7 +163,7 @@ def test_sewing_closes_a_seam_at_its_speed_conserving_momentum_and_keeps_it_shut
 
 def test_a_sewing_run_resumes_with_the_same_bits(f64, tmp_path):
     garment = two_panels()
-    cloth = tc.Cloth(garment.mesh, tc.Fabric.preset("dots"), seams=garment.seam_pairs,
+    cloth = tc.Cloth(garment.mesh, tc.Material(), seams=garment.seam_pairs,
                      pinned=garment.particles(0, 2))
     make = lambda: tc.Simulation(cloth, integrator="xpbd", dt=1 / 600,  # noqa: E731
                                  sewing=tc.Sewing(0.4))
