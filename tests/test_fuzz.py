@@ -204,7 +204,7 @@ garment_changes = st.lists(st.tuples(st.sampled_from(GARMENT_PATHS),
                            min_size=1, max_size=3)
 
 
-@settings(max_examples=40, deadline=FRAME_DEADLINE_MS, derandomize=True,
+@settings(max_examples=30, deadline=FRAME_DEADLINE_MS, derandomize=True,
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(changes=garment_changes)
 def test_a_generated_garment_scene_runs_a_frame_or_is_refused_naming_a_key(tmp_path, changes):
