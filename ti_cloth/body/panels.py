@@ -28,6 +28,7 @@ from ..runtime.validation import as_array, finite_number, in_range, require
 from .mesh import Mesh
 
 MAX_PANEL_POINTS = 1_000_000
+MAX_LATTICE = 4_000_000   # lattice points over the outline's box, before those outside go
 SMOOTHING_PASSES = 3      # Laplacian passes on the lattice points next to the outline
 
 
@@ -66,6 +67,10 @@ class Panel:
         slope = np.arctan(flare)
         circle = radius + below * np.sin(slope)
         angle = x / circle
+        least = (np.abs(x) / np.pi - below * np.sin(slope)).max()
+        require(np.abs(angle).max() <= np.pi, "Panel.wrapped radius", radius,
+                f"at least {least:.3g} m for this panel: wrapped further than half round each "
+                "way, it would pass through itself")
         vertices = np.column_stack([circle * np.sin(angle), y.max() - below * np.cos(slope),
                                     circle * np.cos(angle)])
         return replace(self, mesh=Mesh(vertices, self.mesh.triangles, uvs=self.flat),
@@ -82,11 +87,6 @@ class Panel:
         vertices = self.mesh.vertices @ matrix.T + shift
         return replace(self, mesh=Mesh(vertices, self.mesh.triangles, uvs=self.flat),
                        placed=True)
-
-    @property
-    def boundary(self) -> np.ndarray:
-        """Indices of the points on the outline, in order round it."""
-        return np.concatenate([e[:-1] for e in self.edges])
 
 
 def panel(outline, edge_length: float) -> Panel:
@@ -112,6 +112,11 @@ def panel(outline, edge_length: float) -> Panel:
     require(estimate <= MAX_PANEL_POINTS, "edge_length", h,
             f"at least {np.sqrt(abs(area) / (0.43 * MAX_PANEL_POINTS)):.3g} m for this outline "
             f"(at most {MAX_PANEL_POINTS:,} points)")
+    extent = np.ptp(outline, axis=0)
+    lattice_size = (extent[0] / h + 3) * (extent[1] / (h * np.sqrt(3) / 2) + 2)
+    require(lattice_size <= MAX_LATTICE, "edge_length", h,
+            f"at least {np.sqrt(extent.prod() / (0.86 * MAX_LATTICE)):.3g} m for an outline "
+            f"this size ({extent[0]:.3g} x {extent[1]:.3g} m: the lattice fills its box)")
     # the outline's points: every edge in pieces of at most h
     pieces = np.maximum(1, np.ceil(lengths / h - 1e-9).astype(np.int64))
     boundary, edges, start = [], [], 0
