@@ -146,6 +146,21 @@ def test_bad_animation_files_are_refused_by_key(tmp_path):
         assert message in str(caught.value)
 
 
+def test_an_animation_too_big_is_refused_before_it_is_read(tmp_path, monkeypatch):
+    """The npz member's stored size and the PC2 file's size are checked against the limit
+    on numbers (limits.MOTION_VALUES, lowered here to 10) before any of it is loaded."""
+    from ti_cloth.runtime import limits
+    many = np.tile(SAMPLES, (10, 1, 1))                  # 600 numbers, 4,800 bytes
+    np.savez(tmp_path / "walk.npz", triangles=FACES, positions=many, fps=24.0)
+    write_pc2(tmp_path / "walk.pc2", SAMPLES)
+    meshio.write_points_cells(tmp_path / "rest.obj", TETRAHEDRON, [("triangle", FACES)])
+    monkeypatch.setattr(limits, "MOTION_VALUES", 10)
+    with pytest.raises(ValueError, match=r"walk.npz: positions must be at most 10 numbers"):
+        tc.AnimatedMeshCollider.load(tmp_path / "walk.npz")
+    with pytest.raises(ValueError, match=r"walk.pc2 must be a cache of at most 10 numbers"):
+        tc.AnimatedMeshCollider.load(tmp_path / "walk.pc2", rest=tmp_path / "rest.obj", fps=24)
+
+
 def test_scene_files_read_an_animated_mesh_relative_to_the_scene_scaled_and_moved(tmp_path):
     (tmp_path / "assets").mkdir()
     np.savez(tmp_path / "assets" / "walk.npz", triangles=FACES, positions=SAMPLES, fps=24.0)

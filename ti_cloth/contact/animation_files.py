@@ -88,9 +88,10 @@ def _npz(path: Path):
             require(not missing, f"{path.name}", sorted(data.files),
                     "an npz holding 'triangles' (T, 3) and 'positions' (samples, V, 3) "
                     f"(missing: {', '.join(sorted(missing))})")
+            stored = data.zip.getinfo("positions.npy").file_size     # before reading it
+            require(stored <= 8 * limits.MOTION_VALUES + 1024, f"{path.name}: positions",
+                    f"{stored:,} bytes", f"at most {limits.MOTION_VALUES:,} numbers")
             positions = data["positions"]
-            require(positions.size <= limits.MOTION_VALUES, f"{path.name}: positions.size",
-                    positions.size, f"at most {limits.MOTION_VALUES} numbers")
             triangles, fps = data["triangles"], data["fps"] if "fps" in data.files else None
     except (OSError, zipfile.BadZipFile, EOFError) as err:
         raise ValueError(f"path: {path} is not a readable npz file ({err})") from None
@@ -107,6 +108,9 @@ def _npz(path: Path):
 def _pc2(path: Path, rest: Path):
     require(rest.is_file(), "rest", str(rest), "an existing mesh file (OBJ, PLY, ...)")
     mesh = load_mesh(rest)
+    size = path.stat().st_size
+    require(size <= 4 * limits.MOTION_VALUES + 64, f"{path.name}", f"{size:,} bytes",
+            f"a cache of at most {limits.MOTION_VALUES:,} numbers")
     try:
         header, points = read_pc2(path)
     except (ValueError, struct.error) as err:     # a bad header, a truncated body
