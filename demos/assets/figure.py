@@ -26,7 +26,7 @@ AROUND, ALONG, CAP = 12, 7, 3       # vertices round a capsule, rings along it, 
 
 # bone: (parent, head joint, tail joint, radius at head, radius at tail) [m]
 BONES = {
-    "pelvis": (None, (0.0, 0.90, 0.0), (0.0, 1.02, 0.0), 0.15, 0.14),
+    "pelvis": (None, (0.0, 0.90, 0.0), (0.0, 0.98, 0.0), 0.15, 0.13),
     "spine": ("pelvis", (0.0, 1.02, 0.0), (0.0, 1.36, 0.0), 0.14, 0.15),
     "head": ("spine", (0.0, 1.40, 0.0), (0.0, 1.64, 0.01), 0.05, 0.10),
     "shoulders": ("spine", (-0.18, 1.37, -0.01), (0.18, 1.37, -0.01), 0.065, 0.065),
@@ -42,7 +42,7 @@ BONES = {
     "foot_r": ("shin_r", (-0.095, 0.07, -0.02), (-0.095, 0.04, 0.14), 0.04, 0.035),
 }
 NAMES = list(BONES)
-DEPTH = {"pelvis": 0.85, "spine": 0.7}      # the trunk is flatter front to back
+DEPTH = {"pelvis": 0.85, "spine": 0.8}      # the trunk is flatter front to back
 
 
 def capsule(head, tail, r0, r1, depth=1.0):
