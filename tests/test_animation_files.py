@@ -28,10 +28,14 @@ def write_pc2(path, samples, start=0.0, rate=1.0):
     path.write_bytes(header + samples.astype("<f4").tobytes())
 
 
-def write_usd(path, samples, times, per_second, metres_per_unit=None, translate=None):
+def write_usd(path, samples, times, per_second, metres_per_unit=None, translate=None,
+              z_up=False):
     from pxr import Gf, Usd, UsdGeom
     stage = Usd.Stage.CreateNew(str(path))
     stage.SetTimeCodesPerSecond(per_second)
+    if z_up:                                       # as Blender writes: y up becomes z up
+        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+        samples = samples[..., [0, 2, 1]] * (1.0, -1.0, 1.0)
     if metres_per_unit is not None:
         UsdGeom.SetStageMetersPerUnit(stage, metres_per_unit)
     root = UsdGeom.Xform.Define(stage, "/figure")
@@ -89,6 +93,10 @@ def test_a_usd_stage_gives_world_positions_in_metres_at_every_time_code(tmp_path
     np.testing.assert_allclose(tc.AnimatedMeshCollider.load(metres, fps=12).motion, SAMPLES,
                                atol=FLOAT32)
     assert tc.AnimatedMeshCollider.load(metres, fps=12).fps == 12.0
+    upright = tmp_path / "z_up.usda"
+    write_usd(upright, SAMPLES, range(5), 24, metres_per_unit=1.0, z_up=True)
+    np.testing.assert_allclose(tc.AnimatedMeshCollider.load(upright).motion, SAMPLES,
+                               atol=FLOAT32)
 
 
 def test_our_own_pc2_and_usd_exports_play_back_as_colliders(f64, tmp_path):

@@ -5,6 +5,7 @@ script hands over for a moving character.
     PC2 + rest     a point cache (Blender's, ours: export.py) and the mesh file it deforms
     OBJ sequence   "walk_*.obj": one file per sample, ordered by the number in the name
     USD            a Mesh prim's time-sampled points, in world space, at every time code
+                   (metres; a z-up stage, as Blender writes, turned to ti_cloth's y up)
 
 Every sample must give a position for each vertex of the first (or rest) mesh; a file that
 cannot be read is a ValueError naming it and what is wrong.
@@ -191,4 +192,6 @@ def _usd(path: Path, prim_path: str | None):
                 f"{len(points)} points", f"{vertices}, as at the first time code")
         samples.append((points @ world[:3, :3] + world[3, :3]) * metres)
     samples = np.stack(samples)
+    if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z:     # Blender's default
+        samples = samples[..., [0, 2, 1]] * (1.0, 1.0, -1.0)  # z up -> y up, x kept
     return Mesh(samples[0], triangles), samples, float(stage.GetTimeCodesPerSecond())
