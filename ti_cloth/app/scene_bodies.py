@@ -199,7 +199,7 @@ def read_body(table: Table, folder: Path, colliders=()) -> tuple[Body, tuple]:
     `colliders`: the scene's, which its attachments name by index."""
     kind = table.string("type", choices=BODY_TYPES)
     options = {}
-    if kind in ("grid", "mesh"):
+    if kind in ("grid", "mesh", "garment"):
         if kind == "grid":
             options["rows"] = table.integer("rows", 16, within=limits.GRID_SIDE)
             options["cols"] = table.integer("cols", 16, within=limits.GRID_SIDE)
@@ -208,24 +208,16 @@ def read_body(table: Table, folder: Path, colliders=()) -> tuple[Body, tuple]:
             table.optional(options, "origin", "vector", unit="m")
             mesh = table.build(grid_mesh, **options)
             names = grid_names(mesh)
-        else:
+        elif kind == "mesh":
             mesh, names = read_mesh_file(table, folder), {}
+        else:
+            options["garment"] = _garment(table)
+            mesh, names = options["garment"].mesh, garment_names(options["garment"])
         warp = {}
         table.optional(warp, "warp", lambda k: "uv" if table.value(k) == "uv" else table.vector(k))
-        hem = (_selection(table, "hem", mesh.vertex_count, mesh.named_vertices(), mesh.vertices)
-               if table.has("hem") else None)
+        hem = (_selection(table, "hem", mesh.vertex_count, mesh.named_vertices() | names,
+                          mesh.vertices) if table.has("hem") else None)
         body = Body(kind, options, _material(table), mesh if kind == "mesh" else None,
-                    _selection(table, "pinned", mesh.vertex_count, names, mesh.vertices), hem, warp)
-    elif kind == "garment":
-        garment = _garment(table)
-        options["garment"] = garment
-        names = garment_names(garment)
-        mesh = garment.mesh
-        warp = {}
-        table.optional(warp, "warp", lambda k: "uv" if table.value(k) == "uv" else table.vector(k))
-        hem = (_selection(table, "hem", mesh.vertex_count, names, mesh.vertices)
-               if table.has("hem") else None)
-        body = Body(kind, options, _material(table), None,
                     _selection(table, "pinned", mesh.vertex_count, names, mesh.vertices), hem, warp)
     elif kind == "string":
         options["n"] = table.integer("n", 20, within=limits.CHAIN)
