@@ -1,14 +1,18 @@
-"""Every demo runs in --test mode and writes distinct, non-blank frames."""
+"""Every demo runs in --test mode and writes distinct, non-blank frames; the demos of a
+dressed figure also keep their cloth outside it (checked with libigl's winding number)."""
 
 import importlib.util
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
 import imageio.v3 as iio
 import numpy as np
 import pytest
+from helpers import report
 
 import ti_cloth as tc
+from ti_cloth.app.scene import load_scene
 
 # the runs here initialise Taichi in their scenes' precision, f32: among the f32 tests
 # (conftest), they do not switch a worker out of f64 and back
@@ -27,6 +31,8 @@ def test_every_system_of_the_source_texts_has_a_demo_with_a_scene_file():
 
 @pytest.mark.parametrize("script", DEMOS, ids=[d.stem for d in DEMOS])
 def test_demo_writes_frames(script, tmp_path):
+    """And for the demos of a dressed figure, their own check right after, on the kernels the
+    demo compiled (the same process: pool.py keeps them)."""
     demo = _load(script)
     frames = demo.main(["--test", "--no-progress", "--out-dir", str(tmp_path)])
     images = [iio.imread(f).astype(float) for f in frames]
@@ -37,6 +43,68 @@ def test_demo_writes_frames(script, tmp_path):
         assert np.abs(a - b).mean() > 0.01, "frames identical"
     assert not list(tmp_path.glob(".*tmp*"))
     assert list(tmp_path.glob("*.gif"))
+    if script.stem in FIGURE_CHECKS:
+        FIGURE_CHECKS[script.stem]()
+
+
+def cape_stays_on_the_shoulders_and_out_of_the_figure():
+    """demos/cape.toml for 1.1 s (the figure turns one way and back): in every
+    frame no particle is inside the skinned figure as it is at the frame's time (libigl's
+    fast winding number: not our code) and the attached top edge rides its triangles.
+    Without the figure as a collider the cape swings into it."""
+    import igl
+    scene = load_scene(Path(__file__).parents[1] / "demos" / "cape.toml")
+    figure = scene.colliders[0]
+    (attachment,) = scene.handles
+    free = np.setdiff1d(np.arange(scene.cloth.particle_count), attachment.particles)
+    carried = attachment.handle(scene.cloth.particle_position).path
+    runs = {}
+    for name, colliders in (("with", scene.colliders), ("without", scene.colliders[1:])):
+        sim = replace(scene, colliders=colliders).build(dt=1 / 240)   # the demo's step
+        inside, riding = [], 0.0
+        for _ in range(33):
+            sim.step(8)
+            vertices = figure.vertices_at(sim.time)
+            w = igl.fast_winding_number(vertices, figure.mesh.triangles.astype(np.int64),
+                                        sim.positions()[free].astype(np.float64))
+            inside.append(int((np.abs(w) > 0.5).sum()))
+            expected = scene.cloth.particle_position[attachment.particles] + carried(sim.time)
+            riding = max(riding, np.abs(sim.positions()[attachment.particles] - expected).max())
+        runs[name] = (inside, riding)
+    report("cape particles inside the figure per frame, with it", runs["with"][0], "all 0")
+    report("without it", runs["without"][0], "some frames > 0")
+    assert sum(runs["with"][0]) == 0 and sum(runs["without"][0]) > 0
+    assert runs["with"][1] < 1e-5      # f32 positions of ~1 m: a few roundings
+
+
+def skirt_sews_shut_and_stays_out_of_the_figure():
+    """demos/skirt_walk.toml for 0.8 s: the side seams shut to within the collider's
+    thickness by 0.3 s and stay so, no particle is ever inside the walking figure (libigl's
+    winding number: not our code), and the waistband rides the hips."""
+    import igl
+    scene = load_scene(Path(__file__).parents[1] / "demos" / "skirt_walk.toml")
+    figure = scene.colliders[0]
+    sim = scene.build(dt=1 / 240)
+    pairs = scene.cloth.seam_indices
+    held = np.concatenate([a.particles for a in scene.handles])
+    free = np.setdiff1d(np.arange(scene.cloth.particle_count), held)
+    inside, open_after = [], 0.0
+    for frame in range(24):
+        sim.step(8)
+        x = sim.positions()
+        w = igl.fast_winding_number(figure.vertices_at(sim.time),
+                                    figure.mesh.triangles.astype(np.int64), x[free])
+        inside.append(int((np.abs(w) > 0.5).sum()))
+        if sim.time > 0.3:
+            open_after = max(open_after,
+                             np.linalg.norm(x[pairs[:, 0]] - x[pairs[:, 1]], axis=1).max())
+    report("skirt particles inside the figure per frame; widest seam after 0.3 s (m)",
+           (inside, open_after), "all 0; < 0.01")
+    assert sum(inside) == 0 and open_after < figure.thickness
+
+
+FIGURE_CHECKS = {"cape": cape_stays_on_the_shoulders_and_out_of_the_figure,
+                 "skirt_walk": skirt_sews_shut_and_stays_out_of_the_figure}
 
 
 def _load(script: Path):
