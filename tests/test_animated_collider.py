@@ -161,12 +161,13 @@ def test_an_animated_collider_is_refused_with_the_field_named():
 
 
 def test_candidate_lists_give_the_bits_of_a_traversal_at_every_step(f64, monkeypatch):
-    """The sheet dropped on the breathing sphere with the lists as they are, and with a skin
-    of 0 and room for one candidate (every list made again at every step, and overflowing:
-    a traversal each time): the same positions to the bit."""
+    """The sheet dropped on the breathing sphere with the lists as they are, and with room
+    for one candidate (every list overflows, and its particle traverses the hierarchy at
+    every step): the same positions to the bit."""
     from ti_cloth.contact import animated_contact
     runs = []
-    for skin, listed in ((animated_contact.SKIN, animated_contact.LISTED), (0.0, 1)):
+    for skin, listed in ((animated_contact.SKIN, animated_contact.LISTED),
+                         (animated_contact.SKIN, 1)):
         monkeypatch.setattr(animated_contact, "SKIN", skin)
         monkeypatch.setattr(animated_contact, "LISTED", listed)
         collider = tc.AnimatedMeshCollider(SPHERE, breathing, thickness=THICKNESS)

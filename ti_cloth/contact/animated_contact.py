@@ -461,59 +461,46 @@ def worst_contact(colliders: ti.template(), c, i, x0, x, thickness, least):
     lo, hi = ti.min(x0, x), ti.max(x0, x)
     skin = bodies.skin * thickness
     anchor = bodies.anchor[slot]
-    if (bodies.listed_epoch[slot] != bodies.epoch[b] or (x0 - anchor).norm() > skin
-            or (x - anchor).norm() > skin):
-        _make_list(bodies, b, slot, lo - 3.0 * skin, hi + 3.0 * skin)
-        bodies.anchor[slot] = x
-        bodies.listed_epoch[slot] = bodies.epoch[b]
     found = False
     normal = ti.Vector([0.0, 1.0, 0.0])
     depth = 0.0
     moved = ti.Vector([0.0, 0.0, 0.0])
     best = ti.Vector([2.0, least])             # the earliest crossing, the deepest contact
-    count = bodies.listed_count[slot]
-    if count >= 0:
-        for k in range(count):
-            f = bodies.listed[slot * bodies.listed_size + k]
-            if _meets(bodies, f, lo, hi):
-                found, normal, depth, moved, best = _consider(
-                    bodies, f, x0, x, thickness, found, normal, depth, moved, best)
-    else:
+    stale = (bodies.listed_epoch[slot] != bodies.epoch[b] or (x0 - anchor).norm() > skin
+             or (x - anchor).norm() > skin)
+    if stale or bodies.listed_count[slot] < 0:
+        # the hierarchy: every triangle whose box meets the path's box (and, for a new
+        # list, those within three skins of it, listed)
+        reach = ti.select(stale, 3.0 * skin, 0.0)
+        count = 0
         blocks = bodies.triangle_total
         groups = blocks + bodies.block_total
         for g in range(bodies.body_groups[b], bodies.body_groups[b + 1]):
-            if _meets(bodies, groups + g, lo, hi):
+            if _meets(bodies, groups + g, lo - reach, hi + reach):
                 for k in range(bodies.group_first[g], bodies.group_first[g + 1]):
-                    if _meets(bodies, blocks + k, lo, hi):
+                    if _meets(bodies, blocks + k, lo - reach, hi + reach):
                         for f in range(bodies.block_first[k], bodies.block_first[k + 1]):
+                            if stale and _meets(bodies, f, lo - reach, hi + reach):
+                                if count >= 0 and count < bodies.listed_size:
+                                    bodies.listed[slot * bodies.listed_size + count] = f
+                                    count += 1
+                                else:
+                                    count = -1
                             if _meets(bodies, f, lo, hi):
                                 found, normal, depth, moved, best = _consider(
                                     bodies, f, x0, x, thickness, found, normal, depth, moved,
                                     best)
+        if stale:
+            bodies.listed_count[slot] = count
+            bodies.anchor[slot] = x
+            bodies.listed_epoch[slot] = bodies.epoch[b]
+    else:
+        for k in range(bodies.listed_count[slot]):
+            f = bodies.listed[slot * bodies.listed_size + k]
+            if _meets(bodies, f, lo, hi):
+                found, normal, depth, moved, best = _consider(
+                    bodies, f, x0, x, thickness, found, normal, depth, moved, best)
     return found, normal, depth, moved
-
-
-@ti.func
-def _make_list(bodies: ti.template(), b, slot, lo, hi):
-    """The candidate list of `slot` (a particle and body b): body b's triangles whose boxes
-    meet [lo, hi], in increasing index (the order of the hierarchy's traversal, so a list and
-    a traversal visit the triangles of any smaller box in the same order); -1 when they are
-    more than LISTED (the particle then traverses the hierarchy until its next list)."""
-    count = 0
-    blocks = bodies.triangle_total
-    groups = blocks + bodies.block_total
-    for g in range(bodies.body_groups[b], bodies.body_groups[b + 1]):
-        if _meets(bodies, groups + g, lo, hi):
-            for k in range(bodies.group_first[g], bodies.group_first[g + 1]):
-                if _meets(bodies, blocks + k, lo, hi):
-                    for f in range(bodies.block_first[k], bodies.block_first[k + 1]):
-                        if _meets(bodies, f, lo, hi):
-                            if count >= 0 and count < bodies.listed_size:
-                                bodies.listed[slot * bodies.listed_size + count] = f
-                                count += 1
-                            else:
-                                count = -1
-    bodies.listed_count[slot] = count
 
 
 @ti.func
