@@ -189,7 +189,8 @@ GARMENT = {
                 "attachments": [{"particles": ["panel0_edge2"], "collider": 0,
                                  "release": 0.5}]}],
     "colliders": [{"type": "animated_mesh", "path": "body.npz", "fps": 10, "scale": 1.0,
-                   "translate": [0, 0, 0], "thickness": 0.01, "static_friction": 0.3}],
+                   "translate": [0, 0, 0], "thickness": 0.01, "static_friction": 0.3,
+                   "edge_contact": "auto"}],
     "camera": {"fov": 40, "direction": [0.5, 0.4, 1]},
     "output": {"width": 64, "height": 48, "supersample": 1},
 }
@@ -270,6 +271,9 @@ API = {
                    (small_counts, numbers)),
     "AnimatedMeshCollider": (lambda a, b: tc.AnimatedMeshCollider(
         tc.sphere_mesh(0.1, subdivisions=0), [[[a, 0.0, 0.0]] * 12] * 2, fps=b),
+        ("AnimatedMeshCollider",), (numbers, numbers)),
+    "AnimatedMeshCollider.edge_contact": (lambda a, b: tc.AnimatedMeshCollider(
+        tc.sphere_mesh(0.1, subdivisions=0), edge_contact=a, thickness=b),
         ("AnimatedMeshCollider",), (numbers, numbers)),
 }
 

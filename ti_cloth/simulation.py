@@ -134,7 +134,7 @@ class Simulation:
             parts["strain_limiter"] = (StrainLimiter, (strain_limit, cloth.particle_count,
                                                        tearing is not None))
         if colliders:
-            parts["colliders"] = (ColliderSet, (colliders, cloth.particle_count))
+            parts["colliders"] = (ColliderSet, (colliders, cloth))
         if sewing is not None:
             parts["seams"] = (Seams, (sewing, cloth.seam_indices, cloth.particle_position))
         require(self_collision is None or isinstance(self_collision, SelfCollision),

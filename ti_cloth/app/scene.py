@@ -381,6 +381,7 @@ def _collider(table: Table, folder: Path):
         table.optional(files, "rest", lambda k: folder / table.string(k))
         table.optional(files, "fps", unit="frames/s")
         table.optional(files, "prim", "string")
+        table.optional(options, "edge_contact", table.switch)
         mesh, samples, fps = table.build(read_animation, **files)
         scale = table.number("scale", 1.0, within=limits.SCALE)
         translate = np.asarray(table.vector("translate", (0.0, 0.0, 0.0), unit="m"))

@@ -109,6 +109,13 @@ class Table:
             self.bad(key, value, "true or false")
         return value
 
+    def switch(self, key: str, default=MISSING) -> bool | str:
+        """true, false or "auto"."""
+        value = self._get(key, default)
+        if not (isinstance(value, bool) or value == "auto"):
+            self.bad(key, value, 'true, false or "auto"')
+        return value
+
     def vector(self, key: str, default=MISSING, length: int = 3, unit: str = "",
                within: Range | None = None) -> tuple:
         """A list of `length` finite numbers, each within a limits.Range if given."""

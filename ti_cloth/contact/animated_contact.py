@@ -43,6 +43,7 @@ More than LISTED candidates, and the particle traverses until its next list.
 import numpy as np
 import taichi as ti
 
+from ..body.mesh import triangle_edges, unique_rows
 from ..runtime import backend, limits
 from ..runtime.plan import Loop, Phase
 from ..runtime.transfer import upload
@@ -78,6 +79,49 @@ def _runs(sizes: list[int]) -> np.ndarray:
     return np.asarray(starts, np.int64)
 
 
+def tested_edges(collider, triangles: np.ndarray, longest: float) -> np.ndarray:
+    """(T, 3) 1 where the cloth's edges meet collider's edge k (corners k, k + 1) of its
+    triangles (as ordered here) through this triangle: the first that has the edge, when
+    collider.edge_contact tests it (animated_mesh.py: "auto" those whose faces turn by more
+    than 2 asin(thickness / (1.25 x longest)), longest the cloth's longest rest edge [m])."""
+    triangles = np.asarray(triangles, np.int64).reshape(-1, 3)
+    ends = triangle_edges(triangles)
+    _, first = unique_rows(ends, return_index=True)
+    tested = np.zeros(len(ends), np.int32)
+    tested[first] = 1
+    if collider.edge_contact == "auto":
+        edges, turning = collider.edge_turning
+        n = collider.mesh.vertex_count
+        row = np.searchsorted(edges[:, 0] * n + edges[:, 1], ends[:, 0] * n + ends[:, 1])
+        least = 2.0 * np.arcsin(min(1.0, collider.thickness / (1.25 * max(longest, 1e-300))))
+        tested &= turning[row] > least
+    elif not collider.edge_contact:
+        tested[:] = 0
+    return tested.reshape(-1, 3)
+
+
+@backend.kernel_argument
+class CandidateLists:
+    """Candidate lists (module doc) in `slots` slots, one per element (a particle or an edge)
+    and body: up to `size` triangles each (listed[slot * size + k]; count -1: it overflowed),
+    the `anchors` positions of the element's particles when it was made (anchor[slot *
+    anchors + k]) and the body's epoch then."""
+
+    def __init__(self, slots: int, anchors: int, size: int):
+        self.size, self.anchors = size, anchors        # read at compile time (structure)
+        fields = backend.FieldGroup()
+        self.listed = fields.scalar(ti.i32, slots * self.size)
+        self.count = fields.scalar(ti.i32, slots)
+        self.anchor = fields.vector(3, backend.real(), slots * anchors)
+        self.epoch = fields.scalar(ti.i32, slots)
+        fields.finalize(self)
+
+    def forget(self) -> None:
+        """Every list made again on first use."""
+        self.anchor.fill(FAR)
+        self.epoch.fill(-1)
+
+
 @backend.kernel_argument
 class AnimatedBodies:
     """The animated mesh colliders of a ColliderSet (`members`: (index in the set, collider)):
@@ -86,7 +130,7 @@ class AnimatedBodies:
     def __init__(self, members, collider_count: int, particle_count: int):
         self.count = len(members)
         self.particle_count = particle_count
-        self.skin, self.listed_size = SKIN, LISTED     # read at compile time (structure)
+        self.skin = SKIN                               # read at compile time (structure)
         colliders = [c for _, c in members]
         vertex_counts = [c.mesh.vertex_count for c in colliders]
         triangle_counts = [c.mesh.triangle_count for c in colliders]
@@ -122,14 +166,12 @@ class AnimatedBodies:
         self.rate = fields.scalar(real, self.count)
         self.stepped = fields.scalar(ti.i32, self.count)
         self.first_step = fields.scalar(ti.i32, self.count)
-        slots = max(particle_count, 1) * self.count
-        self.listed = fields.scalar(ti.i32, slots * self.listed_size)
-        self.listed_count = fields.scalar(ti.i32, slots)
-        self.anchor = fields.vector(3, real, slots)
-        self.listed_epoch = fields.scalar(ti.i32, slots)
         self.reference = fields.vector(3, real, self.vertex_total)
         self.epoch = fields.scalar(ti.i32, self.count)
+        self.tested = fields.vector(3, ti.i32, self.triangle_total)
+        self.edge_contact = fields.scalar(ti.i32, self.count)
         fields.finalize(self)
+        self.lists = CandidateLists(max(particle_count, 1) * self.count, 1, LISTED)
         upload(((self.block_first, blocks), (self.group_first, groups),
                 (self.body_groups, np.concatenate([[0], np.cumsum(group_counts)]))))
 
@@ -140,15 +182,20 @@ class AnimatedBodies:
         return tuple((c.mesh.vertex_count, c.mesh.triangle_count,
                       len(c.motion) if c.sampled else -1) for _, c in members) + (SKIN, LISTED)
 
-    def load(self, members, collider_count: int) -> None:
-        """Upload the colliders' triangles (in Morton order) and sampled motions."""
+    def load(self, members, collider_count: int, longest: float) -> None:
+        """Upload the colliders' triangles (in Morton order), the edges the cloth's edges
+        meet (tested_edges; `longest` the cloth's longest rest edge [m]) and sampled
+        motions."""
         self.members = tuple(members)
         vertex_start, frame_start, triangles, owner, body_of = [], [], [], [], [-1] * collider_count
+        tested = []
         offset = frame = 0
         for b, (index, c) in enumerate(self.members):
             rest = c.vertices_at(0.0)
             centroids = rest[c.mesh.triangles].mean(axis=1)
-            triangles.append(c.mesh.triangles[morton_order(centroids)] + offset)
+            ordered = c.mesh.triangles[morton_order(centroids)]
+            triangles.append(ordered + offset)
+            tested.append(tested_edges(c, ordered, longest))
             owner += [b] * c.mesh.vertex_count
             body_of[index] = b
             vertex_start.append(offset)
@@ -156,7 +203,10 @@ class AnimatedBodies:
             offset += c.mesh.vertex_count
             frame += self.rows[b] * c.mesh.vertex_count
         triangles = np.concatenate(triangles)
-        upload(((self.triangles, triangles), (self.vertex_body, owner),
+        tested = np.concatenate(tested)
+        upload(((self.triangles, triangles), (self.tested, tested),
+                (self.edge_contact, [int(t.any()) for t in np.split(tested, np.cumsum(
+                    [c.mesh.triangle_count for _, c in self.members])[:-1])]), (self.vertex_body, owner),
                 (self.triangle_body, np.asarray(owner)[triangles[:, 0]]),
                 (self.collider, [i for i, _ in self.members]), (self.body_of, body_of),
                 (self.vertex_start, vertex_start), (self.frame_start, frame_start),
@@ -171,8 +221,7 @@ class AnimatedBodies:
                 frames[begin:begin + c.motion.size // 3] = c.motion.reshape(-1, 3)
         self.frames.from_numpy(frames)
         self._table = frames                   # the host's copy of the table (schedule)
-        self.anchor.fill(FAR)                  # every list made again on first use
-        self.listed_epoch.fill(-1)
+        self.lists.forget()
         self.reference.fill(FAR)
         self.epoch.fill(0)
         self._frame_start = frame_start
@@ -315,7 +364,7 @@ def body_drift(model: ti.template(), state: ti.template(), forces: ti.template()
 
 
 @ti.func
-def _meets(bodies: ti.template(), k, lo, hi):
+def box_meets(bodies: ti.template(), k, lo, hi):
     return (bodies.lo[k] <= hi).all() and (lo <= bodies.hi[k]).all()
 
 
@@ -450,75 +499,107 @@ def _against(x0, x, a0, b0, c0, a1, b1, c1, thickness):
 
 
 @ti.func
+def stale_list(bodies: ti.template(), lists: ti.template(), slot, b, k, x0, x, skin):
+    """Whether list `slot` (of body b) no longer holds for its particle k moving x0 -> x: made
+    in another epoch, or the particle is farther than the skin from its anchor."""
+    anchor = lists.anchor[slot * lists.anchors + k]
+    return (lists.epoch[slot] != bodies.epoch[b] or (x0 - anchor).norm() > skin
+            or (x - anchor).norm() > skin)
+
+
+@ti.func
+def _wanted(bodies: ti.template(), f, edges: ti.template()):
+    """Whether triangle f is visited: always, or (edges) when it has an edge to test."""
+    wanted = True
+    if ti.static(edges):
+        wanted = (bodies.tested[f] != 0).any()
+    return wanted
+
+
+@ti.func
+def visit_near(bodies: ti.template(), lists: ti.template(), slot, b, lo, hi, stale, skin,
+               visit: ti.template(), query, found, edges: ti.template()):
+    """found = visit(bodies, f, query, found) for every triangle f of body b whose box meets
+    the box [lo, hi] (with `edges`, of those with an edge to test), in the hierarchy's order:
+    from list `slot` while it holds, else by traversing the hierarchy, and when it is stale
+    making it anew (the triangles within three skins of the box; the caller sets its
+    anchors)."""
+    if stale or lists.count[slot] < 0:
+        reach = ti.select(stale, 3.0 * skin, 0.0)
+        count = 0
+        blocks = bodies.triangle_total
+        groups = blocks + bodies.block_total
+        for g in range(bodies.body_groups[b], bodies.body_groups[b + 1]):
+            if box_meets(bodies, groups + g, lo - reach, hi + reach):
+                for k in range(bodies.group_first[g], bodies.group_first[g + 1]):
+                    if box_meets(bodies, blocks + k, lo - reach, hi + reach):
+                        for f in range(bodies.block_first[k], bodies.block_first[k + 1]):
+                            if not _wanted(bodies, f, edges):
+                                continue
+                            if stale and box_meets(bodies, f, lo - reach, hi + reach):
+                                if count >= 0 and count < lists.size:
+                                    lists.listed[slot * lists.size + count] = f
+                                    count += 1
+                                else:
+                                    count = -1
+                            if box_meets(bodies, f, lo, hi):
+                                found = visit(bodies, f, query, found)
+        if stale:
+            lists.count[slot] = count
+            lists.epoch[slot] = bodies.epoch[b]
+    else:
+        for k in range(lists.count[slot]):
+            f = lists.listed[slot * lists.size + k]
+            if box_meets(bodies, f, lo, hi):
+                found = visit(bodies, f, query, found)
+    return found
+
+
+@ti.func
 def worst_contact(colliders: ti.template(), c, i, x0, x, thickness, least):
     """The worst contact of particle i's path x0 -> x with animated collider c's triangles
     (module doc), of those deeper than `least` [m] if none crosses: (found, unit normal on the
     particle's side at the step's end, depth to the thickness [m], the surface point's
     displacement over the step [m])."""
     bodies = colliders.bodies
+    lists = bodies.lists
     b = bodies.body_of[c]
     slot = i * bodies.count + b
-    lo, hi = ti.min(x0, x), ti.max(x0, x)
     skin = bodies.skin * thickness
-    anchor = bodies.anchor[slot]
-    found = False
-    normal = ti.Vector([0.0, 1.0, 0.0])
-    depth = 0.0
-    moved = ti.Vector([0.0, 0.0, 0.0])
-    best = ti.Vector([2.0, least])             # the earliest crossing, the deepest contact
-    stale = (bodies.listed_epoch[slot] != bodies.epoch[b] or (x0 - anchor).norm() > skin
-             or (x - anchor).norm() > skin)
-    if stale or bodies.listed_count[slot] < 0:
-        # the hierarchy: every triangle whose box meets the path's box (and, for a new
-        # list, those within three skins of it, listed)
-        reach = ti.select(stale, 3.0 * skin, 0.0)
-        count = 0
-        blocks = bodies.triangle_total
-        groups = blocks + bodies.block_total
-        for g in range(bodies.body_groups[b], bodies.body_groups[b + 1]):
-            if _meets(bodies, groups + g, lo - reach, hi + reach):
-                for k in range(bodies.group_first[g], bodies.group_first[g + 1]):
-                    if _meets(bodies, blocks + k, lo - reach, hi + reach):
-                        for f in range(bodies.block_first[k], bodies.block_first[k + 1]):
-                            if stale and _meets(bodies, f, lo - reach, hi + reach):
-                                if count >= 0 and count < bodies.listed_size:
-                                    bodies.listed[slot * bodies.listed_size + count] = f
-                                    count += 1
-                                else:
-                                    count = -1
-                            if _meets(bodies, f, lo, hi):
-                                found, normal, depth, moved, best = _consider(
-                                    bodies, f, x0, x, thickness, found, normal, depth, moved,
-                                    best)
-        if stale:
-            bodies.listed_count[slot] = count
-            bodies.anchor[slot] = x
-            bodies.listed_epoch[slot] = bodies.epoch[b]
-    else:
-        for k in range(bodies.listed_count[slot]):
-            f = bodies.listed[slot * bodies.listed_size + k]
-            if _meets(bodies, f, lo, hi):
-                found, normal, depth, moved, best = _consider(
-                    bodies, f, x0, x, thickness, found, normal, depth, moved, best)
-    return found, normal, depth, moved
+    stale = stale_list(bodies, lists, slot, b, 0, x0, x, skin)
+    query = ti.Vector([x0[0], x0[1], x0[2], x[0], x[1], x[2], thickness])
+    # found, normal (3), depth, moved (3), the earliest crossing, the deepest contact
+    found = ti.Vector([0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0, least])
+    found = visit_near(bodies, lists, slot, b, ti.min(x0, x), ti.max(x0, x), stale, skin,
+                       _consider, query, found, False)
+    if stale:
+        lists.anchor[slot] = x
+    return (found[0] > 0.0, ti.Vector([found[1], found[2], found[3]]), found[4],
+            ti.Vector([found[5], found[6], found[7]]))
 
 
 @ti.func
-def _consider(bodies: ti.template(), f, x0, x, thickness, found, normal, depth, moved, best):
-    """Triangle f against the path x0 -> x: the contact so far replaced when f's crossing is
-    earlier, or (no crossing yet) its contact deeper (best: earliest time, deepest depth)."""
+def _consider(bodies: ti.template(), f, query, found):
+    """Triangle f against the path query[0:3] -> query[3:6] (thickness query[6]): the
+    contact so far (worst_contact's `found`) replaced when f's crossing is earlier, or (no
+    crossing yet) its contact deeper."""
+    x0 = ti.Vector([query[0], query[1], query[2]])
+    x = ti.Vector([query[3], query[4], query[5]])
     corner = bodies.triangles[f]
     a0, b0, c0 = bodies.start[corner[0]], bodies.start[corner[1]], bodies.start[corner[2]]
     a1, b1, c1 = bodies.end[corner[0]], bodies.end[corner[1]], bodies.end[corner[2]]
-    t, d, n, w = _against(x0, x, a0, b0, c0, a1, b1, c1, thickness)
-    if t < best[0] or (best[0] > 1.0 and d > best[1]):
+    t, d, n, w = _against(x0, x, a0, b0, c0, a1, b1, c1, query[6])
+    if t < found[8] or (found[8] > 1.0 and d > found[9]):
         if t <= 1.0:
-            best[0] = t
+            found[8] = t
         else:
-            best[1] = d
-        found = True
-        normal, depth = n, d
+            found[9] = d
         w = ti.math.clamp(w, 0.0, 1.0)
         w = w / w.sum()
         moved = w[0] * (a1 - a0) + w[1] * (b1 - b0) + w[2] * (c1 - c0)
-    return found, normal, depth, moved, best
+        found[0] = 1.0
+        for k in ti.static(range(3)):
+            found[1 + k] = n[k]
+            found[5 + k] = moved[k]
+        found[4] = d
+    return found

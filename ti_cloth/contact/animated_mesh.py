@@ -12,10 +12,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 
-from ..body.mesh import Mesh
+from ..body.mesh import Mesh, triangle_edges, unique_rows
 from ..runtime import limits
 from ..runtime.validation import as_array, in_range, require
 from .animation_files import read_animation
@@ -38,16 +39,26 @@ class AnimatedMeshCollider(Collider):
     step's start, whatever the triangle does in the step (continuous collision); a closed
     mesh (every edge shared by two triangles) also reports distances signed negative inside
     (Simulation.collider_distance). `path` is not taken: the motion says everything.
+
+    edge_contact: which of the body's edges the cloth's edges are kept thickness away from,
+    so that a sharp edge cannot pass between two particles (animated_edges.py). "auto" (the
+    default): the edges sharp enough to pass through a cloth edge whose particles are kept
+    out, those whose faces turn by more than 2 asin(thickness / (1.25 x the cloth's longest
+    rest edge)) in any sample (a callable's body: at t = 0); True: every edge; False: none.
     """
 
     mesh: Mesh = field(kw_only=False)
     motion: Callable[[float], object] | np.ndarray | None = field(default=None,
                                                                   kw_only=False)
     fps: float | None = None
+    edge_contact: bool | str = "auto"
 
     def __post_init__(self):
         super().__post_init__()
         name = "AnimatedMeshCollider"
+        require(self.edge_contact is True or self.edge_contact is False
+                or self.edge_contact == "auto", f"{name}.edge_contact", self.edge_contact,
+                '"auto", True or False')
         require(self.path is None, f"{name}.path", self.path,
                 "None (the motion moves an animated mesh: give its vertices at every time)")
         mesh = self.mesh
@@ -97,6 +108,30 @@ class AnimatedMeshCollider(Collider):
     def sampled(self) -> bool:
         """Whether the motion is an array of samples (else a callable or none)."""
         return isinstance(self.motion, np.ndarray)
+
+    @cached_property
+    def edge_turning(self) -> tuple[np.ndarray, np.ndarray]:
+        """(edges (E, 2) as sorted vertex pairs, the largest angle [rad] between the normals
+        of two triangles on each, over the samples (a callable's or a still body's: at t = 0);
+        pi on an open mesh's rim, where one triangle ends like a blade)."""
+        triangles = self.mesh.triangles
+        edges, index = unique_rows(triangle_edges(triangles), return_inverse=True)
+        index = index.ravel()
+        shapes = self.motion if self.sampled else [self.vertices_at(0.0)]
+        turning = np.zeros(len(edges))
+        uses = np.bincount(index, minlength=len(edges))
+        turning[uses == 1] = np.pi
+        order = np.argsort(index, kind="stable")
+        first = order[np.r_[0, np.flatnonzero(np.diff(index[order])) + 1]]
+        for vertices in shapes:
+            corners = vertices[triangles]
+            normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+            normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+            per_side = np.repeat(normal, 3, axis=0)           # the normal beside each edge use
+            reference = per_side[first][index]                # the edge's first triangle's
+            angle = np.arccos(np.clip(np.sum(per_side * reference, axis=1), -1.0, 1.0))
+            np.maximum.at(turning, index, angle)
+        return edges, turning
 
     @property
     def closed(self) -> bool:

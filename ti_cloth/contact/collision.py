@@ -12,9 +12,11 @@ from ..runtime.plan import Loop, Phase
 from ..runtime.transfer import upload
 from ..runtime.validation import require
 from ..state import copy_positions
-from .animated_contact import PASSES, RESOLVED, AnimatedBodies, worst_contact
+from .animated_contact import PASSES, RESOLVED, AnimatedBodies, tested_edges, worst_contact
+from .animated_edges import EDGE_PASSES, EdgeContacts, edge_against_bodies, follow_edges
 from .animated_mesh import AnimatedMeshCollider
 from .colliders import ANIMATED, MESH, Collider, Plane, signed_distance
+from .contact_pairs import cloth_edges
 from .mesh_collider import MeshCollider
 from .sdf import layout, mesh_distance, sample_grid
 
@@ -30,14 +32,18 @@ class ColliderSet:
     `rotation_prev` at the start of the step. Animated meshes are in `bodies` (an
     AnimatedBodies), placed by the stage's first phases every step."""
 
-    def __init__(self, colliders, particle_count: int):
+    def __init__(self, colliders, cloth):
         real, count = backend.real(), len(colliders)
+        particle_count = cloth.particle_count
         self.nodes, self.meshes, self.turning, self.shells = self.structure(colliders,
-                                                                            particle_count)[3:7]
+                                                                            cloth)[3:7]
         members = _animated(colliders)
         self.animated = bool(members)
+        self.edge_contact = _edge_contact(colliders, cloth)
         if self.animated:
             self.bodies = AnimatedBodies(members, count, particle_count)
+        if self.edge_contact:
+            self.edges = EdgeContacts(cloth, len(members))
         self.count = count
         fields = backend.FieldGroup()
         self.kind = fields.scalar(ti.i32, count)
@@ -62,10 +68,10 @@ class ColliderSet:
             self.rotation = fields.vector(9, real, count)
             self.rotation_prev = fields.vector(9, real, count)
         fields.finalize(self)
-        self.load(colliders, particle_count)
+        self.load(colliders, cloth)
 
     @staticmethod
-    def structure(colliders, particle_count: int) -> tuple:
+    def structure(colliders, cloth) -> tuple:
         """What the kernels of a ColliderSet read at compile time: sets of equal structure
         are interchangeable once load() has put the colliders in (pool.py). (count, particle
         count, grid nodes of all meshes, whether any is a mesh, whether any mesh turns,
@@ -73,11 +79,13 @@ class ColliderSet:
         meshes = [c for c in colliders if isinstance(c, MeshCollider)]
         nodes = sum(int(np.prod(layout(c.mesh.vertices, c.resolution, c.margin)[2]))
                     for c in meshes)
-        return ("ColliderSet", len(colliders), particle_count, nodes, bool(meshes),
+        return ("ColliderSet", len(colliders), cloth.particle_count, nodes, bool(meshes),
                 any(c.rotation is not None for c in meshes), any(not c.solid for c in meshes),
-                AnimatedBodies.structure(_animated(colliders)))
+                AnimatedBodies.structure(_animated(colliders)),
+                EdgeContacts.structure(cloth, len(_animated(colliders)))
+                if _edge_contact(colliders, cloth) else None)
 
-    def load(self, colliders, particle_count: int) -> None:
+    def load(self, colliders, cloth) -> None:
         """Upload `colliders` (as many as this set holds), placed at time 0."""
         self.colliders = tuple(colliders)
         for c in self.colliders:
@@ -88,7 +96,9 @@ class ColliderSet:
                                            or getattr(c, "rotation", None) is not None
                                            for c in self.colliders)
         if self.animated:
-            self.bodies.load(_animated(self.colliders), self.count)
+            self.bodies.load(_animated(self.colliders), self.count, _longest_edge(cloth))
+        if self.edge_contact:
+            self.edges.load(cloth, len(_animated(self.colliders)))
         self._rest = [(p[1], p[2]) for p in packed]
         upload(((self.kind, [p[0] for p in packed]), (self.radius, [p[3] for p in packed]),
                 (self.thickness, [c.thickness for c in self.colliders]),
@@ -126,9 +136,13 @@ class ColliderSet:
     def phases(self, model, forces, work) -> tuple:
         """The collision stage as phases (runtime/plan.py; `work` is this set): the animated
         meshes placed, then every particle out of the colliders where they are placed
-        (resolve), from its position at the step's start (step_start)."""
+        (resolve), from its position at the step's start (step_start), then the cloth's
+        edges out of the animated meshes' edges in EDGE_PASSES passes (animated_edges.py)."""
         placing = self.bodies.phases() if self.animated else ()
-        return placing + (Phase(Loop(model.particle_count, resolve)),)
+        edges = ((Phase(Loop(self.edges.count, edge_against_bodies)),
+                  Phase(Loop(model.particle_count, follow_edges))) * EDGE_PASSES
+                 if self.edge_contact else ())
+        return placing + (Phase(Loop(model.particle_count, resolve)),) + edges
 
     def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
         """The collision stage of a step ending at time t (simulation.STEP_ORDER): the
@@ -211,6 +225,22 @@ class ColliderSet:
 def _animated(colliders) -> list:
     """(index, collider) of the animated mesh colliders among `colliders`."""
     return [(i, c) for i, c in enumerate(colliders) if isinstance(c, AnimatedMeshCollider)]
+
+
+def _longest_edge(cloth) -> float:
+    """The cloth's longest rest edge of a triangle [m] (0 without triangles)."""
+    edges = cloth_edges(cloth)[0]
+    rest = cloth.particle_position
+    return float(np.linalg.norm(rest[edges[:, 0]] - rest[edges[:, 1]], axis=1).max(initial=0.0))
+
+
+def _edge_contact(colliders, cloth) -> bool:
+    """Whether the cloth has edges and an animated mesh among `colliders` has edges they
+    meet (animated_contact.tested_edges)."""
+    if cloth.mesh.triangle_count == 0:
+        return False
+    longest = _longest_edge(cloth)
+    return any(tested_edges(c, c.mesh.triangles, longest).any() for _, c in _animated(colliders))
 
 
 @ti.func

@@ -19,11 +19,30 @@ nor pass through, before the list is made again. A body that falls as a whole ke
 one whose parts move apart fast makes one every step.
 """
 
+import numpy as np
 import taichi as ti
 
+from ..body.mesh import triangle_edges, unique_rows
 from ..runtime import backend
 from .box_grid import BLOCK, box_cell, box_cell_count, cell_box, cell_range, found_here
 from .proximity import segment_distance, triangle_distance
+
+
+def cloth_edges(cloth) -> tuple[np.ndarray, np.ndarray]:
+    """The edges of a cloth's triangles (E, 2), as sorted particle pairs in order, and the
+    spring along each (E,), -1 where there is none (a Fabric's): a torn spring's edge no
+    longer collides (torn_edge)."""
+    triangles = np.asarray(cloth.mesh.triangles, np.int64).reshape(-1, 3)
+    if not len(triangles):
+        return np.zeros((0, 2), np.int64), np.zeros(0, np.int64)
+    edges = unique_rows(np.sort(triangle_edges(triangles), axis=1))
+    springs = np.asarray(cloth.triangle_edge_spring, np.int64).reshape(-1, 3)
+    ends = triangle_edges(triangles)
+    n = cloth.particle_count
+    rows = np.searchsorted(edges[:, 0] * n + edges[:, 1], ends[:, 0] * n + ends[:, 1])
+    along = np.full(len(edges), -1, np.int64)
+    np.maximum.at(along, rows, springs.reshape(-1))
+    return edges, along
 
 
 @backend.kernel_argument

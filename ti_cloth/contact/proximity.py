@@ -37,6 +37,28 @@ def segment_distance(p1, q1, p2, q2):
 
 
 @ti.func
+def edge_contact(a, b, c, d, a0, b0, c0, d0, thickness):
+    """(in contact, n, gap, s, t) of the moving edges ab and cd, now at a b c d and at the
+    step's start at a0 b0 c0 d0: their closest points now at parameters s and t, n the unit
+    direction from cd's point to ab's on the side they were on at the start (a pair that
+    crossed during the step is sent back), gap = distance along n minus thickness. In contact:
+    both points interior to their edges and gap < 0 (an end's contacts are a vertex's)."""
+    s, t = segment_parameters(a, b, c, d)
+    between = a + s * (b - a) - c - t * (d - c)
+    s0, t0 = segment_parameters(a0, b0, c0, d0)
+    before = a0 + s0 * (b0 - a0) - c0 - t0 * (d0 - c0)
+    distance = between.norm()
+    n = between / ti.max(distance, TINY)
+    if before.norm() > 0 and between.dot(before) < 0.0:
+        n = -n                                       # crossed during the step: back to its side
+    if distance == 0.0:
+        n = before / ti.max(before.norm(), TINY)
+    gap = between.dot(n) - thickness
+    interior = s > 0.0 and s < 1.0 and t > 0.0 and t < 1.0
+    return interior and gap < 0.0 and n.norm() > 0, n, gap, s, t
+
+
+@ti.func
 def _point_segment_distance(p, a, b):
     d = b - a
     s = ti.math.clamp((p - a).dot(d) / ti.max(d.dot(d), TINY), 0.0, 1.0)

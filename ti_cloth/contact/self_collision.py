@@ -33,7 +33,6 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from ..body.mesh import triangle_edges, unique_rows
 from ..physics.forces import altitude_frame
 from ..runtime import backend, limits
 from ..runtime.transfer import upload
@@ -43,6 +42,7 @@ from .box_grid import BLOCK, BoxGrid
 from .collision import project_out
 from .contact_pairs import (
     PairList,
+    cloth_edges,
     displacement_box,
     index_contacts,
     list_pairs,
@@ -52,7 +52,7 @@ from .contact_pairs import (
     torn_edge,
     torn_triangle,
 )
-from .proximity import segment_parameters
+from .proximity import edge_contact
 
 PAIRS_PER_PARTICLE = 32     # candidate list room at first, per particle
 MAX_PAIRS_PER_PARTICLE = 256
@@ -97,18 +97,6 @@ class SelfContacts:
     edges: np.ndarray
 
 
-def _edge_springs(edges: np.ndarray, triangles: np.ndarray, springs: np.ndarray,
-                  n: int) -> np.ndarray:
-    """The spring along each edge (rows of sorted particle pairs), -1 where there is none, from
-    the triangles' edge springs (topology's triangle_edge_spring)."""
-    triangles = np.asarray(triangles, np.int64).reshape(-1, 3)
-    ends = triangle_edges(triangles)
-    rows = np.searchsorted(edges[:, 0] * n + edges[:, 1], ends[:, 0] * n + ends[:, 1])
-    along = np.full(len(edges), -1, np.int64)
-    np.maximum.at(along, rows, springs.reshape(-1))
-    return along
-
-
 def warn_if_thick(settings: SelfCollision, cloth) -> None:
     """Warn when the thickness exceeds THICK x the mean rest edge of the cloth's triangles."""
     triangles = np.asarray(cloth.mesh.triangles).reshape(-1, 3)
@@ -135,8 +123,7 @@ class SelfContact:
     def __init__(self, settings: SelfCollision, cloth):
         n = cloth.particle_count
         triangles = np.asarray(cloth.mesh.triangles, np.int64).reshape(-1, 3)
-        edges = (unique_rows(np.sort(triangle_edges(triangles), axis=1)) if len(triangles)
-                 else np.zeros((0, 2), np.int64))
+        edges = cloth_edges(cloth)[0]
         self.particle_count = n
         self.triangle_count = len(triangles)
         self.edge_count = len(edges)
@@ -183,8 +170,7 @@ class SelfContact:
         if self.triangle_count:
             springs = np.asarray(cloth.triangle_edge_spring, np.int64).reshape(-1, 3)
             upload(((self.triangle_spring, springs), (self.triangle_face, cloth.triangle_face),
-                    (self.edge_spring, _edge_springs(self.edge_rows, cloth.mesh.triangles,
-                                                     springs, self.particle_count))))
+                    (self.edge_spring, cloth_edges(cloth)[1])))
 
     def attach(self, colliders) -> None:
         """The simulation's ColliderSet (or None): each contact pass ends by projecting the
@@ -310,24 +296,11 @@ def _vertex_triangle(positions: ti.template(), start: ti.template(), corners, th
 
 @ti.func
 def _edge_edge(positions: ti.template(), start: ti.template(), corners, thickness):
-    """(in contact, n, gap, s, t) of edges corners[0:2] and corners[2:4]: closest points at
-    parameters s and t, n the unit direction from the second edge's point to the first's on
-    the side they were at the start of the step, gap = distance along n minus thickness."""
+    """(in contact, n, gap, s, t) of edges corners[0:2] and corners[2:4] (proximity.py's
+    edge_contact): n from the second edge's point to the first's."""
     a, b, c, d = corners[0], corners[1], corners[2], corners[3]
-    s, t = segment_parameters(positions[a], positions[b], positions[c], positions[d])
-    between = (positions[a] + s * (positions[b] - positions[a])
-               - positions[c] - t * (positions[d] - positions[c]))
-    s0, t0 = segment_parameters(start[a], start[b], start[c], start[d])
-    before = start[a] + s0 * (start[b] - start[a]) - start[c] - t0 * (start[d] - start[c])
-    distance = between.norm()
-    n = between / ti.max(distance, 1e-30)
-    if before.norm() > 0 and between.dot(before) < 0.0:
-        n = -n                                       # crossed during the step: back to its side
-    if distance == 0.0:
-        n = before / ti.max(before.norm(), 1e-30)
-    gap = between.dot(n) - thickness
-    interior = s > 0.0 and s < 1.0 and t > 0.0 and t < 1.0
-    return interior and gap < 0.0 and n.norm() > 0, n, gap, s, t
+    return edge_contact(positions[a], positions[b], positions[c], positions[d], start[a],
+                        start[b], start[c], start[d], thickness)
 
 
 @ti.func
