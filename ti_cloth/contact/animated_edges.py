@@ -46,7 +46,8 @@ EDGE_PASSES = 3     # passes over the edges a step (each particle takes its cont
 class EdgeContacts:
     """A cloth's edges for contact with animated meshes: each edge's particles and spring,
     each edge's moves of its two ends (move[2 e + k]), whether it touched and the velocity of
-    the body point it touched over the step (surface[e]), and per particle
+    the body point it touched over the step (surface[e]), and per particle whether the last
+    pass moved it (moved[i]) and
     the slots 2 e + k that move it (CSR in edge order: slot[start[i]:start[i + 1]])."""
 
     def __init__(self, cloth, bodies: int):
@@ -62,6 +63,7 @@ class EdgeContacts:
         self.surface = fields.vector(3, real, max(self.count, 1))
         self.start = fields.scalar(ti.i32, self.particle_count + 1)
         self.slot = fields.scalar(ti.i32, max(2 * self.count, 1))
+        self.moved = fields.scalar(ti.i32, self.particle_count)
         fields.finalize(self)
         self.bodies = bodies
         self.lists = CandidateLists(max(self.count, 1) * bodies, 2, EDGE_LISTED)
@@ -86,14 +88,19 @@ class EdgeContacts:
 @ti.func
 def edge_against_bodies(model: ti.template(), state: ti.template(), forces: ti.template(),
                         colliders: ti.template(), stages: ti.template(), e,
-                        now: ti.template()):
-    """Cloth edge e against every animated body's edges (module doc): its ends' moves."""
+                        now: ti.template(), again: ti.template()):
+    """Cloth edge e against every animated body's edges (module doc): its ends' moves. In a
+    pass `again` (not the step's first), only an edge one of whose particles the previous
+    pass moved: the others stand where that pass found them clear."""
     edges, bodies = colliders.edges, colliders.bodies
     lists = edges.lists
     i, j = edges.edges[e][0], edges.edges[e][1]
     wi, wj = model.particle_inv_mass[i], model.particle_inv_mass[j]
     touched = 0
-    if wi + wj > 0 and not torn_edge(edges, state, e):
+    moved = True
+    if ti.static(again):
+        moved = edges.moved[i] != 0 or edges.moved[j] != 0
+    if moved and wi + wj > 0 and not torn_edge(edges, state, e):
         a0, b0 = colliders.step_start[i], colliders.step_start[j]
         a, b = state.particle_position[i], state.particle_position[j]
         lo, hi = ti.min(a0, b0, a, b), ti.max(a0, b0, a, b)
@@ -160,6 +167,7 @@ def follow_edges(model: ti.template(), state: ti.template(), forces: ti.template
     """Particle i moved by the mean of its touched edges' moves, without approach velocity
     along it relative to the body points they touched."""
     edges = colliders.edges
+    edges.moved[i] = 0
     if model.particle_inv_mass[i] > 0:
         move = ti.Vector([0.0, 0.0, 0.0])
         surface = ti.Vector([0.0, 0.0, 0.0])
@@ -179,5 +187,6 @@ def follow_edges(model: ti.template(), state: ti.template(), forces: ti.template
             if approach < 0.0:
                 v -= approach * n
             state.particle_position[i] = x
+            edges.moved[i] = 1
             state.particle_velocity[i] = v
             state.particle_prev_position[i] = x - v * now.dt

@@ -139,9 +139,9 @@ class ColliderSet:
         (resolve), from its position at the step's start (step_start), then the cloth's
         edges out of the animated meshes' edges in EDGE_PASSES passes (animated_edges.py)."""
         placing = self.bodies.phases() if self.animated else ()
-        edges = ((Phase(Loop(self.edges.count, edge_against_bodies)),
-                  Phase(Loop(model.particle_count, follow_edges))) * EDGE_PASSES
-                 if self.edge_contact else ())
+        edges = sum(((Phase(Loop(self.edges.count, edge_against_bodies, k > 0)),
+                      Phase(Loop(model.particle_count, follow_edges)))
+                     for k in range(EDGE_PASSES if self.edge_contact else 0)), ())
         return placing + (Phase(Loop(model.particle_count, resolve)),) + edges
 
     def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
