@@ -215,12 +215,23 @@ def test_a_rising_blade_lifts_the_sheet_by_its_edges(f64):
 
 
 def test_auto_edge_contact_tests_the_edges_sharp_enough_to_pass_between_particles():
-    """The blade's faces are split by three diagonals (0-4, 0-5, 1-5) across which they do not
-    turn: "auto" tests its nine other edges (they turn by 90 to 179 degrees, more than the
-    9.2 degrees through which a 5 cm cloth edge can be pierced with its particles 5 mm out),
-    each once; True tests all twelve; False none. A smooth icosphere (faces 4.6 degrees apart)
-    under the same cloth: none."""
+    """A hinge of two triangles turning by alpha: "auto" tests its ridge just when a straight
+    edge of 1.25 x the cloth's longest, its ends the thickness out of both faces, can reach
+    across it, (1.25 L / 2) sin(alpha / 2) > thickness (the threshold +-0.5 degrees; its rim
+    always, where one face ends like a blade). The blade's faces are split by three diagonals
+    (0-4, 0-5, 1-5) across which they do not turn: "auto" tests its nine other edges (they turn
+    by 90 to 179 degrees, more than 18.4 for a 5 cm cloth edge and 5 mm), each once; True tests
+    all twelve; False none. A smooth icosphere (faces 4.6 degrees apart): none."""
     from ti_cloth.contact.animated_contact import tested_edges
+    thickness, longest = 0.005, 0.05
+    threshold = 2 * np.arcsin(thickness / (1.25 * longest / 2))
+    for alpha, expected in ((threshold - np.radians(0.5), 4), (threshold + np.radians(0.5), 5)):
+        c, s = np.cos(alpha), np.sin(alpha)      # the second face goes on, turned down by alpha
+        hinge = tc.Mesh(np.array([[0.0, 0, -1], [0, 0, 1], [-1, 0, 0], [c, -s, 0]]),
+                        np.array([[0, 1, 2], [1, 0, 3]]))
+        collider = tc.AnimatedMeshCollider(hinge, thickness=thickness)
+        tested = tested_edges(collider, hinge.triangles, longest)
+        assert tested.sum() == expected, np.degrees(alpha)
     blade = tc.Mesh(KNIFE, KNIFE_TRIANGLES)
     ends = np.sort(KNIFE_TRIANGLES[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 3, 2), axis=2)
     for setting, expected in (("auto", 9), (True, 12), (False, 0)):

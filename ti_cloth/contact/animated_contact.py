@@ -83,7 +83,9 @@ def tested_edges(collider, triangles: np.ndarray, longest: float) -> np.ndarray:
     """(T, 3) 1 where the cloth's edges meet collider's edge k (corners k, k + 1) of its
     triangles (as ordered here) through this triangle: the first that has the edge, when
     collider.edge_contact tests it (animated_mesh.py: "auto" those whose faces turn by more
-    than 2 asin(thickness / (1.25 x longest)), longest the cloth's longest rest edge [m])."""
+    than 2 asin(2 thickness / (1.25 x longest)), longest the cloth's longest rest edge [m]:
+    with its particles thickness out of a wedge turning by less, a straight edge up to 1.25 x
+    longest cannot reach across its ridge; animated_edges.py)."""
     triangles = np.asarray(triangles, np.int64).reshape(-1, 3)
     ends = triangle_edges(triangles)
     _, first = unique_rows(ends, return_index=True)
@@ -93,7 +95,8 @@ def tested_edges(collider, triangles: np.ndarray, longest: float) -> np.ndarray:
         edges, turning = collider.edge_turning
         n = collider.mesh.vertex_count
         row = np.searchsorted(edges[:, 0] * n + edges[:, 1], ends[:, 0] * n + ends[:, 1])
-        least = 2.0 * np.arcsin(min(1.0, collider.thickness / (1.25 * max(longest, 1e-300))))
+        reach = 2.0 * collider.thickness / (1.25 * max(longest, 1e-300))
+        least = 2.0 * np.arcsin(min(1.0, reach))
         tested &= turning[row] > least
     elif not collider.edge_contact:
         tested[:] = 0

@@ -43,7 +43,7 @@ class AnimatedMeshCollider(Collider):
     edge_contact: which of the body's edges the cloth's edges are kept thickness away from,
     so that a sharp edge cannot pass between two particles (animated_edges.py). "auto" (the
     default): the edges sharp enough to pass through a cloth edge whose particles are kept
-    out, those whose faces turn by more than 2 asin(thickness / (1.25 x the cloth's longest
+    out, those whose faces turn by more than 2 asin(2 thickness / (1.25 x the cloth's longest
     rest edge)) in any sample (a callable's body: at t = 0); True: every edge; False: none.
     """
 
