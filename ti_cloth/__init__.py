@@ -72,7 +72,7 @@ APP_MODULES = ("scene", "scene_file", "runner", "study", "cli")   # were ti_clot
 
 def __getattr__(name):
     """The application layer (ti_cloth.app) pulls in the renderer, so load_scene, run_scene,
-    advise and its modules (ti_cloth.study, ...; they lived here before ti_cloth.app) are imported
+    advise, view and its modules (ti_cloth.study, ...; they lived here before ti_cloth.app) are imported
     only when used."""
     if name == "load_scene":
         from .app.scene import load_scene
@@ -83,6 +83,9 @@ def __getattr__(name):
     if name == "advise":
         from .app.advisor import advise
         return advise
+    if name == "view":
+        from .app.view import view
+        return view
     if name in APP_MODULES:
         return importlib.import_module(f".app.{name}", __name__)
     raise AttributeError(f"module 'ti_cloth' has no attribute {name!r}")

@@ -254,11 +254,33 @@ def info() -> int:
     return 0
 
 
+def view(scene_path, *, out=None, width=960, height=540, arch="cpu", record=False) -> int:
+    """Open a window on the scene (app/view.py); exit code 0 when it closes, 2 for a scene it
+    refuses (the message names the key) or no display."""
+    from .scene import load_scene
+    from .scene_file import SceneError
+    from .view import NoDisplay, require_display
+    from .view import view as open_view
+
+    try:
+        require_display()
+        scene = load_scene(scene_path)
+        backend.ensure(arch=arch, precision=scene.precision)
+        open_view(scene, width=width, height=height, folder=out, record=record)
+    except (SceneError, FileNotFoundError, NoDisplay, ValueError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    return 0
+
+
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command == "info":
         return info()
+    if args.command == "view":
+        return view(args.scene, out=args.out, width=args.width, height=args.height,
+                    arch=args.arch, record=args.record)
     if args.command == "study":
         if args.duration is not None and not args.duration > 0:
             parser.error(f"--duration must be > 0, got {args.duration}")
@@ -340,6 +362,16 @@ def build_parser() -> argparse.ArgumentParser:
     advise_parser.add_argument("--arch", choices=sorted(backend.ARCHS), default="cpu")
     _resolution_argument(advise_parser)
     _sweep_arguments(advise_parser)
+    view_parser = commands.add_parser("view", help="run a scene live in a window: drag the "
+                                      "cloth with the left button, orbit with the right")
+    view_parser.add_argument("scene", type=Path, help="scene file (TOML)")
+    view_parser.add_argument("--out", type=Path, help="folder for saved states and --record "
+                             "(default: the scene's)")
+    view_parser.add_argument("--width", type=_positive, default=960)
+    view_parser.add_argument("--height", type=_positive, default=540)
+    view_parser.add_argument("--arch", choices=sorted(backend.ARCHS), default="cpu")
+    view_parser.add_argument("--record", action="store_true",
+                             help="write what the window shows as PNG frames and a GIF")
     commands.add_parser("info", help="versions, architecture and threads")
     return parser
 

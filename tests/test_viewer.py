@@ -1,0 +1,254 @@
+"""The live viewer (render/viewer.py, app/view.py): picking, dragging and keys driven by
+synthetic events without a window, checked against the camera's own projection and the
+simulation's state; and the real window under Xvfb, driven by xdotool."""
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+from helpers import report
+
+import ti_cloth as tc
+from ti_cloth.app.scene import load_scene
+from ti_cloth.app.view import viewer_for
+from ti_cloth.render.viewer import PICK_PIXELS, Event
+
+SCENE = """
+[scene]
+name = "curtain"
+
+[simulation]
+integrator = "xpbd"
+fps = 30
+duration = 10.0
+substeps = 8
+
+[forces]
+drag = 0.5
+
+[[bodies]]
+type = "grid"
+rows = 9
+cols = 9
+size = [1.0, 1.0]
+plane = "xy"
+origin = [-0.5, 0.0, 0.0]
+pinned = ["top_left", "top_right"]
+material = { density = 0.15, stretch = { k = 800.0, kd = 0.4 }, shear = { k = 80.0, kd = 0.04 }, bend = { k = 1.0, kd = 0.001 } }
+
+[camera]
+position = [0.0, 0.5, 2.5]
+target = [0.0, 0.5, 0.0]
+fov = 40
+
+[output]
+width = 320
+height = 240
+"""
+WIDTH, HEIGHT = 320, 240
+
+
+@pytest.fixture
+def scene_file(tmp_path):
+    path = tmp_path / "curtain.toml"
+    path.write_text(SCENE)
+    return path
+
+
+def test_a_drag_holds_the_picked_particle_on_the_cursor_ray_and_a_release_frees_it(scene_file, f64,
+                                                                                   tmp_path):
+    """A press within PICK_PIXELS of the image of the middle particle of the sheet's first row (its top edge, between the pins) picks it
+    (none further away); dragged 60 px right and 40 px up, after each frame it lies on the
+    plane through where it was grabbed facing the camera, where the ray through the cursor
+    meets it (projected back to the cursor's pixel to 1e-6 px), pinned; its neighbours follow.
+    Released, it is free again: it falls back from where it was let go, with the velocity of
+    its last move."""
+    viewer = viewer_for(load_scene(scene_file), width=WIDTH, height=HEIGHT, folder=tmp_path)
+    sim, camera = viewer.sim, viewer.camera
+    first_row_middle = 4
+    screen, depth = camera.project(sim.positions(), WIDTH, HEIGHT)
+    x, y = screen[first_row_middle]
+    viewer.handle(Event("press", x + PICK_PIXELS + 20, y - PICK_PIXELS - 20, button="left"))
+    assert viewer.held is None, "a press far from every particle picks none"
+    viewer.handle(Event("press", x + 5, y - 5, button="left"))
+    assert viewer.held is not None and viewer.held[0] == first_row_middle
+    neighbour = sim.positions()[first_row_middle + 9].copy()
+    cursor = np.array([x + 60, y + 40])
+    for _ in range(5):
+        viewer.handle(Event("motion", *cursor))
+        viewer.advance()
+    p = sim.positions()[first_row_middle]
+    pixel, at_depth = camera.project(p, WIDTH, HEIGHT)
+    report("dragged particle: pixel, depth against the grab", (pixel[0], at_depth[0]),
+           (cursor, depth[first_row_middle]))
+    np.testing.assert_allclose(pixel[0], cursor, atol=1e-6)
+    assert at_depth[0] == pytest.approx(depth[first_row_middle], abs=1e-9)
+    assert sim.pinned()[first_row_middle]
+    assert np.linalg.norm(sim.positions()[first_row_middle + 9] - neighbour) > 0.02, "it pulled"
+    held_at = p.copy()
+    viewer.handle(Event("release", *cursor, button="left"))
+    assert not sim.pinned()[first_row_middle] and viewer.held is None
+    np.testing.assert_allclose(sim.velocities()[first_row_middle], viewer.velocity)
+    for _ in range(5):
+        viewer.advance()
+    assert sim.positions()[first_row_middle][1] < held_at[1] - 0.02, "it falls once let go"
+
+
+def test_a_pinned_corner_dragged_keeps_its_pin_where_it_is_left(scene_file, tmp_path, f64):
+    viewer = viewer_for(load_scene(scene_file), width=WIDTH, height=HEIGHT, folder=tmp_path)
+    corner = int(np.flatnonzero(viewer.sim.pinned())[0])
+    (x, y), = viewer.camera.project(viewer.sim.positions()[corner], WIDTH, HEIGHT)[0]
+    viewer.handle(Event("press", x, y, button="left"))
+    viewer.handle(Event("motion", x - 30, y))
+    viewer.advance()
+    viewer.handle(Event("release", x - 30, y, button="left"))
+    left = viewer.sim.positions()[corner].copy()
+    for _ in range(3):
+        viewer.advance()
+    assert viewer.sim.pinned()[corner]
+    np.testing.assert_array_equal(viewer.sim.positions()[corner], left)
+    assert np.linalg.norm(left - viewer.sim.cloth.particle_position[corner]) > 0.05
+
+
+def test_keys_save_a_state_that_loads_reset_pause_and_quit(scene_file, tmp_path, f64):
+    """"s" writes <name>.view.npz, which Simulation.load_state of the same scene loads to the
+    same positions; "r" puts every particle back at rest at time 0 (and the pins as the scene
+    has them); space pauses (frames take no steps) and resumes; "." steps one frame while
+    paused; "w" toggles the wireframe (the image changes); "q" asks to quit."""
+    scene = load_scene(scene_file)
+    viewer = viewer_for(scene, width=WIDTH, height=HEIGHT, folder=tmp_path)
+    sim = viewer.sim
+    for _ in range(4):
+        viewer.advance()
+    viewer.handle(Event("key", key="s"))
+    saved = tmp_path / "curtain.view.npz"
+    assert viewer.saved == saved and saved.exists()
+    other = scene.build(dt=scene.frame_dt / scene.resolved_substeps())
+    other.load_state(saved)
+    np.testing.assert_array_equal(other.positions(), sim.positions())
+    assert other.time == sim.time > 0
+    viewer.handle(Event("key", key=" "))
+    steps = sim.step_count
+    viewer.advance()
+    assert sim.step_count == steps, "paused"
+    viewer.handle(Event("key", key="."))
+    assert sim.step_count == steps + viewer.substeps
+    viewer.handle(Event("key", key=" "))
+    shaded = viewer.image()
+    viewer.handle(Event("key", key="w"))
+    assert np.abs(viewer.image().astype(int) - shaded).max() > 50
+    viewer.handle(Event("key", key="r"))
+    np.testing.assert_array_equal(sim.positions(), scene.cloth.particle_position)
+    assert sim.time == 0.0 and np.array_equal(sim.pinned(), scene.cloth.pinned)
+    assert not viewer.quit
+    viewer.handle(Event("key", key="q"))
+    assert viewer.quit
+
+
+def test_orbit_and_zoom_keep_the_target_and_the_distance_or_scale_it(scene_file, tmp_path, f64):
+    viewer = viewer_for(load_scene(scene_file), width=WIDTH, height=HEIGHT, folder=tmp_path)
+    target = np.asarray(viewer.camera.target)
+    distance = np.linalg.norm(np.asarray(viewer.camera.position) - target)
+    viewer.handle(Event("press", 100, 100, button="right"))
+    viewer.handle(Event("motion", 180, 130))
+    viewer.handle(Event("release", 180, 130, button="right"))
+    before = np.array([0.0, 0.5, 2.5]) - target
+    after = np.asarray(viewer.camera.position) - target
+    assert np.linalg.norm(after) == pytest.approx(distance, rel=1e-12)
+    turned = np.degrees(np.arccos(np.dot(before, after) / distance**2))
+    report("orbit: degrees turned for an 80 x 30 px drag", turned, "> 20")
+    assert turned > 20
+    viewer.handle(Event("wheel", delta=1.0))
+    assert np.linalg.norm(np.asarray(viewer.camera.position) - target) == pytest.approx(
+        distance / 1.15, rel=1e-12)
+
+
+def test_without_a_display_view_exits_2_naming_display(scene_file, monkeypatch, capsys):
+    from ti_cloth.app import cli
+    monkeypatch.delenv("DISPLAY", raising=False)
+    assert cli.main(["view", str(scene_file)]) == 2
+    err = capsys.readouterr().err
+    assert "DISPLAY" in err and "Traceback" not in err
+
+
+def _tools():
+    missing = [name for name in ("Xvfb", "xdotool") if shutil.which(name) is None]
+    return missing
+
+
+@pytest.mark.skipif(bool(_tools()), reason="needs the Debian packages xvfb and xdotool "
+                    "(apt-get install xvfb xdotool; .ci/run installs them)")
+def test_the_window_shows_the_cloth_follows_a_drag_and_quits_on_q(scene_file, tmp_path):
+    """`ti-cloth view --record` on a virtual X display: the window appears titled with the
+    scene's name; its recorded frames show the sheet (pixels unlike the background); a left
+    drag from the middle of the sheet's first row (the top edge, between the pins) 80 px to
+    the right moves the sheet's pixels right (their mean column), and after the release they
+    swing back; "q" closes it with exit code 0."""
+    display = ":97"
+    server = subprocess.Popen(["Xvfb", display, "-screen", "0", "640x480x24"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    env = dict(os.environ, DISPLAY=display)
+    out = tmp_path / "out"
+    try:
+        time.sleep(1.0)
+        viewer = subprocess.Popen([sys.executable, "-m", "ti_cloth.app.cli", "view",
+                                   str(scene_file), "--out", str(out), "--record",
+                                   "--width", str(WIDTH), "--height", str(HEIGHT)],
+                                  env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+
+        def xdotool(*args):
+            return subprocess.run(["xdotool", *args], env=env, capture_output=True, text=True)
+
+        window = ""
+        for _ in range(240):
+            window = xdotool("search", "--name", "ti_cloth: curtain").stdout.split()
+            if window or viewer.poll() is not None:
+                break
+            time.sleep(0.5)
+        assert window, viewer.communicate(timeout=10)
+        window = window[0]
+        time.sleep(2.0)                         # the sheet settles a little
+        scene = load_scene(scene_file)
+        camera = scene.camera
+        (x, y), = camera.project(scene.cloth.particle_position[4] + (0, 0.02, 0), WIDTH,
+                                 HEIGHT)[0]
+        row = HEIGHT - y                        # X11 rows go down
+        xdotool("mousemove", "--window", window, str(int(x)), str(int(row)))
+        time.sleep(0.3)
+        xdotool("mousedown", "--window", window, "1")
+        for step in range(1, 9):
+            xdotool("mousemove", "--window", window, str(int(x + 10 * step)), str(int(row)))
+            time.sleep(0.15)
+        time.sleep(1.0)
+        dragged_frame = len(list(out.glob("frame_*.png")))
+        xdotool("mouseup", "--window", window, "1")
+        time.sleep(3.0)
+        xdotool("key", "--window", window, "q")
+        code = viewer.wait(timeout=60)
+    finally:
+        if viewer.poll() is None:
+            viewer.send_signal(signal.SIGTERM)
+        server.terminate()
+        server.wait(timeout=10)
+    frames = sorted(out.glob("frame_*.png"))
+    assert code == 0, viewer.stderr.read()
+
+    def columns(path):
+        """(pixels, mean column) of the sheet: red, where the background is grey-blue."""
+        image = iio.imread(path).astype(int)
+        cloth = (image[..., 0] - image[..., 1] > 40) & (image[..., 0] - image[..., 2] > 40)
+        return cloth.sum(), np.nonzero(cloth)[1].mean()
+
+    before, during, after = (columns(frames[k]) for k in (0, dragged_frame - 1, -1))
+    report("cloth pixels, mean column: first frame, while dragged, last frame",
+           (before, during, after), "")
+    assert 5000 < before[0] < 0.5 * WIDTH * HEIGHT, "the sheet is in the window"
+    assert during[1] > before[1] + 10, "the drag pulled the sheet right"
+    assert abs(after[1] - before[1]) < abs(during[1] - before[1]) / 2, "it swung back"

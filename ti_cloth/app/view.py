@@ -1,0 +1,128 @@
+"""`ti-cloth view SCENE.toml` and `ti_cloth.view(scene_or_simulation)`: a scene running live in
+a window (ti.GUI: X11, no OpenGL or Vulkan), drawn by ti_cloth's own renderer, with the mouse
+and keys of render/viewer.py. The window shows simulated time, the real-time ratio and steps/s;
+`record` writes what it shows as PNG frames (and a GIF when it closes) into the folder.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from ..render import Camera, FrameSequence, Renderer, SurfaceStyle
+from ..render.viewer import Event, Viewer
+from ..runtime.validation import integer, require
+
+BUTTONS = {"LMB": "left", "RMB": "right"}
+KEYS = {"Escape": "escape"}
+WIRE = 1.0           # wireframe width [pixels] ("w")
+
+
+class NoDisplay(RuntimeError):
+    """No X11 display to open a window on (DISPLAY unset)."""
+
+
+def require_display() -> None:
+    """NoDisplay, naming DISPLAY, when there is no X11 display to open a window on."""
+    if not os.environ.get("DISPLAY"):
+        raise NoDisplay("no display to open a window on: DISPLAY is not set (run under X11, "
+                        "or headless with Xvfb: xvfb-run ti-cloth view scene.toml)")
+
+
+def viewer_for(subject, *, width: int = 960, height: int = 540, folder=None) -> Viewer:
+    """A Viewer of a Scene (app.scene.Scene: its simulation, camera, frame rate and ground) or
+    of a Simulation (the camera fitted to its cloth, 60 frames a second of dt steps)."""
+    from .scene import Scene
+
+    integer("width", width, 16, 4096)
+    integer("height", height, 16, 4096)
+    if isinstance(subject, Scene):
+        substeps = subject.resolved_substeps()
+        sim = subject.build(dt=subject.frame_dt / substeps)
+        name, frame_dt = subject.name, subject.frame_dt
+        camera = subject.camera or Camera.fit(subject.cloth, aspect=width / height,
+                                              **subject.camera_fit)
+        ground, style = subject.output.ground, subject.output.style
+        folder = Path(folder or subject.output.folder)
+    else:
+        from ..simulation import Simulation
+
+        require(isinstance(subject, Simulation), "scene_or_simulation", subject,
+                "a Scene (load_scene) or a Simulation")
+        sim, name = subject, "simulation"
+        substeps = max(1, round(1 / 60 / sim.dt))
+        frame_dt = substeps * sim.dt
+        camera = Camera.fit(sim.cloth, aspect=width / height)
+        ground, style = None, None
+        folder = Path(folder or Path("renders") / name)
+    style = style or SurfaceStyle()
+
+    def paint(renderer, sim, wireframe):
+        if ground is not None:
+            renderer.draw_plane(point=(0.0, ground, 0.0), checker=0.5)
+        renderer.draw_colliders(sim)
+        renderer.draw_simulation(sim, replace(style, wireframe=WIRE) if wireframe else style)
+
+    return Viewer(sim, Renderer(width, height, camera, supersample=1), camera, name=name,
+                  frame_dt=frame_dt, substeps=substeps, folder=folder, paint=paint)
+
+
+def events_of(gui) -> list[Event]:
+    """The window's pending events as Events (cursor in pixels, bottom-left origin)."""
+    import taichi as ti
+
+    found = []
+    width, height = gui.res
+    for e in gui.get_events():
+        x, y = e.pos[0] * width, e.pos[1] * height
+        if e.key in BUTTONS and e.type in (ti.GUI.PRESS, ti.GUI.RELEASE):
+            found.append(Event("press" if e.type == ti.GUI.PRESS else "release", x, y,
+                               button=BUTTONS[e.key]))
+        elif e.type == ti.GUI.MOTION and e.key == ti.GUI.WHEEL:
+            found.append(Event("wheel", x, y, delta=float(np.sign(e.delta[1]))))
+        elif e.type == ti.GUI.MOTION:
+            found.append(Event("motion", x, y))
+        elif e.type == ti.GUI.PRESS:
+            found.append(Event("key", x, y, key=KEYS.get(e.key, e.key)))
+    return found
+
+
+def view(subject, *, width: int = 960, height: int = 540, folder=None,
+         record: bool = False) -> Viewer:
+    """Open a window on `subject` (a Scene or a Simulation) and run it until "q", Escape or
+    the window is closed, a frame at most every frame_dt of wall time (real time, or as fast
+    as it can); returns the Viewer. NoDisplay without an X11 display."""
+    import taichi as ti
+
+    require_display()
+    viewer = viewer_for(subject, width=width, height=height, folder=folder)
+    gui = ti.GUI(f"ti_cloth: {viewer.name}", res=(width, height), fast_gui=False)
+    frames = FrameSequence(viewer.folder, fps=1 / viewer.frame_dt, name=viewer.name) if record else None
+    start, steps0 = time.perf_counter(), viewer.sim.step_count
+    shown = start
+    try:
+        while gui.running and not viewer.quit:
+            for event in events_of(gui):
+                viewer.handle(event)
+            viewer.advance()
+            image = viewer.image()
+            if frames is not None:
+                frames.write(image)
+            gui.set_image(np.ascontiguousarray(image[::-1].transpose(1, 0, 2)))
+            elapsed = max(time.perf_counter() - start, 1e-9)
+            steps = viewer.sim.step_count - steps0
+            gui.text(f"t = {viewer.sim.time:.3f} s   {viewer.sim.time / elapsed:.2f} x real time"
+                     f"   {steps / elapsed:,.0f} steps/s" + ("   paused" if viewer.paused else ""),
+                     (0.01, 0.98), font_size=16, color=0x202020)
+            gui.show()
+            time.sleep(max(0.0, viewer.frame_dt - (time.perf_counter() - shown)))
+            shown = time.perf_counter()
+    finally:
+        if frames is not None:
+            frames.close()
+        gui.close()
+    return viewer

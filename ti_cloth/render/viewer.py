@@ -1,0 +1,237 @@
+"""A running simulation seen through a camera and driven by input events: the lecture's "click
+one of the particles and pull it around", live (issue 39).
+
+The window (app/view.py) turns its ti.GUI events into `Event`s and shows `Viewer.image()`;
+tests send the same events without a window. A left-button press picks the particle whose
+image is nearest the cursor (within PICK_PIXELS) and holds it: while the button is down the
+particle is pinned (inverse mass 0: the integrator leaves it, its neighbours follow through
+their springs or elements, as Verlet's pins in the lecture) and put, before each frame's steps,
+where the ray through the cursor meets the plane through its grab point that faces the camera,
+with the velocity of that move. Releasing the button gives its mass back (a particle the scene
+pins keeps its pin where it was dragged) and it goes on with that velocity. A right-button
+drag orbits the camera about its target, the wheel or +/- zooms.
+
+Keys: space pause and resume, "." one frame, "r" back to the rest state, "s" save the state to
+`<folder>/<name>.view.npz` (Simulation.load_state of the same scene reads it), "w" wireframe,
+"q" or Escape quit.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from .camera import Camera
+
+PICK_PIXELS = 30.0      # a press this far from every particle's image picks none
+ORBIT = math.pi         # radians of turn for a drag across the whole window
+ZOOM = 1.15             # distance factor per wheel notch or +/- press
+KINDS = ("press", "release", "motion", "key", "wheel")
+
+
+@dataclass(frozen=True)
+class Event:
+    """One input event: kind "press" / "release" (button "left" or "right"), "motion", "key"
+    (key: a character, "escape", ...) or "wheel" (delta: notches, positive away from the
+    user); x, y: the cursor [pixels, bottom-left origin]."""
+
+    kind: str
+    x: float = 0.0
+    y: float = 0.0
+    button: str = ""
+    key: str = ""
+    delta: float = 0.0
+
+    def __post_init__(self):
+        if self.kind not in KINDS:
+            raise ValueError(f"Event.kind must be one of {list(KINDS)}, got {self.kind!r}")
+
+
+class Viewer:
+    """sim seen by `camera` in width x height pixels through `renderer` (a Renderer of that
+    size); `frame_dt` [s] of simulated time and `substeps` steps a frame; `folder` where "s"
+    saves `<name>.view.npz`."""
+
+    def __init__(self, sim, renderer, camera: Camera, *, name: str, frame_dt: float,
+                 substeps: int, folder, paint):
+        self.sim, self.renderer, self.camera = sim, renderer, camera
+        self.name, self.frame_dt, self.substeps = name, frame_dt, substeps
+        self.folder = Path(folder)
+        self.paint = paint                     # paint(renderer, sim, wireframe): the scene
+        self.width, self.height = renderer.width, renderer.height
+        self.paused = self.wireframe = self.quit = False
+        self.held = None                       # (particle, depth, scene pinned it, target)
+        self.velocity = np.zeros(3)
+        self.orbiting = None                   # the cursor where a right drag is now
+        self.cursor = (0.0, 0.0)
+        self.frames = 0
+        self.saved = None
+        self.rest_pinned = sim.pinned()
+
+    # -- events -------------------------------------------------------------------------------
+
+    def handle(self, event: Event) -> None:
+        """Act on one event (module doc)."""
+        if event.kind in ("press", "release", "motion"):
+            self.cursor = (event.x, event.y)
+        if event.kind == "press" and event.button == "left":
+            self.grab(event.x, event.y)
+        elif event.kind == "release" and event.button == "left":
+            self.let_go()
+        elif event.kind == "press" and event.button == "right":
+            self.orbiting = (event.x, event.y)
+        elif event.kind == "release" and event.button == "right":
+            self.orbiting = None
+        elif event.kind == "motion":
+            if self.orbiting is not None:
+                self.orbit(event.x - self.orbiting[0], event.y - self.orbiting[1])
+                self.orbiting = (event.x, event.y)
+            if self.held is not None:
+                particle, depth, pinned, _ = self.held
+                self.held = (particle, depth, pinned, self.unproject(event.x, event.y, depth))
+        elif event.kind == "wheel":
+            self.zoom(ZOOM ** -event.delta)
+        elif event.kind == "key":
+            self.key(event.key)
+
+    def key(self, key: str) -> None:
+        if key == " ":
+            self.paused = not self.paused
+        elif key == ".":
+            self.advance(force=True)
+        elif key == "r":
+            self.reset()
+        elif key == "s":
+            self.save()
+        elif key == "w":
+            self.wireframe = not self.wireframe
+        elif key in ("+", "="):
+            self.zoom(1 / ZOOM)
+        elif key == "-":
+            self.zoom(ZOOM)
+        elif key in ("q", "escape"):
+            self.quit = True
+
+    # -- picking and dragging -----------------------------------------------------------------
+
+    def pick(self, x: float, y: float) -> int | None:
+        """The particle whose image is nearest (x, y) [pixels], in front of the camera and
+        within PICK_PIXELS of it, else None (ghost particles are never picked)."""
+        screen, depth = self.camera.project(self.sim.positions(), self.width, self.height)
+        distance = np.hypot(screen[:, 0] - x, screen[:, 1] - y)
+        distance[(depth <= self.camera.near) | self.sim.cloth.ghost] = np.inf
+        nearest = int(np.argmin(distance))
+        return nearest if distance[nearest] <= PICK_PIXELS else None
+
+    def unproject(self, x: float, y: float, depth: float) -> np.ndarray:
+        """The point [m] at `depth` along the view direction whose image is (x, y)."""
+        right, up, forward = self.camera.basis()
+        scale = self.camera.scale(self.height)
+        across = (x - self.width / 2) / scale, (y - self.height / 2) / scale
+        if not self.camera.orthographic:
+            across = across[0] * depth, across[1] * depth
+        return (np.asarray(self.camera.position) + depth * forward + across[0] * right
+                + across[1] * up)
+
+    def grab(self, x: float, y: float) -> int | None:
+        """Hold the particle picked at (x, y), pinned where it is; returns it (or None)."""
+        particle = self.pick(x, y)
+        if particle is None:
+            return None
+        position = self.sim.positions()[particle]
+        _, depth = self.camera.project(position, self.width, self.height)
+        pinned = self.sim.pinned()
+        self.held = (particle, float(depth[0]), bool(pinned[particle]), position)
+        pinned[particle] = True
+        self.sim.model.set_pinned(pinned)
+        self.velocity = np.zeros(3)
+        return particle
+
+    def let_go(self) -> None:
+        """Release the held particle with the velocity of its last move (a particle the scene
+        pins stays pinned where it is)."""
+        if self.held is None:
+            return
+        particle, _, pinned_by_scene, _ = self.held
+        self.held = None
+        if not pinned_by_scene:
+            pinned = self.sim.pinned()
+            pinned[particle] = False
+            self.sim.model.set_pinned(pinned)
+        velocities = self.sim.velocities()
+        velocities[particle] = 0.0 if pinned_by_scene else self.velocity
+        self.sim.set_velocities(velocities)
+
+    def _hold(self) -> None:
+        """Put the held particle at its target, at rest there for the frame (a pinned
+        particle still moves with its velocity), remembering the velocity of getting there
+        over one frame for its release."""
+        particle, _, _, target = self.held
+        positions = self.sim.positions()
+        self.velocity = (target - positions[particle]) / self.frame_dt
+        positions[particle] = target
+        velocities = self.sim.velocities()
+        velocities[particle] = 0.0
+        self.sim.set_positions(positions)
+        self.sim.set_velocities(velocities)
+
+    # -- camera -------------------------------------------------------------------------------
+
+    def orbit(self, dx: float, dy: float) -> None:
+        """Turn the camera about its target: dx pixels about the world's up axis (y), dy
+        pixels about the camera's right axis, stopping short of looking straight down/up."""
+        target = np.asarray(self.camera.target)
+        offset = np.asarray(self.camera.position) - target
+        yaw, pitch = -ORBIT * dx / self.width, -ORBIT * dy / self.height
+        c, s = math.cos(yaw), math.sin(yaw)
+        offset = np.array([c * offset[0] + s * offset[2], offset[1], -s * offset[0] + c * offset[2]])
+        radius = np.linalg.norm(offset)
+        elevation = math.asin(np.clip(offset[1] / radius, -1, 1))
+        elevation = float(np.clip(elevation + pitch, -1.5, 1.5))
+        flat = np.hypot(offset[0], offset[2])
+        heading = offset[[0, 2]] / flat if flat > 0 else np.array([0.0, 1.0])
+        offset = radius * np.array([math.cos(elevation) * heading[0], math.sin(elevation),
+                                    math.cos(elevation) * heading[1]])
+        self.camera = replace(self.camera, position=tuple(target + offset), up=(0.0, 1.0, 0.0))
+
+    def zoom(self, factor: float) -> None:
+        """Move the camera towards (factor < 1) or away from its target (an orthographic one
+        shows factor x the height)."""
+        target = np.asarray(self.camera.target)
+        position = target + factor * (np.asarray(self.camera.position) - target)
+        self.camera = replace(self.camera, position=tuple(position),
+                              height=self.camera.height * factor)
+
+    # -- time ---------------------------------------------------------------------------------
+
+    def advance(self, force: bool = False) -> None:
+        """One frame of simulated time (unless paused, or `force`): the held particle put at
+        its target, then the frame's steps."""
+        if self.paused and not force:
+            return
+        if self.held is not None:
+            self._hold()
+        self.sim.step(self.substeps)
+        self.frames += 1
+
+    def reset(self) -> None:
+        """Back to the rest state at time 0, nothing held."""
+        self.held = None
+        self.sim.model.set_pinned(self.rest_pinned)
+        self.sim.restart()
+        self.frames = 0
+
+    def save(self) -> Path:
+        """The state now, in `<folder>/<name>.view.npz` (Simulation.save_state)."""
+        self.saved = self.sim.save_state(self.folder / f"{self.name}.view.npz")
+        return self.saved
+
+    def image(self) -> np.ndarray:
+        """What the camera sees now, (height, width, 3) uint8."""
+        self.renderer.begin(self.camera)
+        self.paint(self.renderer, self.sim, self.wireframe)
+        return self.renderer.end()
+
