@@ -119,7 +119,7 @@ def test_a_pinned_corner_dragged_keeps_its_pin_where_it_is_left(scene_file, tmp_
 
 def test_keys_save_a_state_that_loads_reset_pause_and_quit(scene_file, tmp_path, f64):
     """"s" writes <name>.view.npz, which Simulation.load_state of the same scene loads to the
-    same positions; "r" puts every particle back at rest at time 0 (and the pins as the scene
+    same positions (and a viewer of that Simulation picks its particles); "r" puts every particle back at rest at time 0 (and the pins as the scene
     has them); space pauses (frames take no steps) and resumes; "." steps one frame while
     paused; "w" toggles the wireframe (the image changes); "q" asks to quit."""
     scene = load_scene(scene_file)
@@ -134,6 +134,10 @@ def test_keys_save_a_state_that_loads_reset_pause_and_quit(scene_file, tmp_path,
     other.load_state(saved)
     np.testing.assert_array_equal(other.positions(), sim.positions())
     assert other.time == sim.time > 0
+    of_simulation = viewer_for(other, width=WIDTH, height=HEIGHT, folder=tmp_path)
+    assert of_simulation.name == "simulation" and of_simulation.frame_dt >= other.dt
+    assert of_simulation.pick(*of_simulation.camera.project(other.positions()[40], WIDTH,
+                                                            HEIGHT)[0][0]) == 40
     viewer.handle(Event("key", key=" "))
     steps = sim.step_count
     viewer.advance()
