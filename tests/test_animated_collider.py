@@ -156,6 +156,23 @@ def rising_knife(t):
     return KNIFE + [0.0, -0.05 + 0.4 * min(t, 0.5), 0.0]
 
 
+BLADE_THICKNESS, BLADE_DT = 0.005, 1 / 480
+
+
+def blade_sheet():
+    """A 0.5 m sheet of 5 cm cells, level at y = 0 over the blade."""
+    mesh = tc.grid_mesh(11, 11, (0.5, 0.5), plane="xz", origin=(-0.25, 0.0, -0.25))
+    return tc.Cloth(mesh, tc.Material(stretch=tc.SpringParams(2e3, 0.5),
+                                      shear=tc.SpringParams(2e2, 0.05),
+                                      bend=tc.SpringParams(1.0, 0.001)))
+
+
+def blade_simulation(edge_contact):
+    collider = tc.AnimatedMeshCollider(tc.Mesh(KNIFE, KNIFE_TRIANGLES), rising_knife,
+                                       thickness=BLADE_THICKNESS, edge_contact=edge_contact)
+    return tc.Simulation(blade_sheet(), integrator="xpbd", dt=BLADE_DT, colliders=[collider])
+
+
 def segments_through_triangle(p, q, a, b, c):
     """Whether each segment p q (N, 3) passes through triangle abc (Moller-Trumbore)."""
     e1, e2, d = b - a, c - a, q - p
@@ -180,19 +197,14 @@ def test_a_rising_blade_lifts_the_sheet_by_its_edges(f64):
     edge's line), less what one step of rise and fall can bring before the contact answers
     (what the passes' averaging leaves is well inside that). Without it the blade goes
     through and the sheet falls past."""
-    thickness, dt = 0.005, 1 / 480
-    mesh = tc.grid_mesh(11, 11, (0.5, 0.5), plane="xz", origin=(-0.25, 0.0, -0.25))
-    sheet = tc.Cloth(mesh, tc.Material(stretch=tc.SpringParams(2e3, 0.5),
-                                       shear=tc.SpringParams(2e2, 0.05),
-                                       bend=tc.SpringParams(1.0, 0.001)))
+    thickness, dt = BLADE_THICKNESS, BLADE_DT
+    mesh = blade_sheet().mesh
     edges = np.unique(np.sort(mesh.triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1),
                       axis=0)
     along = np.linspace(0.0, 1.0, 101)[:, None, None]
     results = {}
     for edge_contact in ("auto", False):
-        collider = tc.AnimatedMeshCollider(tc.Mesh(KNIFE, KNIFE_TRIANGLES), rising_knife,
-                                           thickness=thickness, edge_contact=edge_contact)
-        sim = tc.Simulation(sheet, integrator="xpbd", dt=dt, colliders=[collider])
+        sim = blade_simulation(edge_contact)
         through, nearest = 0, np.inf
         for _ in range(30):
             sim.step(8)
@@ -266,24 +278,35 @@ def test_an_animated_collider_is_refused_with_the_field_named():
 
 
 def test_candidate_lists_give_the_bits_of_a_traversal_at_every_step(f64, monkeypatch):
-    """The sheet dropped on the breathing sphere, its edges tested against every edge of the
-    sphere, with the lists as they are, and with room for one candidate (every list
-    overflows, and its particle or edge traverses the hierarchy at every step): the same
-    positions to the bit."""
+    """With the lists as they are, and with room for one candidate (every list overflows, and
+    its particle or edge traverses the hierarchy at every step), the same positions to the
+    bit: the sheet dropped on the breathing sphere (particles' lists), and the sheet lifted
+    by the blade (edges' lists, edges touching)."""
     from ti_cloth.contact import animated_contact, animated_edges
-    runs = []
-    for listed, edge_listed in ((animated_contact.LISTED, animated_edges.EDGE_LISTED), (1, 1)):
-        monkeypatch.setattr(animated_contact, "LISTED", listed)
-        monkeypatch.setattr(animated_edges, "EDGE_LISTED", edge_listed)
-        collider = tc.AnimatedMeshCollider(SPHERE, breathing, thickness=THICKNESS,
-                                           edge_contact=True)
-        sim = tc.Simulation(falling_sheet(), integrator="symplectic_euler", dt=1e-4,
-                            colliders=[collider])
-        sim.step(2500)
-        runs.append(sim.positions())
-        distance, _ = sim.collider_distance(runs[-1])
-        assert (distance < 2 * THICKNESS).sum() > 5, "the sheet lies on the sphere"
-    np.testing.assert_array_equal(runs[0], runs[1])
+    for module, name, run in ((animated_contact, "LISTED", sheet_on_the_sphere),
+                              (animated_edges, "EDGE_LISTED", sheet_on_the_blade)):
+        runs = []
+        for listed in (getattr(module, name), 1):
+            monkeypatch.setattr(module, name, listed)
+            runs.append(run())
+        np.testing.assert_array_equal(runs[0], runs[1])
+
+
+def sheet_on_the_sphere():
+    collider = tc.AnimatedMeshCollider(SPHERE, breathing, thickness=THICKNESS)
+    sim = tc.Simulation(falling_sheet(), integrator="symplectic_euler", dt=1e-4,
+                        colliders=[collider])
+    sim.step(2500)
+    distance, _ = sim.collider_distance(sim.positions())
+    assert (distance < 2 * THICKNESS).sum() > 5, "the sheet lies on the sphere"
+    return sim.positions()
+
+
+def sheet_on_the_blade():
+    sim = blade_simulation("auto")
+    sim.step(160)
+    assert sim.positions()[:, 1].max() > rising_knife(sim.time)[0, 1], "the blade lifts it"
+    return sim.positions()
 
 
 def test_every_valid_candidate_list_holds_every_triangle_a_traversal_would_visit(f64):

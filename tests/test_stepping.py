@@ -94,8 +94,14 @@ THROW = (0.0, 0.0, -8.0)   # m/s, the sheet's start velocity
 
 
 def animated_scene():
-    """A growing icosphere under one corner (a callable motion) and a plate rising under the
-    sheet (samples at 1000 fps), with friction: the thrown sheet meets both."""
+    """A growing icosphere under one corner (a callable motion), a plate rising under the
+    sheet (samples at 1000 fps), with friction, and a still blade whose edge, between two
+    columns of the sheet, only the sheet's edges meet (animated_edges.py): the thrown sheet
+    meets all three."""
+    blade = np.array([[0.5, -0.3, -0.015], [0.496, -0.3, -0.2], [0.504, -0.3, -0.2],
+                      [0.5, 1.3, -0.015], [0.496, 1.3, -0.2], [0.504, 1.3, -0.2]])
+    faces = np.array([[0, 1, 2], [3, 5, 4], [0, 3, 4], [0, 4, 1], [0, 2, 5], [0, 5, 3],
+                      [1, 4, 5], [1, 5, 2]])
     ball = tc.sphere_mesh(0.25, (0.37, 0.37, -0.26), subdivisions=1)
     square = np.array([[-0.5, -0.5, -0.03], [1.5, -0.5, -0.03], [1.5, 1.5, -0.03],
                        [-0.5, 1.5, -0.03]])
@@ -105,7 +111,8 @@ def animated_scene():
                 ball, lambda t: (0.37, 0.37, -0.26) + (ball.vertices - (0.37, 0.37, -0.26))
                 * (1.0 + 4.0 * t), thickness=0.005, static_friction=0.2),
             tc.AnimatedMeshCollider(plate, rising, fps=1000, thickness=0.005,
-                                    static_friction=0.4)]
+                                    static_friction=0.4),
+            tc.AnimatedMeshCollider(tc.Mesh(blade, faces), thickness=0.005)]
 
 
 FEATURES = {"none": {}, "tearing": dict(tearing=0.2), "strain limit": dict(strain_limit=tc.StrainLimit(0.05)),

@@ -71,7 +71,8 @@ class EdgeContacts:
 
     @staticmethod
     def structure(cloth, bodies: int) -> tuple:
-        return ("EdgeContacts", len(cloth_edges(cloth)[0]), cloth.particle_count, bodies)
+        return ("EdgeContacts", len(cloth_edges(cloth)[0]), cloth.particle_count, bodies,
+                EDGE_LISTED)
 
     def load(self, cloth, bodies: int) -> None:
         self.lists.forget()
@@ -88,18 +89,17 @@ class EdgeContacts:
 @ti.func
 def edge_against_bodies(model: ti.template(), state: ti.template(), forces: ti.template(),
                         colliders: ti.template(), stages: ti.template(), e,
-                        now: ti.template(), again: ti.template()):
-    """Cloth edge e against every animated body's edges (module doc): its ends' moves. In a
-    pass `again` (not the step's first), only an edge one of whose particles the previous
-    pass moved: the others stand where that pass found them clear."""
+                        now: ti.template()):
+    """Cloth edge e against every animated body's edges (module doc): its ends' moves. Only
+    an edge one of whose particles is marked moved: every particle for the step's first pass
+    (the particles' contact phase marks them), then those the pass before moved (the others
+    stand where it found them clear)."""
     edges, bodies = colliders.edges, colliders.bodies
     lists = edges.lists
     i, j = edges.edges[e][0], edges.edges[e][1]
     wi, wj = model.particle_inv_mass[i], model.particle_inv_mass[j]
     touched = 0
-    moved = True
-    if ti.static(again):
-        moved = edges.moved[i] != 0 or edges.moved[j] != 0
+    moved = edges.moved[i] != 0 or edges.moved[j] != 0
     if moved and wi + wj > 0 and not torn_edge(edges, state, e):
         a0, b0 = colliders.step_start[i], colliders.step_start[j]
         a, b = state.particle_position[i], state.particle_position[j]

@@ -8,7 +8,7 @@ import numpy as np
 import taichi as ti
 
 from ..runtime import backend, limits, plan
-from ..runtime.plan import Loop, Phase
+from ..runtime.plan import Loop, Phase, Repeat
 from ..runtime.transfer import upload
 from ..runtime.validation import require
 from ..state import copy_positions
@@ -139,9 +139,9 @@ class ColliderSet:
         (resolve), from its position at the step's start (step_start), then the cloth's
         edges out of the animated meshes' edges in EDGE_PASSES passes (animated_edges.py)."""
         placing = self.bodies.phases() if self.animated else ()
-        edges = sum(((Phase(Loop(self.edges.count, edge_against_bodies, k > 0)),
-                      Phase(Loop(model.particle_count, follow_edges)))
-                     for k in range(EDGE_PASSES if self.edge_contact else 0)), ())
+        edges = ((Repeat(EDGE_PASSES, Phase(Loop(self.edges.count, edge_against_bodies)),
+                         Phase(Loop(model.particle_count, follow_edges))),)
+                 if self.edge_contact else ())
         return placing + (Phase(Loop(model.particle_count, resolve)),) + edges
 
     def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
@@ -406,8 +406,11 @@ def resolve_particle(model: ti.template(), state: ti.template(), colliders: ti.t
 @ti.func
 def resolve(model: ti.template(), state: ti.template(), forces: ti.template(),
             colliders: ti.template(), stages: ti.template(), i, now: ti.template()):
-    """resolve_particle for particle i, from where it was at the step's start."""
+    """resolve_particle for particle i, from where it was at the step's start; marked for
+    the first pass over the cloth's edges (animated_edges.py)."""
     resolve_particle(model, state, colliders, i, colliders.step_start[i], now.dt)
+    if ti.static(colliders.edge_contact):
+        colliders.edges.moved[i] = 1
 
 
 @backend.kernel
