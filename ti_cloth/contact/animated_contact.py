@@ -32,7 +32,8 @@ Candidate lists (a Verlet list per particle and body, as molecular dynamics keep
 particle's traversal also writes down, in index order, the triangles whose boxes meet its
 path's box grown by 3 x SKIN x thickness, and it tests only those while it stays within SKIN x
 thickness of where it was then and the body's vertices stay within SKIN x thickness of the
-reference they were at (body_drift: beyond it, a new epoch makes every list stale). Any
+reference they were at (place_vertex, body_drift: beyond it, a new epoch makes every list
+stale). Any
 triangle whose box meets a later path's box was then within reach (the particle moved at most
 one skin, each triangle corner at most two), so the list holds every triangle a traversal
 would visit, in the same order: the answers are the same bits as a traversal every step.
@@ -170,7 +171,9 @@ class AnimatedBodies:
         self.stepped = fields.scalar(ti.i32, self.count)
         self.first_step = fields.scalar(ti.i32, self.count)
         self.reference = fields.vector(3, real, self.vertex_total)
+        self.reference_epoch = fields.scalar(ti.i32, self.vertex_total)
         self.epoch = fields.scalar(ti.i32, self.count)
+        self.drifted = fields.scalar(ti.i32, self.count)
         self.tested = fields.vector(3, ti.i32, self.triangle_total)
         self.edge_contact = fields.scalar(ti.i32, self.count)
         fields.finalize(self)
@@ -226,7 +229,9 @@ class AnimatedBodies:
         self._table = frames                   # the host's copy of the table (schedule)
         self.lists.forget()
         self.reference.fill(FAR)
+        self.reference_epoch.fill(0)
         self.epoch.fill(0)
+        self.drifted.fill(0)
         self._frame_start = frame_start
         self._cache = {}
         self.schedule(0, 0, None)
@@ -255,13 +260,12 @@ class AnimatedBodies:
         return self._cache[key]
 
     def phases(self) -> tuple:
-        """Place every vertex, then every triangle's swept box, then the blocks', then the
-        groups' (before the particles' loop of the collision stage)."""
+        """Place every vertex, then every triangle's swept box (and each body's epoch), then
+        the blocks', then the groups' (before the particles' loop of the collision stage)."""
         return (Phase(Loop(self.vertex_total, place_vertex)),
-                Phase(Loop(self.triangle_total, triangle_box)),
+                Phase(Loop(self.triangle_total, triangle_box), Loop(self.count, body_drift)),
                 Phase(Loop(self.block_total, block_box)),
-                Phase(Loop(self.group_total, group_box)),
-                Phase(Loop(self.count, body_drift)))
+                Phase(Loop(self.group_total, group_box)))
 
 
 @ti.func
@@ -290,15 +294,27 @@ def _vertex_at(bodies: ti.template(), b, local, boundary, dt):
 def place_vertex(model: ti.template(), state: ti.template(), forces: ti.template(),
                  colliders: ti.template(), stages: ti.template(), v, now: ti.template()):
     """Vertex v where its body's motion has it at the step's start and end."""
-    _place_vertex(colliders.bodies, v, now.step, now.dt)
+    bodies = colliders.bodies
+    skin = bodies.skin * colliders.thickness[bodies.collider[bodies.vertex_body[v]]]
+    _place_vertex(bodies, v, now.step, now.dt, skin)
 
 
 @ti.func
-def _place_vertex(bodies: ti.template(), v, step, dt):
+def _place_vertex(bodies: ti.template(), v, step, dt, skin):
+    """Vertex v at the step's start and end; its reference the start when its body began a
+    new epoch since (the end of the step that began it), and the body marked drifted when
+    the end is more than `skin` [m] from it (body_drift)."""
     b = bodies.vertex_body[v]
     local = v - bodies.vertex_start[b]
-    bodies.start[v] = _vertex_at(bodies, b, local, step, dt)
-    bodies.end[v] = _vertex_at(bodies, b, local, step + 1, dt)
+    start = _vertex_at(bodies, b, local, step, dt)
+    end = _vertex_at(bodies, b, local, step + 1, dt)
+    bodies.start[v] = start
+    bodies.end[v] = end
+    if bodies.reference_epoch[v] != bodies.epoch[b]:
+        bodies.reference[v] = start
+        bodies.reference_epoch[v] = bodies.epoch[b]
+    if (end - bodies.reference[v]).norm() > skin or skin <= 0.0:
+        ti.atomic_max(bodies.drifted[b], 1)          # an integer: the same whatever the order
 
 
 @ti.func
@@ -352,18 +368,13 @@ def group_box(model: ti.template(), state: ti.template(), forces: ti.template(),
 def body_drift(model: ti.template(), state: ti.template(), forces: ti.template(),
                colliders: ti.template(), stages: ti.template(), b, now: ti.template()):
     """Body b's vertices against where they were when its candidate lists were made: once
-    one has moved more than SKIN x thickness, every particle's list of it is stale (a new
-    epoch) and the positions now are the new reference."""
+    one has moved more than SKIN x thickness (place_vertex marks it), every list of it is
+    stale (a new epoch), and the positions now become the new reference (each vertex takes
+    its own at the next step's start: the same positions)."""
     bodies = colliders.bodies
-    skin = bodies.skin * colliders.thickness[bodies.collider[b]]
-    first = bodies.vertex_start[b]
-    drift = 0.0
-    for v in range(first, first + bodies.vertex_count[b]):
-        drift = ti.max(drift, (bodies.end[v] - bodies.reference[v]).norm())
-    if drift > skin or skin <= 0.0:
+    if bodies.drifted[b]:
         bodies.epoch[b] += 1
-        for v in range(first, first + bodies.vertex_count[b]):
-            bodies.reference[v] = bodies.end[v]
+        bodies.drifted[b] = 0
 
 
 @ti.func
