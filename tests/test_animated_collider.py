@@ -40,6 +40,7 @@ def frames_inside(collider, motion, seconds=0.5, fps=50):
     return np.array(inside), sim
 
 
+@pytest.mark.slow
 def test_a_breathing_sphere_keeps_a_falling_sheet_outside_in_every_frame(f64):
     """A sheet falls onto a sphere whose radius swings +-30 % once a second: in no frame is a
     particle inside the sphere as it is at the frame's time (the winding number above).
@@ -188,6 +189,7 @@ def segments_through_triangle(p, q, a, b, c):
     return ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t >= 0) & (t <= 1)
 
 
+@pytest.mark.slow
 def test_a_rising_blade_lifts_the_sheet_by_its_edges(f64):
     """A blade rises under a sheet of 5 cm cells, its edge between two columns: no particle
     is ever within reach of its faces (they lean 0.8 degrees from the vertical), so only the
@@ -277,6 +279,7 @@ def test_an_animated_collider_is_refused_with_the_field_named():
         tc.AnimatedMeshCollider(SPHERE, path=lambda t: (t, 0, 0))
 
 
+@pytest.mark.slow
 def test_candidate_lists_give_the_bits_of_a_traversal_at_every_step(f64, monkeypatch):
     """With the lists as they are, and with room for one candidate (every list overflows, and
     its particle or edge traverses the hierarchy at every step), the same positions to the

@@ -145,8 +145,10 @@ FEATURES = {"none": {}, "tearing": dict(tearing=0.2), "strain limit": dict(strai
                          # tearable paths, with the stages' shared code tested above
                          + [("implicit_euler", "sheet", "tearing")]
                          + [("xpbd", "sheet", "moving colliders"), ("rk4", "sheet", "moving colliders"),
-                            ("symplectic_euler", "sheet", "animated colliders"),
-                            ("xpbd", "sheet", "animated colliders"),
+                            pytest.param("symplectic_euler", "sheet", "animated colliders",
+                                         marks=pytest.mark.slow),
+                            pytest.param("xpbd", "sheet", "animated colliders",
+                                         marks=pytest.mark.slow),
                             ("xpbd", "garment", "attached"),
                             ("rk4", "sheet", "all but strain limit"),
                             ("symplectic_euler", "braced strands", "none"),

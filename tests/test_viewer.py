@@ -187,6 +187,7 @@ def _tools():
     return missing
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(bool(_tools()), reason="needs the Debian packages xvfb and xdotool "
                     "(apt-get install xvfb xdotool; .ci/run installs them)")
 def test_the_window_shows_the_cloth_follows_a_drag_and_quits_on_q(scene_file, tmp_path):
