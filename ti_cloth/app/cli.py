@@ -265,6 +265,11 @@ def view(scene_path, *, out=None, width=960, height=540, arch="cpu", record=Fals
     try:
         require_display()
         scene = load_scene(scene_path)
+        if scene.automatic:
+            from .advisor import resolve
+
+            scene, why = resolve(scene, out or scene.output.folder, arch=arch)
+            print(f"integrator auto: {why}", file=sys.stderr)
         backend.ensure(arch=arch, precision=scene.precision)
         open_view(scene, width=width, height=height, folder=out, record=record)
     except (SceneError, FileNotFoundError, NoDisplay, ValueError) as err:

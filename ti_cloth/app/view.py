@@ -101,7 +101,8 @@ def view(subject, *, width: int = 960, height: int = 540, folder=None,
     require_display()
     viewer = viewer_for(subject, width=width, height=height, folder=folder)
     gui = ti.GUI(f"ti_cloth: {viewer.name}", res=(width, height), fast_gui=False)
-    frames = FrameSequence(viewer.folder, fps=1 / viewer.frame_dt, name=viewer.name) if record else None
+    frames = (FrameSequence(viewer.folder, fps=1 / viewer.frame_dt, name=viewer.name)
+              if record else None)
     start, steps0 = time.perf_counter(), viewer.sim.step_count
     shown = start
     try:

@@ -210,9 +210,11 @@ class AnimatedBodies:
             frame += self.rows[b] * c.mesh.vertex_count
         triangles = np.concatenate(triangles)
         tested = np.concatenate(tested)
+        per_body = np.split(tested, np.cumsum([c.mesh.triangle_count
+                                                for _, c in self.members])[:-1])
         upload(((self.triangles, triangles), (self.tested, tested),
-                (self.edge_contact, [int(t.any()) for t in np.split(tested, np.cumsum(
-                    [c.mesh.triangle_count for _, c in self.members])[:-1])]), (self.vertex_body, owner),
+                (self.edge_contact, [int(t.any()) for t in per_body]),
+                (self.vertex_body, owner),
                 (self.triangle_body, np.asarray(owner)[triangles[:, 0]]),
                 (self.collider, [i for i, _ in self.members]), (self.body_of, body_of),
                 (self.vertex_start, vertex_start), (self.frame_start, frame_start),
@@ -378,7 +380,7 @@ def body_drift(model: ti.template(), state: ti.template(), forces: ti.template()
 
 
 @ti.func
-def box_meets(bodies: ti.template(), k, lo, hi):
+def _meets(bodies: ti.template(), k, lo, hi):
     return (bodies.lo[k] <= hi).all() and (lo <= bodies.hi[k]).all()
 
 
@@ -544,19 +546,19 @@ def visit_near(bodies: ti.template(), lists: ti.template(), slot, b, lo, hi, sta
         blocks = bodies.triangle_total
         groups = blocks + bodies.block_total
         for g in range(bodies.body_groups[b], bodies.body_groups[b + 1]):
-            if box_meets(bodies, groups + g, lo - reach, hi + reach):
+            if _meets(bodies, groups + g, lo - reach, hi + reach):
                 for k in range(bodies.group_first[g], bodies.group_first[g + 1]):
-                    if box_meets(bodies, blocks + k, lo - reach, hi + reach):
+                    if _meets(bodies, blocks + k, lo - reach, hi + reach):
                         for f in range(bodies.block_first[k], bodies.block_first[k + 1]):
                             if not _wanted(bodies, f, edges):
                                 continue
-                            if stale and box_meets(bodies, f, lo - reach, hi + reach):
+                            if stale and _meets(bodies, f, lo - reach, hi + reach):
                                 if count >= 0 and count < lists.size:
                                     lists.listed[slot * lists.size + count] = f
                                     count += 1
                                 else:
                                     count = -1
-                            if box_meets(bodies, f, lo, hi):
+                            if _meets(bodies, f, lo, hi):
                                 found = visit(bodies, f, query, found)
         if stale:
             lists.count[slot] = count
@@ -564,7 +566,7 @@ def visit_near(bodies: ti.template(), lists: ti.template(), slot, b, lo, hi, sta
     else:
         for k in range(lists.count[slot]):
             f = lists.listed[slot * lists.size + k]
-            if box_meets(bodies, f, lo, hi):
+            if _meets(bodies, f, lo, hi):
                 found = visit(bodies, f, query, found)
     return found
 

@@ -3,28 +3,32 @@
 animated_contact.py keeps every particle thickness away from a body's triangles; a sharp
 edge of the body (a shin, a shoulder's ridge, the rim of a box) can still pass between two
 such particles, through the cloth edge joining them. So after the particles' contacts, every
-cloth edge is tested against the edges of the body triangles whose swept boxes meet its own
-(each body edge once, by the first of its triangles in the hierarchy's order, and only
-the edges sharp enough to pass through a cloth edge unless edge_contact=True: `tested`;
-the triangles found as the particles find theirs, through candidate lists kept while the
-edge's two particles stay within a skin of where they were: animated_contact.py):
-their closest points at the step's end, interior to both, nearer than the thickness or on
-the other side of each other than at the step's start (proximity.edge_contact, the test
-self-collision makes of two cloth edges, Bridson et al. 2002 section 6.2). The deepest is
-answered as a one-sided position-based constraint C = distance - thickness >= 0 on the cloth
-edge's two particles (the body's mass infinite): particle k, with gradient weight
-g = (1 - s, s) and inverse mass w_k, moves by -w_k g_k C n / W, W = w_i g_i^2 + w_j g_j^2
-(Müller et al. 2007, eq. 8-9), W no less than (w_i + w_j) / 4: a contact near a pinned end
-would otherwise swing the free end by C / g, without bound as the contact nears the pin; the
-floor holds that lever to 2 (it never binds for two free particles of equal mass). Each particle takes the mean of its edges' moves, gathered in edge order
-(no atomics: reruns and thread counts give the same bits), and its velocity loses what
-approaches the body along the move's direction, relative to the mean velocity of the body
-points it touched (the colliders' "no approach velocity", colliders.py; adding dx / dt
-instead would fling a particle pushed out of a fresh contact). Edge contacts take no
-friction: the particles' own contacts carry it. The mean under-corrects a particle whose edges are pushed different ways
-(one sitting on a ridge), so the pass runs EDGE_PASSES times: on a blade's edge the gap left
-is then 1.6 % of the thickness, 19 % after one. Edges whose spring tore, and bodies made with edge_contact=False, are
-skipped.
+cloth edge is tested against the body edges of the triangles whose swept boxes meet its own:
+each body edge once, by the first of its triangles in the hierarchy's order, and only the
+edges sharp enough to reach across a cloth edge unless edge_contact=True (`tested`,
+animated_contact.tested_edges); the triangles are found as the particles find theirs,
+through candidate lists kept while the edge's two particles stay within a skin of where they
+were (animated_contact.py). The test (proximity.edge_contact, the one self-collision makes of
+two cloth edges; Bridson et al. 2002, section 6.2): the closest points at the step's end,
+interior to both edges, nearer than the thickness or on the other side of each other than at
+the step's start.
+
+The deepest contact is answered as a one-sided position-based constraint
+C = distance - thickness >= 0 on the cloth edge's two particles, the body's mass infinite:
+particle k, with gradient weight g = (1 - s, s) and inverse mass w_k, moves by
+-w_k g_k C n / W, W = w_i g_i^2 + w_j g_j^2 (Müller et al. 2007, eq. 8-9), W no less than
+(w_i + w_j) / 4: a contact near a pinned end would otherwise swing the free end by C / g,
+without bound as the contact nears the pin; the floor holds that lever to 2 (it never binds
+for two free particles of equal mass). Each particle takes the mean of its edges' moves,
+gathered in edge order (no atomics: reruns and thread counts give the same bits), and its
+velocity loses what approaches the body along the move, relative to the mean velocity of the
+body points it touched (the colliders' "no approach velocity", colliders.py; adding dx / dt
+instead flings a particle pushed out of a fresh contact). Edge contacts take no friction: the
+particles' own contacts carry it. The mean under-corrects a particle whose edges push it
+different ways (one sitting on a ridge), so the pass runs EDGE_PASSES times, each after the
+first only over edges whose particles the pass before moved: on a blade's edge the gap left
+is then under 2 % of the thickness, 19 % after one pass. Edges whose spring tore, and bodies
+with no tested edge, are skipped.
 
 Not covered: a body's vertex (a cone's tip) through the inside of a cloth triangle.
 """
@@ -46,13 +50,12 @@ EDGE_PASSES = 3     # passes over the edges a step (each particle takes its cont
 class EdgeContacts:
     """A cloth's edges for contact with animated meshes: each edge's particles and spring,
     each edge's moves of its two ends (move[2 e + k]), whether it touched and the velocity of
-    the body point it touched over the step (surface[e]), and per particle whether the last
-    pass moved it (moved[i]) and
-    the slots 2 e + k that move it (CSR in edge order: slot[start[i]:start[i + 1]])."""
+    the body point it touched over the step (surface[e]); per particle whether the last pass
+    moved it (moved[i]) and the slots 2 e + k that move it (CSR in edge order:
+    slot[start[i]:start[i + 1]]); and the edges' candidate lists (`bodies` animated bodies)."""
 
     def __init__(self, cloth, bodies: int):
-        edges, springs = cloth_edges(cloth)
-        self.count = len(edges)
+        self.count = len(cloth_edges(cloth)[0])
         self.particle_count = cloth.particle_count
         real = backend.real()
         fields = backend.FieldGroup()
@@ -65,7 +68,6 @@ class EdgeContacts:
         self.slot = fields.scalar(ti.i32, max(2 * self.count, 1))
         self.moved = fields.scalar(ti.i32, self.particle_count)
         fields.finalize(self)
-        self.bodies = bodies
         self.lists = CandidateLists(max(self.count, 1) * bodies, 2, EDGE_LISTED)
         self.load(cloth, bodies)
 
@@ -75,6 +77,7 @@ class EdgeContacts:
                 EDGE_LISTED)
 
     def load(self, cloth, bodies: int) -> None:
+        """Upload the cloth's edges, springs and particles' slots; every list made anew."""
         self.lists.forget()
         edges, springs = cloth_edges(cloth)
         ends = edges.ravel()

@@ -187,7 +187,8 @@ class Viewer:
         offset = np.asarray(self.camera.position) - target
         yaw, pitch = -ORBIT * dx / self.width, -ORBIT * dy / self.height
         c, s = math.cos(yaw), math.sin(yaw)
-        offset = np.array([c * offset[0] + s * offset[2], offset[1], -s * offset[0] + c * offset[2]])
+        offset = np.array([c * offset[0] + s * offset[2], offset[1],
+                           -s * offset[0] + c * offset[2]])
         radius = np.linalg.norm(offset)
         elevation = math.asin(np.clip(offset[1] / radius, -1, 1))
         elevation = float(np.clip(elevation + pitch, -1.5, 1.5))
