@@ -199,7 +199,26 @@ API_MISTAKES = [
     (lambda: tc.Plane(point=(0, 1e300, 0)), "Plane.point[1]"),
     (lambda: tc.Keyframes((0.0,), ((1e300, 0, 0),)), "Keyframes.values"),
     (lambda: tc.Simulation(sheet(), integrator=["rk4"]), "integrator"),
+    # issue 40: an int too big for a float, a name where a body goes, indices out of range
+    (lambda: tc.SpringParams(k=10**400), "SpringParams.k"),
+    (lambda: tc.Sphere(radius=-10**400), "Sphere.radius"),
+    (lambda: tc.Material(density=10**400), "Material.density"),
+    (lambda: tc.stable_dt("cloth"), "cloth"),
+    (lambda: tc.stable_dt(sheet(), pinned=[0, 99]), "pinned"),
+    (lambda: tc.stable_dt(sheet(), pinned=np.ones(3, bool)), "pinned.shape"),
 ]
+
+
+def test_stable_dt_takes_pins_as_indices_or_a_mask_alike():
+    """Pins given as indices (issue 40: they failed inside numpy with a broadcast message)
+    give the step the same pins as a mask give; none pinned differs (the free sheet's limit
+    is its own)."""
+    cloth = sheet(6)
+    mask = np.zeros(cloth.particle_count, bool)
+    mask[[0, 5, 17]] = True
+    by_index = tc.stable_dt(cloth, "symplectic_euler", pinned=[0, 5, 17])
+    assert by_index == tc.stable_dt(cloth, "symplectic_euler", pinned=mask)
+    assert by_index != tc.stable_dt(cloth, "symplectic_euler", pinned=[])
 
 
 @pytest.mark.parametrize("call, named", API_MISTAKES, ids=[m[1] for m in API_MISTAKES])

@@ -5,22 +5,26 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 
+from .body.topology import Cloth, index_mask
 from .integrators import make_integrator
 from .runtime import limits
-from .runtime.validation import in_range
+from .runtime.validation import in_range, require
 
 AUTO_MAX_DT = 1.0 / 240.0     # "auto" steps: at most half the predicted stable step and at most this [s]
 
 
 def stable_dt(cloth, integrator="symplectic_euler", drag: float = 0.0, pinned=None) -> float:
     """Largest stable step [s] predicted for `integrator` (a name or an Integrator) on `cloth`
-    with uniform drag [1/s] and `pinned` (default the cloth's pins): inf when it has no limit,
+    with uniform drag [1/s] and `pinned` (particle indices or an (N,) bool mask; default the
+    cloth's pins): inf when it has no limit,
     0 when no stable step exists (explicit Euler on undamped springs). Each integrator's
     docstring states its rule."""
+    require(isinstance(cloth, Cloth), "cloth", cloth if isinstance(cloth, str) else type(cloth),
+            "a Cloth (tc.Cloth(mesh, material), tc.string(...), ...)")
     drag = in_range("drag", drag, limits.DRAG)
-    pinned = cloth.pinned if pinned is None else np.asarray(pinned, bool)
+    pinned = cloth.pinned if pinned is None else index_mask("pinned", pinned,
+                                                            cloth.particle_count)
     return make_integrator(integrator).stable_step(cloth, drag, pinned)
 
 def auto_dt(cloth, integrator="symplectic_euler", drag: float = 0.0, pinned=None) -> float:

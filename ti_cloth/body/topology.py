@@ -258,8 +258,8 @@ class Cloth:
         n = mesh.vertex_count
         self.particle_position = mesh.vertices
 
-        self.pinned = _index_mask("pinned", pinned, n)
-        self.ghost = _index_mask("ghost", () if ghost is None else ghost, n)
+        self.pinned = index_mask("pinned", pinned, n)
+        self.ghost = index_mask("ghost", () if ghost is None else ghost, n)
         self.hem = np.zeros(n, bool)
         if particle_mass is not None:
             mass = as_array("particle_mass", particle_mass, np.float64, (n,)).copy()
@@ -482,7 +482,7 @@ class Cloth:
                 f"pinned={int(self.pinned.sum())}, mass={self.particle_mass.sum():.4g} kg)")
 
 
-def _index_mask(field: str, value, n: int) -> np.ndarray:
+def index_mask(field: str, value, n: int) -> np.ndarray:
     """(n,) bool mask from particle indices or an (n,) bool mask; ValueError naming `field`."""
     value = np.asarray(value)
     require(value.size == 0 or value.dtype == bool or np.issubdtype(value.dtype, np.integer),
@@ -507,7 +507,7 @@ def _hem_mask(hem, mesh: Mesh) -> np.ndarray:
     if isinstance(hem, str):
         require(hem in names, "hem", hem, f"one of {list(names)} or particle indices")
         hem = names[hem]
-    return _index_mask("hem", hem, mesh.vertex_count)
+    return index_mask("hem", hem, mesh.vertex_count)
 
 
 def _explicit_springs(springs, n: int) -> tuple[np.ndarray, np.ndarray]:

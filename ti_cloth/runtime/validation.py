@@ -14,15 +14,25 @@ def require(ok: bool, field: str, value, allowed: str) -> None:
         raise ValueError(f"{field} must be {allowed}, got {value!r}")
 
 
+def _float(field: str, value, allowed: str) -> float:
+    """`value`, a number and not a bool, as a float; an int too big for one (10**400) is
+    refused like any value out of range, naming the field."""
+    require(isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool),
+            field, value, allowed)
+    try:
+        return float(value)
+    except OverflowError:
+        raise ValueError(f"{field} must be {allowed}, got an integer of {len(str(value))} "
+                         "digits") from None
+
+
 def finite_number(field: str, value, minimum: float | None = None, *, strict: bool = False,
                   unit: str = "") -> float:
     """`value` as a float, finite and >= minimum (> minimum when `strict`)."""
     unit = f" {unit}" if unit else ""
     bound = "" if minimum is None else f" {'>' if strict else '>='} {minimum}{unit}"
     allowed = f"a finite number{bound}"
-    require(isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool),
-            field, value, allowed)
-    value = float(value)
+    value = _float(field, value, allowed)
     require(math.isfinite(value), field, value, allowed)
     if minimum is not None:
         require(value > minimum if strict else value >= minimum, field, value, allowed)
@@ -71,9 +81,7 @@ def _shape_text(shape: tuple) -> str:
 def in_range(field: str, value, allowed) -> float:
     """`value` as a float in the limits.Range `allowed`: 'must be a finite number in [a, b]'."""
     text = f"a finite number {allowed.text()}"
-    require(isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool),
-            field, value, text)
-    value = float(value)
+    value = _float(field, value, text)
     require(math.isfinite(value) and allowed.low <= value <= allowed.high, field, value, text)
     return value
 
