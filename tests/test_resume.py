@@ -133,6 +133,11 @@ def test_a_state_of_another_simulation_or_format_is_refused(f64, tmp_path):
     (tmp_path / "text.npz").write_text("not a state")
     with pytest.raises(StateMismatch, match="not a ti_cloth saved state"):
         sim.load_state(tmp_path / "text.npz")
+    whole = path.read_bytes()                        # cut short: a copy stopped half-way
+    for size in (len(whole) // 2, len(whole) - 30, 100):
+        (tmp_path / "cut.npz").write_bytes(whole[:size])
+        with pytest.raises(StateMismatch, match="cut.npz is damaged"):
+            sim.load_state(tmp_path / "cut.npz")
     with pytest.raises(FileNotFoundError, match="saved state not found"):
         sim.load_state(tmp_path / "absent.npz")
     sim.load_state(path)                             # its own state still loads
@@ -225,3 +230,10 @@ def test_a_run_killed_with_sigkill_and_resumed_writes_the_same_bytes(tmp_path, c
     scene.write_text(SCENE.replace("tearing = 0.5", "tearing = 0.6"))
     assert cli.main(["run", str(scene), "--out", str(killed), "--resume", *ARGUMENTS]) == 2
     assert "different simulation" in capsys.readouterr().err
+    scene.write_text(SCENE)                          # a state cut short (issue 40): refused
+    state = killed / "resume.state.npz"
+    state.write_bytes(state.read_bytes()[:state.stat().st_size // 2])
+    assert cli.main(["run", str(scene), "--out", str(killed), "--resume", *ARGUMENTS]) == 2
+    err = capsys.readouterr().err
+    assert str(state) in err and "damaged" in err and "without --resume" in err
+    assert "Traceback" not in err

@@ -15,6 +15,8 @@ import dataclasses
 import enum
 import hashlib
 import json
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -100,8 +102,10 @@ def read(path, fingerprint_: str) -> tuple[dict, dict[str, np.ndarray]]:
         with np.load(path, allow_pickle=False) as data:
             header = json.loads(str(data["header"]))
             arrays = {key: data[key] for key in data.files if key != "header"}
-    except (OSError, ValueError, KeyError) as err:
-        raise StateMismatch(f"{path} is not a ti_cloth saved state ({err})") from None
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as err:
+        raise StateMismatch(f"{path} is damaged or not a ti_cloth saved state (a copy that "
+                            f"stopped half-way, a full disk? {type(err).__name__}: {err})"
+                            ) from None
     if header.get("format") != FORMAT:
         raise StateMismatch(f"{path} holds a state of format {header.get('format')!r}; this "
                             f"ti_cloth reads format {FORMAT} only: run the simulation again")

@@ -115,7 +115,9 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
         result = run_scene(scene, folder=out, frames=frames, progress=progress, output=output,
                            resume=resume)
     except (FileNotFoundError, StateMismatch) as err:
-        print(f"error: {err}", file=sys.stderr)
+        way_out = ("\nto start again from the first frame, run it without --resume"
+                   if resume else "")
+        print(f"error: {err}{way_out}", file=sys.stderr)
         return 2, []
     folder = result.frames[0].parent if result.frames else (out or scene.output.folder)
     resumed = ("" if result.resumed_from is None
