@@ -156,6 +156,26 @@ def test_keys_save_a_state_that_loads_reset_pause_and_quit(scene_file, tmp_path,
     assert viewer.quit
 
 
+def test_a_run_that_diverges_pauses_the_viewer_until_r(scene_file, tmp_path, f64):
+    """The same sheet with symplectic Euler at ten times its stable step: the first frame
+    diverges, and the viewer keeps the error and pauses (frames take no steps) instead of
+    raising; "r" starts it again from rest."""
+    scene = load_scene(scene_file)
+    stable = tc.stable_dt(scene.cloth, "symplectic_euler", 0.5)
+    text = SCENE.replace('integrator = "xpbd"', 'integrator = "symplectic_euler"').replace(
+        "substeps = 8", f"dt = {10 * stable:.6g}")
+    scene_file.write_text(text)
+    viewer = viewer_for(load_scene(scene_file), width=WIDTH, height=HEIGHT, folder=tmp_path)
+    for _ in range(3):
+        viewer.advance()
+    assert isinstance(viewer.diverged, tc.SimulationDiverged) and viewer.paused
+    steps = viewer.sim.step_count
+    viewer.advance(force=True)
+    assert viewer.sim.step_count == steps
+    viewer.handle(Event("key", key="r"))
+    assert viewer.diverged is None and not viewer.paused and viewer.sim.time == 0.0
+
+
 def test_orbit_and_zoom_keep_the_target_and_the_distance_or_scale_it(scene_file, tmp_path, f64):
     viewer = viewer_for(load_scene(scene_file), width=WIDTH, height=HEIGHT, folder=tmp_path)
     target = np.asarray(viewer.camera.target)

@@ -119,6 +119,9 @@ def view(subject, *, width: int = 960, height: int = 540, folder=None,
             gui.text(f"t = {viewer.sim.time:.3f} s   {viewer.sim.time / elapsed:.2f} x real time"
                      f"   {steps / elapsed:,.0f} steps/s" + ("   paused" if viewer.paused else ""),
                      (0.01, 0.98), font_size=16, color=0x202020)
+            if viewer.diverged is not None:
+                gui.text(f"{viewer.diverged}"[:110] + ": press r to start again", (0.01, 0.93),
+                         font_size=14, color=0xA01010)
             gui.show()
             time.sleep(max(0.0, viewer.frame_dt - (time.perf_counter() - shown)))
             shown = time.perf_counter()

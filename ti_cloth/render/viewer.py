@@ -11,6 +11,8 @@ with the velocity of that move. Releasing the button gives its mass back (a part
 pins keeps its pin where it was dragged) and it goes on with that velocity. A right-button
 drag orbits the camera about its target, the wheel or +/- zooms.
 
+A step that diverges pauses the viewer with the error on screen until "r".
+
 Keys: space pause and resume, "." one frame, "r" back to the rest state, "s" save the state to
 `<folder>/<name>.view.npz` (Simulation.load_state of the same scene reads it), "w" wireframe,
 "q" or Escape quit.
@@ -24,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import SimulationDiverged
 from .camera import Camera
 
 PICK_PIXELS = 30.0      # a press this far from every particle's image picks none
@@ -69,6 +72,7 @@ class Viewer:
         self.cursor = (0.0, 0.0)
         self.frames = 0
         self.saved = None
+        self.diverged = None                   # the SimulationDiverged that paused it
         self.rest_pinned = sim.pinned()
 
     # -- events -------------------------------------------------------------------------------
@@ -210,17 +214,23 @@ class Viewer:
 
     def advance(self, force: bool = False) -> None:
         """One frame of simulated time (unless paused, or `force`): the held particle put at
-        its target, then the frame's steps."""
-        if self.paused and not force:
+        its target, then the frame's steps. A simulation that diverges (pulled too hard for
+        its integrator and step) pauses, keeping the error in `diverged` until "r"."""
+        if (self.paused and not force) or self.diverged is not None:
             return
         if self.held is not None:
             self._hold()
-        self.sim.step(self.substeps)
+        try:
+            self.sim.step(self.substeps)
+        except SimulationDiverged as err:
+            self.diverged, self.paused, self.held = err, True, None
+            return
         self.frames += 1
 
     def reset(self) -> None:
         """Back to the rest state at time 0, nothing held."""
-        self.held = None
+        self.held = self.diverged = None
+        self.paused = False
         self.sim.model.set_pinned(self.rest_pinned)
         self.sim.restart()
         self.frames = 0
