@@ -94,7 +94,9 @@ SCENE_MISTAKES = [
     (dict(body_keys="rows = 100000\ncols = 100000"), "bodies[0].rows"),
     (dict(body_keys="rows = 100000000000000000000"), "bodies[0].rows"),
     (dict(body_keys="size = [1e300, 1e300]"), "size[0]"),
-    (dict(body_keys="origin = [1e300, 0, 0]"), "vertices"),
+    (dict(body_keys="origin = [1e300, 0, 0]"), "bodies[0].origin"),     # issue 40: the key
+    (dict(camera="position = [1e300, 0.5, 2]"), "camera.position"),     # written, not a
+    (dict(camera="position = [0, 0.5, 2]\ntarget = [0, -1e300, 0]"), "camera.target"),  # later one
     (dict(body="string", body_keys="n = 1000000000"), "bodies[0].n"),
     (dict(body="tet_block", body_keys="cells = [1000, 1000, 1000]"), "cells"),
     (dict(body="hair", body_keys="strands = 100000000"), "bodies[0].strands"),

@@ -384,7 +384,8 @@ def _collider(table: Table, folder: Path):
         table.optional(options, "edge_contact", table.switch)
         mesh, samples, fps = table.build(read_animation, **files)
         scale = table.number("scale", 1.0, within=limits.SCALE)
-        translate = np.asarray(table.vector("translate", (0.0, 0.0, 0.0), unit="m"))
+        translate = np.asarray(table.vector("translate", (0.0, 0.0, 0.0), unit="m",
+                                               within=limits.COORDINATE))
         collider = table.build(AnimatedMeshCollider, Mesh(mesh.vertices * scale + translate,
                                                           mesh.triangles),
                                samples * scale + translate, fps=fps, **options)

@@ -205,7 +205,7 @@ def read_body(table: Table, folder: Path, colliders=()) -> tuple[Body, tuple]:
             options["cols"] = table.integer("cols", 16, within=limits.GRID_SIDE)
             table.optional(options, "size", "vector", length=2, unit="m")
             table.optional(options, "plane", "string", choices=sorted(PLANES))
-            table.optional(options, "origin", "vector", unit="m")
+            table.optional(options, "origin", "vector", unit="m", within=limits.COORDINATE)
             mesh = table.build(grid_mesh, **options)
             names = grid_names(mesh)
         elif kind == "mesh":
@@ -244,7 +244,7 @@ def read_body(table: Table, folder: Path, colliders=()) -> tuple[Body, tuple]:
     else:
         table.optional(options, "cells", "vector", unit="cubes")
         table.optional(options, "size", "vector", unit="m")
-        table.optional(options, "origin", "vector", unit="m")
+        table.optional(options, "origin", "vector", unit="m", within=limits.COORDINATE)
         table.optional(options, "density", unit="kg/m^3")
         _spring_options(table, options, "stretch")
         body = Body(kind, options)
@@ -293,7 +293,8 @@ def _garment(table: Table) -> Garment:
         if p.has("wrap"):
             piece = p.build(piece.wrapped, p.number("wrap", unit="m", within=limits.LENGTH),
                             p.number("flare", 0.0, minimum=0.0))
-        piece = p.build(piece.moved, p.vector("translate", (0.0, 0.0, 0.0), unit="m"),
+        piece = p.build(piece.moved, p.vector("translate", (0.0, 0.0, 0.0), unit="m",
+                                              within=limits.COORDINATE),
                         p.vector("rotate", (0.0, 0.0, 0.0), unit="rad"))
         p.finish()
         pieces.append(piece)
@@ -406,7 +407,7 @@ def _selection(table: Table, key: str, count: int, named: dict | None = None,
     value = table.value(key, [])
     if isinstance(value, dict) and positions is not None:
         ball = table.table(key)
-        centre = np.array(ball.vector("centre", unit="m"))
+        centre = np.array(ball.vector("centre", unit="m", within=limits.COORDINATE))
         radius = ball.number("radius", minimum=0.0, unit="m")
         ball.finish()
         if not (np.linalg.norm(positions - centre, axis=1) <= radius).any():
@@ -437,7 +438,8 @@ def read_mesh_file(table: Table, folder: Path) -> Mesh:
     except ValueError as err:
         table.fail(f"{table.path('path')}: {err}")
     scale = table.number("scale", 1.0, within=limits.SCALE)
-    translate = np.asarray(table.vector("translate", (0.0, 0.0, 0.0), unit="m"))
+    translate = np.asarray(table.vector("translate", (0.0, 0.0, 0.0), unit="m",
+                                       within=limits.COORDINATE))
     return Mesh(mesh.vertices * scale + translate, mesh.triangles, uvs=mesh.uvs)
 
 

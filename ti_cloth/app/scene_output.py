@@ -41,8 +41,8 @@ def read_camera(table: Table):
     table.optional(options, "up", "vector")
     table.optional(options, "fov", within=limits.FOV)
     if table.has("position"):
-        options["position"] = table.vector("position", unit="m")
-        table.optional(options, "target", "vector", unit="m")
+        options["position"] = table.vector("position", unit="m", within=limits.COORDINATE)
+        table.optional(options, "target", "vector", unit="m", within=limits.COORDINATE)
         camera = table.build(Camera, **options)
         table.finish()
         return camera, {}
