@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import use
+from helpers import report, use
 
 import ti_cloth as tc
 from ti_cloth.app import signals
@@ -330,6 +330,35 @@ def test_ensure_keeps_the_runtime_a_caller_chose_when_asked_for_no_thread_count(
         assert backend.config().precision == "f32"
     finally:
         use("f64")
+
+
+@pytest.mark.parametrize("keys, says, counted", [
+    (dict(simulation="fps = 10\nduration = 1.5\ntearing = 1e-9", body_keys='pinned = ["left"]',
+          forces="wind = { velocity = [6, 0, 3] }"), "tearing = 1e-09", "springs"),
+    (dict(simulation="fps = 10\nduration = 1.5",
+          camera="position = [0.5, 0.5, 3.0]\ntarget = [0.5, 0.5, 0.0]"), "camera", "particles")])
+def test_a_run_that_shreds_or_leaves_the_view_says_so_once_naming_the_setting(
+        f64, tmp_path, keys, says, counted):
+    """Issue 40: tearing = 1e-9 is legal, tears most springs of a flag in the wind in the
+    first frame and used to finish in silence with frames of shreds; a free sheet falls out of
+    a fixed camera's view. Each run warns once, naming the setting, when the frames show it:
+    checked against the springs still intact, or the particles projected onto the image."""
+    from ti_cloth.app.runner import run_scene
+    text = scene_text(output="width = 64\nheight = 48", **keys)
+    scene = load_scene(write_scene(tmp_path, text))
+    with pytest.warns(RuntimeWarning, match=re.escape(says)) as caught:
+        result = run_scene(scene, folder=tmp_path / "out", progress=False)
+    assert len([w for w in caught if says in str(w.message)]) == 1
+    sim = scene.build()
+    sim.step(result.steps)
+    if counted == "springs":
+        report("springs intact at the end", int(sim.spring_alive().sum()), 0)
+        assert sim.spring_alive().mean() < 0.5
+    else:
+        screen, depth = scene.camera.project(sim.positions(), 64, 48)
+        shown = ((screen >= 0) & (screen <= (64, 48))).all(axis=1) & (depth > 0)
+        report("particles on the image at the end", int(shown.sum()), 0)
+        assert shown.mean() < 0.5
 
 
 def test_tearing_does_not_hide_a_step_ten_times_too_large(f64):

@@ -15,6 +15,7 @@ stopped (rendering and export are functions of the state).
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -49,16 +50,65 @@ class RunResult:
         return not self.interrupted and self.diverged is None
 
 
+class Watch:
+    """What a run says once when its frames go wrong without diverging (issue 40): a frame
+    that tears more than LOST of the body's springs (or a Fabric's triangles), naming the
+    tearing setting; the particles leaving the camera's view, more than LOST of them off the
+    image when most were on it in the first frame, naming the camera."""
+
+    LOST = 0.5
+
+    def __init__(self, scene, sim, camera, width: int, height: int):
+        self.scene, self.sim, self.camera, self.size = scene, sim, camera, (width, height)
+        self.total = sim.cloth.spring_count + sim.cloth.face_count
+        self.intact = self._intact()
+        self.seen = self._off_view() <= self.LOST
+        self.said = set()
+
+    def _intact(self) -> int:
+        return int(self.sim.spring_alive().sum()) + int(self.sim.face_alive().sum())
+
+    def _off_view(self) -> float:
+        """The fraction of the drawn particles off the image or behind the camera."""
+        if self.camera is None:
+            return 0.0
+        drawn = ~self.sim.cloth.ghost
+        screen, depth = self.camera.project(self.sim.positions()[drawn], *self.size)
+        inside = ((depth > self.camera.near) & (screen[:, 0] >= 0) & (screen[:, 1] >= 0)
+                  & (screen[:, 0] <= self.size[0]) & (screen[:, 1] <= self.size[1]))
+        return 1.0 - float(inside.mean()) if len(inside) else 0.0
+
+    def frame(self, index: int) -> None:
+        """Check the frame just stepped to (index >= 1); warn once per kind."""
+        if self.scene.tearing is not None and self.total:
+            intact = self._intact()
+            torn, self.intact = self.intact - intact, intact
+            if torn > self.LOST * self.total and "tearing" not in self.said:
+                self.said.add("tearing")
+                warnings.warn(
+                    f"'{self.scene.name}' frame {index}: {torn} of {self.total} springs and "
+                    f"triangles tore in one frame (tearing = {self.scene.tearing:g}): the cloth "
+                    "is shredding. tearing is the strain a spring tears at (0.3 = 30 % "
+                    "stretch); raise it, or leave it out", RuntimeWarning, stacklevel=3)
+        if self.seen and "camera" not in self.said and self._off_view() > self.LOST:
+            self.said.add("camera")
+            warnings.warn(
+                f"'{self.scene.name}' frame {index}: most particles have left the camera's "
+                "view (the frames show little of the body): set [camera] position and "
+                "target, or give none and let it fit the body", RuntimeWarning, stacklevel=3)
+
+
 def _frame_painter(scene, sim, out):
-    """A function () -> (H, W, 3) uint8 image of the simulation now, per the output settings."""
+    """(a function () -> (H, W, 3) uint8 image of the simulation now, per the output settings;
+    the camera, None for the 2-D view)."""
     if out.view == "2d":
         x = scene.cloth.particle_position @ np.asarray(FRONT).T
         lo, hi = x.min(axis=0), x.max(axis=0)
         reach = max(float(np.max(hi - lo)), 1e-3)   # a pinned body can swing this far
         view = SpringView((lo - reach, hi + reach), FRONT, res=(out.width, out.height))
         cloth = scene.cloth
-        return lambda: view.render(sim.positions(), cloth.spring_indices, cloth.spring_kind,
-                                   sim.pinned(), sim.spring_alive(), cloth.ghost)
+        return (lambda: view.render(sim.positions(), cloth.spring_indices, cloth.spring_kind,
+                                    sim.pinned(), sim.spring_alive(), cloth.ghost)), None
     camera = scene.camera or Camera.fit(scene.cloth, aspect=out.width / out.height,
                                         **scene.camera_fit)
     renderer = Renderer(out.width, out.height, camera, supersample=out.supersample)
@@ -70,7 +120,7 @@ def _frame_painter(scene, sim, out):
         renderer.draw_colliders(sim)
         renderer.draw_simulation(sim, out.style)
         return renderer.end()
-    return paint
+    return paint, camera
 
 
 def state_path(folder, name: str) -> Path:
@@ -131,13 +181,15 @@ def run_scene(scene, *, folder=None, frames: int | None = None, progress: bool =
             exporter = Exporter(folder, out.export if export is None else export,
                                 name=scene.name, cloth=scene.cloth, fps=scene.fps,
                                 first_frame=first)
-            paint = _frame_painter(scene, sim, out)
+            paint, camera = _frame_painter(scene, sim, out)
+            watch = Watch(scene, sim, camera, out.width, out.height)
             bar = tqdm(total=frames, initial=min(first, frames), unit="frame",
                        disable=not progress, dynamic_ncols=True)
             try:
                 for frame in range(first, frames):
                     if frame:
                         sim.step(substeps)
+                        watch.frame(frame)
                     sequence.write(paint())
                     exporter.write(sim)
                     if (frame and frame % every == 0) or frame == frames - 1:
