@@ -5,6 +5,7 @@ these cases is test_fuzz.py."""
 
 import gc
 import re
+import warnings
 import signal
 from pathlib import Path
 
@@ -408,3 +409,29 @@ def test_a_signal_the_process_ignores_stays_ignored_during_a_run():
 def test_the_documented_limits_table_is_the_one_in_limits_py():
     page = (Path(__file__).parents[1] / "docs" / "integrators.md").read_text()
     assert limits.markdown() in page
+
+
+def test_a_mesh_that_is_not_a_surface_is_described_with_what_the_body_does_there():
+    """Issue 40: three triangles on one edge (a fin) and two sheets sharing one vertex (a
+    bowtie) were taken without a word. Now a warning names the edge and the vertex, and the
+    body does what it says: no bend spring or hinge across the fin's edge (counted), while
+    the same edge between two triangles gets one. A closed sphere and an open disc are
+    surfaces: no warning."""
+    v = np.array([[0, 0, 0], [0, 0, 1], [1, 0, 0.5], [-1, 0, 0.5], [0, 1, 0.5]], float)
+    fin = tc.Mesh(v, np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]]))
+    pair = tc.Mesh(v[:4], np.array([[0, 1, 2], [1, 0, 3]]))
+    for material, count in ((tc.Material(), lambda c: (c.spring_kind == tc.SpringKind.BEND).sum()),
+                            (tc.Fabric.preset("denim"), lambda c: c.hinge_count)):
+        with pytest.warns(UserWarning, match=re.escape("shared by three or more triangles "
+                                                       "(first [[0, 1]])")):
+            assert count(tc.Cloth(fin, material)) == 0
+        assert count(tc.Cloth(pair, material)) == 1
+    bowtie = tc.Mesh(np.array([[0, 0, 0], [0, 0, 1], [1, 0, 0.5], [2, 0, 0], [2, 0, 1]], float),
+                     np.array([[0, 1, 2], [2, 3, 4]]))
+    with pytest.warns(UserWarning, match=re.escape("separate sheets meet at a point (first [2])")):
+        tc.Cloth(bowtie, tc.Material())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        tc.Cloth(tc.sphere_mesh(1.0), tc.Material())
+        tc.Cloth(tc.disc_mesh(), tc.Material())
+        tc.Cloth(pair, tc.Material())

@@ -283,6 +283,20 @@ def triangle_edges(triangles: np.ndarray) -> np.ndarray:
     return np.sort(e, axis=1)
 
 
+def nonmanifold(triangles: np.ndarray, vertex_count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Where a triangle mesh is not a surface: (edges (E, 2), as sorted pairs, shared by three
+    or more triangles; vertices (V,) on more than two boundary edges, where separate sheets
+    meet at a point)."""
+    triangles = np.asarray(triangles, np.int64).reshape(-1, 3)
+    if not len(triangles):
+        return np.zeros((0, 2), np.int64), np.zeros(0, np.int64)
+    edges, uses = unique_rows(triangle_edges(triangles), return_counts=True)
+    on_rim = np.bincount(edges[uses == 1].ravel(), minlength=vertex_count)
+    shared = edges[uses > 2]
+    on_rim[shared.ravel()] = 0                   # a fin's own corners are not a second sheet
+    return shared, np.flatnonzero(on_rim > 2)
+
+
 def vertex_triangles(triangles: np.ndarray, vertex_count: int) -> tuple[np.ndarray, np.ndarray]:
     """Each vertex's triangles, as CSR lists in triangle order: vertex v's triangles are
     triangle[start[v]:start[v + 1]]. Returns (start (vertex_count + 1,), triangle (3 T,)), int64;

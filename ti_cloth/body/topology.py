@@ -20,6 +20,7 @@ Rest lengths are distances in the reference configuration.
 from __future__ import annotations
 
 import copy
+import warnings
 from collections.abc import Mapping
 
 import numpy as np
@@ -28,7 +29,7 @@ from ..runtime.validation import as_array, finite_number, require
 from . import elements
 from .fabric import Fabric
 from .material import Material, SpringKind, SpringParams
-from .mesh import Mesh, triangle_edges, unique_rows
+from .mesh import Mesh, nonmanifold, triangle_edges, unique_rows
 
 
 def grid_springs(rows: int, cols: int) -> dict[SpringKind, np.ndarray]:
@@ -291,6 +292,8 @@ class Cloth:
             pairs, kind = unique_springs(mesh_springs(mesh.triangles))
         else:
             pairs, kind = np.zeros((0, 2), np.int64), np.zeros(0, np.int64)
+        if mesh.triangle_count and springs is None and mesh.grid_shape is None:
+            _warn_if_nonmanifold(mesh, fabric)
         self.spring_indices = pairs
         self.spring_kind = kind
         x = self.particle_position
@@ -497,6 +500,24 @@ def index_mask(field: str, value, n: int) -> np.ndarray:
     mask = np.zeros(n, bool)
     mask[index] = True
     return mask
+
+
+def _warn_if_nonmanifold(mesh: Mesh, fabric: bool) -> None:
+    """Say where the mesh is not a surface, and what the body does there (issue 40)."""
+    edges, vertices = nonmanifold(mesh.triangles, mesh.vertex_count)
+    found = []
+    if len(edges):
+        found.append(f"{len(edges)} edges shared by three or more triangles (first "
+                     f"{edges[:5].tolist()}): each triangle keeps its "
+                     f"{'membrane' if fabric else 'stretch and shear springs'}, but no "
+                     f"{'hinge' if fabric else 'bend spring'} crosses them (those join exactly "
+                     "two triangles), so the sheets turn freely about them")
+    if len(vertices):
+        found.append(f"{len(vertices)} vertices where separate sheets meet at a point (first "
+                     f"{vertices[:5].tolist()}): the sheets are held together there only")
+    if found:
+        warnings.warn("Cloth: the mesh is not a manifold surface: " + "; ".join(found),
+                      stacklevel=3)
 
 
 def _hem_mask(hem, mesh: Mesh) -> np.ndarray:
