@@ -35,9 +35,9 @@ def cloth_edges(cloth) -> tuple[np.ndarray, np.ndarray]:
     triangles = np.asarray(cloth.mesh.triangles, np.int64).reshape(-1, 3)
     if not len(triangles):
         return np.zeros((0, 2), np.int64), np.zeros(0, np.int64)
-    edges = unique_rows(np.sort(triangle_edges(triangles), axis=1))
+    ends = triangle_edges(triangles)                 # sorted pairs, three per triangle
+    edges = unique_rows(ends)
     springs = np.asarray(cloth.triangle_edge_spring, np.int64).reshape(-1, 3)
-    ends = triangle_edges(triangles)
     n = cloth.particle_count
     rows = np.searchsorted(edges[:, 0] * n + edges[:, 1], ends[:, 0] * n + ends[:, 1])
     along = np.full(len(edges), -1, np.int64)

@@ -69,8 +69,6 @@ class Viewer:
         self.held = None                       # (particle, depth, scene pinned it, target)
         self.velocity = np.zeros(3)
         self.orbiting = None                   # the cursor where a right drag is now
-        self.cursor = (0.0, 0.0)
-        self.frames = 0
         self.saved = None
         self.diverged = None                   # the SimulationDiverged that paused it
         self.rest_pinned = sim.pinned()
@@ -79,8 +77,6 @@ class Viewer:
 
     def handle(self, event: Event) -> None:
         """Act on one event (module doc)."""
-        if event.kind in ("press", "release", "motion"):
-            self.cursor = (event.x, event.y)
         if event.kind == "press" and event.button == "left":
             self.grab(event.x, event.y)
         elif event.kind == "release" and event.button == "left":
@@ -225,7 +221,6 @@ class Viewer:
         except SimulationDiverged as err:
             self.diverged, self.paused, self.held = err, True, None
             return
-        self.frames += 1
 
     def reset(self) -> None:
         """Back to the rest state at time 0, nothing held."""
@@ -233,7 +228,6 @@ class Viewer:
         self.paused = False
         self.sim.model.set_pinned(self.rest_pinned)
         self.sim.restart()
-        self.frames = 0
 
     def save(self) -> Path:
         """The state now, in `<folder>/<name>.view.npz` (Simulation.save_state)."""
