@@ -7,12 +7,14 @@ import hashlib
 import numpy as np
 import taichi as ti
 
-from .body.elements import bending_stencils, tangents
+from .body.elements import (bending_stencils, is_flat, isometric_faces, isometric_matrix,
+                            isometric_parts, tangents)
 from .body.material import SpringKind
 from .body.mesh import triangle_edges, unique_rows
 from .body.topology import Cloth, color_springs
 from .runtime import backend
 from .runtime.transfer import upload
+from .runtime.validation import require
 from .state import State
 
 
@@ -52,12 +54,19 @@ class Model:
     particle_face_start, adjacency_face: particle i is corner adjacency_face[a] % 3 of
                           triangle adjacency_face[a] // 3 (CSR, as for altitude springs);
     particle_hinge_start, adjacency_hinge: the same for hinges (4 corners)
+    particle_bend_start, bend_other, bend_stiffness, bend_damping: with `isometric` (a flat
+                          rest sheet), the bending of body/elements.isometric_matrix, a CSR
+                          of each particle's neighbours, gathered in increasing order; the
+                          hinges' angles are then not computed; face_stencil,
+                          face_stencil_weight (w_i's weights on it, row i at 6 i) and
+                          face_isometric (B', 00 11 22 01 02 12) per triangle, for XPBD
 
     Python attributes read at compile time (fixed for the model's life):
-    particle_count, spring_count, altitude_count, face_count, hinge_count, relative_damping.
+    particle_count, spring_count, altitude_count, face_count, hinge_count, relative_damping,
+    isometric.
     """
 
-    def __init__(self, cloth: Cloth, pinned: np.ndarray | None = None):
+    def __init__(self, cloth: Cloth, pinned: np.ndarray | None = None, isometric: bool = False):
         real = backend.real()
         self.particle_count = n = cloth.particle_count
         self.spring_count = s = cloth.spring_count
@@ -65,6 +74,10 @@ class Model:
         self.face_count = faces = cloth.face_count
         self.hinge_count = hinges = cloth.hinge_count
         self.relative_damping = cloth.damping == "relative"
+        require(not isometric or is_flat(cloth), "isometric", isometric,
+                "False for a body whose rest sheet is not flat (body/elements.is_flat)")
+        self.isometric = bool(isometric)
+        bends = len(isometric_matrix(cloth)[1]) if self.isometric else 0
         fields = backend.FieldGroup()
         s1 = max(s, 1)
         self.particle_mass = fields.scalar(real, n)
@@ -101,6 +114,14 @@ class Model:
         self.adjacency_face = fields.scalar(ti.i32, 3 * f1)
         self.particle_hinge_start = fields.scalar(ti.i32, n + 1)
         self.adjacency_hinge = fields.scalar(ti.i32, 4 * h1)
+        self.particle_bend_start = fields.scalar(ti.i32, n + 1)
+        self.bend_other = fields.scalar(ti.i32, max(bends, 1))
+        self.bend_stiffness = fields.scalar(real, max(bends, 1))
+        self.bend_damping = fields.scalar(real, max(bends, 1))
+        iso_faces = f1 if self.isometric else 1
+        self.face_stencil = fields.vector(6, ti.i32, iso_faces)
+        self.face_stencil_weight = fields.vector(18, real, iso_faces)
+        self.face_isometric = fields.vector(6, real, iso_faces)
         fields.finalize(self)
         self._colouring = None
         self._altitude_colouring = None
@@ -109,7 +130,8 @@ class Model:
         self.load(cloth, pinned)
 
     @staticmethod
-    def structure(cloth: Cloth, pinned: np.ndarray | None = None) -> tuple:
+    def structure(cloth: Cloth, pinned: np.ndarray | None = None,
+                  isometric: bool = False) -> tuple:
         """What the kernels of a Model of `cloth` read at compile time, and the topology its
         adjacency and colouring come from: Models of equal structure are interchangeable once
         load() has put a cloth's values in (pool.py reuses them)."""
@@ -120,9 +142,10 @@ class Model:
         digest.update(np.ascontiguousarray(cloth.hinge_indices).tobytes())
         return ("Model", cloth.particle_count, cloth.spring_count, cloth.altitude_count,
                 cloth.face_count, cloth.hinge_count, cloth.damping == "relative",
-                digest.hexdigest())
+                bool(isometric), digest.hexdigest())
 
-    def load(self, cloth: Cloth, pinned: np.ndarray | None = None) -> None:
+    def load(self, cloth: Cloth, pinned: np.ndarray | None = None,
+             isometric: bool = False) -> None:
         """Upload `cloth` (of this model's structure) with `pinned` (default: the cloth's)."""
         self.cloth = cloth
         if self._colouring is not None:
@@ -144,6 +167,14 @@ class Model:
         face_start, face_order = corner_adjacency(cloth.face_indices, n)
         hinge_start, hinge_order = corner_adjacency(cloth.hinge_indices, n)
         bending = cloth.face_bending[:, [0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]]
+        if self.isometric:
+            bend_start, *bends = isometric_matrix(cloth)
+            stencil, weights = isometric_faces(cloth)
+            reduced = isometric_parts(cloth)[1][:, [0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]]
+            upload(((self.particle_bend_start, bend_start),
+                    *zip((self.bend_other, self.bend_stiffness, self.bend_damping), bends),
+                    (self.face_stencil, stencil), (self.face_stencil_weight, weights.reshape(-1, 18)),
+                    (self.face_isometric, reduced)))
         upload(((self.particle_mass, cloth.particle_mass),
                 (self.particle_inv_mass, inv_mass),
                 (self.particle_rest_position, cloth.particle_position),

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from . import saved_state, stepping
+from .body.elements import is_flat
 from .body.topology import Cloth
 from .contact.attachment import Attachment
 from .contact.collision import ColliderSet
@@ -125,7 +126,10 @@ class Simulation:
         # what decides the motion besides the integrator and dt (fingerprint)
         self._inputs = (cloth, tuple(gravity), drag, wind, tearing, handles, colliders,
                         strain_limit, position_limit, self_collision, sewing)
-        parts = {"model": (Model, (cloth, pinned)),
+        # a flat sheet bends by the isometric model, its Q merged over the triangles, unless
+        # triangles can tear out of it (then by the mid-edge tangents, whose hinges can go)
+        isometric = is_flat(cloth) and tearing is None
+        parts = {"model": (Model, (cloth, pinned, isometric)),
                  "state": (State, (cloth.particle_count, cloth.spring_count, position_limit,
                                    cloth.altitude_count, cloth.face_count, cloth.hinge_count))}
         if wind is not None:
@@ -455,7 +459,7 @@ class Simulation:
         """{"kinetic", "gravity", "spring", "spring_stretch", "spring_shear", "spring_bend",
         "total"} [J]; torn springs and triangles hold no energy."""
         return energies(self.cloth, self.positions(), self.velocities(), self.forces.gravity,
-                        self.spring_alive(), self.face_alive())
+                        self.spring_alive(), self.face_alive(), self.model.isometric)
 
     def stable_dt(self) -> float:
         """Predicted largest stable step [s] of this simulation's integrator."""

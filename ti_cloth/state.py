@@ -27,6 +27,8 @@ class State:
     face_force              force of a Fabric's triangle f on its corner c [N], at 3 f + c
     hinge_force             bending force of hinge e on its corner k [N], at 4 e + k
     hinge_tangent, hinge_rate  t - t_rest of each hinge and dt/dt [1/s] (physics/elements.py)
+    particle_bend_force     the isometric bending force on each particle [N] (a flat
+                            sheet's: physics/elements.isometric_forces)
     face_moment             dE/dt of triangle f's bending on the hinge across its edge i [J],
                             at 3 f + i
     spring_alive            1 while a spring exists, 0 once torn (Stuyck 4.5); lives here, not
@@ -61,6 +63,7 @@ class State:
         self.hinge_force = fields.vector(3, real, 4 * max(hinge_count, 1))
         self.hinge_tangent = fields.scalar(real, max(hinge_count, 1))
         self.hinge_rate = fields.scalar(real, max(hinge_count, 1))
+        self.particle_bend_force = fields.vector(3, real, particle_count if hinge_count else 1)
         self.face_alive = fields.scalar(ti.i8, max(face_count, 1))
         self.face_torn_step = fields.scalar(ti.i32, max(face_count, 1))
         self.first_bad_step = fields.scalar(ti.i32, ())

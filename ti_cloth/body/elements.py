@@ -32,6 +32,10 @@ al. 2003, "Discrete shells"), which on a regular grid is three times stiffer acr
 diagonals than along the axes, this operator bends a grid the same way in every direction
 (tests/test_fabric.py measures both).
 
+A flat rest sheet (is_flat) bends by the isometric model instead (Bergou, Wardetzky, Harmon,
+Zorin & Grinspun 2006; isometric_matrix): the same B on vectors w_i with |w_i| = 2 |e_i|
+sin(theta_i / 2), an energy quadratic in the positions, 1/2 x^T Q x with Q constant.
+
 The dihedral angle: with (a, b) the edge as the first face winds it and c, d the opposite
 vertices, n1 = (b - a) x (c - a) / |.|, n2 = (d - a) x (b - a) / |.|, e = (b - a) / |b - a|:
 theta = atan2((n1 x n2) . e, n1 . n2). Its gradient (Bridson et al. 2003; Tamstorf &
@@ -212,15 +216,22 @@ def face_tangents(cloth, values: np.ndarray) -> np.ndarray:
     return padded[cloth.face_hinge]                    # face_hinge = -1 reads the 0 at the end
 
 
-def bending_energy(cloth, positions: np.ndarray, alive: np.ndarray | None = None) -> float:
-    """sum over triangles of 1/2 dt^T B dt [J] (module doc); with `alive` ((F,) bool: not
-    torn), a torn triangle holds none and a hinge beside one has dt = 0 (it is gone)."""
+def bending_energy(cloth, positions: np.ndarray, alive: np.ndarray | None = None,
+                   isometric: bool = False) -> float:
+    """sum over triangles of 1/2 dt^T B dt [J] (module doc), or with `isometric` (a flat rest
+    sheet: is_flat) the isometric model's 1/2 sum_ij B'_ij w_i . w_j (isometric_matrix); with
+    `alive` ((F,) bool: not torn), a torn triangle holds none and a hinge beside one is gone."""
     if not cloth.hinge_count:
         return 0.0
-    dt = hinge_tangents(cloth, positions)
+    intact = np.ones(cloth.hinge_count, bool)
     if alive is not None:
-        dt = dt * alive[cloth.hinge_faces // 3].all(axis=1)
-    dt = face_tangents(cloth, dt)
+        intact = alive[cloth.hinge_faces // 3].all(axis=1)
+    if isometric:
+        weights, reduced = isometric_parts(cloth)
+        w = np.einsum("hk,hkx->hx", weights, positions[cloth.hinge_indices]) * intact[:, None]
+        w = np.concatenate([w, np.zeros((1, 3))])[cloth.face_hinge]          # (F, 3, 3)
+        return float(0.5 * np.einsum("fix,fij,fjx->", w, reduced, w))
+    dt = face_tangents(cloth, hinge_tangents(cloth, positions) * intact)
     return float(0.5 * np.einsum("ti,tij,tj->", dt, cloth.face_bending, dt))
 
 
@@ -268,7 +279,11 @@ def rest_rank_one(cloth) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     exact Hessian: membrane A J^T C J = sum_m g_m g_m^T with g = sqrt(A) L^T J (C = L L^T, J the
     Green strain's gradient); bending sum_ij B_ij G_i G_j^T = sum_m g_m g_m^T with
     g_m = sqrt(lambda_m) sum_i V_im G_i (B = V diag(lambda) V^T, G_i = t'(theta) grad theta of
-    hinge i). Rayleigh damping is beta times the same: its vectors are sqrt(beta) g."""
+    hinge i); on a flat rest sheet (is_flat) the isometric model's constant Q = sum_ij B'_ij
+    K_i K_j^T (x) I (isometric_matrix), nine terms a triangle (g = sqrt(lambda_m) sum_i V_im
+    K_i along each axis; it holds the mid-edge Hessian's normal part and adds the in-plane one,
+    an upper bound for either model). Rayleigh damping is beta times the same: its vectors are
+    sqrt(beta) g."""
     if not cloth.face_count:
         return []
     x = cloth.particle_position
@@ -287,7 +302,18 @@ def rest_rank_one(cloth) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     beta = np.sqrt(cloth.face_damping)
     groups = [(np.repeat(cloth.face_indices, 3, axis=0), membrane.reshape(-1, 3, 3),
                np.repeat(beta, 3)[:, None, None] * membrane.reshape(-1, 3, 3))]
-    if cloth.hinge_count:
+    if cloth.hinge_count and is_flat(cloth):
+        weights, reduced = isometric_parts(cloth)
+        values, vectors = np.linalg.eigh(reduced)
+        modes = vectors * np.sqrt(np.maximum(values, 0.0))[:, None, :]       # V sqrt(lambda)
+        per_face = np.concatenate([weights, np.zeros((1, 4))])[cloth.face_hinge]  # (F, 3, 4)
+        scalar = np.einsum("fim,fik->fmik", modes, per_face).reshape(-1, 3, 12)
+        bending = (scalar[:, :, None, :, None]                             # (F, mode, axis,
+                   * np.eye(3)[None, None, :, None, :]).reshape(-1, 12, 3)  # slot, xyz)
+        hinge_corners = np.concatenate([cloth.hinge_indices, np.zeros((1, 4), np.int64)])
+        corners = np.repeat(hinge_corners[cloth.face_hinge].reshape(-1, 12), 9, axis=0)
+        groups.append((corners, bending, np.repeat(beta, 9)[:, None, None] * bending))
+    elif cloth.hinge_count:
         theta, grad = hinge_angles(x, cloth.hinge_indices, gradient=True)
         half = 0.5 * theta
         slope = np.where(np.abs(half) > HALF_ANGLE_LIMIT, 0.5 / np.cos(HALF_ANGLE_LIMIT) ** 2,
@@ -302,3 +328,105 @@ def rest_rank_one(cloth) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
         bending = bending.reshape(-1, 12, 3)
         groups.append((corners, bending, np.repeat(beta, 3)[:, None, None] * bending))
     return groups
+
+
+# A flat rest sheet's bending needs no angle: the isometric model (module doc of
+# isometric_matrix). Rest angles below this [rad] (a planar mesh's rounding) count as flat.
+FLAT_REST_ANGLE = 1e-6
+
+
+def cotangent_weights(positions: np.ndarray, indices: np.ndarray) -> np.ndarray:
+    """K (H, 4) of hinges [a, b, c, d] at rest (Bergou, Wardetzky, Harmon, Zorin & Grinspun,
+    "A quadratic bending model for inextensible surfaces", SGP 2006, sec. 4.1):
+    w = sum_k K_k x_k = (cot b1 + cot b2) a + (cot a1 + cot a2) b - (cot a1 + cot b1) c
+    - (cot a2 + cot b2) d, with a1, b1 the rest angles at a and b in triangle (a, b, c) and
+    a2, b2 in (a, b, d). In each triangle (cot b1 a + cot a1 b) / (cot a1 + cot b1) is the
+    foot of c's altitude, so w is |e| (u1 + u2), u the unit vectors from c and d to the edge
+    in their triangles: 0 on the flat rest sheet and |w| = 2 |e| sin(theta / 2) in any
+    isometric deformation of it."""
+    a, b, c, d = (positions[indices[:, k]] for k in range(4))
+
+    def cot(apex, p, q):
+        u, v = p - apex, q - apex
+        return np.sum(u * v, 1) / np.linalg.norm(np.cross(u, v), axis=1)
+
+    a1, b1 = cot(a, b, c), cot(b, a, c)
+    a2, b2 = cot(a, b, d), cot(b, a, d)
+    return np.stack([b1 + b2, a1 + a2, -(a1 + b1), -(a2 + b2)], 1)
+
+
+def is_flat(cloth) -> bool:
+    """Whether every hinge of `cloth` is flat at rest (FLAT_REST_ANGLE): its bending is then
+    the isometric model (isometric_matrix), else the mid-edge tangents."""
+    return cloth.hinge_count > 0 and bool(np.all(np.abs(cloth.hinge_rest_angle)
+                                                 <= FLAT_REST_ANGLE))
+
+
+def isometric_parts(cloth) -> tuple:
+    """(K (H, 4) the hinges' cotangent weights, B' (F, 3, 3) = s_i s_j B_ij / (4 |e_i| |e_j|),
+    0 across a boundary edge): the isometric model's constants (isometric_matrix)."""
+    weights = cotangent_weights(cloth.particle_position, cloth.hinge_indices)
+    ends = cloth.particle_position[cloth.hinge_indices[:, :2]]
+    lengths = np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1)
+    _, _, face_hinge, face_sign = hinges(cloth.face_indices)
+    present = face_hinge >= 0
+    scale = np.where(present, face_sign / (2.0 * lengths[np.where(present, face_hinge, 0)]), 0.0)
+    return weights, cloth.face_bending * scale[:, :, None] * scale[:, None, :]
+
+
+def isometric_matrix(cloth) -> tuple:
+    """The isometric bending energy of a flat rest sheet, 1/2 sum_kl Q_kl x_k . x_l with a
+    constant Q (Bergou et al. 2006, eq. 8-9, generalised from one hinge to the mid-edge
+    operator's coupling of a triangle's hinges): with w_i = sum_k K_ik x_k of the hinge across
+    edge i (cotangent_weights), a triangle holds
+
+        1/2 sum_ij B'_ij w_i . w_j,   B'_ij = s_i s_j B_ij / (4 |e_i| |e_j|),
+
+    B the mid-edge matrix (bending_matrices) and s its orientation signs. On the flat rest
+    sheet w_i = 2 |e_i| sin(theta_i / 2) n (1 + O(theta)) along the normal, with the sign of
+    s_i theta_i, so for small angles this is the mid-edge energy 1/2 dt^T B dt (t = tan(theta /
+    2) and sin(theta / 2) agree to O(theta^3)); under refinement theta ~ h / R and both converge
+    to the same continuum. Q = sum_f K_f^T B'_f K_f is positive semi-definite, the same in x, y
+    and z, and its rows sum to 0 (a translation moves nothing); the force is
+    -sum_l Q_kl ((x_l - x_k) + beta (v_l - v_k)) with Rayleigh damping beta. Returns (start
+    (N + 1,), other, stiffness (-Q_kl), damping (-beta Q_kl)): particle k's neighbours l != k
+    in increasing order, as a CSR."""
+    n = cloth.particle_count
+    weights, reduced = isometric_parts(cloth)
+    hinge = np.maximum(cloth.face_hinge, 0)
+    corners = cloth.hinge_indices[hinge]                                        # (F, 3, 4)
+    k = weights[hinge] * (cloth.face_hinge >= 0)[:, :, None]
+    local = np.einsum("fik,fij,fjl->fikjl", k, reduced, k)                      # Q per face
+    rows = np.broadcast_to(corners[:, :, :, None, None], local.shape).ravel()
+    cols = np.broadcast_to(corners[:, None, None, :, :], local.shape).ravel()
+    damped = local * cloth.face_damping[:, None, None, None, None]
+    keep = rows != cols
+    unique, inverse = np.unique(rows[keep] * n + cols[keep], return_inverse=True)
+    stiffness = -np.bincount(inverse, weights=local.ravel()[keep], minlength=len(unique))
+    damping = -np.bincount(inverse, weights=damped.ravel()[keep], minlength=len(unique))
+    row, other = np.divmod(unique, n)
+    start = np.concatenate([[0], np.cumsum(np.bincount(row, minlength=n))])
+    return start, other, stiffness, damping
+
+
+def isometric_faces(cloth) -> tuple:
+    """(stencil (F, 6), weights (F, 3, 6)): each triangle's bending stencil (bending_stencils)
+    with w_i = sum_s weights[i, s] x_stencil[s] (the cotangent weights of the hinge across its
+    edge i, isometric_matrix); a particle in two slots has its weights in the first and none in
+    the second, so the slots' particles with weights are distinct (XPBD's per-triangle solve)."""
+    stencil = bending_stencils(cloth)
+    weights = np.zeros((cloth.face_count, 3, 6))
+    present = cloth.face_hinge >= 0
+    hinge = np.where(present, cloth.face_hinge, 0)
+    cot = cotangent_weights(cloth.particle_position, cloth.hinge_indices)[hinge]   # (F, 3, 4)
+    corners = cloth.hinge_indices[hinge]                                          # (F, 3, 4)
+    for k in range(4):
+        for s in range(6):
+            weights[:, :, s] += np.where(present & (corners[:, :, k] == stencil[:, None, s])
+                                         & _first_slot(stencil, s)[:, None], cot[:, :, k], 0.0)
+    return stencil, weights
+
+
+def _first_slot(stencil: np.ndarray, s: int) -> np.ndarray:
+    """(F,) bool: slot s holds its particle's first appearance in the triangle's stencil."""
+    return ~np.any(stencil[:, :s] == stencil[:, s:s + 1], axis=1)

@@ -23,7 +23,7 @@ blocks without the cross terms between a triangle's hinges (still positive).
 
 import taichi as ti
 
-from ..physics.elements import face_columns, gather_corners, store_corners
+from ..physics.elements import face_columns, gather_corners, isometric_sum, store_corners
 from ..runtime import backend
 from ..runtime.plan import Loop, Phase
 
@@ -221,14 +221,35 @@ def bend_direction(model: ti.template(), state: ti.template(), forces: ti.templa
 @ti.func
 def stiffness_times(model: ti.template(), ws: ti.template(), i):
     """Particle i's rows of the elements' products (stiffness times v_n after the
-    linearisation, the blocks of A times p after product_phases)."""
+    linearisation, the blocks of A times p after product_phases); the isometric bending's
+    (a constant Q) are isometric_velocity's and isometric_product's."""
     return gather_corners(model, ws.face_product, ws.hinge_product, i)
 
 
 @ti.func
-def diagonal(model: ti.template(), ws: ti.template(), i):
-    """The elements' share of particle i's 3x3 diagonal of A (preconditioner)."""
-    return gather_corners(model, ws.face_diagonal, ws.hinge_diagonal, i)
+def isometric_velocity(model: ti.template(), state: ti.template(), i):
+    """Particle i's row of Q v_n, the isometric bending's stiffness times v_n (its Hessian is
+    the constant Q of body/elements.isometric_matrix, positive semi-definite as it is)."""
+    return -isometric_sum(model, state.particle_velocity, state.particle_velocity, i, 1.0, 0.0)
+
+
+@ti.func
+def isometric_product(model: ti.template(), ws: ti.template(), i, dt):
+    """Particle i's row of (h^2 + h beta) Q p, the isometric bending's block of A times p."""
+    return -isometric_sum(model, ws.p, ws.p, i, dt * dt, dt)
+
+
+@ti.func
+def diagonal(model: ti.template(), ws: ti.template(), i, dt):
+    """The elements' share of particle i's 3x3 diagonal of A (preconditioner); the isometric
+    bending's Q_ii = sum of -Q_il over its neighbours (rows sum to 0), the same on each axis."""
+    total = gather_corners(model, ws.face_diagonal, ws.hinge_diagonal, i)
+    if ti.static(model.isometric):
+        weight = 0.0
+        for c in range(model.particle_bend_start[i], model.particle_bend_start[i + 1]):
+            weight += dt * dt * model.bend_stiffness[c] + dt * model.bend_damping[c]
+        total += weight * ti.Vector([1.0, 1.0, 1.0])
+    return total
 
 
 def linear_loops(model) -> tuple:
@@ -239,7 +260,7 @@ def linear_loops(model) -> tuple:
 def bending_loops(model) -> tuple:
     """(with the moments, with the hinge forces): physics/elements.bending_phases' extra
     loops that linearise every hinge and apply its stiffness to v_n."""
-    if not model.hinge_count:
+    if not model.hinge_count or model.isometric:
         return (), ()
     return (Loop(model.hinge_count, linearise_hinge),), (Loop(model.hinge_count, bend_velocity),)
 
@@ -250,9 +271,10 @@ def product_phases(model, first: tuple) -> tuple:
     loops = first
     if model.face_count:
         loops += (Loop(model.face_count, stretch_direction),)
-    if model.hinge_count:
+    hinges = model.hinge_count and not model.isometric
+    if hinges:
         loops += (Loop(model.hinge_count, project_direction),)
     phases = (Phase(*loops),) if loops else ()
-    if model.hinge_count:
+    if hinges:
         phases += (Phase(Loop(model.hinge_count, bend_direction)),)
     return phases

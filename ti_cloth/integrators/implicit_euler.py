@@ -239,7 +239,9 @@ def _start_block(model: ti.template(), state: ti.template(), forces: ti.template
                               + dt * model.altitude_damping[e]) * g * g * n * n)
         if ti.static(model.face_count > 0):
             kv += implicit_elements.stiffness_times(model, ws, i)
-            diagonal += implicit_elements.diagonal(model, ws, i)
+            diagonal += implicit_elements.diagonal(model, ws, i, dt)
+        if ti.static(model.isometric):
+            kv += implicit_elements.isometric_velocity(model, state, i)
         b = free * dt * (state.particle_force[i] - dt * kv)
         if free == 0:
             diagonal = ti.Vector([1.0, 1.0, 1.0])   # a pin's row is the identity (b = 0 there)
@@ -271,6 +273,8 @@ def _apply_block(model: ti.template(), state: ti.template(), forces: ti.template
         ap += _altitudes_times(model, ws, i, dt)
         if ti.static(model.face_count > 0):
             ap += implicit_elements.stiffness_times(model, ws, i)
+        if ti.static(model.isometric):
+            ap += implicit_elements.isometric_product(model, ws, i, dt)
         ap *= free
         ws.ap[i] = ap
         pap += pi.dot(ap)

@@ -8,7 +8,7 @@ import taichi as ti
 
 from ..physics import wind
 from ..physics.constraints import damp, xpbd_altitude, xpbd_update
-from ..physics.element_constraints import xpbd_bending, xpbd_membrane
+from ..physics.element_constraints import xpbd_bending, xpbd_isometric, xpbd_membrane
 from ..physics.forces import gather_force
 from ..runtime import backend, limits
 from ..runtime.plan import Loop, Phase, Repeat, Sweep
@@ -58,7 +58,7 @@ def solve_altitude(model: ti.template(), state: ti.template(), forces: ti.templa
 def clear_face(model: ti.template(), state: ti.template(), forces: ti.template(),
                work: ti.template(), stages: ti.template(), f, now: ti.template()):
     work.membrane[f] = ti.Vector([0.0, 0.0, 0.0])
-    work.bending[f] = ti.Vector([0.0, 0.0, 0.0])
+    work.bending[f] = 0.0 * work.bending[f]
 
 
 @ti.func
@@ -71,8 +71,11 @@ def solve_membrane(model: ti.template(), state: ti.template(), forces: ti.templa
 @ti.func
 def solve_bending(model: ti.template(), state: ti.template(), forces: ti.template(),
                   work: ti.template(), stages: ti.template(), t, now: ti.template()):
-    xpbd_bending(model, state, work.bending_colours.order[t], work.bending, now.dt,
-                 forces.tearable)
+    if ti.static(model.isometric):
+        xpbd_isometric(model, state, work.bending_colours.order[t], work.bending, now.dt)
+    else:
+        xpbd_bending(model, state, work.bending_colours.order[t], work.bending, now.dt,
+                     forces.tearable)
 
 
 @ti.func
@@ -84,7 +87,8 @@ def damp_spring(model: ti.template(), state: ti.template(), forces: ti.template(
 @backend.kernel_argument
 class _Multipliers:
     """One Lagrange multiplier per spring (in colour order) and per altitude spring [N s^2],
-    three per triangle for its strain and three for its bending (a Fabric's), reset every
+    three per triangle for its strain and three for its bending (a Fabric's; nine for the
+    isometric bending of a flat sheet, a hinge's on each axis), reset every
     step, and the model's colourings (read by the phases)."""
 
     def __init__(self, model):
@@ -92,7 +96,8 @@ class _Multipliers:
         self.value = fields.scalar(backend.real(), max(model.spring_count, 1))
         self.altitude = fields.scalar(backend.real(), max(model.altitude_count, 1))
         self.membrane = fields.vector(3, backend.real(), max(model.face_count, 1))
-        self.bending = fields.vector(3, backend.real(), max(model.face_count, 1))
+        self.bending = fields.vector(9 if model.isometric else 3, backend.real(),
+                                     max(model.face_count, 1))
         fields.finalize(self)
         self.colours = model.spring_colouring()
         self.altitude_colours = model.altitude_colouring()

@@ -190,3 +190,45 @@ def _bending(model: ti.template(), state: ti.template(), f, multiplier: ti.templ
             p = others[i]
             state.particle_position[p] = (state.particle_position[p]
                                           + model.particle_inv_mass[p] * step[i] * other_grads[i])
+
+
+@ti.func
+def xpbd_isometric(model: ti.template(), state: ti.template(), f, multiplier: ti.template(), dt):
+    """XPBD for triangle f's isometric bending (a flat rest sheet: body/elements.isometric_matrix),
+    its multipliers in multiplier[f] (3 x 3: a hinge's row, an axis's column): the constraint
+    is w_i = sum_s J_is x_s over its stencil s (Model.face_stencil_weight), linear and the same
+    on each axis, with compliance B'^-1. Its gradients do not change within the step, so,
+    converged, this is the backward Euler step of the energy (what XPBD leaves out of the
+    other elements is zero here)."""
+    stencil = model.face_stencil[f]
+    weight = model.face_stencil_weight[f]
+    coupling = ti.Matrix.zero(float, 3, 3)
+    value = ti.Matrix.zero(float, 3, 3)
+    motion = ti.Matrix.zero(float, 3, 3)
+    for s in ti.static(range(6)):
+        p = stencil[s]
+        w = model.particle_inv_mass[p]
+        x = state.particle_position[p]
+        moved = _moved(state, p)
+        for i in ti.static(range(3)):
+            for j in ti.static(range(3)):
+                coupling[i, j] += w * weight[6 * i + s] * weight[6 * j + s]
+            for a in ti.static(range(3)):
+                value[i, a] += weight[6 * i + s] * x[a]
+                motion[i, a] += weight[6 * i + s] * moved[a]
+    b = model.face_isometric[f]                # symmetric: 00, 11, 22, 01, 02, 12
+    bending = ti.Matrix([[b[0], b[3], b[4]], [b[3], b[1], b[5]], [b[4], b[5], b[2]]])
+    gamma = model.face_damping[f] / dt
+    m = multiplier[f]
+    held = ti.Matrix([[m[0], m[1], m[2]], [m[3], m[4], m[5]], [m[6], m[7], m[8]]])
+    step = _multiplier_step((dt * dt) * bending, coupling, value + gamma * motion, held, gamma)
+    for i in ti.static(range(3)):
+        for a in ti.static(range(3)):
+            m[3 * i + a] += step[i, a]
+    multiplier[f] = m
+    for s in ti.static(range(6)):
+        p = stencil[s]
+        move = ti.Vector([0.0, 0.0, 0.0])
+        for i in ti.static(range(3)):
+            move += weight[6 * i + s] * ti.Vector([step[i, 0], step[i, 1], step[i, 2]])
+        state.particle_position[p] = state.particle_position[p] + model.particle_inv_mass[p] * move

@@ -6,7 +6,9 @@ As for springs (forces.py), each element's forces are computed once per evaluati
 force per corner, which every particle gathers in a fixed order (Model adjacency): no float
 atomics, the same bits in every plan. Bending takes three loops: every hinge's angle (its
 tangent t = tan(theta / 2), rate and gradient), every triangle's moments dE/dt_i, and every
-hinge's corner forces -(M_1 + M_2) grad t from the moments of its two triangles.
+hinge's corner forces -(M_1 + M_2) grad t from the moments of its two triangles. A flat sheet
+(Model.isometric) bends by the isometric model instead: one loop in which every particle sums
+its neighbours' rows of the constant Q (body/elements.isometric_matrix), no angle computed.
 """
 
 import numpy as np
@@ -192,25 +194,57 @@ def gather_corners(model: ti.template(), face_values: ti.template(),
     total = ti.Vector([0.0, 0.0, 0.0])
     for a in range(model.particle_face_start[i], model.particle_face_start[i + 1]):
         total += face_values[model.adjacency_face[a]]
-    if ti.static(model.hinge_count > 0):
+    if ti.static(model.hinge_count > 0 and not model.isometric):
         for a in range(model.particle_hinge_start[i], model.particle_hinge_start[i + 1]):
             total += hinge_values[model.adjacency_hinge[a]]
     return total
 
 
 @ti.func
+def isometric_sum(model: ti.template(), first: ti.template(), second: ti.template(), i,
+                  a, b):
+    """sum_l (a k_il (first_l - first_i) + b d_il (second_l - second_i)) over particle i's
+    neighbours l in increasing order, k = -Q and d = -beta Q the isometric bending's
+    stiffness and damping (body/elements.isometric_matrix): a = b = 1 on positions and
+    velocities is its force, a = h^2, b = h on one direction implicit Euler's product."""
+    x = first[i]
+    v = second[i]
+    total = ti.Vector([0.0, 0.0, 0.0])
+    for c in range(model.particle_bend_start[i], model.particle_bend_start[i + 1]):
+        other = model.bend_other[c]
+        total += (a * model.bend_stiffness[c] * (first[other] - x)
+                  + b * model.bend_damping[c] * (second[other] - v))
+    return total
+
+
+@ti.func
+def isometric_forces(model: ti.template(), state: ti.template(), forces: ti.template(),
+                     work: ti.template(), stages: ti.template(), i, now: ti.template()):
+    """particle_bend_force[i] = the isometric bending force on particle i (with the membranes,
+    before any particle moves: it reads its neighbours' positions and velocities)."""
+    state.particle_bend_force[i] = isometric_sum(model, state.particle_position,
+                                                 state.particle_velocity, i, 1.0, 1.0)
+
+
+@ti.func
 def gather_elements(model: ti.template(), state: ti.template(), i):
     """The force of particle i's triangles and hinges (a body with triangles: gather_force
     calls it only then)."""
-    return gather_corners(model, state.face_force, state.hinge_force, i)
+    total = gather_corners(model, state.face_force, state.hinge_force, i)
+    if ti.static(model.isometric):
+        total += state.particle_bend_force[i]
+    return total
 
 
 def element_loops(model) -> tuple:
-    """The loops of the first force phase: every membrane triangle and every hinge's angle."""
+    """The loops of the first force phase: every membrane triangle and every hinge's angle, or
+    (isometric) every particle's bending force."""
     loops = ()
     if model.face_count:
         loops += (Loop(model.face_count, membrane_forces),)
-    if model.hinge_count:
+    if model.isometric:
+        loops += (Loop(model.particle_count, isometric_forces),)
+    elif model.hinge_count:
         loops += (Loop(model.hinge_count, hinge_angles),)
     return loops
 
@@ -219,7 +253,7 @@ def bending_phases(model, with_moments: tuple = (), with_forces: tuple = ()) -> 
     """The phases after the first: the triangles' moments, then the hinges' forces (each with
     the caller's loops that read the same inputs: with_moments read the hinges' angles and
     gradients, with_forces everything the moments' phase wrote)."""
-    if not model.hinge_count:
+    if not model.hinge_count or model.isometric:
         return ()
     return (Phase(Loop(model.face_count, face_moments), *with_moments),
             Phase(Loop(model.hinge_count, hinge_forces), *with_forces))

@@ -238,15 +238,16 @@ def compute_forces(model, state, forces: ForceSettings, springs: bool = True) ->
 
 
 def energies(cloth, positions: np.ndarray, velocities: np.ndarray, gravity,
-             alive: np.ndarray | None = None,
-             face_alive: np.ndarray | None = None) -> dict[str, float]:
+             alive: np.ndarray | None = None, face_alive: np.ndarray | None = None,
+             isometric: bool = False) -> dict[str, float]:
     """Kinetic, gravitational and spring energy [J], in float64 on the host.
 
     kinetic = sum 1/2 m |v|^2; gravity = -sum m g . x (Stuyck 4.3.1, zero at the origin);
     spring = sum 1/2 k (|x_i - x_j| - L)^2 (Stuyck eq. 4.4) over intact springs, plus
     sum 1/2 k (h - h0)^2 over altitude springs, plus a Fabric's membrane and bending energies
-    (body/elements.py; of the triangles face_alive keeps, when given); also per kind as spring_stretch, spring_shear, spring_bend,
-    spring_altitude, membrane and bending; total = kinetic + gravity + spring.
+    (body/elements.py; of the triangles face_alive keeps, when given; bending by the isometric
+    model with `isometric`, as Model.isometric); also per kind as spring_stretch, spring_shear,
+    spring_bend, spring_altitude, membrane and bending; total = kinetic + gravity + spring.
     """
     m = cloth.particle_mass
     kinetic = 0.5 * float(np.sum(m * np.sum(velocities * velocities, axis=1)))
@@ -259,7 +260,7 @@ def energies(cloth, positions: np.ndarray, velocities: np.ndarray, gravity,
     by_kind = np.bincount(cloth.spring_kind, weights=per_spring, minlength=len(SpringKind))
     altitude = altitude_energy(cloth, positions)
     membrane = host_elements.membrane_energy(cloth, positions, face_alive)
-    bending = host_elements.bending_energy(cloth, positions, face_alive)
+    bending = host_elements.bending_energy(cloth, positions, face_alive, isometric)
     result = {"kinetic": kinetic, "gravity": potential,
               "spring": float(by_kind.sum()) + altitude + membrane + bending}
     result.update({f"spring_{k.name.lower()}": float(by_kind[k]) for k in SpringKind})
