@@ -1,12 +1,14 @@
 """What a Fabric's step costs against a step of Stuyck's springs on the same mesh.
 
 The scene: grid_mesh(N, N), two corners pinned, gravity, at rest, stepped by symplectic Euler
-with one dt for both bodies (half the smaller of their stable steps): the default Material
-(stretch, shear and bend springs: about 6 per particle) and Fabric.preset("denim")
-(a membrane per triangle, 2 per particle, and a hinge per interior edge, about 3 per
-particle). Both run the full simulator (Simulation.step, many steps per launch, divergence
+with one dt for all bodies (half the smallest of their stable steps): the default Material
+(stretch, shear and bend springs: about 6 per particle), Fabric.preset("denim") on the flat
+grid (a membrane per triangle, 2 per particle, and the isometric bending of a flat sheet: a
+row of its constant Q per particle) and the same fabric on the grid bowed to a 10 m radius
+(curved at rest: bending by the mid-edge tangents, a hinge per interior edge, about 3 per
+particle). All run the full simulator (Simulation.step, many steps per launch, divergence
 guard included). Rates are medians of --repeats runs of at least --seconds each, measured in
-the same process, and the ratio comes from this run.
+the same process, and the ratios come from this run.
 
 --newton also times Newton's semi-implicit cloth on the same mesh, particles, pins and dt:
 SolverSemiImplicit with its triangle FEM (tri_ke = tri_ka = the fabric's mean stretch / 2,
@@ -31,8 +33,12 @@ import ti_cloth as tc
 def bodies(n: int) -> dict[str, tc.Cloth]:
     mesh = tc.grid_mesh(n, n, (1.0, 1.0))
     pinned = [n * (n - 1), n * n - 1]
+    x = mesh.vertices
+    bowed = tc.Mesh(x + np.outer(10.0 - np.sqrt(100.0 - (x[:, 0] - 0.5) ** 2), [0, 1, 0]),
+                    mesh.triangles)
     return {"springs": tc.Cloth(mesh, tc.Material(), pinned=pinned),
-            "fabric": tc.Cloth(mesh, tc.Fabric.preset("denim"), pinned=pinned)}
+            "fabric": tc.Cloth(mesh, tc.Fabric.preset("denim"), pinned=pinned),
+            "curved": tc.Cloth(bowed, tc.Fabric.preset("denim"), pinned=pinned)}
 
 
 class NewtonFabric(NewtonCloth):
@@ -75,8 +81,8 @@ def main() -> None:
     tc.init(arch=args.arch, precision=args.precision)
     print(f"symplectic Euler, {args.precision}, {args.arch}, medians of {args.repeats} runs")
     print(f"{'N':>5} {'particles':>9} {'springs steps/s':>16} {'fabric steps/s':>15} "
-          f"{'fabric cost / springs':>22}" + (f" {'Newton steps/s':>15} {'fabric / Newton':>16}"
-                                              if args.newton else ""))
+          f"{'fabric cost / springs':>22} {'curved steps/s':>15} {'curved cost / springs':>22}"
+          + (f" {'Newton steps/s':>15} {'fabric / Newton':>16}" if args.newton else ""))
     for n in args.sizes:
         cloths = bodies(n)
         dt = 0.5 * min(tc.stable_dt(c, "symplectic_euler") for c in cloths.values())
@@ -85,7 +91,8 @@ def main() -> None:
             sim = tc.Simulation(cloth, integrator="symplectic_euler", dt=dt)
             rates[name] = median_rate(sim.step, sim.velocities, args.seconds, args.repeats)
         line = (f"{n:>5} {n * n:>9} {rates['springs']:>16.1f} {rates['fabric']:>15.1f} "
-                f"{rates['springs'] / rates['fabric']:>22.2f}")
+                f"{rates['springs'] / rates['fabric']:>22.2f} {rates['curved']:>15.1f} "
+                f"{rates['springs'] / rates['curved']:>22.2f}")
         if args.newton:
             peer = NewtonFabric(cloths["fabric"], tc.Fabric.preset("denim"), dt)
             rate = median_rate(peer.step, peer.sync, args.seconds, args.repeats)
