@@ -7,8 +7,9 @@ grid (a membrane per triangle, 2 per particle, and the isometric bending of a fl
 row of its constant Q per particle) and the same fabric on the grid bowed to a 10 m radius
 (curved at rest: bending by the mid-edge tangents, a hinge per interior edge, about 3 per
 particle). All run the full simulator (Simulation.step, many steps per launch, divergence
-guard included). Rates are medians of --repeats runs of at least --seconds each, measured in
-the same process, and the ratios come from this run.
+guard included). Rates are medians of --repeats rounds, each timing every variant in turn for
+about --seconds, in the same process; a cost is the median over the rounds of the ratio of
+the spring step's rate to the variant's in that round.
 
 --newton also times Newton's semi-implicit cloth on the same mesh, particles, pins and dt:
 SolverSemiImplicit with its triangle FEM (tri_ke = tri_ka = the fabric's mean stretch / 2,
@@ -22,10 +23,11 @@ ours; the run checks only that it stayed finite.
 """
 
 import argparse
+import statistics
 
 import numpy as np
 import peers
-from throughput import NEWTON_CHECKED, NewtonCloth, median_rate
+from throughput import NEWTON_CHECKED, NewtonCloth, interleaved_rates, median_rate
 
 import ti_cloth as tc
 
@@ -34,7 +36,7 @@ def bodies(n: int) -> dict[str, tc.Cloth]:
     mesh = tc.grid_mesh(n, n, (1.0, 1.0))
     pinned = [n * (n - 1), n * n - 1]
     x = mesh.vertices
-    bowed = tc.Mesh(x + np.outer(10.0 - np.sqrt(100.0 - (x[:, 0] - 0.5) ** 2), [0, 1, 0]),
+    bowed = tc.Mesh(x + np.outer(10.0 - np.sqrt(100.0 - (x[:, 0] - 0.5) ** 2), [0, 0, 1]),
                     mesh.triangles)
     return {"springs": tc.Cloth(mesh, tc.Material(), pinned=pinned),
             "fabric": tc.Cloth(mesh, tc.Fabric.preset("denim"), pinned=pinned),
@@ -86,13 +88,15 @@ def main() -> None:
     for n in args.sizes:
         cloths = bodies(n)
         dt = 0.5 * min(tc.stable_dt(c, "symplectic_euler") for c in cloths.values())
-        rates = {}
-        for name, cloth in cloths.items():
-            sim = tc.Simulation(cloth, integrator="symplectic_euler", dt=dt)
-            rates[name] = median_rate(sim.step, sim.velocities, args.seconds, args.repeats)
+        sims = {name: tc.Simulation(cloth, integrator="symplectic_euler", dt=dt)
+                for name, cloth in cloths.items()}
+        rounds = interleaved_rates({name: (sim.step, sim.velocities) for name, sim in sims.items()},
+                                   args.seconds, args.repeats)
+        rates = {name: statistics.median(r) for name, r in rounds.items()}
+        cost = {name: statistics.median(np.divide(rounds["springs"], rounds[name]))
+                for name in ("fabric", "curved")}
         line = (f"{n:>5} {n * n:>9} {rates['springs']:>16.1f} {rates['fabric']:>15.1f} "
-                f"{rates['springs'] / rates['fabric']:>22.2f} {rates['curved']:>15.1f} "
-                f"{rates['springs'] / rates['curved']:>22.2f}")
+                f"{cost['fabric']:>22.2f} {rates['curved']:>15.1f} {cost['curved']:>22.2f}")
         if args.newton:
             peer = NewtonFabric(cloths["fabric"], tc.Fabric.preset("denim"), dt)
             rate = median_rate(peer.step, peer.sync, args.seconds, args.repeats)

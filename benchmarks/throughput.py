@@ -53,6 +53,32 @@ def scene(n: int) -> tuple[tc.Cloth, np.ndarray]:
 def median_rate(step, sync, seconds: float, repeats: int) -> float:
     """Median steps/s of `repeats` runs, each of enough steps to last about `seconds`, after a
     warm-up that compiles every launch plan (one step, then several)."""
+    steps = calibrated_steps(step, sync, seconds)
+    return statistics.median(timed_rate(step, sync, steps) for _ in range(repeats))
+
+
+def interleaved_rates(variants: dict, seconds: float, repeats: int) -> dict[str, list[float]]:
+    """{name: steps/s of each of `repeats` rounds} of variants {name: (step, sync)}, each
+    round timing every variant once in turn (so a ratio of two variants' rates in one round
+    compares runs seconds apart on a machine whose speed drifts)."""
+    steps = {name: calibrated_steps(step, sync, seconds) for name, (step, sync) in variants.items()}
+    rates = {name: [] for name in variants}
+    for _ in range(repeats):
+        for name, (step, sync) in variants.items():
+            rates[name].append(timed_rate(step, sync, steps[name]))
+    return rates
+
+
+def timed_rate(step, sync, steps: int) -> float:
+    start = time.perf_counter()
+    step(steps)
+    sync()
+    return steps / (time.perf_counter() - start)
+
+
+def calibrated_steps(step, sync, seconds: float) -> int:
+    """After a warm-up that compiles every launch plan (one step, then several), the number of
+    steps that lasts about `seconds`."""
     step(1)
     step(2)
     sync()
@@ -65,14 +91,7 @@ def median_rate(step, sync, seconds: float, repeats: int) -> float:
         if elapsed >= seconds / 4 or steps >= 1 << 20:
             break
         steps *= 4
-    steps = max(2, int(steps * seconds / elapsed))
-    rates = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        step(steps)
-        sync()
-        rates.append(steps / (time.perf_counter() - start))
-    return statistics.median(rates)
+    return max(2, int(steps * seconds / elapsed))
 
 
 class NumpyCloth:

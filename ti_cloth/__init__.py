@@ -26,7 +26,7 @@ from .contact.attachment import Attachment
 from .contact.colliders import Box, Capsule, Collider, Plane, Sphere
 from .contact.mesh_collider import MeshCollider
 from .contact.self_collision import SelfCollision, SelfContacts
-from .errors import SimulationDiverged, StateMismatch, TeamStalled
+from .errors import OutputError, SimulationDiverged, StateMismatch, TeamStalled
 from .export import Exporter
 from .integrators import (
     INTEGRATORS,
@@ -53,7 +53,7 @@ from .stability import AUTO_MAX_DT, auto_dt, auto_substeps, stable_dt
 from .state import State
 
 __all__ = [
-    "init", "AnimatedMeshCollider", "Box", "Capsule", "Collider", "Exporter", "MeshCollider", "Plane", "Sphere", "SimulationDiverged", "StateMismatch",
+    "init", "AnimatedMeshCollider", "Box", "Capsule", "Collider", "Exporter", "MeshCollider", "Plane", "Sphere", "OutputError", "SimulationDiverged", "StateMismatch",
     "TeamStalled",
     "ForceSettings",
     "INTEGRATORS", "Integrator", "ExplicitEuler", "SymplecticEuler", "Verlet", "PBD", "XPBD",

@@ -47,3 +47,26 @@ class TeamStalled(RuntimeError):
 class StateMismatch(ValueError):
     """A saved state (Simulation.load_state, a resumed run) that this simulation cannot take:
     not a state file, another state format, or saved by a different simulation."""
+
+
+class OutputError(OSError):
+    """A file ti_cloth writes (a frame, a checkpoint, an export, the GIF/MP4, a study's table)
+    could not be written: the disk is full, the folder is not writable or is on a read-only
+    file system. `path` is the file, `reason` the system's words for why; nothing is left
+    under the file's name (files are written to a temporary name, then renamed)."""
+
+    HINTS = {"ENOSPC": "free some space", "EDQUOT": "free some of your quota",
+             "EACCES": "choose a folder you can write to", "EPERM": "choose a folder you can write to",
+             "EROFS": "choose a folder on a writable file system"}
+
+    def __init__(self, path, cause: OSError):
+        import errno
+
+        self.path, self.cause = path, cause
+        code = errno.errorcode.get(cause.errno, "")
+        self.reason = f"{cause.strerror or cause}" + (f" ({code})" if code else "")
+        self.hint = self.HINTS.get(code, "check the folder and the disk")
+        super().__init__(cause.errno, f"cannot write {path}: {self.reason}; {self.hint}")
+
+    def __str__(self) -> str:
+        return self.args[1]

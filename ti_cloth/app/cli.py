@@ -9,10 +9,12 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+from ..errors import OutputError
 from ..export import FORMATS
 from ..runtime import backend, limits
 
 TEST_FRAMES, TEST_SIZE = 4, (160, 96)
+OUTPUT_FAILED = 74        # sysexits.h's EX_IOERR: a file could not be written
 
 
 def _positive(text: str) -> int:
@@ -74,7 +76,8 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
         checkpoint_every=None) -> tuple[int, list[Path]]:
     """Load, initialise, run and report; returns (exit code, frame paths). Exit codes: 0 done,
     1 diverged, 2 a scene the run refuses (the message names the key) or a state it cannot
-    resume from, 128 + signal when stopped by Ctrl-C (130) or SIGTERM (143)."""
+    resume from, 74 (sysexits' EX_IOERR) a file it could not write (disk full, no permission,
+    read-only), 128 + signal when stopped by Ctrl-C (130) or SIGTERM (143)."""
     from ..errors import StateMismatch
     from ..runtime.limits import LONG_RUN_SECONDS
     from . import signals
@@ -130,6 +133,12 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
     if result.interrupted:
         print(f"interrupted: {summary}", file=sys.stderr)
         return 128 + result.stop_signal, result.frames
+    if result.unwritten is not None:
+        kept = (f"the last checkpoint is {result.checkpoint} (--resume continues from it)"
+                if result.checkpoint is not None else "no checkpoint was saved")
+        print(f"error: {result.unwritten}\n{summary}\n{len(result.frames)} finished frames "
+              f"kept; {kept}", file=sys.stderr)
+        return OUTPUT_FAILED, result.frames
     if result.diverged is not None:
         print(f"error: {result.diverged}\n{summary}", file=sys.stderr)
         return 1, result.frames
@@ -177,6 +186,9 @@ def _sweep(scene_path, jobs, scheduler, compute, write, lost: str):
             result = compute(scene, workers)
         with signals.stop_signals_held():
             written = write(scene, result)
+    except OutputError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return OUTPUT_FAILED, None, None, []
     except (ValueError, RuntimeError, ImportError, ConnectionError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2, None, None, []

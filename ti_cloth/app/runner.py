@@ -21,10 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import SimulationDiverged, StateMismatch
+from ..errors import OutputError, SimulationDiverged, StateMismatch
 from ..export import Exporter
 from ..render import Camera, FrameSequence, Renderer
-from ..render.image import frame_path
 from ..render.springs2d import FRONT, SpringView
 from ..runtime import backend, limits
 from . import signals
@@ -44,10 +43,12 @@ class RunResult:
     stop_signal: int | None = None   # the signal that interrupted the run (SIGINT, SIGTERM)
     exports: list[Path] = field(default_factory=list)   # geometry files (export.Exporter)
     resumed_from: int | None = None   # the first frame this run wrote, when it was resumed
+    unwritten: OutputError | None = None   # a file the run could not write, which stopped it
+    checkpoint: Path | None = None   # the last state saved (Simulation.save_state), if any
 
     @property
     def complete(self) -> bool:
-        return not self.interrupted and self.diverged is None
+        return not self.interrupted and self.diverged is None and self.unwritten is None
 
 
 class Watch:
@@ -147,7 +148,9 @@ def run_scene(scene, *, folder=None, frames: int | None = None, progress: bool =
     (FileNotFoundError without one, errors.StateMismatch for another scene's). Call
     ti_cloth.init first. Returns a RunResult; Ctrl-C, SIGTERM (in the main thread) or a
     SimulationDiverged end the run early, in any phase, with every finished frame kept and the
-    GIF/MP4 and point caches assembled from them."""
+    GIF/MP4 and point caches assembled from them; so does a file that cannot be written
+    (errors.OutputError: a full disk, a folder without permission), in RunResult.unwritten,
+    the last checkpoint left as it was."""
     from tqdm import tqdm
 
     if scene.automatic:
@@ -164,17 +167,14 @@ def run_scene(scene, *, folder=None, frames: int | None = None, progress: bool =
     every = checkpoint_interval(scene, out)
     start = time.perf_counter()
     sim, sequence, exporter, first = None, None, None, 0
-    stop, diverged = None, None
+    stop, diverged, unwritten, checkpoint = None, None, None, None
     with signals.stop_signals_raise():
         try:
             sim = scene.build(dt=scene.frame_dt / substeps)
             if resume:
                 first = _resume(sim, saved, substeps)
-                if first >= frames:                 # it had finished: nothing to write
-                    return RunResult(frames=[frame_path(folder, k) for k in range(frames)],
-                                     outputs=[], steps=sim.step_count, dt=sim.dt,
-                                     wall_seconds=time.perf_counter() - start,
-                                     resumed_from=first)
+                if first >= frames:      # it had finished: only the GIF/MP4 may be missing
+                    return _finished(scene, out, folder, sim, frames, start)
             sequence = FrameSequence(folder, fps=scene.fps, gif=out.gif, mp4=out.mp4,
                                      name=scene.name, gif_width=min(out.gif_width, out.width),
                                      first=first)
@@ -194,6 +194,7 @@ def run_scene(scene, *, folder=None, frames: int | None = None, progress: bool =
                     exporter.write(sim)
                     if (frame and frame % every == 0) or frame == frames - 1:
                         sim.save_state(saved)
+                        checkpoint = saved
                     elapsed = time.perf_counter() - start
                     bar.set_postfix_str(f"t={sim.time:.3f} s, "
                                         f"{sim.step_count / max(elapsed, 1e-9):,.0f} steps/s")
@@ -204,10 +205,19 @@ def run_scene(scene, *, folder=None, frames: int | None = None, progress: bool =
             stop = err
         except SimulationDiverged as err:
             diverged = err
+        except OutputError as err:
+            unwritten = err
     with signals.stop_signals_held() as held:
-        outputs = sequence.close() if sequence is not None else []
-        complete = stop is None and diverged is None and not held
-        exports = exporter.close(keep_journal=not complete) if exporter is not None else []
+        outputs, exports = [], []
+        complete = stop is None and diverged is None and unwritten is None and not held
+        try:
+            outputs = sequence.close() if sequence is not None else []
+        except OutputError as err:
+            unwritten = unwritten or err
+        try:
+            exports = exporter.close(keep_journal=not complete) if exporter is not None else []
+        except OutputError as err:
+            unwritten = unwritten or err
     if stop is None and held:
         stop = signals.Stopped(held[0])
     return RunResult(frames=sequence.paths if sequence is not None else [], outputs=outputs,
@@ -215,7 +225,19 @@ def run_scene(scene, *, folder=None, frames: int | None = None, progress: bool =
                      dt=sim.dt if sim is not None else scene.frame_dt / substeps,
                      wall_seconds=time.perf_counter() - start, interrupted=stop is not None,
                      diverged=diverged, resumed_from=first if resume else None,
-                     stop_signal=None if stop is None else signals.signal_number(stop))
+                     stop_signal=None if stop is None else signals.signal_number(stop),
+                     unwritten=unwritten, checkpoint=checkpoint or (saved if resume else None))
+
+
+def _finished(scene, out, folder: Path, sim, frames: int, start: float) -> RunResult:
+    """A resumed run that had written every frame: the GIF/MP4 assembled from them again (a
+    run stopped by a file it could not write may have lost only those)."""
+    sequence = FrameSequence(folder, fps=scene.fps, gif=out.gif, mp4=out.mp4, name=scene.name,
+                             gif_width=min(out.gif_width, out.width), first=frames)
+    with signals.stop_signals_held():
+        outputs = sequence.close()
+    return RunResult(frames=sequence.paths, outputs=outputs, steps=sim.step_count, dt=sim.dt,
+                     wall_seconds=time.perf_counter() - start, resumed_from=frames)
 
 
 def _resume(sim, saved: Path, substeps: int) -> int:

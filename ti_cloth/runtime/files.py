@@ -7,19 +7,32 @@ from __future__ import annotations
 from contextlib import contextmanager
 from pathlib import Path
 
+from ..errors import OutputError
+
 
 @contextmanager
 def atomic_path(path):
     """Yield a hidden temporary name beside `path` (same extension: writers pick the format
-    from it); rename it to `path` when the block succeeds, delete it when it fails."""
+    from it); rename it to `path` when the block succeeds, delete it when it fails. A write
+    the system refuses (disk full, no permission, read-only: an OSError with an errno) is an
+    errors.OutputError naming `path`; what was at `path` before is left as it was."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = temporary_name(path)
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
         yield tmp
         tmp.replace(path)
+    except OutputError:
+        raise
+    except OSError as err:
+        if err.errno is None:
+            raise
+        raise OutputError(path, err) from err
     finally:
-        tmp.unlink(missing_ok=True)
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:
+            pass                   # a folder that cannot be written holds no temporary either
 
 
 def temporary_name(path: Path) -> Path:
