@@ -353,10 +353,50 @@ def test_a_sheet_dropped_from_2_m_onto_a_folded_sheet_makes_a_pile_of_four_layer
             frames.append(violations(body, sim.positions()))
         results[contact is not None] = (min(f[0] for f in frames), max(f[1] for f in frames),
                                         covered(body, sim.positions(), layer, up))
+        if contact is not None:
+            assert sim.self_contacts().closest_left is None      # every step's passes resolved
     print(f"closest vertex-triangle, most edge crossings, particles under a lower layer "
           f"(with, without): {results}")
     assert results[True][0] > 0.5 * THICKNESS and results[True][1:] == (0, 0)
     assert results[False][0] < 0.5 * THICKNESS and results[False][1] > 0 and results[False][2] > 0
+
+
+def test_a_contact_the_passes_cannot_resolve_is_reported_with_its_distance(f64):
+    """A sheet on the ground and a sheet over it pressed down by a handle to 6 mm above the
+    ground, the thickness 20 mm: no pass can make room (issue 40, a dense pile: the ground and
+    the handle hold the layers 0.3 thickness apart). The run warns once, in the first step
+    whose passes leave the layers nearer than half the thickness (measured here by brute force
+    over every vertex and triangle of the other sheet), naming the distance, the passes and
+    the step; self_contacts().closest_left is the nearest distance and its first step. The
+    folded four-layer pile above, whose passes do resolve, reports nothing."""
+    thickness, height = 0.02, 0.006
+    lower = tc.Cloth(tc.grid_mesh(6, 6, size=(0.3, 0.3), plane="xz"), tc.Material())
+    mesh = tc.grid_mesh(6, 6, size=(0.2, 0.2), plane="xz")
+    upper = tc.Cloth(tc.Mesh(mesh.vertices + [0.05, 0.05, 0.05], mesh.triangles), tc.Material())
+    body = tc.Cloth.combine([lower, upper])
+    press = tc.Handle(np.arange(36, 72), lambda t: (0.0, -min(t / 0.1, 1.0) * (0.05 - height), 0.0))
+    sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240, handles=[press],
+                        self_collision=tc.SelfCollision(thickness),
+                        colliders=[tc.Plane(point=(0.0, 0.0, 0.0))])
+    tris = body.mesh.triangles
+    v, t = np.nonzero(body.particle_body[:, None] != body.particle_body[tris[:, 0]][None])
+    nearest = []
+    with pytest.warns(UserWarning, match=r"self-collision left a contact 0\.\d\d of the "
+                                         r"thickness apart \(0\.\d+ m of 0\.02 m\) after 16 "
+                                         r"passes in step (\d+)") as caught:
+        for _ in range(40):
+            sim.step(1)
+            x = sim.positions()
+            nearest.append(point_triangle_distances(x[v], x[tris[t]]).min())
+    reports = [str(w.message) for w in caught if "self-collision left" in str(w.message)]
+    assert len(reports) == 1
+    crowded = np.flatnonzero(np.array(nearest) < 0.5 * thickness)
+    assert f"in step {crowded[0]}:" in reports[0]
+    assert f"({nearest[crowded[0]]:.3g} m of 0.02 m)" in reports[0]
+    distance, step = sim.self_contacts().closest_left
+    assert step == int(np.argmin(nearest))
+    np.testing.assert_allclose(distance, min(nearest), rtol=1e-9)
+    np.testing.assert_allclose(distance, height, rtol=1e-9)
 
 
 def test_two_sheets_dropped_on_a_sphere_stay_apart(f64):

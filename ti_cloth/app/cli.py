@@ -111,6 +111,9 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
     except (SceneError, FileNotFoundError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2, []
+    except OutputError as err:                  # the advice of integrator = "auto"
+        print(f"error: {err}", file=sys.stderr)
+        return OUTPUT_FAILED, []
     except KeyboardInterrupt as stop:
         print("interrupted before the first frame", file=sys.stderr)
         return signals.exit_code(stop), []
@@ -270,7 +273,7 @@ def info() -> int:
 
 def view(scene_path, *, out=None, width=960, height=540, arch="cpu", record=False) -> int:
     """Open a window on the scene (app/view.py); exit code 0 when it closes, 2 for a scene it
-    refuses (the message names the key) or no display."""
+    refuses (the message names the key) or no display, 74 for a file it cannot write."""
     from .scene import load_scene
     from .scene_file import SceneError
     from .view import NoDisplay, require_display
@@ -286,6 +289,9 @@ def view(scene_path, *, out=None, width=960, height=540, arch="cpu", record=Fals
             print(f"integrator auto: {why}", file=sys.stderr)
         backend.ensure(arch=arch, precision=scene.precision)
         open_view(scene, width=width, height=height, folder=out, record=record)
+    except OutputError as err:                  # a recorded frame, a snapshot, advice
+        print(f"error: {err}", file=sys.stderr)
+        return OUTPUT_FAILED
     except (SceneError, FileNotFoundError, NoDisplay, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

@@ -59,6 +59,7 @@ MAX_PAIRS_PER_PARTICLE = 256
 SKIN = 1.0                  # the list's slack (skin), in thicknesses
 THICK = 0.5                 # a thickness above this (in mean rest edges) is warned about
 RESOLVED = 0.01             # a contact shallower than this (in thicknesses) ends the passes
+CROWDED = 0.5               # a contact left nearer than this (in thicknesses) is reported
 INSIDE = 1e-6               # a foot this far outside a triangle (in barycentric terms) is inside
 
 
@@ -68,7 +69,9 @@ class SelfCollision:
     of, and between edges that share no particle, > 0 (Blender's self_distance_min, 0.015 m).
     friction: Coulomb coefficient between touching layers, >= 0.
     iterations: contact passes per step at most, >= 1; they stop once no contact is deeper
-    than 1 % of the thickness."""
+    than 1 % of the thickness. A contact the passes leave nearer than half the thickness (a
+    layer pressed between a pin or a collider and another layer, or a pile too dense for the
+    passes) is reported: a warning, once a run, and SelfContacts.closest_left."""
 
     thickness: float = 0.005
     friction: float = 0.0
@@ -90,11 +93,14 @@ class SelfCollision:
 class SelfContacts:
     """Pairs of a simulation's self-collision (Simulation.self_contacts): vertex_triangle
     (K, 2) rows (vertex, triangle index into the mesh), edge_edge (M, 2) rows of edge
-    indices into `edges` (E, 2) particle pairs."""
+    indices into `edges` (E, 2) particle pairs. closest_left: (distance [m], step) of the
+    nearest contact the passes of a step have left, over the run so far, when one was left
+    nearer than half the thickness; None otherwise."""
 
     vertex_triangle: np.ndarray
     edge_edge: np.ndarray
     edges: np.ndarray
+    closest_left: tuple[float, int] | None = None
 
 
 def warn_if_thick(settings: SelfCollision, cloth) -> None:
@@ -147,6 +153,7 @@ class SelfContact:
         self.mean_edge = fields.scalar(real, ())
         self.pair_start = fields.scalar(ti.i32, len(triangles) + len(edges) + 1)
         self.touching = fields.vector(2, ti.i32, ())
+        self.deepest = fields.scalar(real, ())    # the smallest gap of a contact evaluated
         self.contact_start = fields.scalar(ti.i32, n + 1)
         self.contact_fill = fields.scalar(ti.i32, n)
         fields.finalize(self)
@@ -181,6 +188,7 @@ class SelfContact:
         """Drop the candidate list: the next step makes a new one (after a restart)."""
         self.listed = False
         self.pair_total = self.vertex_pairs = 0
+        self.closest_left = None
 
     def saved(self) -> dict:
         """The candidate list and where it was made: a list made at another step would order
@@ -236,7 +244,31 @@ class SelfContact:
                 project_out(model, state, self.colliders)
             if deep == 0:
                 break
+        else:                        # the passes ran out with contacts deep: what is left?
+            _, deep = evaluate_contacts(self, self.candidates, model, state, thickness,
+                                        self.settings.friction)
+            if deep:
+                self._report(thickness + float(self.deepest[None]), step_index)
         follow_corrections(self, state, dt)
+
+    def _report(self, distance: float, step_index: int) -> None:
+        """Keep the nearest contact the passes left (closest_left); warn the first time one is
+        left nearer than CROWDED thicknesses."""
+        thickness = self.settings.thickness
+        if distance >= CROWDED * thickness:
+            return
+        first = self.closest_left is None
+        if first or distance < self.closest_left[0]:
+            self.closest_left = (distance, step_index)
+        if first:
+            warnings.warn(
+                f"self-collision left a contact {distance / thickness:.2f} of the thickness "
+                f"apart ({distance:.3g} m of {thickness:.3g} m) after "
+                f"{self.settings.iterations} passes in step {step_index}: a layer may be held "
+                "against another by a pin, a handle or a collider, or the pile is too dense "
+                "for the passes; raise SelfCollision.iterations, add substeps or use a smaller "
+                "thickness (Simulation.self_contacts().closest_left follows the nearest)",
+                stacklevel=2)
 
     def _make_list(self, model, state, step_index: int) -> None:
         """List the pairs that met within thickness + skin during the step (their swept boxes
@@ -272,7 +304,8 @@ class SelfContact:
             kept = kept[self.candidates.active.to_numpy()[:total] > 0]
         elements = self.candidates.elements.to_numpy()[kept]
         vertex = kept < self.vertex_pairs
-        return SelfContacts(elements[vertex], elements[~vertex], self.edge_rows)
+        return SelfContacts(elements[vertex], elements[~vertex], self.edge_rows,
+                            self.closest_left)
 
 
 @ti.func
@@ -332,9 +365,10 @@ def evaluate_contacts(stage: ti.template(), pairs: ti.template(), model: ti.temp
               state: ti.template(), thickness: float,
               friction: float) -> ti.types.vector(2, ti.i32):
     """Evaluate every listed pair at the current positions: active[p] and, for contacts,
-    their moves. Returns how many are in contact and how many of those deeper than RESOLVED
-    thicknesses (integer counts: exact)."""
+    their moves, and the smallest gap of a contact in `deepest`. Returns how many are in
+    contact and how many of those deeper than RESOLVED thicknesses (integer counts: exact)."""
     stage.touching[None] = ti.Vector([0, 0])
+    stage.deepest[None] = 0.0
     vertex_pairs = stage.pair_start[stage.triangle_count]
     for p in range(stage.pair_start[stage.triangle_count + stage.edge_count]):
         corners = pairs.particles[p]
@@ -358,6 +392,7 @@ def evaluate_contacts(stage: ti.template(), pairs: ti.template(), model: ti.temp
         if touching:
             _contact_move(stage, pairs, model, state, p, corners, weights, n, gap, friction)
             ti.atomic_add(stage.touching[None][0], 1)
+            ti.atomic_min(stage.deepest[None], gap)      # a min: exact, in any order
             if gap < -RESOLVED * thickness:
                 ti.atomic_add(stage.touching[None][1], 1)
     return stage.touching[None]
