@@ -15,6 +15,8 @@ from hypothesis import strategies as st
 import ti_cloth as tc
 from ti_cloth.app.scene import load_scene
 from ti_cloth.app.scene_file import SceneError
+from ti_cloth.app.view import viewer_for
+from ti_cloth.runtime import backend
 
 BASE = {
     "scene": {"name": "fuzz"},
@@ -222,6 +224,39 @@ def test_a_generated_garment_scene_runs_a_frame_or_is_refused_naming_a_key(tmp_p
     runs_a_frame_or_is_refused(tmp_path, scene, touched, GARMENT_KEYS)
 
 
+FABRIC = {
+    "scene": {"name": "fuzz_fabric"},
+    "simulation": {"integrator": "implicit_euler", "fps": 30, "duration": 1.0, "resolution": 2,
+                   "self_collision": {"thickness": 0.02, "friction": 0.2, "iterations": 4}},
+    "bodies": [{"type": "grid", "rows": 4, "cols": 5, "size": [0.3, 0.3], "pinned": ["top"],
+                "warp": [1, 0, 0],
+                "fabric": {"preset": "denim", "stretch": [300, 200], "bending": [1e-4, 2e-4],
+                           "shear": 20, "poisson": 0.3, "damping": 0.01, "density": 0.3,
+                           "hem_mass": 0.0}}],
+    "camera": {"fov": 40, "direction": [0.5, 0.4, 1]},
+    "output": {"width": 64, "height": 48, "supersample": 1},
+}
+FABRIC_PATHS = [p for p in paths(FABRIC) if isinstance(p[-1], str)] + [("bodies", 0, "fabric")]
+FABRIC_KEYS = sorted({p[-1] for p in FABRIC_PATHS if isinstance(p[-1], str)} | set(KEY_NAMES)
+                     | {"material"})
+fabric_changes = st.lists(st.tuples(st.sampled_from(FABRIC_PATHS),
+                                    st.one_of(values, factors, factors,
+                                              st.sampled_from(sorted(tc.FABRICS) + ["silk", "uv"])),
+                                    st.one_of(st.none(), st.none(),
+                                              st.text(min_size=1, max_size=6))),
+                          min_size=1, max_size=3)
+
+
+@settings(max_examples=40, deadline=FRAME_DEADLINE_MS, derandomize=True,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(changes=fabric_changes)
+def test_a_generated_fabric_scene_runs_a_frame_or_is_refused_naming_a_key(tmp_path, changes):
+    """The same for the keys of fabrics (a preset by name, a table of moduli, warp), a
+    resolution and self-collision of a Fabric (its flat sheet bends by the isometric model)."""
+    scene, touched = mutated(changes, FABRIC)
+    runs_a_frame_or_is_refused(tmp_path, scene, touched, FABRIC_KEYS)
+
+
 def test_the_unmutated_fuzz_scene_loads(tmp_path):
     path = tmp_path / "scene.toml"
     path.write_text(document(BASE))
@@ -231,6 +266,9 @@ def test_the_unmutated_fuzz_scene_loads(tmp_path):
     garment = load_scene(path)
     assert len(garment.cloth.seam_indices) > 0 and len(garment.handles) == 1
     assert isinstance(garment.colliders[0], tc.AnimatedMeshCollider)
+    path.write_text(document(FABRIC))
+    fabric = load_scene(path)
+    assert fabric.cloth.face_count > 0 and fabric.self_collision is not None
 
 
 numbers = st.one_of(st.floats(allow_nan=True, allow_infinity=True),
@@ -272,10 +310,33 @@ API = {
     "AnimatedMeshCollider": (lambda a, b: tc.AnimatedMeshCollider(
         tc.sphere_mesh(0.1, subdivisions=0), [[[a, 0.0, 0.0]] * 12] * 2, fps=b),
         ("AnimatedMeshCollider",), (numbers, numbers)),
+    "Fabric": (lambda a, b: tc.Fabric(stretch=a, bending=b), ("stretch", "bending"),
+               (numbers, numbers)),
+    "Fabric.moduli": (lambda a, b: tc.Fabric(shear=a, poisson=b), ("shear", "poisson"),
+                      (numbers, numbers)),
+    "Fabric.preset": (lambda a, b: tc.Fabric.preset(a, density=b), ("preset", "density"),
+                      (st.one_of(st.sampled_from(sorted(tc.FABRICS)), st.text(max_size=6),
+                                 numbers), numbers)),
+    "Cloth.warp": (lambda a, b: tc.Cloth(tc.grid_mesh(3, 3), tc.Fabric(), warp=(a, 0.0, b)),
+                   ("warp",), (numbers, numbers)),
+    "SelfCollision": (lambda a, b: tc.SelfCollision(thickness=a, friction=b),
+                      ("SelfCollision",), (numbers, numbers)),
+    "viewer_for": (lambda a, b: viewer_for(viewed(), width=a, height=b), ("width", "height"),
+                   (small_counts, st.one_of(small_counts, st.sampled_from([16, 4096, 4097])))),
     "AnimatedMeshCollider.edge_contact": (lambda a, b: tc.AnimatedMeshCollider(
         tc.sphere_mesh(0.1, subdivisions=0), edge_contact=a, thickness=b),
         ("AnimatedMeshCollider",), (numbers, numbers)),
 }
+
+
+def viewed() -> tc.Simulation:
+    """One small simulation for the viewer_for examples of one Taichi runtime (a new one each
+    would compile)."""
+    use("f64")
+    if getattr(viewed, "runtime", None) != backend.generation():
+        viewed.sim = tc.Simulation(tc.Cloth(tc.grid_mesh(3, 3), tc.Material()))
+        viewed.runtime = backend.generation()
+    return viewed.sim
 
 
 @pytest.mark.parametrize("name", sorted(API))

@@ -97,7 +97,8 @@ class Fabric:
     @classmethod
     def preset(cls, name: str, **overrides) -> "Fabric":
         """A measured fabric (PRESETS); keyword arguments replace single fields."""
-        require(name in PRESETS, "preset", name, f"one of {sorted(PRESETS)}")
+        require(isinstance(name, str) and name in PRESETS, "preset", name,
+                f"one of {sorted(PRESETS)}")
         known = {f.name for f in fields(cls)}
         for key in overrides:
             require(key in known, "Fabric field", key, f"one of {sorted(known)}")
