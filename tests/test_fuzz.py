@@ -131,9 +131,16 @@ def reach(owner, key):
 
 
 factors = st.sampled_from([0.0, -1.0, 0.01, 0.3, 0.5, 2.0, 3.0, 10.0, 1e3]).map(Scale)
-changes = st.lists(st.tuples(st.sampled_from(PATHS), st.one_of(values, factors, factors),
-                             st.one_of(st.none(), st.none(), st.text(min_size=1, max_size=6))),
-                   min_size=1, max_size=3)
+def change_lists(key_paths, *more_values):
+    """One to three changes of the keys at `key_paths`: a value, a factor, or (a new key)
+    the value under another name."""
+    return st.lists(st.tuples(st.sampled_from(key_paths),
+                              st.one_of(values, factors, factors, *more_values),
+                              st.one_of(st.none(), st.none(), st.text(min_size=1, max_size=6))),
+                    min_size=1, max_size=3)
+
+
+changes = change_lists(PATHS)
 
 
 FRAME_SECONDS = 0.5     # examples whose frame is estimated longer are only loaded
@@ -207,11 +214,7 @@ def write_body(folder) -> None:
              positions=np.stack([corners + (0.0, 0.02 * k, 0.0) for k in range(11)]))
 
 
-garment_changes = st.lists(st.tuples(st.sampled_from(GARMENT_PATHS),
-                                     st.one_of(values, factors, factors),
-                                     st.one_of(st.none(), st.none(),
-                                               st.text(min_size=1, max_size=6))),
-                           min_size=1, max_size=3)
+garment_changes = change_lists(GARMENT_PATHS)
 
 
 @settings(max_examples=30, deadline=FRAME_DEADLINE_MS, derandomize=True,
@@ -239,12 +242,7 @@ FABRIC = {
 FABRIC_PATHS = [p for p in paths(FABRIC) if isinstance(p[-1], str)] + [("bodies", 0, "fabric")]
 FABRIC_KEYS = sorted({p[-1] for p in FABRIC_PATHS if isinstance(p[-1], str)} | set(KEY_NAMES)
                      | {"material"})
-fabric_changes = st.lists(st.tuples(st.sampled_from(FABRIC_PATHS),
-                                    st.one_of(values, factors, factors,
-                                              st.sampled_from(sorted(tc.FABRICS) + ["silk", "uv"])),
-                                    st.one_of(st.none(), st.none(),
-                                              st.text(min_size=1, max_size=6))),
-                          min_size=1, max_size=3)
+fabric_changes = change_lists(FABRIC_PATHS, st.sampled_from(sorted(tc.FABRICS) + ["silk", "uv"]))
 
 
 @settings(max_examples=40, deadline=FRAME_DEADLINE_MS, derandomize=True,
