@@ -77,7 +77,7 @@ class Model:
         require(not isometric or is_flat(cloth), "isometric", isometric,
                 "False for a body whose rest sheet is not flat (body/elements.is_flat)")
         self.isometric = bool(isometric)
-        bends = len(isometric_matrix(cloth)[1]) if self.isometric else 0
+        bends = len(self._isometric_bending(cloth)[0][1]) if self.isometric else 0
         fields = backend.FieldGroup()
         s1 = max(s, 1)
         self.particle_mass = fields.scalar(real, n)
@@ -146,7 +146,8 @@ class Model:
 
     def load(self, cloth: Cloth, pinned: np.ndarray | None = None,
              isometric: bool = False) -> None:
-        """Upload `cloth` (of this model's structure) with `pinned` (default: the cloth's)."""
+        """Upload `cloth` (of this model's structure, `isometric` included: the structure
+        holds it) with `pinned` (default: the cloth's)."""
         self.cloth = cloth
         if self._colouring is not None:
             self._colouring.pack(cloth)
@@ -168,9 +169,9 @@ class Model:
         hinge_start, hinge_order = corner_adjacency(cloth.hinge_indices, n)
         bending = cloth.face_bending[:, [0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]]
         if self.isometric:
-            bend_start, *bends = isometric_matrix(cloth)
-            stencil, weights = isometric_faces(cloth)
-            reduced = isometric_parts(cloth)[1][:, [0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]]
+            (bend_start, *bends), (stencil, weights), reduced = self._isometric_bending(cloth)
+            self._isometric_of = (None,)
+            reduced = reduced[:, [0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]]
             upload(((self.particle_bend_start, bend_start),
                     *zip((self.bend_other, self.bend_stiffness, self.bend_damping), bends),
                     (self.face_stencil, stencil), (self.face_stencil_weight, weights.reshape(-1, 18)),
@@ -208,6 +209,14 @@ class Model:
                 (self.adjacency_face, face_order),
                 (self.particle_hinge_start, hinge_start),
                 (self.adjacency_hinge, hinge_order)))
+
+    def _isometric_bending(self, cloth: Cloth) -> tuple:
+        """(isometric_matrix, isometric_faces, B') of `cloth`, computed once for a cloth both
+        built and loaded (its sizes make the fields, its values are what load() uploads)."""
+        if getattr(self, "_isometric_of", (None,))[0] is not cloth:
+            self._isometric_of = (cloth, (isometric_matrix(cloth), isometric_faces(cloth),
+                                          isometric_parts(cloth)[1]))
+        return self._isometric_of[1]
 
     def set_pinned(self, pinned: np.ndarray) -> None:
         """Pin exactly `pinned` (N,) bool from the next step on: inverse masses 0 there and
