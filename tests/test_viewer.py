@@ -2,6 +2,7 @@
 synthetic events without a window, checked against the camera's own projection and the
 simulation's state; and the real window under Xvfb, driven by xdotool."""
 
+import errno
 import os
 import shutil
 import signal
@@ -117,9 +118,11 @@ def test_a_pinned_corner_dragged_keeps_its_pin_where_it_is_left(scene_file, tmp_
     assert np.linalg.norm(left - viewer.sim.cloth.particle_position[corner]) > 0.05
 
 
-def test_keys_save_a_state_that_loads_reset_pause_and_quit(scene_file, tmp_path, f64):
+def test_keys_save_a_state_that_loads_reset_pause_and_quit(scene_file, tmp_path, f64,
+                                                           monkeypatch):
     """"s" writes <name>.view.npz, which Simulation.load_state of the same scene loads to the
-    same positions (and a viewer of that Simulation picks its particles); "r" puts every particle back at rest at time 0 (and the pins as the scene
+    same positions (a disk that refuses a later one is kept in `unsaved`, the earlier file
+    untouched, and the session goes on) (and a viewer of that Simulation picks its particles); "r" puts every particle back at rest at time 0 (and the pins as the scene
     has them); space pauses (frames take no steps) and resumes; "." steps one frame while
     paused; "w" toggles the wireframe (the image changes); "q" asks to quit."""
     scene = load_scene(scene_file)
@@ -129,7 +132,19 @@ def test_keys_save_a_state_that_loads_reset_pause_and_quit(scene_file, tmp_path,
         viewer.advance()
     viewer.handle(Event("key", key="s"))
     saved = tmp_path / "curtain.view.npz"
-    assert viewer.saved == saved and saved.exists()
+    assert viewer.saved == saved and saved.exists() and viewer.unsaved is None
+    written = saved.read_bytes()
+    def full_disk(self, target):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    with monkeypatch.context() as patch:         # a full disk: said, the session goes on
+        patch.setattr(Path, "replace", full_disk)
+        viewer.advance()
+        viewer.handle(Event("key", key="s"))
+    assert isinstance(viewer.unsaved, tc.OutputError) and str(saved) in str(viewer.unsaved)
+    assert saved.read_bytes() == written and not viewer.quit
+    viewer.handle(Event("key", key="s"))
+    assert viewer.unsaved is None and saved.read_bytes() != written
     other = scene.build(dt=scene.frame_dt / scene.resolved_substeps())
     other.load_state(saved)
     np.testing.assert_array_equal(other.positions(), sim.positions())

@@ -122,6 +122,8 @@ def view(subject, *, width: int = 960, height: int = 540, folder=None,
             if viewer.diverged is not None:
                 gui.text(f"{viewer.diverged}"[:110] + ": press r to start again", (0.01, 0.93),
                          font_size=14, color=0xA01010)
+            if viewer.unsaved is not None:
+                gui.text(f"{viewer.unsaved}"[:130], (0.01, 0.89), font_size=14, color=0xA01010)
             gui.show()
             time.sleep(max(0.0, viewer.frame_dt - (time.perf_counter() - shown)))
             shown = time.perf_counter()

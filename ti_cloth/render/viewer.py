@@ -14,8 +14,8 @@ drag orbits the camera about its target, the wheel or +/- zooms.
 A step that diverges pauses the viewer with the error on screen until "r".
 
 Keys: space pause and resume, "." one frame, "r" back to the rest state, "s" save the state to
-`<folder>/<name>.view.npz` (Simulation.load_state of the same scene reads it), "w" wireframe,
-"q" or Escape quit.
+`<folder>/<name>.view.npz` (Simulation.load_state of the same scene reads it; a disk that
+refuses it is said on screen and the session goes on), "w" wireframe, "q" or Escape quit.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import SimulationDiverged
+from ..errors import OutputError, SimulationDiverged
 from .camera import Camera
 
 PICK_PIXELS = 30.0      # a press this far from every particle's image picks none
@@ -69,7 +69,7 @@ class Viewer:
         self.held = None                       # (particle, depth, scene pinned it, target)
         self.velocity = np.zeros(3)
         self.orbiting = None                   # the cursor where a right drag is now
-        self.saved = None
+        self.saved = self.unsaved = None       # the last state saved; why the last "s" failed
         self.diverged = None                   # the SimulationDiverged that paused it
         self.rest_pinned = sim.pinned()
 
@@ -229,9 +229,15 @@ class Viewer:
         self.sim.model.set_pinned(self.rest_pinned)
         self.sim.restart()
 
-    def save(self) -> Path:
-        """The state now, in `<folder>/<name>.view.npz` (Simulation.save_state)."""
-        self.saved = self.sim.save_state(self.folder / f"{self.name}.view.npz")
+    def save(self) -> Path | None:
+        """The state now, in `<folder>/<name>.view.npz` (Simulation.save_state); a state the
+        disk refuses (errors.OutputError: full, not writable) is kept in `unsaved` for the
+        window to say, and the session goes on."""
+        try:
+            self.saved = self.sim.save_state(self.folder / f"{self.name}.view.npz")
+            self.unsaved = None
+        except OutputError as err:
+            self.unsaved = err
         return self.saved
 
     def image(self) -> np.ndarray:
