@@ -4,17 +4,22 @@ never leaves half a file."""
 
 from __future__ import annotations
 
+import errno
 from contextlib import contextmanager
 from pathlib import Path
 
 from ..errors import OutputError
+
+# what the system says when a file cannot be written where it was asked to be
+UNWRITABLE = {errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC), errno.EACCES, errno.EPERM,
+              errno.EROFS, errno.EIO, errno.EFBIG}
 
 
 @contextmanager
 def atomic_path(path):
     """Yield a hidden temporary name beside `path` (same extension: writers pick the format
     from it); rename it to `path` when the block succeeds, delete it when it fails. A write
-    the system refuses (disk full, no permission, read-only: an OSError with an errno) is an
+    the system refuses (UNWRITABLE: disk full, no permission, read-only) is an
     errors.OutputError naming `path`; what was at `path` before is left as it was."""
     path = Path(path)
     tmp = temporary_name(path)
@@ -25,8 +30,8 @@ def atomic_path(path):
     except OutputError:
         raise
     except OSError as err:
-        if err.errno is None:
-            raise
+        if err.errno not in UNWRITABLE:
+            raise                  # not the target's disk (a frame an MP4 reads went missing)
         raise OutputError(path, err) from err
     finally:
         try:
