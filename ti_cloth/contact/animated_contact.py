@@ -454,7 +454,7 @@ def _crossing(x0, x1, a0, a1, b0, b1, c0, c1):
     for k in ti.static(range(1, 3)):
         ends[k] = ti.math.clamp(ends[k], 0.0, 1.0)
     found = 2.0
-    for piece in ti.static(range(3)):
+    for piece in range(3):
         lo, hi = ends[piece], ends[piece + 1]
         if found > 1.0 and hi > lo:
             f_lo = _cubic(k0, k1, k2, k3, lo)
@@ -539,35 +539,54 @@ def visit_near(bodies: ti.template(), lists: ti.template(), slot, b, lo, hi, sta
     the box [lo, hi] (with `edges`, of those with an edge to test), in the hierarchy's order:
     from list `slot` while it holds, else by traversing the hierarchy, and when it is stale
     making it anew (the triangles within three skins of the box; the caller sets its
-    anchors)."""
-    if stale or lists.count[slot] < 0:
-        reach = ti.select(stale, 3.0 * skin, 0.0)
-        count = 0
-        blocks = bodies.triangle_total
-        groups = blocks + bodies.block_total
-        for g in range(bodies.body_groups[b], bodies.body_groups[b + 1]):
+    anchors).
+
+    One loop yields the candidates of either source, the traversal walking groups, blocks
+    and triangles as a cursor, so `visit` (the contact test, most of the code) is compiled
+    once: two call sites, one per source, took a third more of the build of a step with an
+    animated collider (docs/performance.md)."""
+    traverse = stale or lists.count[slot] < 0
+    reach = ti.select(stale, 3.0 * skin, 0.0)
+    count = 0
+    blocks = bodies.triangle_total
+    groups = blocks + bodies.block_total
+    g, g_end = bodies.body_groups[b], bodies.body_groups[b + 1]
+    k, k_end, f, f_end, n = 0, 0, 0, 0, 0
+    more = True
+    while more:
+        candidate = -1
+        if not traverse:
+            if n < lists.count[slot]:
+                candidate = lists.listed[slot * lists.size + n]
+                n += 1
+            else:
+                more = False
+        elif f < f_end:                        # the next triangle of the current block
+            if _wanted(bodies, f, edges):
+                candidate = f
+            f += 1
+        elif k < k_end:                        # the next block of the current group
+            if _meets(bodies, blocks + k, lo - reach, hi + reach):
+                f, f_end = bodies.block_first[k], bodies.block_first[k + 1]
+            k += 1
+        elif g < g_end:                        # the next group of the body
             if _meets(bodies, groups + g, lo - reach, hi + reach):
-                for k in range(bodies.group_first[g], bodies.group_first[g + 1]):
-                    if _meets(bodies, blocks + k, lo - reach, hi + reach):
-                        for f in range(bodies.block_first[k], bodies.block_first[k + 1]):
-                            if not _wanted(bodies, f, edges):
-                                continue
-                            if stale and _meets(bodies, f, lo - reach, hi + reach):
-                                if count >= 0 and count < lists.size:
-                                    lists.listed[slot * lists.size + count] = f
-                                    count += 1
-                                else:
-                                    count = -1
-                            if _meets(bodies, f, lo, hi):
-                                found = visit(bodies, f, query, found)
-        if stale:
-            lists.count[slot] = count
-            lists.epoch[slot] = bodies.epoch[b]
-    else:
-        for k in range(lists.count[slot]):
-            f = lists.listed[slot * lists.size + k]
-            if _meets(bodies, f, lo, hi):
-                found = visit(bodies, f, query, found)
+                k, k_end = bodies.group_first[g], bodies.group_first[g + 1]
+            g += 1
+        else:
+            more = False
+        if traverse and stale and candidate >= 0 and _meets(bodies, candidate, lo - reach,
+                                                            hi + reach):
+            if count >= 0 and count < lists.size:
+                lists.listed[slot * lists.size + count] = candidate
+                count += 1
+            else:
+                count = -1
+        if candidate >= 0 and _meets(bodies, candidate, lo, hi):
+            found = visit(bodies, candidate, query, found)
+    if stale:
+        lists.count[slot] = count
+        lists.epoch[slot] = bodies.epoch[b]
     return found
 
 

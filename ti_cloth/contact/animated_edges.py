@@ -149,7 +149,7 @@ def _consider(bodies: ti.template(), f, query, found):
     lo = ti.min(a0, b0, a, b) - thickness
     hi = ti.max(a0, b0, a, b) + thickness
     corner = bodies.triangles[f]
-    for side in ti.static(range(3)):
+    for side in range(3):
         u, v = corner[side], corner[(side + 1) % 3]
         u0, v0, u1, v1 = bodies.start[u], bodies.start[v], bodies.end[u], bodies.end[v]
         if (bodies.tested[f][side] and (ti.min(u0, v0, u1, v1) <= hi).all()
