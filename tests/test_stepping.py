@@ -312,7 +312,7 @@ def test_a_step_runs_its_stages_in_step_order(f64, monkeypatch, features):
     sim = tc.Simulation(cloth, integrator="symplectic_euler", dt=1e-4, **kwargs)
     calls = record_stages(monkeypatch)
     for _ in range(3):
-        sim.step(1)
+        sim.step(1, plan="per stage")
     expected = tuple(name for name in STEP_ORDER if name == "integrator" or name in features)
     assert sim.stages == expected
     assert calls == list(expected) * 3

@@ -269,9 +269,10 @@ class Simulation:
         continue.
 
         plan: how the steps are launched (PLANS). None takes the default, decided by the
-        arch and the call alone: on the CPU many steps per launch when every stage runs
-        there (many_steps), except a single step of a fused integrator; else a launch per
-        stage. "per stage" or "many steps" forces one (ValueError if this simulation has no
+        arch and the simulation alone: on the CPU many steps per launch when every stage runs
+        there (many_steps), a single step too (one kernel serves a simulation stepped one
+        and many at a time: each plan compiles the whole step, docs/performance.md); else a
+        launch per stage. "per stage" or "many steps" forces one (ValueError if this simulation has no
         many-steps plan). Every plan gives the same bits, on every rerun and thread
         count (exact IEEE arithmetic: runtime/backend.py)."""
         self._check_runtime()
@@ -284,7 +285,7 @@ class Simulation:
         if self._diverged is not None:
             raise self._diverged
         if plan is None:
-            many = self._many_per_launch and (n > 1 or not self.integrator.fused)
+            many = self._many_per_launch
         else:
             many = plan == "many steps"
         try:
