@@ -37,7 +37,7 @@ from .physics.sewing import Seams, Sewing
 from .physics.strain_limit import StrainLimit, StrainLimiter
 from .physics.tearing import RUNAWAY_STRAIN, Tearing, torn_triangles
 from .physics.wind import WindField
-from .runtime import backend, limits
+from .runtime import backend, limits, transfer
 from .runtime.pool import POOL
 from .runtime.validation import as_array, in_range, integer, require
 from .stability import auto_dt, stable_dt
@@ -81,7 +81,8 @@ class Simulation:
         options = {name: value for name, value in locals().items() if name in OPTIONS}
         if positional:
             options = _from_positional(positional, options)
-        self._build(cloth, **options)
+        with transfer.batched():     # the model's and the stages' tables in one launch
+            self._build(cloth, **options)
 
     def _build(self, cloth, integrator, dt, gravity, drag, wind, tearing, handles, colliders,
                strain_limit, position_limit, self_collision, sewing) -> None:

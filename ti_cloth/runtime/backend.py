@@ -170,11 +170,23 @@ def kernel(function):
 
     @functools.wraps(function)
     def launch(*args):
+        if _before_launch is not None:
+            _before_launch()
         if _counting:
             _launched.setdefault(launch, set()).add(tuple(_key(args[i]) for i in templates))
         return compiled(*args)
 
     return launch
+
+
+_before_launch = None   # called before any kernel launches (transfer.batched: its uploads)
+
+
+def before_launch(hook) -> None:
+    """Call hook() (None: nothing) before each launch of a ti_cloth kernel from now on: a
+    batch of uploads is sent before a kernel can read the fields it fills."""
+    global _before_launch
+    _before_launch = hook
 
 
 def _key(value):

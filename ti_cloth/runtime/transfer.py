@@ -1,23 +1,68 @@
 """Moving arrays from numpy into Taichi fields in one launch per set of fields."""
 
+from contextlib import contextmanager
+
 import numpy as np
 import taichi as ti
 
 from . import backend
 
+_batch: list | None = None   # (field, values) waiting while a batch is open (batched())
+
+
+@contextmanager
+def batched():
+    """Uploads made inside the block are sent together, in one launch when it ends, or
+    earlier when a ti_cloth kernel is about to launch (it may read them) or a field is
+    uploaded twice: a simulation's build sends its model's and its stages' tables as one
+    kernel, where an upload each compiled one each (docs/performance.md). Nested blocks
+    belong to the outermost; a block left by an exception sends nothing."""
+    global _batch
+    if _batch is not None:
+        yield
+        return
+    _batch = []
+    backend.before_launch(flush)
+    try:
+        yield
+        flush()
+    finally:
+        _batch = None
+        backend.before_launch(None)
+
+
+def flush() -> None:
+    """Send what the open batch holds (batched())."""
+    if _batch:
+        pending = list(_batch)
+        _batch.clear()
+        _send(pending)
+
 
 def upload(pairs) -> None:
     """Copy numpy arrays into Taichi fields in one launch: one compiled kernel with one loop
     for the whole set, where field.from_numpy compiles a kernel per field (most of the cost
-    of building a small Model: docs/performance.md).
+    of building a small Model: docs/performance.md). Inside batched(), later, with the
+    block's other uploads.
 
     pairs: (field, values); values has the field's shape, or fewer rows (the rest keep their
     values: the padding of a field that cannot have length 0). Values are rounded to the
     field's type in numpy, then carried exactly, so the result is that of field.from_numpy.
     """
+    pairs = [(field, np.asarray(values)) for field, values in pairs]
+    if _batch is None:
+        _send(pairs)
+        return
+    pending = {id(field) for field, _ in _batch}
+    if any(id(field) in pending for field, _ in pairs):
+        flush()                       # a field's values arrive in the order they were given
+    _batch.extend(pairs)
+
+
+def _send(pairs) -> None:
+    """One launch of _copy_in for `pairs` (upload())."""
     targets, groups, chunks, offset = [], {}, [], 0
     for field, values in pairs:
-        values = np.asarray(values)
         if len(values) == 0:
             continue
         width = values.shape[1] if values.ndim == 2 else 0
