@@ -229,7 +229,7 @@ class Model:
         divergence guard flags any |coordinate| beyond position_limit [m]."""
         state = State(self.particle_count, self.spring_count, position_limit, self.altitude_count,
                       self.face_count, self.hinge_count)
-        state.reset(self.particle_rest_position)
+        state.reset(self.cloth.particle_position)
         return state
 
     def spring_colouring(self) -> SpringColouring:

@@ -168,7 +168,7 @@ class Simulation:
         if auto:
             self.dt = auto_dt(cloth, self.integrator, drag, pinned if self.handles is None
                               else self.handles.pinned(permanent=True))
-        self.state.reset(self.model.particle_rest_position)
+        self.state.reset(self.cloth.particle_position)
         # the pool's copy of the Tearing, its strain a constant of the kernels (pool.py)
         self._tearing = None if self.tearing is None else POOL.keep(self.tearing)
         stages = dict(sewing=self.seams, strain_limit=self.strain_limiter,
@@ -209,14 +209,15 @@ class Simulation:
         self._check_runtime()
         if dt is not None:
             self.dt = in_range("dt", dt, limits.DT)
-        self.state.reset(self.model.particle_rest_position)
-        self.step_count = 0
-        self._diverged = None
-        if self.colliders is not None and self.colliders.moving:
-            self.colliders.place(0.0)
-        self._place_handles_at_start()
-        if self.self_contact is not None:
-            self.self_contact.forget()
+        with transfer.batched():
+            self.state.reset(self.cloth.particle_position)
+            self.step_count = 0
+            self._diverged = None
+            if self.colliders is not None and self.colliders.moving:
+                self.colliders.place(0.0)
+            self._place_handles_at_start()
+            if self.self_contact is not None:
+                self.self_contact.forget()
 
     def _place_handles_at_start(self) -> None:
         if self.handles is not None:
@@ -363,7 +364,7 @@ class Simulation:
     def positions(self) -> np.ndarray:
         """Particle positions [m], (N, 3) float64 copy."""
         self._check_runtime()
-        return self.state.particle_position.to_numpy().astype(np.float64)
+        return self.state.read(State.POSITION).astype(np.float64)
 
     def self_contacts(self, active: bool = True) -> SelfContacts:
         """Self-collision's pairs after the last step: those in contact in its last pass, or
@@ -376,20 +377,20 @@ class Simulation:
     def velocities(self) -> np.ndarray:
         """Particle velocities [m/s], (N, 3) float64 copy."""
         self._check_runtime()
-        return self.state.particle_velocity.to_numpy().astype(np.float64)
+        return self.state.read(State.VELOCITY).astype(np.float64)
 
     def set_positions(self, positions) -> None:
         """Overwrite positions [m] (N, 3); Verlet-type history restarts from the velocities."""
         self._check_runtime()
         x = as_array("positions", positions, np.float64, (self.cloth.particle_count, 3))
-        self.state.particle_position.from_numpy(x.astype(backend.numpy_real()))
+        self.state.write(State.POSITION, x)
         self.state.prev_valid = False
 
     def set_velocities(self, velocities) -> None:
         """Overwrite velocities [m/s] (N, 3); Verlet-type history restarts from them."""
         self._check_runtime()
         v = as_array("velocities", velocities, np.float64, (self.cloth.particle_count, 3))
-        self.state.particle_velocity.from_numpy(v.astype(backend.numpy_real()))
+        self.state.write(State.VELOCITY, v)
         self.state.prev_valid = False
 
     def spring_alive(self) -> np.ndarray:

@@ -5,6 +5,7 @@ import numpy as np
 import taichi as ti
 
 from .runtime import backend
+from .runtime.transfer import upload
 
 # Largest coordinate or speed the divergence guard accepts; anything beyond (or NaN) flags
 # the step. Well inside f32 range, so an exponential blow-up is caught before it overflows.
@@ -108,27 +109,56 @@ class State:
             getattr(self, name).from_numpy(arrays[name])
         self.prev_valid = bool(arrays["prev_valid"])
 
-    def reset(self, rest_position) -> None:
-        """Positions (and history) = rest_position, at rest, every spring intact, no bad step
-        (one launch)."""
-        _reset(self, rest_position, self.limit)
+    POSITION, VELOCITY = 0, 1   # what read() and write() move
+
+    def read(self, which: int) -> np.ndarray:
+        """Particle positions (which POSITION) or velocities (VELOCITY), (N, 3) in the
+        fields' type: one kernel serves both (Taichi's to_numpy compiles one per field)."""
+        out = np.empty(self.particle_position.shape + (3,), backend.numpy_real())
+        read_particles(self, which, out)
+        return out
+
+    def write(self, which: int, values: np.ndarray) -> None:
+        """Overwrite positions (which POSITION) or velocities (VELOCITY) with (N, 3) values
+        in the fields' type: one kernel serves both."""
+        write_particles(self, which, np.ascontiguousarray(values, backend.numpy_real()))
+
+    def reset(self, rest_position: np.ndarray) -> None:
+        """Positions (and history) = rest_position (N, 3) [m], at rest, every spring and
+        triangle intact, no bad step: one upload (in a simulation's build, sent with its
+        model's tables: transfer.batched)."""
+        springs, faces = self.spring_alive.shape[0], self.face_alive.shape[0]
+        upload(((self.particle_position, rest_position),
+                (self.particle_prev_position, rest_position),
+                (self.particle_velocity, np.zeros_like(rest_position)),
+                (self.spring_alive, np.ones(springs, np.int8)),
+                (self.spring_torn_step, np.full(springs, -1, np.int32)),
+                (self.face_alive, np.ones(faces, np.int8)),
+                (self.face_torn_step, np.full(faces, -1, np.int32)),
+                (self.first_bad_step, NO_BAD_STEP), (self.position_limit, self.limit)))
         self.prev_valid = False
 
 
 @backend.kernel
-def _reset(state: ti.template(), rest_position: ti.template(), position_limit: ti.f64):
+def read_particles(state: ti.template(), which: ti.i32, out: ti.types.ndarray()):
+    """out[i] = particle i's position (which: State.POSITION) or velocity (State.VELOCITY)."""
     for i in state.particle_position:
-        state.particle_position[i] = rest_position[i]
-        state.particle_prev_position[i] = rest_position[i]
-        state.particle_velocity[i] = ti.Vector([0.0, 0.0, 0.0])
-    for s in state.spring_alive:
-        state.spring_alive[s] = ti.i8(1)
-        state.spring_torn_step[s] = -1
-    for f in state.face_alive:
-        state.face_alive[f] = ti.i8(1)
-        state.face_torn_step[f] = -1
-    state.first_bad_step[None] = NO_BAD_STEP
-    state.position_limit[None] = ti.cast(position_limit, state.position_limit.dtype)
+        value = state.particle_position[i]
+        if which == State.VELOCITY:
+            value = state.particle_velocity[i]
+        for c in ti.static(range(3)):
+            out[i, c] = value[c]
+
+
+@backend.kernel
+def write_particles(state: ti.template(), which: ti.i32, values: ti.types.ndarray()):
+    """Particle i's position (which: State.POSITION) or velocity (State.VELOCITY) = values[i]."""
+    for i in state.particle_position:
+        value = ti.Vector([values[i, 0], values[i, 1], values[i, 2]])
+        if which == State.VELOCITY:
+            state.particle_velocity[i] = value
+        else:
+            state.particle_position[i] = value
 
 
 @ti.func

@@ -46,8 +46,9 @@ def upload(pairs) -> None:
     block's other uploads.
 
     pairs: (field, values); values has the field's shape, or fewer rows (the rest keep their
-    values: the padding of a field that cannot have length 0). Values are rounded to the
-    field's type in numpy, then carried exactly, so the result is that of field.from_numpy.
+    values: the padding of a field that cannot have length 0); a 0-d field takes a scalar.
+    Values are rounded to the field's type in numpy, then carried exactly, so the result is
+    that of field.from_numpy.
     """
     pairs = [(field, np.asarray(values)) for field, values in pairs]
     if _batch is None:
@@ -60,12 +61,15 @@ def upload(pairs) -> None:
 
 
 def _send(pairs) -> None:
-    """One launch of _copy_in for `pairs` (upload())."""
+    """One launch of copy_in for `pairs` (upload())."""
     targets, groups, chunks, offset = [], {}, [], 0
     for field, values in pairs:
+        scalar = field.shape == ()
+        if scalar:
+            values = values.reshape(1)
         if len(values) == 0:
             continue
-        width = values.shape[1] if values.ndim == 2 else 0
+        width = -1 if scalar else values.shape[1] if values.ndim == 2 else 0
         typed = np.ascontiguousarray(values, dtype=backend.numpy_dtype(field.dtype))
         chunks.append(typed.astype(np.float64).ravel())   # exact for f32, f64, i8 and i32
         groups.setdefault(len(values), []).append((len(targets), offset, width, field.dtype))
@@ -74,21 +78,24 @@ def _send(pairs) -> None:
     if targets:
         longest_first = sorted(groups.items(), reverse=True)
         layout = tuple((rows, tuple(members)) for rows, members in longest_first)
-        _copy_in(tuple(targets), np.concatenate(chunks), layout)
+        copy_in(tuple(targets), np.concatenate(chunks), layout)
 
 
 @backend.kernel
-def _copy_in(targets: ti.template(), data: ti.types.ndarray(), layout: ti.template()):
+def copy_in(targets: ti.template(), data: ti.types.ndarray(), layout: ti.template()):
     """One loop over the most rows (layout[0], the longest group, first); in it, for each group (rows, members) of layout that has
     row i, for each member (k, offset, width, dtype): targets[k][i] = data[offset + i] (a
-    scalar field) or targets[k][i][c] = data[offset + i * width + c] (a vector field)."""
+    scalar field), targets[k][i][c] = data[offset + i * width + c] (a vector field) or, width
+    -1, targets[k][None] = data[offset] (a 0-d field, one row)."""
     for i in range(ti.static(layout[0][0])):
         for g in ti.static(range(len(layout))):
             rows, members = ti.static(layout[g])
             if i < rows:
                 for m in ti.static(range(len(members))):
                     k, offset, width, dtype = ti.static(members[m])
-                    if ti.static(width == 0):
+                    if ti.static(width < 0):
+                        targets[k][None] = ti.cast(data[offset], dtype)
+                    elif ti.static(width == 0):
                         targets[k][i] = ti.cast(data[offset + i], dtype)
                     else:
                         for c in ti.static(range(width)):
