@@ -459,10 +459,13 @@ def test_a_pulled_fabric_tears_where_its_edges_pass_the_limit():
         assert strain[alive].max() <= 0.3
         np.testing.assert_array_equal(sim.torn_triangles(), np.flatnonzero(~alive))
         assert ((sim.face_torn_step() >= 0) == ~alive).all()
+    del sim
+    first = pulled("symplectic_euler", 1 / 2000)
+    again = first.positions(), first.face_torn_step()
+    del first                # the rerun gets its fields and compiled kernels (pool.py)
     sim = pulled("symplectic_euler", 1 / 2000)
-    again = pulled("symplectic_euler", 1 / 2000)
-    np.testing.assert_array_equal(sim.positions(), again.positions())
-    np.testing.assert_array_equal(sim.face_torn_step(), again.face_torn_step())
+    np.testing.assert_array_equal(sim.positions(), again[0])
+    np.testing.assert_array_equal(sim.face_torn_step(), again[1])
     x = sim.positions() + 0.005 * np.random.default_rng(2).normal(size=(len(cloth.pinned), 3))
     sim.set_positions(x)                  # stressed everywhere, at rest: elastic forces only
     sim.set_velocities(np.zeros_like(x))
@@ -492,6 +495,7 @@ def test_reruns_give_the_same_bits():
         sim = tc.Simulation(cloth, dt="auto")
         sim.step(300)
         runs.append(sim.positions())
+        del sim              # the rerun gets its fields and compiled kernels (pool.py)
     assert np.abs(runs[0] - cloth.particle_position).max() > 1e-3
     np.testing.assert_array_equal(runs[0], runs[1])
 

@@ -115,9 +115,7 @@ def animated_scene():
             tc.AnimatedMeshCollider(tc.Mesh(blade, faces), thickness=0.005)]
 
 
-FEATURES = {"none": {}, "tearing": dict(tearing=0.2), "strain limit": dict(strain_limit=tc.StrainLimit(0.05)),
-            "colliders": dict(colliders=contact_scene(False)),
-            "moving colliders": dict(colliders=contact_scene(True)),
+FEATURES = {"none": {}, "tearing": dict(tearing=0.2),
             "animated colliders": dict(colliders=animated_scene()),
             # two particles carried by a sphere moving along a path (not among the
             # colliders), let go part-way
@@ -138,14 +136,15 @@ FEATURES = {"none": {}, "tearing": dict(tearing=0.2), "strain limit": dict(strai
 
 @pytest.mark.parametrize("integrator, body, feature",
                          [(i, "sheet", f) for f in ("none", "tearing") for i in FUSED]
+                         # moving colliders alone: within "all but strain limit" (fused, they
+                         # collide as particles move) and "everything" (they do not)
                          + [("symplectic_euler", "sheet", f)
-                            for f in ("moving colliders", "all but strain limit", "everything")]
+                            for f in ("all but strain limit", "everything")]
                          + [(i, "sheet", "everything") for i in ("xpbd", "pbd")]
                          # implicit Euler's CG with every stage compiled 7 s per plan: its own
                          # tearable paths, with the stages' shared code tested above
                          + [("implicit_euler", "sheet", "tearing")]
-                         + [("xpbd", "sheet", "moving colliders"), ("rk4", "sheet", "moving colliders"),
-                            # an animated mesh is a stage of its own for every integrator (it
+                         + [# an animated mesh is a stage of its own for every integrator (it
                             # is placed first): one integrator's plans test it
                             pytest.param("xpbd", "sheet", "animated colliders",
                                          marks=pytest.mark.slow),
