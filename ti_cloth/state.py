@@ -4,8 +4,7 @@
 import numpy as np
 import taichi as ti
 
-from .runtime import backend
-from .runtime.transfer import upload
+from .runtime import backend, transfer
 
 # Largest coordinate or speed the divergence guard accepts; anything beyond (or NaN) flags
 # the step. Well inside f32 range, so an exponential blow-up is caught before it overflows.
@@ -89,7 +88,8 @@ class State:
         """Working storage of this state made by make() on first use under `key` (an
         integrator's buffers), kept for the state's life."""
         if key not in self._workspaces:
-            self._workspaces[key] = make()
+            with transfer.batched():     # its tables (colourings, packed springs) in one launch
+                self._workspaces[key] = make()
         return self._workspaces[key]
 
     # what a step reads from the steps before it (Simulation.save_state)
@@ -128,7 +128,7 @@ class State:
         triangle intact, no bad step: one upload (in a simulation's build, sent with its
         model's tables: transfer.batched)."""
         springs, faces = self.spring_alive.shape[0], self.face_alive.shape[0]
-        upload(((self.particle_position, rest_position),
+        transfer.upload(((self.particle_position, rest_position),
                 (self.particle_prev_position, rest_position),
                 (self.particle_velocity, np.zeros_like(rest_position)),
                 (self.spring_alive, np.ones(springs, np.int8)),
