@@ -43,7 +43,9 @@ def test_a_batch_is_sent_before_a_kernel_reads_it_and_in_the_order_given(f64):
         assert values.to_numpy().sum() == 0.0            # not sent yet
         assert _sum(values, scalar) == 110.0             # a kernel launch sends it first
         transfer.upload(((values, np.ones(5)),))
-        transfer.upload(((values, np.full(5, 2.0)),))    # the same field again: the later wins
+        later = np.full(5, 2.0)
+        transfer.upload(((values, later),))              # the same field again: the later wins
+        later[:] = 3.0                                   # the values as they were uploaded
     np.testing.assert_array_equal(values.to_numpy(), np.full(5, 2.0))
     assert scalar[None] == 100.0
 

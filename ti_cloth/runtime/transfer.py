@@ -57,7 +57,7 @@ def upload(pairs) -> None:
     pending = {id(field) for field, _ in _batch}
     if any(id(field) in pending for field, _ in pairs):
         flush()                       # a field's values arrive in the order they were given
-    _batch.extend(pairs)
+    _batch.extend((field, values.copy()) for field, values in pairs)   # as they were now
 
 
 def _send(pairs) -> None:
