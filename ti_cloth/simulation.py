@@ -274,8 +274,8 @@ class Simulation:
         arch and the simulation alone: on the CPU many steps per launch when every stage runs
         there (many_steps), a single step too (one kernel serves a simulation stepped one
         and many at a time: each plan compiles the whole step, docs/performance.md); else a
-        launch per stage. "per stage" or "many steps" forces one (ValueError if this simulation has no
-        many-steps plan). Every plan gives the same bits, on every rerun and thread
+        launch per stage. "per stage" or "many steps" forces one (ValueError if this
+        simulation has no many-steps plan). Every plan gives the same bits, on every rerun and thread
         count (exact IEEE arithmetic: runtime/backend.py)."""
         self._check_runtime()
         integer("n", n, 0, limits.STEPS.high - self.step_count)

@@ -129,13 +129,13 @@ class State:
         model's tables: transfer.batched)."""
         springs, faces = self.spring_alive.shape[0], self.face_alive.shape[0]
         transfer.upload(((self.particle_position, rest_position),
-                (self.particle_prev_position, rest_position),
-                (self.particle_velocity, np.zeros_like(rest_position)),
-                (self.spring_alive, np.ones(springs, np.int8)),
-                (self.spring_torn_step, np.full(springs, -1, np.int32)),
-                (self.face_alive, np.ones(faces, np.int8)),
-                (self.face_torn_step, np.full(faces, -1, np.int32)),
-                (self.first_bad_step, NO_BAD_STEP), (self.position_limit, self.limit)))
+                         (self.particle_prev_position, rest_position),
+                         (self.particle_velocity, np.zeros_like(rest_position)),
+                         (self.spring_alive, np.ones(springs, np.int8)),
+                         (self.spring_torn_step, np.full(springs, -1, np.int32)),
+                         (self.face_alive, np.ones(faces, np.int8)),
+                         (self.face_torn_step, np.full(faces, -1, np.int32)),
+                         (self.first_bad_step, NO_BAD_STEP), (self.position_limit, self.limit)))
         self.prev_valid = False
 
 

@@ -83,10 +83,11 @@ def _send(pairs) -> None:
 
 @backend.kernel
 def copy_in(targets: ti.template(), data: ti.types.ndarray(), layout: ti.template()):
-    """One loop over the most rows (layout[0], the longest group, first); in it, for each group (rows, members) of layout that has
-    row i, for each member (k, offset, width, dtype): targets[k][i] = data[offset + i] (a
-    scalar field), targets[k][i][c] = data[offset + i * width + c] (a vector field) or, width
-    -1, targets[k][None] = data[offset] (a 0-d field, one row)."""
+    """One loop over the most rows (layout[0], the longest group, first); in it, for each
+    group (rows, members) of layout that has row i, for each member (k, offset, width,
+    dtype): targets[k][i] = data[offset + i] (a scalar field), targets[k][i][c] =
+    data[offset + i * width + c] (a vector field) or, width -1, targets[k][None] =
+    data[offset] (a 0-d field, one row)."""
     for i in range(ti.static(layout[0][0])):
         for g in ti.static(range(len(layout))):
             rows, members = ti.static(layout[g])
