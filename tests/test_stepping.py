@@ -79,15 +79,14 @@ def braced_strands():
     return body, start
 
 
-def contact_scene(moving: bool):
-    """A plane 3 cm under the sheet and a sphere 1 cm under one of its particles (swept
-    sideways along a path when `moving`), with friction: the sheet thrown at them (THROW)
-    reaches both within the runs."""
-    path = (lambda t: (2.0 * t, 0.0, 0.0)) if moving else None
+def contact_scene():
+    """A plane 3 cm under the sheet and a sphere 1 cm under one of its particles, swept
+    sideways along a path, with friction: the sheet thrown at them (THROW) reaches both
+    within the runs."""
     return [tc.Plane(point=(0.0, 0.0, -0.03), normal=(0.0, 0.0, 1.0), thickness=0.005,
                      static_friction=0.4),
             tc.Sphere(centre=(0.37, 0.37, -0.26), radius=0.25, thickness=0.005,
-                      static_friction=0.2, path=path)]
+                      static_friction=0.2, path=lambda t: (2.0 * t, 0.0, 0.0))]
 
 
 THROW = (0.0, 0.0, -8.0)   # m/s, the sheet's start velocity
@@ -125,12 +124,12 @@ FEATURES = {"none": {}, "tearing": dict(tearing=0.2),
             # strain limiting apart, the stages let a fused integrator's particles collide as
             # they move (stepping.TeamStages.collides_on_move)
             "all but strain limit": dict(
-                tearing=0.4, colliders=contact_scene(True),
+                tearing=0.4, colliders=contact_scene(),
                 wind=tc.Wind(velocity=(1.0, 0.0, 2.0), turbulence=0.5, gust=0.3),
                 handles=[tc.Handle([0, 1], lambda t: (0.3 * t, 0.1 * np.sin(7 * t), 0.0),
                                    release=0.0031)]),
             "everything": dict(tearing=0.4, strain_limit=tc.StrainLimit(0.05),
-                               colliders=contact_scene(True), wind=tc.Wind(velocity=(1.0, 0.0, 2.0)),
+                               colliders=contact_scene(), wind=tc.Wind(velocity=(1.0, 0.0, 2.0)),
                                handles=[tc.Handle([0, 1], lambda t: (0.3 * t, 0.0, 0.0), release=0.0031)])}
 
 
@@ -218,7 +217,7 @@ def test_a_team_shares_big_launches_and_one_worker_takes_small_ones(threads):
     big = SimpleNamespace(spring_count=stepping.SPRING_STEPS_PER_LAUNCH // 10, altitude_count=0,
                           face_count=0, hinge_count=0)
     assert many.steps_per_launch(tc.SymplecticEuler(), big) == 10
-    moving = tc.Simulation(cloth, dt=1e-4, colliders=contact_scene(True)).many_steps
+    moving = tc.Simulation(cloth, dt=1e-4, colliders=contact_scene()).many_steps
     assert moving.steps_per_launch(tc.SymplecticEuler(), model) == limits.SCHEDULED_STEPS
 
 

@@ -275,8 +275,8 @@ class Simulation:
         there (many_steps), a single step too (one kernel serves a simulation stepped one
         and many at a time: each plan compiles the whole step, docs/performance.md); else a
         launch per stage. "per stage" or "many steps" forces one (ValueError if this
-        simulation has no many-steps plan). Every plan gives the same bits, on every rerun and thread
-        count (exact IEEE arithmetic: runtime/backend.py)."""
+        simulation has no many-steps plan). Every plan gives the same bits, on every rerun
+        and thread count (exact IEEE arithmetic: runtime/backend.py)."""
         self._check_runtime()
         integer("n", n, 0, limits.STEPS.high - self.step_count)
         require(plan is None or plan in PLANS, "plan", plan, f"None or one of {PLANS}")
@@ -364,7 +364,7 @@ class Simulation:
     def positions(self) -> np.ndarray:
         """Particle positions [m], (N, 3) float64 copy."""
         self._check_runtime()
-        return self.state.read(State.POSITION).astype(np.float64)
+        return self.state.read(State.POSITION).astype(np.float64, copy=False)   # a fresh array
 
     def self_contacts(self, active: bool = True) -> SelfContacts:
         """Self-collision's pairs after the last step: those in contact in its last pass, or
@@ -377,7 +377,7 @@ class Simulation:
     def velocities(self) -> np.ndarray:
         """Particle velocities [m/s], (N, 3) float64 copy."""
         self._check_runtime()
-        return self.state.read(State.VELOCITY).astype(np.float64)
+        return self.state.read(State.VELOCITY).astype(np.float64, copy=False)   # a fresh array
 
     def set_positions(self, positions) -> None:
         """Overwrite positions [m] (N, 3); Verlet-type history restarts from the velocities."""
