@@ -170,8 +170,8 @@ def test_pbd_with_one_pass_per_substep_is_the_lectures_loop(f64):
     assert x[-1, 1] < -0.05, "the string fell and swings"
 
 
-def test_integrators_document_order_and_stability():
+def test_integrators_are_registered_by_name():
+    """Each integrator is registered under its own name and states an order the
+    zero-rest-length oscillator (test_extremes.py) holds it to."""
     for name, cls in tc.INTEGRATORS.items():
-        doc = cls.__doc__.lower()
         assert cls.name == name and cls.order in (1, 2, 4)
-        assert "order" in doc and "stab" in doc, name

@@ -96,14 +96,3 @@ def triangle_distance(p, a, b, c):
         distance = ti.min(_point_segment_distance(p, a, b), _point_segment_distance(p, b, c),
                           _point_segment_distance(p, c, a))
     return distance
-
-
-@ti.func
-def box_of(a, b, c, margin):
-    """(lo, hi): the bounding box of a, b, c grown by `margin` on every side."""
-    return ti.min(a, b, c) - margin, ti.max(a, b, c) + margin
-
-
-@ti.func
-def in_box(x, lo, hi):
-    return (x >= lo).all() and (x <= hi).all()

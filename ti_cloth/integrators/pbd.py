@@ -70,7 +70,7 @@ class PBD(Integrator):
     damping: lecture factor d in [0, 1), as Verlet.
     stiffness: fraction of the correction applied per pass, per kind, {"stretch": 1.0, ...};
         "altitude" for the altitude springs (each a corner projected to its rest height over
-        the opposite face of a tetrahedron: constraints._relax_altitude).
+        the opposite face of a tetrahedron: constraints.relax_altitude).
     Order 1 (velocity from positions); no step-size stability limit: positions are projected,
     never extrapolated by stiff forces.
     """
