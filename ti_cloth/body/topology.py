@@ -25,6 +25,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from ..geometry import points_over_triangles
 from ..runtime.validation import as_array, finite_number, require
 from . import elements
 from .fabric import Fabric
@@ -170,17 +171,10 @@ def altitude_frames(positions: np.ndarray, indices: np.ndarray):
     """(n (A, 3), h (A,), g (A, 4)) of altitude springs [p, a, b, c] at `positions`, in numpy:
     the face normal, the signed altitude of p and the weights of the altitude's gradient
     (1, -w_a, -w_b, -w_c), w the barycentric coordinates of p's foot on the face's plane (the
-    host twin of forces.altitude_frame; zero for a face of zero area)."""
-    p, a, b, c = (positions[indices[:, corner]] for corner in range(4))
-    e1, e2, u = b - a, c - a, p - a
-    normal = np.cross(e1, e2)
-    area2 = np.linalg.norm(normal, axis=1)
-    safe = np.where(area2 > 0, area2, np.inf)[:, None]
-    n = normal / safe
-    h = np.einsum("ij,ij->i", u, n)
-    wb = np.einsum("ij,ij->i", np.cross(u, e2), n) / safe[:, 0]
-    wc = np.einsum("ij,ij->i", np.cross(e1, u), n) / safe[:, 0]
-    g = np.stack([np.where(area2 > 0, 1.0, 0.0), wb + wc - 1.0, -wb, -wc], axis=1)
+    host twin of forces.altitude_gradient; zero for a face of zero area)."""
+    n, h, wb, wc, has_area = points_over_triangles(*(positions[indices[:, corner]]
+                                                     for corner in range(4)))
+    g = np.stack([np.where(has_area, 1.0, 0.0), wb + wc - 1.0, -wb, -wc], axis=1)
     return n, h, g
 
 

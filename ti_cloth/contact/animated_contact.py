@@ -45,6 +45,7 @@ import numpy as np
 import taichi as ti
 
 from ..body.mesh import triangle_edges, unique_rows
+from ..geometry import foot_barycentric, nearest_on_edges
 from ..runtime import backend, limits
 from ..runtime.plan import Loop, Phase
 from ..runtime.transfer import upload
@@ -385,41 +386,6 @@ def _meets(bodies: ti.template(), k, lo, hi):
 
 
 @ti.func
-def _barycentric(p, a, b, c):
-    """Barycentric coordinates of p's foot on the plane of abc, and abc's unnormalised normal
-    (zero for a degenerate triangle, whose coordinates are then (1, 0, 0))."""
-    e1, e2, q = b - a, c - a, p - a
-    m = e1.cross(e2)
-    area2 = m.dot(m)
-    w = ti.Vector([1.0, 0.0, 0.0])
-    if area2 > 0:
-        u = q.cross(e2).dot(m) / area2
-        v = e1.cross(q).dot(m) / area2
-        w = ti.Vector([1.0 - u - v, u, v])
-    return w, m
-
-
-@ti.func
-def _nearest_on_edges(p, a, b, c):
-    """The point of triangle abc's edges nearest p, and its barycentric coordinates."""
-    best, weights = a, ti.Vector([1.0, 0.0, 0.0])
-    distance = (p - a).norm_sqr() + 1.0
-    corners = ti.Matrix.rows([a, b, c])
-    for k in ti.static(range(3)):
-        u, v = corners[k, :], corners[(k + 1) % 3, :]
-        d = v - u
-        s = ti.math.clamp((p - u).dot(d) / ti.max(d.dot(d), 1e-30), 0.0, 1.0)
-        q = u + s * d
-        if (p - q).norm_sqr() < distance:
-            distance = (p - q).norm_sqr()
-            best = q
-            weights = ti.Vector([0.0, 0.0, 0.0])
-            weights[k] = 1.0 - s
-            weights[(k + 1) % 3] = s
-    return best, weights
-
-
-@ti.func
 def _cubic(c0, c1, c2, c3, t):
     return ((c3 * t + c2) * t + c1) * t + c0
 
@@ -468,7 +434,7 @@ def _crossing(x0, x1, a0, a1, b0, b1, c0, c1):
                     else:
                         hi = mid
                 t = hi
-                w, _ = _barycentric(x0 + t * (x1 - x0), a0 + t * (a1 - a0), b0 + t * (b1 - b0),
+                w, _ = foot_barycentric(x0 + t * (x1 - x0), a0 + t * (a1 - a0), b0 + t * (b1 - b0),
                                     c0 + t * (c1 - c0))
                 if w.min() >= -INSIDE:
                     found = t
@@ -502,11 +468,11 @@ def _against(x0, x, a0, b0, c0, a1, b1, c1, thickness):
             length = ti.sqrt(area1)
             n = side * m1 / length
             gap = above / length
-            w, _ = _barycentric(x, a1, b1, c1)
+            w, _ = foot_barycentric(x, a1, b1, c1)
             if t <= 1.0 or w.min() >= -INSIDE:
                 depth = thickness - gap
             elif gap > 0.0:                    # beside it: nearest one of its edges
-                q, w = _nearest_on_edges(x, a1, b1, c1)
+                q, w = nearest_on_edges(x, a1, b1, c1)
                 distance = (x - q).norm()
                 if distance > 0.0 and distance < thickness:
                     n = (x - q) / distance

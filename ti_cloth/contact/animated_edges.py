@@ -8,7 +8,7 @@ each body edge once, by the first of its triangles in the hierarchy's order, and
 edges sharp enough to reach across a cloth edge unless edge_contact=True (`tested`,
 animated_contact.tested_edges); the triangles are found as the particles find theirs,
 through candidate lists kept while the edge's two particles stay within a skin of where they
-were (animated_contact.py). The test (proximity.edge_contact, the one self-collision makes of
+were (animated_contact.py). The test (geometry.edge_contact, the one self-collision makes of
 two cloth edges; Bridson et al. 2002, section 6.2): the closest points at the step's end,
 interior to both edges, nearer than the thickness or on the other side of each other than at
 the step's start.
@@ -36,11 +36,11 @@ Not covered: a body's vertex (a cone's tip) through the inside of a cloth triang
 import numpy as np
 import taichi as ti
 
+from ..geometry import edge_contact
 from ..runtime import backend
 from ..runtime.transfer import upload
 from .animated_contact import RESOLVED, CandidateLists, stale_list, visit_near
 from .contact_pairs import cloth_edges, torn_edge
-from .proximity import edge_contact
 
 EDGE_LISTED = 64    # candidate triangles an edge keeps per body (a path's box is longer)
 EDGE_PASSES = 3     # passes over the edges a step (each particle takes its contacts' mean)

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..geometry import closest_barycentric
 from ..physics.handles import Handle
 from ..runtime import limits
 from ..runtime.validation import as_array, in_range, require
@@ -119,27 +120,3 @@ def triangle_frames(a, b, c, triangle, t: float = 0.0) -> np.ndarray:
     u = edge / np.linalg.norm(edge, axis=1)[:, None]
     n = normal / area[:, None]
     return np.stack([u, np.cross(n, u), n], axis=1)
-
-
-def closest_barycentric(a, b, c, points) -> np.ndarray:
-    """(P, 3) barycentric coordinates of each point's nearest point on its triangle a b c:
-    its foot in the plane when that is inside, else the nearest point of the nearest edge
-    (Ericson, Real-Time Collision Detection, 3.4 and 5.1.5)."""
-    e0, e1, d = b - a, c - a, points - a
-    d00, d01, d11 = (np.sum(x * y, axis=1) for x, y in ((e0, e0), (e0, e1), (e1, e1)))
-    d20, d21 = np.sum(d * e0, axis=1), np.sum(d * e1, axis=1)
-    det = d00 * d11 - d01 * d01
-    v, w = (d11 * d20 - d01 * d21) / det, (d00 * d21 - d01 * d20) / det
-    result = np.column_stack([1 - v - w, v, w])
-    outside = (result < 0).any(axis=1)
-    corners = np.stack([a, b, c], axis=1)
-    best = np.full(len(points), np.inf)
-    for i, j in ((0, 1), (1, 2), (2, 0)):
-        p, q = corners[:, i], corners[:, j]
-        s = np.clip(np.sum((points - p) * (q - p), axis=1) / np.sum((q - p) ** 2, axis=1), 0, 1)
-        distance = np.linalg.norm(p + s[:, None] * (q - p) - points, axis=1)
-        nearer = outside & (distance < best)
-        best[nearer] = distance[nearer]
-        result[nearer] = 0.0
-        result[nearer, i], result[nearer, j] = 1 - s[nearer], s[nearer]
-    return result

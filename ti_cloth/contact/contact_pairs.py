@@ -25,7 +25,7 @@ import taichi as ti
 from ..body.mesh import triangle_edges, unique_rows
 from ..runtime import backend
 from .box_grid import BLOCK, box_cell, box_cell_count, cell_box, cell_range, found_here
-from .proximity import segment_distance, triangle_distance
+from ..geometry import segment_distance, triangle_distance
 
 
 def cloth_edges(cloth) -> tuple[np.ndarray, np.ndarray]:

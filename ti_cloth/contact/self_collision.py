@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from ..physics.forces import altitude_frame
+from ..geometry import edge_contact, point_over_triangle
 from ..runtime import backend, limits
 from ..runtime.transfer import upload
 from ..runtime.validation import count, finite_number, require
@@ -52,7 +52,6 @@ from .contact_pairs import (
     torn_edge,
     torn_triangle,
 )
-from .proximity import edge_contact
 
 PAIRS_PER_PARTICLE = 32     # candidate list room at first, per particle
 MAX_PAIRS_PER_PARTICLE = 256
@@ -315,11 +314,11 @@ def _vertex_triangle(positions: ti.template(), start: ti.template(), corners, th
     gap = its height over the plane along n minus thickness (< 0 in contact), w the barycentric
     coordinates of its foot."""
     v, a, b, c = corners[0], corners[1], corners[2], corners[3]
-    n, h, w = altitude_frame(positions[v], positions[a], positions[b], positions[c])
+    n, h, w = point_over_triangle(positions[v], positions[a], positions[b], positions[c])
     inside = w.min() >= -INSIDE and n.norm() > 0
     side = 1.0
     if inside:                                       # else no contact: skip the start's frame
-        n0, h0, _ = altitude_frame(start[v], start[a], start[b], start[c])
+        n0, h0, _ = point_over_triangle(start[v], start[a], start[b], start[c])
         side = ti.select(h0 >= 0.0, 1.0, -1.0)
         if n.dot(n0) < 0.0:
             side = -side                             # the triangle turned over in the step
@@ -329,8 +328,8 @@ def _vertex_triangle(positions: ti.template(), start: ti.template(), corners, th
 
 @ti.func
 def _edge_edge(positions: ti.template(), start: ti.template(), corners, thickness):
-    """(in contact, n, gap, s, t) of edges corners[0:2] and corners[2:4] (proximity.py's
-    edge_contact): n from the second edge's point to the first's."""
+    """(in contact, n, gap, s, t) of edges corners[0:2] and corners[2:4]
+    (geometry.edge_contact): n from the second edge's point to the first's."""
     a, b, c, d = corners[0], corners[1], corners[2], corners[3]
     return edge_contact(positions[a], positions[b], positions[c], positions[d], start[a],
                         start[b], start[c], start[d], thickness)

@@ -65,7 +65,7 @@ def _altitude_constraint(model: ti.template(), state: ti.template(), a):
 
 @ti.func
 def relax_altitude(model: ti.template(), state: ti.template(), a, stiffness):
-    """Project altitude spring a (Selle et al. 2008; forces.altitude_frame) to its rest
+    """Project altitude spring a (Selle et al. 2008; forces.altitude_gradient) to its rest
     altitude: C = h - h0 with gradient g_c n on corner c, so corner c moves by
     -stiffness C w_c g_c n / sum_l w_l g_l^2 (the lecture's mass-weighted projection of one
     constraint, w = 1/m)."""

@@ -22,6 +22,7 @@ import taichi as ti
 from ..body import elements as host_elements
 from ..body.material import SpringKind
 from ..body.topology import altitude_frames
+from ..geometry import point_over_triangle
 from ..runtime import backend, plan
 from ..runtime.plan import Loop, Phase
 from . import elements, wind
@@ -105,34 +106,14 @@ def spring_forces(model: ti.template(), state: ti.template(), forces: ti.templat
 
 
 @ti.func
-def altitude_frame(xp, xa, xb, xc):
-    """(n, h, w) of an altitude spring (Selle et al. 2008) with corners p, a, b, c:
-    n = (x_b - x_a) x (x_c - x_a) / |...| the face normal, h = (x_p - x_a) . n the signed
-    altitude of p over the face, and w = (w_a, w_b, w_c) the barycentric coordinates of p's
-    foot on the face's plane. The gradient of h is (n, -w_a n, -w_b n, -w_c n) (the foot's
-    tangential terms cancel), so -k (h - h0) times it is the exact force of the energy
-    1/2 k (h - h0)^2, along n, with zero net force and torque. A face of zero area has no
-    normal: n = 0, h = 0, w = 0 (no force)."""
-    e1, e2, u = xb - xa, xc - xa, xp - xa
-    normal = e1.cross(e2)
-    area2 = normal.norm()
-    n = ti.Vector([0.0, 0.0, 0.0])
-    w = ti.Vector([0.0, 0.0, 0.0])
-    h = 0.0
-    if area2 > 0:
-        n = normal / area2
-        h = u.dot(n)
-        wb = u.cross(e2).dot(n) / area2
-        wc = e1.cross(u).dot(n) / area2
-        w = ti.Vector([1.0 - wb - wc, wb, wc])
-    return n, h, w
-
-
-@ti.func
 def altitude_gradient(positions: ti.template(), corner):
-    """(n, h, g) of the altitude spring with corners `corner` (p, a, b, c) at `positions`:
-    altitude_frame's normal and height, and g = (1, -w_a, -w_b, -w_c), so grad h = g_c n."""
-    n, h, w = altitude_frame(positions[corner[0]], positions[corner[1]], positions[corner[2]],
+    """(n, h, g) of the altitude spring (Selle et al. 2008) with corners `corner` (p, a, b, c)
+    at `positions`: the face's unit normal, p's signed altitude over it
+    (geometry.point_over_triangle) and g = (1, -w_a, -w_b, -w_c), w the barycentric
+    coordinates of p's foot, so grad h = g_c n and -k (h - h0) g_c n is the exact force of
+    the energy 1/2 k (h - h0)^2, along n, with zero net force and torque (zero for a face of
+    zero area)."""
+    n, h, w = point_over_triangle(positions[corner[0]], positions[corner[1]], positions[corner[2]],
                              positions[corner[3]])
     return n, h, ti.Vector([1.0, -w[0], -w[1], -w[2]])
 
@@ -273,6 +254,6 @@ def energies(cloth, positions: np.ndarray, velocities: np.ndarray, gravity,
 
 def altitude_energy(cloth, positions: np.ndarray) -> float:
     """sum 1/2 k (h - h0)^2 over the altitude springs [J], h the signed altitude of p over the
-    face (a, b, c) (forces.altitude_frame)."""
+    face (a, b, c) (altitude_gradient)."""
     _, h, _ = altitude_frames(positions, cloth.altitude_indices)
     return float(np.sum(0.5 * cloth.altitude_stiffness * (h - cloth.altitude_rest_length) ** 2))
