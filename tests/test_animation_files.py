@@ -13,7 +13,7 @@ from helpers import report
 
 import ti_cloth as tc
 from ti_cloth.app.scene import load_scene
-from ti_cloth.app.scene_file import SceneError
+from ti_cloth.inputs.scene_file import SceneError
 
 TETRAHEDRON = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
 FACES = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
@@ -157,7 +157,7 @@ def test_bad_animation_files_are_refused_by_key(tmp_path):
 def test_an_animation_too_big_is_refused_before_it_is_read(tmp_path, monkeypatch):
     """The npz member's stored size and the PC2 file's size are checked against the limit
     on numbers (limits.MOTION_VALUES, lowered here to 10) before any of it is loaded."""
-    from ti_cloth.runtime import limits
+    from ti_cloth.inputs import limits
     many = np.tile(SAMPLES, (10, 1, 1))                  # 600 numbers, 4,800 bytes
     np.savez(tmp_path / "walk.npz", triangles=FACES, positions=many, fps=24.0)
     write_pc2(tmp_path / "walk.pc2", SAMPLES)

@@ -10,7 +10,7 @@ from helpers import report
 
 import ti_cloth as tc
 from ti_cloth.app.scene import load_scene
-from ti_cloth.app.scene_file import SceneError
+from ti_cloth.inputs.scene_file import SceneError
 
 ROUNDING = 1e-12        # f64 positions of order 1 m, a few operations: rounding only
 SHEET = tc.grid_mesh(6, 6, (0.6, 0.6), plane="xz", origin=(-0.3, 0.0, -0.3))

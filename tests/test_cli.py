@@ -168,7 +168,7 @@ def test_a_large_body_is_announced_before_its_stable_step_is_sought(tmp_path, ca
     """Above limits.LARGE_BODY springs the stable-step analysis takes seconds to a minute: the
     command says so first, naming the counts (lowered here below the 5 x 5 scene's 40 + 32 + 30 springs)."""
     from ti_cloth.app import scene as scene_module
-    from ti_cloth.runtime import limits
+    from ti_cloth.inputs import limits
 
     heard = []
     monkeypatch.setattr(limits, "LARGE_BODY", 101)

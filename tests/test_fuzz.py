@@ -14,8 +14,8 @@ from hypothesis import strategies as st
 
 import ti_cloth as tc
 from ti_cloth.app.scene import load_scene
-from ti_cloth.app.scene_file import SceneError
 from ti_cloth.app.view import viewer_for
+from ti_cloth.inputs.scene_file import SceneError
 from ti_cloth.runtime import backend
 
 BASE = {

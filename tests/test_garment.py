@@ -11,7 +11,7 @@ from helpers import report
 
 import ti_cloth as tc
 from ti_cloth.app.scene import load_scene
-from ti_cloth.app.scene_file import SceneError
+from ti_cloth.inputs.scene_file import SceneError
 
 ROUNDING = 1e-12
 TRAPEZOID = [(-0.3, 0.0), (0.3, 0.0), (0.2, 0.5), (-0.2, 0.5)]

@@ -5,8 +5,8 @@ these cases is test_fuzz.py."""
 
 import gc
 import re
-import warnings
 import signal
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -16,11 +16,12 @@ from helpers import report, use
 import ti_cloth as tc
 from ti_cloth.app import signals
 from ti_cloth.app.scene import load_scene
-from ti_cloth.app.scene_file import SceneError
 from ti_cloth.errors import StaleSimulation
+from ti_cloth.inputs import limits
+from ti_cloth.inputs.scene_file import SceneError
 from ti_cloth.render import Camera, Renderer
 from ti_cloth.render.image import FrameSequence
-from ti_cloth.runtime import backend, limits
+from ti_cloth.runtime import backend
 
 BASE = """
 [scene]

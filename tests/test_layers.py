@@ -73,14 +73,15 @@ def test_the_checker_sees_a_forbidden_import(tmp_path, monkeypatch):
 
 
 def test_the_app_modules_keep_their_old_names():
-    """ti_cloth.study and the other modules that moved into ti_cloth.app still resolve."""
+    """ti_cloth.study and the other modules that moved into ti_cloth.app (and the scene file
+    reader, into ti_cloth.inputs) still resolve."""
     from ti_cloth import cli, runner, scene, scene_file, study
     from ti_cloth.app import cli as app_cli
     from ti_cloth.app import study as app_study
 
     assert study is app_study and cli is app_cli
     assert scene.load_scene is ti_cloth.load_scene and runner.run_scene is ti_cloth.run_scene
-    assert scene_file.SceneError.__module__ == "ti_cloth.app.scene_file"
+    assert scene_file.SceneError.__module__ == "ti_cloth.inputs.scene_file"
 
 
 ROOT = PACKAGE.parent

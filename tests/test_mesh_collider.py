@@ -297,7 +297,7 @@ rotation = {{ type = "keyframes", times = [0.0, 1.0], values = [[0, 0, 0], [0, 1
 
 
 def test_a_scene_file_loads_a_moving_turning_mesh_collider_relative_to_itself(f64, tmp_path):
-    from ti_cloth.app.scene_file import SceneError
+    from ti_cloth.inputs.scene_file import SceneError
     box = tc.box_mesh((-0.1, 0.0, -0.1), (0.1, 0.1, 0.1))
     tc.save_mesh(tmp_path / "assets" / "block.obj", box)
     scene_path = tmp_path / "block.toml"

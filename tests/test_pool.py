@@ -9,7 +9,8 @@ import pytest
 
 import ti_cloth as tc
 from ti_cloth import simulation, stepping
-from ti_cloth.runtime import backend, limits, pool
+from ti_cloth.inputs import limits
+from ti_cloth.runtime import backend, pool
 from ti_cloth.runtime.pool import Pool
 
 

@@ -16,12 +16,13 @@ import pytest
 import ti_cloth as tc
 from ti_cloth import stepping
 from ti_cloth.contact.collision import ColliderSet
+from ti_cloth.inputs import limits
 from ti_cloth.integrators import Integrator
 from ti_cloth.model import Model
 from ti_cloth.physics.forces import ForceSettings, compute_forces
 from ti_cloth.physics.handles import HandleSet
 from ti_cloth.physics.strain_limit import StrainLimiter
-from ti_cloth.runtime import backend, limits, team
+from ti_cloth.runtime import backend, team
 from ti_cloth.runtime import plan as runtime_plan
 from ti_cloth.simulation import STEP_ORDER
 

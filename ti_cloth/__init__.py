@@ -67,7 +67,9 @@ __all__ = [
 ]
 
 
-APP_MODULES = ("scene", "scene_file", "runner", "study", "cli")   # were ti_cloth.<name>
+# modules that were ti_cloth.<name>, and where they are now
+MOVED_MODULES = {"scene": "app.scene", "scene_file": "inputs.scene_file", "runner": "app.runner",
+                 "study": "app.study", "cli": "app.cli"}
 
 
 def __getattr__(name):
@@ -86,6 +88,6 @@ def __getattr__(name):
     if name == "view":
         from .app.view import view
         return view
-    if name in APP_MODULES:
-        return importlib.import_module(f".app.{name}", __name__)
+    if name in MOVED_MODULES:
+        return importlib.import_module(f".{MOVED_MODULES[name]}", __name__)
     raise AttributeError(f"module 'ti_cloth' has no attribute {name!r}")

@@ -31,9 +31,9 @@ import numpy as np
 
 from .body.material import SpringKind
 from .errors import StateMismatch
+from .inputs.files import atomic_path
+from .inputs.validation import finite_number, require
 from .runtime import backend
-from .runtime.files import atomic_path
-from .runtime.validation import finite_number, require
 
 FORMATS = ("obj", "ply", "pc2", "npz", "usd")
 STREAMS = ("pc2", "npz", "usd")            # assembled at close from the journal

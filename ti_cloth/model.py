@@ -7,14 +7,20 @@ import hashlib
 import numpy as np
 import taichi as ti
 
-from .body.elements import (bending_stencils, is_flat, isometric_faces, isometric_matrix,
-                            isometric_parts, tangents)
+from .body.elements import (
+    bending_stencils,
+    is_flat,
+    isometric_faces,
+    isometric_matrix,
+    isometric_parts,
+    tangents,
+)
 from .body.material import SpringKind
 from .body.mesh import triangle_edges, unique_rows
 from .body.topology import Cloth, color_springs
+from .inputs.validation import require
 from .runtime import backend
 from .runtime.transfer import upload
-from .runtime.validation import require
 from .state import State
 
 

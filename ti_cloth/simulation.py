@@ -29,6 +29,8 @@ from .contact.attachment import Attachment
 from .contact.collision import ColliderSet
 from .contact.self_collision import SelfCollision, SelfContact, SelfContacts, warn_if_thick
 from .errors import SimulationDiverged, StaleSimulation
+from .inputs import limits
+from .inputs.validation import as_array, in_range, integer, require
 from .integrators import INTEGRATORS, make_integrator
 from .model import Model
 from .physics.forces import ForceSettings, energies
@@ -37,9 +39,8 @@ from .physics.sewing import Seams, Sewing
 from .physics.strain_limit import StrainLimit, StrainLimiter
 from .physics.tearing import RUNAWAY_STRAIN, Tearing, torn_triangles
 from .physics.wind import WindField
-from .runtime import backend, limits, transfer
+from .runtime import backend, transfer
 from .runtime.pool import POOL
-from .runtime.validation import as_array, in_range, integer, require
 from .stability import auto_dt, stable_dt
 from .state import NO_BAD_STEP, State
 from .stepping import STEP_ORDER

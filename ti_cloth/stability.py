@@ -5,11 +5,10 @@ from __future__ import annotations
 
 import math
 
-
 from .body.topology import Cloth, index_mask
+from .inputs import limits
+from .inputs.validation import in_range, require
 from .integrators import make_integrator
-from .runtime import limits
-from .runtime.validation import in_range, require
 
 AUTO_MAX_DT = 1.0 / 240.0     # "auto" steps: at most half the predicted stable step and at most this [s]
 

@@ -41,7 +41,8 @@ import taichi as ti
 
 from .contact.collision import resolve_particle
 from .errors import TeamStalled
-from .runtime import backend, limits, plan
+from .inputs import limits
+from .runtime import backend, plan
 from .runtime.team import BARRIER_SPINS, MAX_WORKERS, TASK_SPACING, Team
 from .state import NO_BAD_STEP
 

@@ -26,10 +26,10 @@ import math
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
+from ..inputs.files import atomic_path
+from ..inputs.scene_file import SceneError
 from ..integrators import INTEGRATORS, make_integrator
-from ..runtime.files import atomic_path
 from ..saved_state import fingerprint
-from .scene_file import SceneError
 from .study import DEFAULT_INTEGRATORS, DEFAULT_ITERATIONS, Run, StudyResult, retime, run_study
 
 METRICS = ("max_error", "rms_error")

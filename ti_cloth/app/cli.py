@@ -11,7 +11,8 @@ from pathlib import Path
 
 from ..errors import OutputError
 from ..export import FORMATS
-from ..runtime import backend, limits
+from ..inputs import limits
+from ..runtime import backend
 
 TEST_FRAMES, TEST_SIZE = 4, (160, 96)
 OUTPUT_FAILED = 74        # sysexits.h's EX_IOERR: a file could not be written
@@ -79,11 +80,11 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
     resume from, 74 (sysexits' EX_IOERR) a file it could not write (disk full, no permission,
     read-only), 128 + signal when stopped by Ctrl-C (130) or SIGTERM (143)."""
     from ..errors import StateMismatch
-    from ..runtime.limits import LONG_RUN_SECONDS
+    from ..inputs.limits import LONG_RUN_SECONDS
+    from ..inputs.scene_file import SceneError
     from . import signals
     from .runner import run_scene
     from .scene import load_scene
-    from .scene_file import SceneError
 
     try:
         with signals.stop_signals_raise():
@@ -175,9 +176,9 @@ def _sweep(scene_path, jobs, scheduler, compute, write, lost: str):
     """Load a scene, compute(scene, workers) on the workers of --jobs / --scheduler, then
     write(scene, result) with stop signals held. Returns (exit code to stop with or None,
     scene, result, written paths)."""
+    from ..inputs.scene_file import SceneError
     from . import signals
     from .scene import load_scene
-    from .scene_file import SceneError
 
     try:
         scene = load_scene(scene_path)
@@ -274,8 +275,8 @@ def info() -> int:
 def view(scene_path, *, out=None, width=960, height=540, arch="cpu", record=False) -> int:
     """Open a window on the scene (app/view.py); exit code 0 when it closes, 2 for a scene it
     refuses (the message names the key) or no display, 74 for a file it cannot write."""
+    from ..inputs.scene_file import SceneError
     from .scene import load_scene
-    from .scene_file import SceneError
     from .view import NoDisplay, require_display
     from .view import view as open_view
 

@@ -23,9 +23,10 @@ import numpy as np
 
 from ..errors import OutputError, SimulationDiverged, StateMismatch
 from ..export import Exporter
+from ..inputs import limits
 from ..render import Camera, FrameSequence, Renderer
 from ..render.springs2d import FRONT, SpringView
-from ..runtime import backend, limits
+from ..runtime import backend
 from . import signals
 
 

@@ -21,16 +21,17 @@ from ..contact.animation_files import read_animation
 from ..contact.colliders import Box, Capsule, Collider, Plane, Sphere
 from ..contact.mesh_collider import MeshCollider
 from ..contact.self_collision import SelfCollision
+from ..inputs import limits
+from ..inputs.scene_file import SceneError, Table, load_toml
 from ..integrators import INTEGRATORS
 from ..physics.sewing import Sewing
 from ..physics.strain_limit import StrainLimit
 from ..physics.wind import Wind
 from ..render.camera import Camera
-from ..runtime import backend, limits
+from ..runtime import backend
 from ..simulation import Simulation
 from ..stability import auto_substeps
 from .scene_bodies import build_bodies, read_body, read_mesh_file, read_path
-from .scene_file import SceneError, Table, load_toml
 from .scene_output import Output, read_camera, read_output
 
 COLLIDER_TYPES = {"plane": Plane, "sphere": Sphere, "box": Box, "capsule": Capsule,

@@ -28,11 +28,11 @@ from ..body.panels import Garment, panel
 from ..body.topology import Cloth
 from ..contact.attachment import Attachment
 from ..contact.colliders import Collider
+from ..inputs import limits
+from ..inputs.limits import Range
+from ..inputs.scene_file import Table
 from ..physics.handles import Handle
 from ..physics.paths import INTERPOLATIONS, Keyframes, Oscillation
-from ..runtime import limits
-from ..runtime.limits import Range
-from .scene_file import Table
 
 BODY_TYPES = ("grid", "mesh", "garment", "string", "hair", "tet_block")
 SPRING_KEYS = {"string": ("stretch", "bend"), "hair": ("stretch", "bend", "twist", "altitude"),

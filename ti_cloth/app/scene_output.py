@@ -7,10 +7,10 @@ from pathlib import Path
 
 from ..contact.colliders import Plane
 from ..export import FORMATS
+from ..inputs import limits
+from ..inputs.scene_file import Table
 from ..render.camera import Camera
 from ..render.renderer import SurfaceStyle
-from ..runtime import limits
-from .scene_file import Table
 
 VIEWS = ("3d", "2d")
 

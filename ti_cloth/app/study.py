@@ -39,9 +39,10 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SimulationDiverged
+from ..inputs import limits
+from ..inputs.files import atomic_path
 from ..integrators import INTEGRATORS, make_integrator
-from ..runtime import backend, limits
-from ..runtime.files import atomic_path
+from ..runtime import backend
 from ..stability import stable_dt
 from .sweep import Failure, as_workers, run_tasks
 

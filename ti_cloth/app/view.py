@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..inputs.validation import integer, require
 from ..render import Camera, FrameSequence, Renderer, SurfaceStyle
 from ..render.viewer import Event, Viewer
-from ..runtime.validation import integer, require
 
 BUTTONS = {"LMB": "left", "RMB": "right"}
 KEYS = {"Escape": "escape"}

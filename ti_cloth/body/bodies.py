@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..runtime import limits
-from ..runtime.validation import as_array, count, in_range, require
+from ..inputs import limits
+from ..inputs.validation import as_array, count, in_range, require
 from .material import Material, SpringKind, SpringParams
 from .mesh import Mesh, tet_grid_mesh
 from .topology import Cloth, unique_springs

@@ -50,7 +50,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..runtime.validation import as_array, require
+from ..inputs.validation import as_array, require
 from .mesh import Mesh
 
 # |theta / 2| past which t = tan(theta / 2) continues along its tangent line (a crease folded

@@ -27,8 +27,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 
-from ..runtime import limits
-from ..runtime.validation import finite_number, in_range, require
+from ..inputs import limits
+from ..inputs.validation import finite_number, in_range, require
 
 STRETCH = limits.Range(1e-3, 1e9, "N/m", "fabric stretch and shear moduli")
 BENDING = limits.Range(0.0, 1e2, "N m", "fabric flexural rigidity (0 allowed: no bending)")

@@ -5,8 +5,8 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass, field
 
-from ..runtime import limits
-from ..runtime.validation import finite_number, in_range, require
+from ..inputs import limits
+from ..inputs.validation import finite_number, in_range, require
 
 
 class SpringKind(enum.IntEnum):

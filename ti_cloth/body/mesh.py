@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..runtime import limits
-from ..runtime.files import atomic_path
-from ..runtime.validation import as_array, count, in_range, require
+from ..inputs import limits
+from ..inputs.files import atomic_path
+from ..inputs.validation import as_array, count, in_range, require
 
 PLANES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2), "zx": (2, 0), "yx": (1, 0), "zy": (2, 1)}
 

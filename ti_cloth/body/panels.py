@@ -23,8 +23,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..runtime import limits
-from ..runtime.validation import as_array, finite_number, in_range, require
+from ..inputs import limits
+from ..inputs.validation import as_array, finite_number, in_range, require
 from .mesh import Mesh
 
 MAX_PANEL_POINTS = 1_000_000

@@ -26,7 +26,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..runtime.validation import require
+from ..inputs.validation import require
 from .material import SpringParams
 from .mesh import Mesh, split_triangles
 

@@ -26,7 +26,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from ..geometry import points_over_triangles
-from ..runtime.validation import as_array, finite_number, require
+from ..inputs.validation import as_array, finite_number, require
 from . import elements
 from .fabric import Fabric
 from .material import Material, SpringKind, SpringParams

@@ -46,7 +46,8 @@ import taichi as ti
 
 from ..body.mesh import triangle_edges, unique_rows
 from ..geometry import foot_barycentric, nearest_on_edges
-from ..runtime import backend, limits
+from ..inputs import limits
+from ..runtime import backend
 from ..runtime.plan import Loop, Phase
 from ..runtime.transfer import upload
 

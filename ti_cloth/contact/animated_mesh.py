@@ -17,8 +17,8 @@ from functools import cached_property
 import numpy as np
 
 from ..body.mesh import Mesh, triangle_edges, unique_rows
-from ..runtime import limits
-from ..runtime.validation import as_array, in_range, require
+from ..inputs import limits
+from ..inputs.validation import as_array, in_range, require
 from .animation_files import read_animation
 from .colliders import ANIMATED, Collider
 from .mesh_collider import closed

@@ -22,8 +22,8 @@ import numpy as np
 
 from ..body.mesh import Mesh, load_mesh
 from ..export import read_pc2
-from ..runtime import limits
-from ..runtime.validation import in_range, require
+from ..inputs import limits
+from ..inputs.validation import in_range, require
 
 USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
 

@@ -23,9 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry import closest_barycentric
+from ..inputs import limits
+from ..inputs.validation import as_array, in_range, require
 from ..physics.handles import Handle
-from ..runtime import limits
-from ..runtime.validation import as_array, in_range, require
 from .animated_mesh import AnimatedMeshCollider
 from .colliders import Collider
 from .sdf import nearest_triangles

@@ -7,10 +7,11 @@ theirs (animated_contact.py)."""
 import numpy as np
 import taichi as ti
 
-from ..runtime import backend, limits, plan
+from ..inputs import limits
+from ..inputs.validation import require
+from ..runtime import backend, plan
 from ..runtime.plan import Loop, Phase, Repeat
 from ..runtime.transfer import upload
-from ..runtime.validation import require
 from ..state import copy_positions
 from .animated_contact import PASSES, RESOLVED, AnimatedBodies, tested_edges, worst_contact
 from .animated_edges import EDGE_PASSES, EdgeContacts, edge_against_bodies, follow_edges

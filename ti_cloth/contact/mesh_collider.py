@@ -15,8 +15,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..body.mesh import Mesh, triangle_edges, unique_rows
-from ..runtime import limits
-from ..runtime.validation import as_array, count, require
+from ..inputs import limits
+from ..inputs.validation import as_array, count, require
 from .colliders import MESH, Collider
 from .sdf import DistanceGrid, distance_grid, layout
 

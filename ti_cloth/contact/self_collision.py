@@ -34,9 +34,10 @@ import numpy as np
 import taichi as ti
 
 from ..geometry import edge_contact, point_over_triangle
-from ..runtime import backend, limits
+from ..inputs import limits
+from ..inputs.validation import count, finite_number, require
+from ..runtime import backend
 from ..runtime.transfer import upload
-from ..runtime.validation import count, finite_number, require
 from ..state import copy_positions
 from .box_grid import BLOCK, BoxGrid
 from .collision import project_out

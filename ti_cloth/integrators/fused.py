@@ -17,9 +17,9 @@ bits.
 
 import taichi as ti
 
+from ..inputs import limits
 from ..physics import wind
 from ..physics.forces import gather_force, spring_phases
-from ..runtime import limits
 from ..runtime.plan import Loop, Phase
 
 

@@ -26,12 +26,13 @@ import math
 
 import taichi as ti
 
+from ..inputs import limits
+from ..inputs.validation import count, finite_number, require
 from ..physics import elements, wind
 from ..physics.forces import altitude_gradient, gather_force, spring_loops
-from ..runtime import backend, limits
+from ..runtime import backend
 from ..runtime.plan import Loop, Once, Phase, Until
 from ..runtime.team import MAX_WORKERS
-from ..runtime.validation import count, finite_number, require
 from ..state import store_particle
 from . import fused, implicit_elements
 from .base import Integrator

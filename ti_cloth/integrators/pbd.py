@@ -6,12 +6,12 @@ from collections.abc import Mapping
 import taichi as ti
 
 from ..body.material import SpringKind
+from ..inputs import limits
+from ..inputs.validation import count, finite_number, require
 from ..physics import wind
 from ..physics.constraints import SweepOrder, relax, relax_altitude
 from ..physics.forces import gather_force
-from ..runtime import limits
 from ..runtime.plan import Loop, Phase, Repeat, Sweep
-from ..runtime.validation import count, finite_number, require
 from ..state import store_particle
 from . import fused
 from .base import Integrator

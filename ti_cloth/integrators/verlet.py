@@ -3,7 +3,7 @@
 
 import taichi as ti
 
-from ..runtime.validation import finite_number, require
+from ..inputs.validation import finite_number, require
 from ..state import store_particle
 from .base import Integrator
 from .symplectic_euler import leapfrog_stable_step

@@ -6,13 +6,14 @@ triangles as strain and bending constraints with compliance from its moduli
 
 import taichi as ti
 
+from ..inputs import limits
+from ..inputs.validation import count
 from ..physics import wind
 from ..physics.constraints import damp, xpbd_altitude, xpbd_update
 from ..physics.element_constraints import xpbd_bending, xpbd_isometric, xpbd_membrane
 from ..physics.forces import gather_force
-from ..runtime import backend, limits
+from ..runtime import backend
 from ..runtime.plan import Loop, Phase, Repeat, Sweep
-from ..runtime.validation import count
 from . import fused
 from .base import Integrator
 from .pbd import velocity_from_positions

@@ -11,10 +11,11 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from ..runtime import backend, limits, plan
+from ..inputs import limits
+from ..inputs.validation import as_array, in_range, require
+from ..runtime import backend, plan
 from ..runtime.plan import Loop, Phase
 from ..runtime.transfer import upload
-from ..runtime.validation import as_array, in_range, require
 
 
 @dataclass(frozen=True)

@@ -10,8 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..runtime import limits
-from ..runtime.validation import as_array, finite_number, require
+from ..inputs import limits
+from ..inputs.validation import as_array, finite_number, require
 
 INTERPOLATIONS = ("linear", "smooth")
 

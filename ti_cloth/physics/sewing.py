@@ -22,10 +22,11 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from ..runtime import backend, limits, plan
+from ..inputs import limits
+from ..inputs.validation import in_range
+from ..runtime import backend, plan
 from ..runtime.plan import Loop, Phase
 from ..runtime.transfer import upload
-from ..runtime.validation import in_range
 
 
 @dataclass(frozen=True)

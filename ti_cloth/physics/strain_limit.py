@@ -9,9 +9,10 @@ from dataclasses import dataclass
 import taichi as ti
 
 from ..body.material import SpringKind
-from ..runtime import backend, limits, plan
+from ..inputs import limits
+from ..inputs.validation import count, finite_number, require
+from ..runtime import backend, plan
 from ..runtime.plan import Loop, Phase, Repeat, Sweep
-from ..runtime.validation import count, finite_number, require
 from .constraints import relax
 
 

@@ -9,9 +9,9 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
+from ..inputs.validation import finite_number
 from ..runtime import backend, plan
 from ..runtime.plan import Loop, Phase
-from ..runtime.validation import finite_number
 
 
 @backend.kernel_argument

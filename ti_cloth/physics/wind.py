@@ -25,10 +25,11 @@ import numpy as np
 import taichi as ti
 
 from ..body.mesh import vertex_triangles
-from ..runtime import backend, limits
+from ..inputs import limits
+from ..inputs.validation import as_array, finite_number, in_range, integer, require
+from ..runtime import backend
 from ..runtime.plan import Loop, Phase
 from ..runtime.transfer import upload
-from ..runtime.validation import as_array, finite_number, in_range, integer, require
 
 TURBULENCE_MODES = 8
 

@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..runtime import limits
-from ..runtime.validation import as_array, finite_number, in_range, require
+from ..inputs import limits
+from ..inputs.validation import as_array, finite_number, in_range, require
 
 DEFAULT_DIRECTION = (0.55, 0.4, 1.0)   # from the target towards the camera: front-right, above
 

@@ -10,8 +10,8 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 
-from ..runtime.files import atomic_path, remove_temporaries
-from ..runtime.validation import finite_number, require
+from ..inputs.files import atomic_path, remove_temporaries
+from ..inputs.validation import finite_number, require
 
 MP4_HINT = "pip install 'ti_cloth[video]' (or: pip install imageio-ffmpeg)"
 

@@ -23,9 +23,10 @@ from ..body.mesh import vertex_triangles
 from ..contact.animated_mesh import AnimatedMeshCollider
 from ..contact.colliders import BOX, CAPSULE, SPHERE, Box, Capsule, Plane, Sphere
 from ..contact.mesh_collider import MeshCollider
-from ..runtime import backend, limits
+from ..inputs import limits
+from ..inputs.validation import as_array, finite_number, in_range, integer, require
+from ..runtime import backend
 from ..runtime.backend import taichi_dtype
-from ..runtime.validation import as_array, finite_number, in_range, integer, require
 from . import raster, shapes
 from .camera import Camera
 from .image import from_taichi

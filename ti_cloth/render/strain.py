@@ -4,8 +4,8 @@ particle is beyond its rest length — the quantity tearing (Stuyck 4.5) compare
 import numpy as np
 import taichi as ti
 
+from ..inputs.validation import as_array, require
 from ..runtime import backend
-from ..runtime.validation import as_array, require
 from .raster import ndarray_f32_1, ndarray_f32_2, ndarray_i32_1, ndarray_i32_2
 
 

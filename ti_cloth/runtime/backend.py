@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from . import limits
-from .validation import count
+from ..inputs import limits
+from ..inputs.validation import count
 
 ARCHS = {"cpu": "cpu", "cuda": "cuda", "vulkan": "vulkan", "gpu": "gpu"}
 PRECISIONS = {"f32": ti.f32, "f64": ti.f64}

@@ -38,7 +38,8 @@ tasks, and with exact IEEE arithmetic (backend.py) they give the same bits
 
 import taichi as ti
 
-from . import backend, limits
+from ..inputs import limits
+from . import backend
 from .team import SOLO
 
 SERIAL_SPRING_LIMIT = 50_000   # serial launches faster at 24k springs, parallel ones at 97k

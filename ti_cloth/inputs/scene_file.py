@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from ..runtime.limits import Range
+from .limits import Range
 
 MISSING = object()
 
