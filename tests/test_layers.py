@@ -121,9 +121,10 @@ def test_the_private_reach_checker_can_fail():
 
 
 def test_the_package_keeps_a_folder_per_concern():
-    """At most 12 modules at the top of ti_cloth; the rest in body/, physics/, contact/,
-    integrators/, runtime/, render/ and app/."""
+    """At most 12 modules at the top of ti_cloth; the rest in inputs/, body/, physics/,
+    contact/, integrators/, runtime/, render/ and app/."""
     top = sorted(p.name for p in PACKAGE.glob("*.py"))
     folders = sorted(p.name for p in PACKAGE.iterdir() if (p / "__init__.py").exists())
     assert len(top) <= 12, top
-    assert folders == ["app", "body", "contact", "integrators", "physics", "render", "runtime"]
+    assert folders == ["app", "body", "contact", "integrators", "inputs", "physics", "render",
+                       "runtime"]
