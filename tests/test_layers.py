@@ -126,5 +126,5 @@ def test_the_package_keeps_a_folder_per_concern():
     top = sorted(p.name for p in PACKAGE.glob("*.py"))
     folders = sorted(p.name for p in PACKAGE.iterdir() if (p / "__init__.py").exists())
     assert len(top) <= 12, top
-    assert folders == ["app", "body", "contact", "integrators", "inputs", "physics", "render",
+    assert folders == ["app", "body", "contact", "inputs", "integrators", "physics", "render",
                        "runtime"]
