@@ -236,7 +236,7 @@ def test_auto_edge_contact_tests_the_edges_sharp_enough_to_pass_between_particle
     (0-4, 0-5, 1-5) across which they do not turn: "auto" tests its nine other edges (they turn
     by 90 to 179 degrees, more than 18.4 for a 5 cm cloth edge and 5 mm), each once; True tests
     all twelve; False none. A smooth icosphere (faces 4.6 degrees apart): none."""
-    from ti_cloth.contact.animated_contact import tested_edges
+    from ti_cloth.contact.colliders.animated_contact import tested_edges
     thickness, longest = 0.005, 0.05
     threshold = 2 * np.arcsin(thickness / (1.25 * longest / 2))
     for alpha, expected in ((threshold - np.radians(0.5), 4), (threshold + np.radians(0.5), 5)):
@@ -316,7 +316,7 @@ def test_every_valid_candidate_list_holds_every_triangle_a_traversal_would_visit
     """After each step, for every particle whose list still holds (its epoch, within a skin
     of its anchor at the step's start and end), every triangle whose box meets the particle's
     path box is in the list: checked against all 1,280 triangles' boxes read back."""
-    from ti_cloth.contact.animated_contact import SKIN
+    from ti_cloth.contact.colliders.animated_contact import SKIN
     sphere = tc.sphere_mesh(RADIUS, CENTRE, subdivisions=3)
     collider = tc.AnimatedMeshCollider(
         sphere, lambda t: CENTRE + (sphere.vertices - CENTRE) * (1.0 + 0.3 * np.sin(6 * t)),

@@ -1,4 +1,4 @@
-"""Attachments (contact/attachment.py): cloth particles carried by a collider's surface. The
+"""Attachments (contact/colliders/attachment.py): cloth particles carried by a collider's surface. The
 surface point each particle should be at is computed here independently (its nearest triangle
 found by brute force, barycentric coordinates by Cramer's rule), and rigid carrying is checked
 against the shape's own transform."""

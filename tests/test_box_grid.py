@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import taichi as ti
 
-from ti_cloth.contact.box_grid import (
+from ti_cloth.contact.broad_phase.box_grid import (
     BoxGrid,
     box_cell,
     box_cell_count,

@@ -10,7 +10,7 @@ from helpers import compiled, forget_compiled, report
 
 import ti_cloth as tc
 from ti_cloth.app.scene import load_scene
-from ti_cloth.contact.collision import resolve
+from ti_cloth.contact.colliders.collision import resolve
 from ti_cloth.inputs.scene_file import SceneError
 from ti_cloth.physics import wind as wind_module
 from ti_cloth.physics.strain_limit import relax_stretched

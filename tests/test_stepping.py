@@ -15,7 +15,7 @@ import pytest
 
 import ti_cloth as tc
 from ti_cloth import stepping
-from ti_cloth.contact.collision import ColliderSet
+from ti_cloth.contact.colliders.collision import ColliderSet
 from ti_cloth.inputs import limits
 from ti_cloth.integrators import Integrator
 from ti_cloth.model import Model

@@ -21,10 +21,10 @@ from .body.mesh import (
 )
 from .body.panels import Garment, Panel, panel
 from .body.topology import Cloth
-from .contact.animated_mesh import AnimatedMeshCollider
-from .contact.attachment import Attachment
-from .contact.colliders import Box, Capsule, Collider, Plane, Sphere
-from .contact.mesh_collider import MeshCollider
+from .contact.colliders.animated_mesh import AnimatedMeshCollider
+from .contact.colliders.attachment import Attachment
+from .contact.colliders.mesh_collider import MeshCollider
+from .contact.colliders.shapes import Box, Capsule, Collider, Plane, Sphere
 from .contact.self_collision import SelfCollision, SelfContacts
 from .errors import OutputError, SimulationDiverged, StateMismatch, TeamStalled
 from .export import Exporter

@@ -25,8 +25,8 @@ import numpy as np
 from . import saved_state, stepping
 from .body.elements import is_flat
 from .body.topology import Cloth
-from .contact.attachment import Attachment
-from .contact.collision import ColliderSet
+from .contact.colliders.attachment import Attachment
+from .contact.colliders.collision import ColliderSet
 from .contact.self_collision import SelfCollision, SelfContact, SelfContacts, warn_if_thick
 from .errors import SimulationDiverged, StaleSimulation
 from .inputs import limits

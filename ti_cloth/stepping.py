@@ -39,7 +39,7 @@ from collections import deque
 
 import taichi as ti
 
-from .contact.collision import resolve_particle
+from .contact.colliders.collision import resolve_particle
 from .errors import TeamStalled
 from .inputs import limits
 from .runtime import backend, plan

@@ -16,10 +16,10 @@ import numpy as np
 
 from ..body.mesh import Mesh
 from ..body.topology import Cloth
-from ..contact.animated_mesh import AnimatedMeshCollider
-from ..contact.animation_files import read_animation
-from ..contact.colliders import Box, Capsule, Collider, Plane, Sphere
-from ..contact.mesh_collider import MeshCollider
+from ..contact.colliders.animated_mesh import AnimatedMeshCollider
+from ..contact.colliders.animation_files import read_animation
+from ..contact.colliders.mesh_collider import MeshCollider
+from ..contact.colliders.shapes import Box, Capsule, Collider, Plane, Sphere
 from ..contact.self_collision import SelfCollision
 from ..inputs import limits
 from ..inputs.scene_file import SceneError, Table, load_toml

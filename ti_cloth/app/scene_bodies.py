@@ -26,8 +26,8 @@ from ..body.material import DAMPING_MODELS, PRESETS, Material, SpringParams
 from ..body.mesh import PLANES, Mesh, grid_mesh, load_mesh
 from ..body.panels import Garment, panel
 from ..body.topology import Cloth
-from ..contact.attachment import Attachment
-from ..contact.colliders import Collider
+from ..contact.colliders.attachment import Attachment
+from ..contact.colliders.shapes import Collider
 from ..inputs import limits
 from ..inputs.limits import Range
 from ..inputs.scene_file import Table

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..contact.colliders import Plane
+from ..contact.colliders.shapes import Plane
 from ..export import FORMATS
 from ..inputs import limits
 from ..inputs.scene_file import Table

@@ -39,9 +39,8 @@ from ..inputs.validation import count, finite_number, require
 from ..runtime import backend
 from ..runtime.transfer import upload
 from ..state import copy_positions
-from .box_grid import BLOCK, BoxGrid
-from .collision import project_out
-from .contact_pairs import (
+from .broad_phase.box_grid import BLOCK, BoxGrid
+from .broad_phase.contact_pairs import (
     PairList,
     cloth_edges,
     displacement_box,
@@ -53,6 +52,7 @@ from .contact_pairs import (
     torn_edge,
     torn_triangle,
 )
+from .colliders.collision import project_out
 
 PAIRS_PER_PARTICLE = 32     # candidate list room at first, per particle
 MAX_PAIRS_PER_PARTICLE = 256

@@ -20,9 +20,9 @@ import taichi as ti
 
 from ..body.material import SpringKind
 from ..body.mesh import vertex_triangles
-from ..contact.animated_mesh import AnimatedMeshCollider
-from ..contact.colliders import BOX, CAPSULE, SPHERE, Box, Capsule, Plane, Sphere
-from ..contact.mesh_collider import MeshCollider
+from ..contact.colliders.animated_mesh import AnimatedMeshCollider
+from ..contact.colliders.mesh_collider import MeshCollider
+from ..contact.colliders.shapes import BOX, CAPSULE, SPHERE, Box, Capsule, Plane, Sphere
 from ..inputs import limits
 from ..inputs.validation import as_array, finite_number, in_range, integer, require
 from ..runtime import backend

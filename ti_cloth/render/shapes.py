@@ -5,7 +5,7 @@ Each sample belongs to one thread here, so a plain minimum replaces the atomic o
 
 import taichi as ti
 
-from ..contact.colliders import BOX, SPHERE
+from ..contact.colliders.shapes import BOX, SPHERE
 from ..runtime import backend
 from .raster import EMPTY, camera_basis, lambert, ndarray_f32_1, pack, samples_type
 

@@ -22,10 +22,10 @@ one whose parts move apart fast makes one every step.
 import numpy as np
 import taichi as ti
 
-from ..body.mesh import triangle_edges, unique_rows
-from ..runtime import backend
+from ...body.mesh import triangle_edges, unique_rows
+from ...geometry import segment_distance, triangle_distance
+from ...runtime import backend
 from .box_grid import BLOCK, box_cell, box_cell_count, cell_box, cell_range, found_here
-from ..geometry import segment_distance, triangle_distance
 
 
 def cloth_edges(cloth) -> tuple[np.ndarray, np.ndarray]:

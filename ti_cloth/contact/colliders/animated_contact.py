@@ -44,12 +44,12 @@ More than LISTED candidates, and the particle traverses until its next list.
 import numpy as np
 import taichi as ti
 
-from ..body.mesh import triangle_edges, unique_rows
-from ..geometry import foot_barycentric, nearest_on_edges
-from ..inputs import limits
-from ..runtime import backend
-from ..runtime.plan import Loop, Phase
-from ..runtime.transfer import upload
+from ...body.mesh import triangle_edges, unique_rows
+from ...geometry import foot_barycentric, nearest_on_edges
+from ...inputs import limits
+from ...runtime import backend
+from ...runtime.plan import Loop, Phase
+from ...runtime.transfer import upload
 
 BLOCK = 16          # triangles per block, blocks per group
 PASSES = 4          # contacts answered per particle and body in a step, at most

@@ -19,8 +19,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 import taichi as ti
 
-from ..inputs import limits
-from ..inputs.validation import as_array, finite_number, in_range, require
+from ...inputs import limits
+from ...inputs.validation import as_array, finite_number, in_range, require
 
 PLANE, SPHERE, BOX, CAPSULE, MESH, ANIMATED = 0, 1, 2, 3, 4, 5   # mesh_collider.py, animated_mesh.py
 

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import taichi as ti
 
-from ..inputs.files import atomic_path
+from ...inputs.files import atomic_path
 
 FORMAT = 1            # bump when the grid's meaning or layout changes: old cache files are ignored
 MEMORY_CACHE = 4      # grids kept in memory

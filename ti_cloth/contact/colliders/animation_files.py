@@ -20,10 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..body.mesh import Mesh, load_mesh
-from ..export import read_pc2
-from ..inputs import limits
-from ..inputs.validation import in_range, require
+from ...body.mesh import Mesh, load_mesh
+from ...export import read_pc2
+from ...inputs import limits
+from ...inputs.validation import in_range, require
 
 USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
 

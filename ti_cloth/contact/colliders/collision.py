@@ -7,19 +7,19 @@ theirs (animated_contact.py)."""
 import numpy as np
 import taichi as ti
 
-from ..inputs import limits
-from ..inputs.validation import require
-from ..runtime import backend, plan
-from ..runtime.plan import Loop, Phase, Repeat
-from ..runtime.transfer import upload
-from ..state import copy_positions
+from ...inputs import limits
+from ...inputs.validation import require
+from ...runtime import backend, plan
+from ...runtime.plan import Loop, Phase, Repeat
+from ...runtime.transfer import upload
+from ...state import copy_positions
+from ..broad_phase.contact_pairs import cloth_edges
 from .animated_contact import PASSES, RESOLVED, AnimatedBodies, tested_edges, worst_contact
 from .animated_edges import EDGE_PASSES, EdgeContacts, edge_against_bodies, follow_edges
 from .animated_mesh import AnimatedMeshCollider
-from .colliders import ANIMATED, MESH, Collider, Plane, signed_distance
-from .contact_pairs import cloth_edges
 from .mesh_collider import MeshCollider
 from .sdf import layout, mesh_distance, sample_grid
+from .shapes import ANIMATED, MESH, Collider, Plane, signed_distance
 
 PLACEMENT = 30       # numbers per collider in a placement row (ColliderSet._placement)
 

@@ -14,11 +14,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..body.mesh import Mesh, triangle_edges, unique_rows
-from ..inputs import limits
-from ..inputs.validation import as_array, count, require
-from .colliders import MESH, Collider
+from ...body.mesh import Mesh, triangle_edges, unique_rows
+from ...inputs import limits
+from ...inputs.validation import as_array, count, require
 from .sdf import DistanceGrid, distance_grid, layout
+from .shapes import MESH, Collider
 
 MARGIN = 0.1          # the grid reaches this fraction of the mesh's largest extent beyond it
 ROTATION_TOLERANCE = 1e-6

@@ -36,11 +36,11 @@ Not covered: a body's vertex (a cone's tip) through the inside of a cloth triang
 import numpy as np
 import taichi as ti
 
-from ..geometry import edge_contact
-from ..runtime import backend
-from ..runtime.transfer import upload
+from ...geometry import edge_contact
+from ...runtime import backend
+from ...runtime.transfer import upload
+from ..broad_phase.contact_pairs import cloth_edges, torn_edge
 from .animated_contact import RESOLVED, CandidateLists, stale_list, visit_near
-from .contact_pairs import cloth_edges, torn_edge
 
 EDGE_LISTED = 64    # candidate triangles an edge keeps per body (a path's box is longer)
 EDGE_PASSES = 3     # passes over the edges a step (each particle takes its contacts' mean)

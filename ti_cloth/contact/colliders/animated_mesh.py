@@ -16,12 +16,12 @@ from functools import cached_property
 
 import numpy as np
 
-from ..body.mesh import Mesh, triangle_edges, unique_rows
-from ..inputs import limits
-from ..inputs.validation import as_array, in_range, require
+from ...body.mesh import Mesh, triangle_edges, unique_rows
+from ...inputs import limits
+from ...inputs.validation import as_array, in_range, require
 from .animation_files import read_animation
-from .colliders import ANIMATED, Collider
 from .mesh_collider import closed
+from .shapes import ANIMATED, Collider
 
 
 @dataclass(frozen=True, kw_only=True)

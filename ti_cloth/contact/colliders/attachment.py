@@ -22,13 +22,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import closest_barycentric
-from ..inputs import limits
-from ..inputs.validation import as_array, in_range, require
-from ..physics.handles import Handle
+from ...geometry import closest_barycentric
+from ...inputs import limits
+from ...inputs.validation import as_array, in_range, require
+from ...physics.handles import Handle
 from .animated_mesh import AnimatedMeshCollider
-from .colliders import Collider
 from .sdf import nearest_triangles
+from .shapes import Collider
 
 DEGENERATE = 1e-12      # a triangle whose doubled area is below this x its longest edge^2
 

@@ -24,7 +24,7 @@ cells), so exactly once.
 import numpy as np
 import taichi as ti
 
-from ..runtime import backend
+from ...runtime import backend
 
 CELL_BUDGET = 4     # grid cells per item at most
 ENTRY_BUDGET = 8    # cell entries per item at most

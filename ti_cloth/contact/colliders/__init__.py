@@ -1,0 +1,5 @@
+"""Colliders and the collision stage: analytic shapes (shapes.py), triangle meshes with their
+distance grids (mesh_collider.py, sdf.py), deforming meshes (animated_mesh.py, read by
+animation_files.py; continuous contact of particles in animated_contact.py and of cloth edges
+in animated_edges.py), attachments to a collider's surface (attachment.py), and the stage
+that keeps particles out of a simulation's colliders (collision.py)."""
