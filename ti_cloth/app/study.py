@@ -26,24 +26,22 @@ timings are then taken with other tasks running, and the result says so).
 
 from __future__ import annotations
 
-import csv
 import gc
-import io
 import math
 import statistics
 import threading
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import SimulationDiverged
 from ..inputs import limits
-from ..inputs.files import atomic_path
 from ..integrators import INTEGRATORS, make_integrator
 from ..runtime import backend
 from ..stability import stable_dt
+from . import study_report
 from .sweep import Failure, as_workers, run_tasks
 
 REFERENCE_TOLERANCE = 1e-9     # halving the reference step changes positions by less than this x size
@@ -301,151 +299,26 @@ class StudyResult:
             result[label] = ok
         return result
 
+    def pareto_front(self) -> list[Run]:
+        """The runs that did not diverge and that no other such run beats in both cost and
+        max error (pareto_front)."""
+        return pareto_front(self.runs)
+
     def csv_text(self) -> str:
-        out = io.StringIO()
-        names = list(asdict(self.runs[0])) if self.runs else []
-        writer = csv.DictWriter(out, fieldnames=names, lineterminator="\n")
-        writer.writeheader()
-        for run in self.runs:
-            writer.writerow(asdict(run))
-        return out.getvalue()
+        """Every run, a CSV row each (study_report.py)."""
+        return study_report.csv_text(self)
 
     def markdown(self) -> str:
-        """Pareto-optimal runs first (no other run is both cheaper and more accurate), then the
-        largest stable step of each configuration."""
-        ref = self.reference
-        lines = [f"Scene `{self.scene_name}`: error against rk4/f64 at dt = {ref.dt:.3g} s "
-                 f"(halving changed positions by {ref.change:.1e} of the {ref.size:.3g} m cloth), "
-                 f"{len(ref.times)} samples over {ref.times[-1]:.3g} s."
-                 + ("" if self.timing == "serial" else
-                    f" Costs measured with other runs at once ({self.timing}): compare them "
-                    "with each other, not with a serial study."), "",
-                 "| integrator | precision | dt [s] | max error | RMS error | energy drift | "
-                 "max strain | cost [s/s] | Pareto |",
-                 "|---|---|---|---|---|---|---|---|---|"]
-        swept = self.swept
-        if not swept:
-            lines[0] += (" Integration error only: the reference is this same mesh's; "
-                         "resolutions (--resolutions 1 2 4) measure the mesh's own error too.")
-        if swept:
-            lines[2:2] = self._resolution_lines()
-            lines[-2] = ("| resolution | particles | integrator | precision | dt [s] | max error | "
-                         "discretisation | integration | RMS error | energy drift | max strain | "
-                         "cost [s/s] | Pareto |")
-            lines[-1] = "|---" * 13 + "|"
-        front = {id(r) for r in pareto_front(self.runs)}
-        for run in sorted(self.runs, key=lambda r: (r.resolution, r.label, -r.dt)):
-            name = run.integrator if run.iterations is None else f"{run.integrator} ({run.iterations} it)"
-            split = (f"{run.discretisation_error:.2e} | {run.integration_error:.2e} | " if swept
-                     else "")
-            if run.diverged:
-                metrics = (f"diverged at step {run.diverged_step} | {'| | ' if swept else ''}"
-                           f"| | | {run.cost:.3g} |")
-            else:
-                metrics = (f"{run.max_error:.2e} | {split}{run.rms_error:.2e} | "
-                           f"{run.energy_drift:.2e} | {run.max_strain:.3f} | {run.cost:.3g} |")
-            where = f"{run.resolution} | {run.particles} | " if swept else ""
-            lines.append(f"| {where}{name} | {run.precision} | {run.dt:.3g} | {metrics} "
-                         f"{'yes' if id(run) in front else ''} |")
-        for label, error in self.failed.items():
-            lines.append(f"| {label} | failed: {error} | | | | | | | |")
-        if self.incidents:
-            lines.append("")
-        lines += [f"{label}: its worker failed ({error}); "
-                  + ("the retry finished." if recovered else "the retry failed too.")
-                  for label, (error, recovered) in self.incidents.items()]
-        lines += ["", "| configuration | largest stable dt in the sweep [s] | predicted [s] |", "|---|---|---|"]
-        predicted = {r.label: r.predicted_stable_dt for r in self.runs}
-        for label, dt in self.largest_stable_dt().items():
-            lines.append(f"| {label} | {dt:.3g} | {predicted[label]:.3g} |")
-        return "\n".join(lines) + "\n"
-
-    def _resolution_lines(self) -> list[str]:
-        """The resolution axis: each resolution's discretisation error, the observed orders,
-        the reference's estimated own error."""
-        ref = self.reference
-        lines = [f"Resolution: the reference is the scene refined {ref.resolution} times "
-                 f"({ref.particles} particles); errors are at the scene file's own particles.", "",
-                 "| resolution | particles | discretisation: max error | RMS error | "
-                 "converged step [s] |", "|---|---|---|---|---|"]
-        for f, (worst, rms) in self.discretisation().items():
-            converged = self.converged[f]
-            lines.append(f"| {f} | {converged.particles} | {worst:.2e} | {rms:.2e} | "
-                         f"{converged.dt:.3g} |")
-        orders = ", ".join(f"{p:.2f} from {a} to {b}" for a, b, p in self.spatial_orders())
-        estimate = self.reference_error()
-        lines += ["", f"Observed order of spatial convergence (max error): {orders or 'n/a'}."
-                  + (f" At that order the reference itself is about {estimate:.1e} of the cloth "
-                     "size from the converged cloth: add it to an error below for the error "
-                     "against the continuum." if math.isfinite(estimate) else ""), ""]
-        return lines
+        """The study's tables (study_report.py)."""
+        return study_report.markdown(self)
 
     def plot(self, path) -> Path:
-        """Log-log max error against cost, one line per configuration (colour: integrator;
-        dashed: f32; marker: resolution, o ^ v D ... from the coarsest, or squares for the most
-        pbd/xpbd iterations; the label ends in xN at resolution N), the Pareto front outlined
-        (needs matplotlib: pip install "ti_cloth[study]")."""
-        try:
-            import matplotlib
-        except ImportError as err:
-            raise ImportError('the study plot needs matplotlib: pip install "ti_cloth[study]" '
-                              "(or pip install matplotlib)") from err
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        markers = dict(zip(sorted({r.resolution for r in self.runs}), "o^vDPX*"))
-        fig, ax = plt.subplots(figsize=(9.5 if len(markers) > 1 else 8, 5.5), dpi=100)
-        colours = {name: f"C{i}" for i, name in enumerate(dict.fromkeys(r.integrator for r in self.runs))}
-        counts = {name: sorted({r.iterations or 0 for r in self.runs if r.integrator == name}) for name in colours}
-        for label in dict.fromkeys(r.label for r in self.runs):
-            runs = sorted((r for r in self.runs if r.label == label and not r.diverged), key=lambda r: r.cost)
-            if runs:
-                first = runs[0]
-                most = len(counts[first.integrator]) > 1 and first.iterations == counts[first.integrator][-1]
-                ax.plot([r.cost for r in runs], [max(r.max_error, 1e-16) for r in runs], label=label,
-                        color=colours[first.integrator], ls="--" if first.precision == "f32" else "-",
-                        marker="s" if most else markers[first.resolution], ms=4, lw=1)
-        front = sorted(pareto_front(self.runs), key=lambda r: r.cost)
-        if front:
-            ax.plot([r.cost for r in front], [max(r.max_error, 1e-16) for r in front], "k-", lw=3,
-                    alpha=0.25, label="Pareto front")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("cost: wall seconds per simulated second")
-        ax.set_ylabel("max position error / cloth size")
-        ax.set_title(f"{self.scene_name}: error against cost (diverged runs left out)"
-                     + ("" if self.timing == "serial" else f"\ncosts timed with {self.timing}"),
-                     fontsize=10 if self.timing != "serial" else None)
-        ax.grid(True, which="both", alpha=0.3)
-        if len(markers) > 1:          # one entry per colour, marker and line style
-            from matplotlib.lines import Line2D
-            keys = ([Line2D([], [], color=c, label=name) for name, c in colours.items()]
-                    + [Line2D([], [], color="grey", ls="", marker=m, label=f"resolution {f}")
-                       for f, m in markers.items()]
-                    + [Line2D([], [], color="grey", ls=ls, label=p)
-                       for p, ls in (("f64", "-"), ("f32", "--"))]
-                    + [Line2D([], [], color="k", lw=3, alpha=0.25, label="Pareto front")])
-            ax.legend(handles=keys, fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1))
-        else:
-            ax.legend(fontsize=7, ncol=2)
-        fig.tight_layout()
-        path = Path(path)
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp)
-        plt.close(fig)
-        return path
+        """The error-against-cost plot, written to `path` (study_report.py)."""
+        return study_report.plot(self, path)
 
     def write(self, folder, plot: bool = True) -> list[Path]:
         """study.csv, study.md and (plot) study.png in `folder`, each written atomically."""
-        folder = Path(folder)
-        written = []
-        for name, text in (("study.csv", self.csv_text()), ("study.md", self.markdown())):
-            with atomic_path(folder / name) as tmp:
-                tmp.write_text(text)
-            written.append(folder / name)
-        if plot:
-            written.append(self.plot(folder / "study.png"))
-        return written
+        return study_report.write(self, folder, plot)
 
 
 def pareto_front(runs) -> list[Run]:
