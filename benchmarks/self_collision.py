@@ -105,7 +105,7 @@ def main(argv=None):
             free = ms_per_step(free_sim, args.steps, args.repeats, warm_up_steps(free_sim, scene))
             sim = simulation(n, scene, integrator, contact)
             with_contact = ms_per_step(sim, args.steps, args.repeats, warm_up_steps(sim, scene))
-            pairs = sim.self_contact.pair_total / sim.cloth.particle_count
+            pairs = sim.self_collision.pair_total / sim.cloth.particle_count
             print(f"{n:>5} {scene:>6} {integrator:>17} {free:>13.3f} {with_contact:>23.3f} "
                   f"{with_contact / free:>6.1f} {pairs:>15.2f}")
             if args.profile:

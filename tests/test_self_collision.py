@@ -211,7 +211,7 @@ def test_one_thread_and_all_cores_and_a_rerun_give_the_same_bits():
         assert len(sim.self_contacts().vertex_triangle) > 20, "the sheets touch"
         lifted = np.linalg.norm(sim.positions() - [0.5, -0.12, 0.5], axis=1) - 0.15
         assert np.abs(lifted).min() < 2 * THICKNESS, "the ball holds the upper sheet up"
-        grid, listed = sim.self_contact.grid, sim.self_contacts(active=False)
+        grid, listed = sim.self_collision.grid, sim.self_contacts(active=False)
         return (sim.positions(), grid.cell_start.to_numpy(), grid.cell_item.to_numpy(),
                 listed.vertex_triangle, listed.edge_edge)
 

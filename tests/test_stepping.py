@@ -24,7 +24,7 @@ from ti_cloth.physics.handles import HandleSet
 from ti_cloth.physics.strain_limit import StrainLimiter
 from ti_cloth.runtime import backend, team
 from ti_cloth.runtime import plan as runtime_plan
-from ti_cloth.simulation import STEP_ORDER
+from ti_cloth.stages import STEP_ORDER, Stage, in_order
 
 FUSED = ["explicit_euler", "symplectic_euler", "verlet"]
 
@@ -301,7 +301,8 @@ def record_stages(monkeypatch):
     ("strain_limit", "colliders", "handles", "tearing"), ("colliders", "tearing"), ("handles",), ()])
 def test_a_step_runs_its_stages_in_step_order(f64, monkeypatch, features):
     """One launch per stage: the integrator, then exactly the stages the scene has, in
-    STEP_ORDER; the many-steps plan runs the stages of TEAM_STAGES, which keep that order."""
+    STEP_ORDER; the many-steps plan runs each of them inside the launch (its `launched`
+    object), in the same order (TeamStages.after)."""
     cloth, _ = sheet()
     options = {"strain_limit": dict(strain_limit=tc.StrainLimit(0.1)),
                "colliders": dict(colliders=[tc.Plane(point=(0.0, -1.0, 0.0))]),
@@ -315,9 +316,19 @@ def test_a_step_runs_its_stages_in_step_order(f64, monkeypatch, features):
     expected = tuple(name for name in STEP_ORDER if name == "integrator" or name in features)
     assert sim.stages == expected
     assert calls == list(expected) * 3
-    assert stepping.TEAM_STAGES == tuple(n for n in STEP_ORDER if n in stepping.TEAM_STAGES)
-    assert stepping.TEAM_STAGES[0] == "integrator"
-    assert (sim.many_steps is not None) == (set(expected) <= set(stepping.TEAM_STAGES))
+    assert all(isinstance(sim.stage(name), Stage) for name in expected[1:])
+    assert all(sim.stage(name) is None for name in STEP_ORDER[1:] if name not in expected)
+    launched = sim.many_steps.stages.stages
+    assert tuple(launched) == expected[1:]
+    assert all(launched[name] is sim.stage(name).launched for name in launched)
+
+
+def test_stages_are_kept_in_step_order_by_name():
+    assert STEP_ORDER[0] == "integrator" and len(set(STEP_ORDER)) == len(STEP_ORDER)
+    assert list(in_order({"tearing": 1, "handles": 2, "colliders": None})) == ["handles",
+                                                                             "tearing"]
+    with pytest.raises(KeyError, match="self_contact"):
+        in_order({"self_contact": 1})
 
 
 @pytest.mark.parametrize("integrator", FUSED)

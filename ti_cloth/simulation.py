@@ -1,18 +1,12 @@
 """Simulation: the step loop, the divergence guard and diagnostics.
 
-One step, in this order (STEP_ORDER), the same in every launch plan:
-
-    integrator (forces, move)  ->  handles  ->  sewing  ->  strain limiting  ->  colliders
-        ->  self-collision  ->  tearing
-
-(held particles are on their paths before strain limiting and the colliders see them)
-
-Each stage after the integrator is an object with after_step(model, state, t, dt, step_index)
-(t: the time at the step's end), compiled and launched only when the simulation has it; the
-colliders, self-collision and the wind also have before_step(state, t) (t: the step's start). The
-integrator's step is written once, as phases (runtime/plan.py): a launch per phase runs them
-(Integrator.step), and on the CPU, when every stage is among stepping.TEAM_STAGES, many steps
-run in one launch (stepping.py; tested against a launch per phase).
+Each step runs the integrator, then the stages the simulation has, in STEP_ORDER (stages.py:
+the order and what a stage is); a stage is made, compiled and launched only when the
+simulation has it. The colliders, self-collision and the wind also have before_step(state, t)
+(t: the step's start). The integrator's step and the stages' are written once, as phases
+(runtime/plan.py): a launch per phase runs them (Integrator.step, Stage.after_step), and on
+the CPU, when every stage has a `launched` object, many steps run in one launch (stepping.py;
+tested against a launch per phase).
 """
 
 
@@ -27,7 +21,12 @@ from .body.elements import is_flat
 from .body.topology import Cloth
 from .contact.colliders.attachment import Attachment
 from .contact.colliders.collision import ColliderSet
-from .contact.self_collision import SelfCollision, SelfContact, SelfContacts, warn_if_thick
+from .contact.self_collision import (
+    SelfCollision,
+    SelfCollisionStage,
+    SelfContacts,
+    warn_if_thick,
+)
 from .errors import SimulationDiverged, StaleSimulation
 from .inputs import limits
 from .inputs.validation import as_array, in_range, integer, require
@@ -42,8 +41,8 @@ from .physics.wind import WindField
 from .runtime import backend, transfer
 from .runtime.pool import POOL
 from .stability import auto_dt, stable_dt
+from .stages import STEP_ORDER, in_order
 from .state import NO_BAD_STEP, State
-from .stepping import STEP_ORDER
 
 PLANS = ("per stage", "many steps")   # Simulation.step's launch plans
 # Simulation's options, in the order of the positional form kept for one release
@@ -70,8 +69,8 @@ class Simulation:
     sewing: how a garment's seams close (a Sewing); default Sewing() when the cloth has
         seams (Cloth.seam_indices), none otherwise (never compiled nor launched).
 
-    Each step runs the stages of STEP_ORDER (module doc); the wind is held at its value at the
-    step start.
+    Each step runs the integrator, then the stages of STEP_ORDER this simulation has
+    (stages.py); the wind is held at its value at the step start.
     """
 
     def __init__(self, cloth: Cloth, *positional, integrator="symplectic_euler",
@@ -137,30 +136,30 @@ class Simulation:
         if wind is not None:
             parts["wind"] = (WindField, (wind, cloth))
         if strain_limit is not None and (cloth.spring_count or cloth.face_count):
-            parts["strain_limiter"] = (StrainLimiter, (strain_limit, cloth.particle_count,
+            parts["strain_limit"] = (StrainLimiter, (strain_limit, cloth.particle_count,
                                                        tearing is not None))
         if colliders:
             parts["colliders"] = (ColliderSet, (colliders, cloth))
         if sewing is not None:
-            parts["seams"] = (Seams, (sewing, cloth.seam_indices, cloth.particle_position))
+            parts["sewing"] = (Seams, (sewing, cloth.seam_indices, cloth.particle_position))
         require(self_collision is None or isinstance(self_collision, SelfCollision),
                 "self_collision", self_collision, "None or a SelfCollision(thickness=...)")
         if self_collision is not None:
             warn_if_thick(self_collision, cloth)
-            parts["self_contact"] = (SelfContact, (self_collision, cloth))
+            parts["self_collision"] = (SelfCollisionStage, (self_collision, cloth))
         if handles:
             parts["handle_table"] = (HandleTable, (len(self.handles.index),))
         self._lent = self._lend(parts)
         self.model, self.state = self._lent["model"], self._lent["state"]
         self.wind = self._lent.get("wind")
-        self.strain_limiter = self._lent.get("strain_limiter")
+        self.strain_limiter = self._lent.get("strain_limit")
         self.colliders = self._lent.get("colliders")
-        self.seams = self._lent.get("seams")
-        self.self_contact = self._lent.get("self_contact")
+        self.seams = self._lent.get("sewing")
+        self.self_collision = self._lent.get("self_collision")
         if self.handles is not None:
             self.handles.table = self._lent["handle_table"]
-        if self.self_contact is not None:
-            self.self_contact.attach(self.colliders)
+        if self.self_collision is not None:
+            self.self_collision.attach(self.colliders)
         # Kernels get the pool's equal copies, whose compiled kernels outlive this simulation;
         # the user's integrator gets the reports of the steps (Simulation.step).
         self.forces = POOL.keep(ForceSettings(gravity=tuple(gravity), drag=drag,
@@ -172,22 +171,20 @@ class Simulation:
         self.state.reset(self.cloth.particle_position)
         # the pool's copy of the Tearing, its strain a constant of the kernels (pool.py)
         self._tearing = None if self.tearing is None else POOL.keep(self.tearing)
-        stages = dict(sewing=self.seams, strain_limit=self.strain_limiter,
-                      colliders=self.colliders,
-                      self_collision=self.self_contact, handles=self.handles,
-                      tearing=self._tearing)
-        self.stages = ("integrator",) + tuple(name for name in STEP_ORDER[1:]
-                                              if stages[name] is not None)
-        self._after = [stages[name] for name in self.stages[1:]]
-        self._before = [stage for stage in (self.colliders, self.self_contact, self.wind)
+        # the stages this simulation has, by their STEP_ORDER names, in that order
+        self._stages = in_order(dict(handles=self.handles, sewing=self.seams,
+                                     strain_limit=self.strain_limiter, colliders=self.colliders,
+                                     self_collision=self.self_collision, tearing=self._tearing))
+        self.stages = ("integrator",) + tuple(self._stages)
+        self._before = [stage for stage in (self.colliders, self.self_collision, self.wind)
                         if stage is not None]
         self.step_count = 0
         self._diverged: SimulationDiverged | None = None
         self._place_handles_at_start()
         # Many steps per launch on the CPU when every stage runs in a team launch; made on
         # first use (kept with the lent objects).
-        self._many_per_launch = (backend.config().arch == "cpu"
-                                 and set(self.stages) <= set(stepping.TEAM_STAGES))
+        self._many_per_launch = (backend.config().arch == "cpu" and all(
+            stage.launched is not None for stage in self._stages.values()))
 
     def _lend(self, parts: dict) -> dict:
         """The objects this simulation passes to kernels, {name: cls(*args)}, lent by the pool
@@ -217,8 +214,8 @@ class Simulation:
             if self.colliders is not None and self.colliders.moving:
                 self.colliders.place(0.0)
             self._place_handles_at_start()
-            if self.self_contact is not None:
-                self.self_contact.forget()
+            if self.self_collision is not None:
+                self.self_collision.forget()
 
     def _place_handles_at_start(self) -> None:
         if self.handles is not None:
@@ -240,8 +237,9 @@ class Simulation:
         require(self._diverged is None, "simulation", "diverged",
                 "a simulation that has not diverged (its state is not finite)")
         arrays = {f"state.{k}": v for k, v in self.state.saved().items()}
-        if self.self_contact is not None:
-            arrays.update({f"self_contact.{k}": v for k, v in self.self_contact.saved().items()})
+        if self.self_collision is not None:    # "self_contact.": the key of saved states
+            arrays.update({f"self_contact.{k}": v
+                           for k, v in self.self_collision.saved().items()})
         return saved_state.write(path, self.fingerprint(),
                                  {"step_count": self.step_count, "dt": self.dt}, arrays)
 
@@ -252,8 +250,8 @@ class Simulation:
         self._check_runtime()
         header, arrays = saved_state.read(path, self.fingerprint())
         self.state.restore(_prefixed(arrays, "state."))
-        if self.self_contact is not None:
-            self.self_contact.restore(_prefixed(arrays, "self_contact."))
+        if self.self_collision is not None:
+            self.self_collision.restore(_prefixed(arrays, "self_contact."))
         self.step_count = int(header["step_count"])
         self._diverged = None
         if self.handles is not None:
@@ -346,7 +344,7 @@ class Simulation:
             stage.before_step(self.state, self.time)
         self._stepper.step(self.model, self.state, self.dt, self.forces, self.step_count)
         self.step_count += 1
-        for stage in self._after:
+        for stage in self._stages.values():
             stage.after_step(self.model, self.state, self.time, self.dt, self.step_count - 1)
 
     @property
@@ -358,9 +356,15 @@ class Simulation:
         key = ("many_steps", self._tearing, self.integrator.fused)
         if key not in self._lent:
             self._lent[key] = stepping.ManySteps(stepping.TeamStages(
-                self._lent.get("handle_table"), self.strain_limiter, self.colliders,
-                self._tearing, self.integrator.fused, self.seams))
+                {name: stage.launched for name, stage in self._stages.items()},
+                self.integrator.fused))
         return self._lent[key]
+
+    def stage(self, name: str):
+        """The object that runs stage `name` of STEP_ORDER (stages.py) in this simulation's
+        steps, None when it has no such stage; ValueError for a name not in STEP_ORDER."""
+        require(name in STEP_ORDER[1:], "stage", name, f"one of {STEP_ORDER[1:]}")
+        return self._stages.get(name)
 
     def positions(self) -> np.ndarray:
         """Particle positions [m], (N, 3) float64 copy."""
@@ -371,9 +375,9 @@ class Simulation:
         """Self-collision's pairs after the last step: those in contact in its last pass, or
         (active=False) every candidate pair it watches. ValueError without self-collision."""
         self._check_runtime()
-        require(self.self_contact is not None, "self_collision", None,
+        require(self.self_collision is not None, "self_collision", None,
                 "a SelfCollision for self_contacts()")
-        return self.self_contact.pairs(active)
+        return self.self_collision.pairs(active)
 
     def velocities(self) -> np.ndarray:
         """Particle velocities [m/s], (N, 3) float64 copy."""

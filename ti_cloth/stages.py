@@ -10,10 +10,11 @@ Held particles are on their paths before strain limiting and the colliders see t
 limiter run before would pull free particles towards where the handle's particles were).
 
 A stage after the integrator is the object Simulation makes for it when the scene has it (a
-scene without it compiles and launches none of its code), kept under its STEP_ORDER name:
-a Stage. Those that also have `phases` (a LaunchedStage) run inside many-steps launches; the
-others (self-collision) keep a launch per stage, and a simulation with one steps launch by
-launch.
+scene without it compiles and launches none of its code), kept under its STEP_ORDER name: a
+Stage. Its work is written once, as phases (runtime/plan.py), which its after_step launches
+and which many-steps launches (stepping.py) run inside the launch on the stage's `launched`
+object; a stage without one (self-collision) keeps a launch per stage, and a simulation that
+has it steps launch by launch.
 """
 
 from __future__ import annotations
@@ -26,19 +27,17 @@ STEP_ORDER = ("integrator", "handles", "sewing", "strain_limit", "colliders", "s
 
 @runtime_checkable
 class Stage(Protocol):
-    """A stage of a step after the integrator."""
+    """A stage of a step after the integrator.
+
+    launched: the kernel argument whose `phases(model, forces, work)` a many-steps launch runs
+        for this stage (`work` is that object): the stage itself, or the table it fills
+        before each launch (the handles'); None for a stage that runs only launch by launch.
+    """
+
+    launched: object | None
 
     def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
-        """The stage of the step `step_index` that ended at time t [s], a launch of its own."""
-
-
-@runtime_checkable
-class LaunchedStage(Stage, Protocol):
-    """A stage whose work is also written as phases (runtime/plan.py), so that many-steps
-    launches run it inside the launch, in STEP_ORDER, with the same bits as after_step."""
-
-    def phases(self, model, forces, work) -> tuple:
-        """The stage's work as plan nodes (`work` is the stage itself)."""
+        """The stage of step `step_index`, which ended at time t [s]: a launch of its own."""
 
 
 def in_order(stages: dict) -> dict:

@@ -1,5 +1,5 @@
-"""Many steps per launch on the CPU: the plan Simulation.step takes there, with the stages of
-TEAM_STAGES inside the launch.
+"""Many steps per launch on the CPU: the plan Simulation.step takes there, with the stages
+inside the launch (those with a `launched` object: stages.py).
 
 A launch and every parallel loop in it cost tens of microseconds on a CPU (the thread pool
 waking), about a small cloth's whole step of arithmetic, and a step of xpbd is 2 + 17 x
@@ -20,7 +20,7 @@ per worker:
 each stage after the integrator running its own phases (TeamStages.after), the ones its
 after_step launches in a launch per stage:
 
-the order of STEP_ORDER. What Python computes from the time (scripted paths, the
+the order of stages.STEP_ORDER. What Python computes from the time (scripted paths, the
 wind's gusts) is tabled for the launch's steps; a launch ends at the step after which a
 handle lets go (its particles are free from that step's handle stage on: that step runs stage
 by stage). Self-collision steps one launch per stage, as GPUs always do.
@@ -44,14 +44,9 @@ from .errors import TeamStalled
 from .inputs import limits
 from .runtime import backend, plan
 from .runtime.team import BARRIER_SPINS, MAX_WORKERS, TASK_SPACING, Team
+from .stages import STEP_ORDER
 from .state import NO_BAD_STEP
 
-# One step, in this order, in every launch plan (Simulation's launch per stage and the
-# many-steps launches here); held particles are on their paths before strain limiting and the
-# colliders see them.
-STEP_ORDER = ("integrator", "handles", "sewing", "strain_limit", "colliders", "self_collision",
-              "tearing")
-TEAM_STAGES = tuple(name for name in STEP_ORDER if name != "self_collision")   # in a launch
 MAX_STEPS_PER_LAUNCH = 4096    # bounds one launch (Ctrl-C and the divergence check wait for it)
 SPRING_STEPS_PER_LAUNCH = 25_000_000   # about 0.1 s of one core's work: fewer steps for big cloths
 TEAM_MIN_SPRING_STEPS = 1_000_000   # less work per launch runs on one worker (launch_plans.py)
@@ -62,11 +57,11 @@ TEAM_MARGIN = 1.25     # one worker takes over when the team costs more than thi
 
 @backend.kernel_argument
 class TeamStages:
-    """The stages around the integrator that run inside a many-steps launch (None: absent,
-    compiled out): handles (their HandleTable), sewing (the Seams), strain limiting (the
-    StrainLimiter),
-    colliders (the ColliderSet), tearing (the Tearing); the wind is the integrator's (its
-    phases). Each runs its phases (runtime/plan.py), as in a launch per stage.
+    """The stages after the integrator that run inside a many-steps launch: {STEP_ORDER name:
+    the stage's `launched` object} (stages.py; an absent stage is compiled out): handles
+    (their HandleTable), sewing (the Seams), strain limiting (the StrainLimiter), colliders
+    (the ColliderSet), tearing (the Tearing); the wind is the integrator's (its phases). Each
+    runs its phases (runtime/plan.py), as in a launch per stage.
 
     fused: whether the integrator is fused (its particles move independently of each other
     at the end of its step). Then, unless sewing or strain limiting moves them in between
@@ -77,16 +72,15 @@ class TeamStages:
     of STEP_ORDER with the same bits, without a pass over the particles of its own nor the
     copy of the step's start positions."""
 
-    def __init__(self, handles=None, strain_limiter=None, colliders=None, tearing=None,
-                 fused=False, seams=None):
-        self.stages = {"handles": handles, "sewing": seams, "strain_limit": strain_limiter,
-                       "colliders": colliders, "tearing": tearing}
-        self.colliders = colliders
-        self.holds = handles is not None          # read at compile time
-        self.limits_strain = strain_limiter is not None
-        self.collides = colliders is not None
+    def __init__(self, stages: dict | None = None, fused: bool = False):
+        self.stages = dict(stages or {})
+        self.colliders = self.stages.get("colliders")
+        self.holds = "handles" in self.stages          # read at compile time
+        self.limits_strain = "strain_limit" in self.stages
+        self.collides = self.colliders is not None
         self.collides_on_move = (self.collides and fused and not self.limits_strain
-                                 and seams is None and not colliders.animated)
+                                 and "sewing" not in self.stages
+                                 and not self.colliders.animated)
 
     def running(self, name: str) -> tuple:
         """(stage `name`'s object,) when it runs its phases after the integrator's, else ()
@@ -118,7 +112,7 @@ class TeamStages:
     def after(self, model: ti.template(), state: ti.template(), forces: ti.template(),
               team: ti.template(), worker, now: ti.template(), moving):
         """The stages of the launch's step now.k after the integrator's last barrier, in
-        STEP_ORDER (those a team launch runs: TEAM_STAGES; self-collision never does): each
+        STEP_ORDER (those with a `launched` object; self-collision never is): each
         stage's phases, the colliders placed first when they move (by worker 0, then a
         barrier)."""
         for name in ti.static(STEP_ORDER[1:]):

@@ -121,10 +121,13 @@ def warn_if_thick(settings: SelfCollision, cloth) -> None:
 
 
 @backend.kernel_argument
-class SelfContact:
+class SelfCollisionStage:
     """The self-collision stage of one simulation: the body's triangles and edges, each
     particle's edges (CSR), the grid, the candidate list and the positions at the start of the
-    step and at the list's making."""
+    step and at the list's making. It runs launch by launch only (its candidate lists are
+    made on the host): no `launched` object (stages.py)."""
+
+    launched = None
 
     def __init__(self, settings: SelfCollision, cloth):
         n = cloth.particle_count
@@ -165,7 +168,7 @@ class SelfContact:
     @staticmethod
     def structure(settings: SelfCollision, cloth) -> tuple:
         triangles = np.ascontiguousarray(cloth.mesh.triangles).tobytes()
-        return ("SelfContact", cloth.particle_count,
+        return ("SelfCollisionStage", cloth.particle_count,
                 hashlib.blake2b(triangles, digest_size=16).hexdigest())
 
     def load(self, settings: SelfCollision, cloth) -> None:
@@ -225,7 +228,7 @@ class SelfContact:
         copy_positions(state, self.step_start)
 
     def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
-        """The self-collision stage of a step ending at time t (simulation.STEP_ORDER)."""
+        """The self-collision stage of a step ending at time t (stages.STEP_ORDER)."""
         if self.triangle_count == 0:
             return
         thickness = self.settings.thickness

@@ -127,8 +127,14 @@ class HandleSet:
                 f"displacements keeping particles at coordinates {limits.COORDINATE.text()}")
         return target
 
+    @property
+    def launched(self):
+        """The object a many-steps launch runs this stage's phases on: the HandleTable, which
+        schedule() fills before each launch (stages.py)."""
+        return self.table
+
     def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
-        """The handle stage of a step ending at time t (simulation.STEP_ORDER): the held
+        """The handle stage of a step ending at time t (stages.STEP_ORDER): the held
         particles to their targets, moving at the path's velocity over the step (dt [s]);
         handles whose release falls before the next step's end let go (model.set_pinned)."""
         if not self.holding:

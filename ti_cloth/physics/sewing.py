@@ -43,7 +43,7 @@ class Sewing:
 
 @backend.kernel_argument
 class Seams:
-    """The sewing stage of one simulation (simulation.STEP_ORDER): the seam particles, each
+    """The sewing stage of one simulation (stages.STEP_ORDER): the seam particles, each
     one's partners (CSR: partner[start[s]:start[s + 1]], positions in the seam list) and
     their gaps in the rest shape, the seam particles' positions before the stage."""
 
@@ -88,6 +88,11 @@ class Seams:
     def phases(self, model, forces, work) -> tuple:
         """Keep the seam particles' positions, then pull each towards its partners."""
         return (Phase(Loop(self.count, keep_seam_position)), Phase(Loop(self.count, sew)))
+
+    @property
+    def launched(self):
+        """The object a many-steps launch runs this stage's phases on: itself (stages.py)."""
+        return self
 
     def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
         """The sewing stage of a step, a launch of its phases."""

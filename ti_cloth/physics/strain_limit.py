@@ -44,7 +44,7 @@ class StrainLimit:
 
 @backend.kernel_argument
 class StrainLimiter:
-    """The strain-limiting stage of one simulation (simulation.STEP_ORDER), with the positions
+    """The strain-limiting stage of one simulation (stages.STEP_ORDER), with the positions
     before the correction, so velocities can follow it. tearable: springs may be torn."""
 
     def __init__(self, limit: StrainLimit, particle_count: int, tearable: bool):
@@ -80,8 +80,13 @@ class StrainLimiter:
                 Repeat(self.limit.passes, *sweeps),
                 Phase(Loop(model.particle_count, follow_velocity)))
 
+    @property
+    def launched(self):
+        """The object a many-steps launch runs this stage's phases on: itself (stages.py)."""
+        return self
+
     def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
-        """The strain-limiting stage of a step (simulation.STEP_ORDER), a launch of its
+        """The strain-limiting stage of a step (stages.STEP_ORDER), a launch of its
         phases."""
         plan.run(self, model, state, None, self, dt, step_index, False)
 

@@ -51,8 +51,13 @@ class Tearing:
             loops += (Loop(model.face_count, tear_face),)
         return (Phase(*loops),)
 
+    @property
+    def launched(self):
+        """The object a many-steps launch runs this stage's phases on: itself (stages.py)."""
+        return self
+
     def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
-        """The tearing stage of a step (simulation.STEP_ORDER), a launch of its phases."""
+        """The tearing stage of a step (stages.STEP_ORDER), a launch of its phases."""
         plan.run(self, model, state, None, self, dt, step_index, False)
 
 

@@ -145,8 +145,13 @@ class ColliderSet:
                  if self.edge_contact else ())
         return placing + (Phase(Loop(model.particle_count, resolve)),) + edges
 
+    @property
+    def launched(self):
+        """The object a many-steps launch runs this stage's phases on: itself (stages.py)."""
+        return self
+
     def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
-        """The collision stage of a step ending at time t (simulation.STEP_ORDER): the
+        """The collision stage of a step ending at time t (stages.STEP_ORDER): the
         colliders placed, then a launch of its phases."""
         if self.moving:
             self.place(t, dt)
