@@ -23,7 +23,7 @@ import time
 import numpy as np
 
 import ti_cloth as tc
-from ti_cloth.contact import sdf
+from ti_cloth.contact.colliders import sdf
 
 RADIUS, CENTRE = 0.3, (0.0, 0.0, 0.0)
 

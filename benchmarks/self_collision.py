@@ -17,7 +17,8 @@ import statistics
 import time
 
 import ti_cloth as tc
-from ti_cloth.contact import box_grid, self_collision
+from ti_cloth.contact import self_collision
+from ti_cloth.contact.broad_phase import box_grid
 
 KERNELS = {self_collision: ("displacement_box", "sweep_boxes", "mean_edge", "list_pairs",
                             "prefix_pairs", "index_contacts", "evaluate_contacts",

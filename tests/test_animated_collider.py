@@ -285,7 +285,7 @@ def test_candidate_lists_give_the_bits_of_a_traversal_at_every_step(f64, monkeyp
     its particle or edge traverses the hierarchy at every step), the same positions to the
     bit: the sheet dropped on the breathing sphere (particles' lists), and the sheet lifted
     by the blade (edges' lists, edges touching)."""
-    from ti_cloth.contact import animated_contact, animated_edges
+    from ti_cloth.contact.colliders import animated_contact, animated_edges
     for module, name, run in ((animated_contact, "LISTED", sheet_on_the_sphere),
                               (animated_edges, "EDGE_LISTED", sheet_on_the_blade)):
         runs = []

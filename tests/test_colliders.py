@@ -9,7 +9,7 @@ import pytest
 from helpers import compiled, forget_compiled, report
 
 import ti_cloth as tc
-from ti_cloth.contact import collision as colliders_module
+from ti_cloth.contact.colliders import collision as colliders_module
 from ti_cloth.state import copy_positions
 
 

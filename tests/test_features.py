@@ -7,7 +7,7 @@ import pytest
 from helpers import compiled, forget_compiled
 
 import ti_cloth as tc
-from ti_cloth.contact import contact_pairs
+from ti_cloth.contact.broad_phase import contact_pairs
 from ti_cloth.contact.colliders.collision import resolve
 from ti_cloth.integrators import implicit_euler, rk4, xpbd
 from ti_cloth.physics import handles, strain_limit, tearing, wind

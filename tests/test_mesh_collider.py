@@ -10,7 +10,7 @@ import pytest
 from helpers import report
 
 import ti_cloth as tc
-from ti_cloth.contact import sdf
+from ti_cloth.contact.colliders import sdf
 
 THICKNESS = 0.01
 
