@@ -7,7 +7,8 @@ import pytest
 from helpers import report
 
 import ti_cloth as tc
-from ti_cloth.body.topology import altitude_springs, color_springs
+from ti_cloth.body.topology import color_springs
+from ti_cloth.energies.altitude import altitude_springs
 from ti_cloth.physics.forces import compute_forces, energies
 from ti_cloth.runtime import backend
 

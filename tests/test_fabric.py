@@ -1,4 +1,4 @@
-"""Fabrics (body/fabric.py, body/elements.py, physics/elements.py) against closed forms: the
+"""Fabrics (body/fabric.py and the Fabric terms of energies/) against closed forms: the
 elements' forces are their energy's gradient; a homogeneous stretch gives the plane-stress
 orthotropic law exactly (Poisson contraction, the strip's stiffness); a hanging strip
 stretches by the continuum's W L^2 / (2E); bending a sheet to a cylinder of radius R costs
@@ -12,7 +12,8 @@ import pytest
 from scipy.integrate import solve_bvp
 
 import ti_cloth as tc
-from ti_cloth.body import elements
+from ti_cloth.body.topology import warp_directions
+from ti_cloth.energies import bending, isometric
 from ti_cloth.physics.forces import compute_forces, energies
 
 pytestmark = pytest.mark.usefixtures("f64")
@@ -83,7 +84,7 @@ def test_element_forces_are_the_gradient_of_their_energy(rest):
 
 
 def test_a_flat_sheet_bends_by_the_isometric_model():
-    """A flat rest sheet's bending is Bergou et al.'s isometric model (body/elements.
+    """A flat rest sheet's bending is Bergou et al.'s isometric model (energies/isometric.
     isometric_matrix): a constant Q, symmetric, positive semi-definite, its rows summing to 0,
     so a rigid motion of the sheet costs nothing; folded along a grid line by theta (an
     isometry: only the hinges on the line turn, each by theta), its energy is the mid-edge
@@ -93,7 +94,7 @@ def test_a_flat_sheet_bends_by_the_isometric_model():
     mesh = jittered(tc.grid_mesh(7, 6, (0.3, 0.25)), 0.2)
     cloth = tc.Cloth(mesh, tc.Fabric(bending=(2e-4, 1e-4), poisson=0.3))
     n = cloth.particle_count
-    start, other, stiffness, _ = elements.isometric_matrix(cloth)
+    start, other, stiffness, _ = isometric.isometric_matrix(cloth)
     q = np.zeros((n, n))
     q[np.repeat(np.arange(n), np.diff(start)), other] = -stiffness
     q[np.arange(n), np.arange(n)] = -q.sum(axis=1)
@@ -101,9 +102,9 @@ def test_a_flat_sheet_bends_by_the_isometric_model():
     assert np.linalg.eigvalsh(q).min() > -1e-12 * np.abs(q).max()
     turn = np.linalg.qr(np.random.default_rng(3).normal(size=(3, 3)))[0]
     moved = mesh.vertices @ turn.T + [1.0, -2.0, 0.5]
-    assert elements.bending_energy(cloth, moved, isometric=True) < 1e-20
-    assert elements.bending_energy(cloth, mesh.vertices + [0, 0, 0.01] * mesh.vertices[:, :1] ** 2,
-                                   isometric=True) > 1e-9
+    assert isometric.isometric_energy(cloth, moved) < 1e-20
+    assert isometric.isometric_energy(cloth, mesh.vertices
+                                      + [0, 0, 0.01] * mesh.vertices[:, :1] ** 2) > 1e-9
     grid = tc.grid_mesh(7, 6, (0.3, 0.25))
     sheet = tc.Cloth(grid, tc.Fabric(bending=(2e-4, 1e-4), poisson=0.3))
     line = grid.vertices[3, 0]                                   # the fourth column's x
@@ -113,8 +114,8 @@ def test_a_flat_sheet_bends_by_the_isometric_model():
         d = folded[beyond, 0] - line
         folded[beyond, 0] = line + d * np.cos(theta)
         folded[beyond, 2] = d * np.sin(theta)
-        ratio = (elements.bending_energy(sheet, folded, isometric=True)
-                 / elements.bending_energy(sheet, folded))
+        ratio = (isometric.isometric_energy(sheet, folded)
+                 / bending.bending_energy(sheet, folded))
         np.testing.assert_allclose(ratio, np.cos(theta / 2) ** 2, rtol=1e-9)
     assert tc.Simulation(sheet).model.isometric
     assert not tc.Simulation(sheet, tearing=0.5).model.isometric
@@ -251,11 +252,10 @@ def test_bending_a_sheet_to_a_cylinder_costs_the_continuum_energy_in_every_direc
             cloth = tc.Cloth(mesh, fabric)
             expected = 2e-4 * cloth.face_area.sum() / (2 * radius ** 2)
             for angle in (0.0, np.pi / 4, np.pi / 2, 0.3):
-                for isometric in (False, True):
-                    got = elements.bending_energy(cloth, rolled(mesh.vertices, radius, angle),
-                                                  isometric=isometric)
+                for energy in (bending.bending_energy, isometric.isometric_energy):
+                    got = energy(cloth, rolled(mesh.vertices, radius, angle))
                     assert abs(got / expected - 1) < tolerance, (n, angle, got / expected)
-    theta = elements.hinge_angles(rolled(grid.vertices, radius, np.pi / 4), cloth.hinge_indices)
+    theta = bending.dihedral_angles(rolled(grid.vertices, radius, np.pi / 4), cloth.hinge_indices)
     a, b, c, d = (grid.vertices[cloth.hinge_indices[:, k]] for k in range(4))
     areas = 0.5 * (np.linalg.norm(np.cross(b - a, c - a), axis=1)
                    + np.linalg.norm(np.cross(d - a, b - a), axis=1))
@@ -275,7 +275,7 @@ def test_a_strip_bent_to_an_arc_has_energy_g_l_w_over_2_r_squared():
     for segments in (8, 16, 32, 64):
         mesh = tc.grid_mesh(4, segments + 1, (length, width))
         cloth = tc.Cloth(mesh, fabric)
-        got = elements.bending_energy(cloth, rolled(mesh.vertices, radius, 0.0))
+        got = bending.bending_energy(cloth, rolled(mesh.vertices, radius, 0.0))
         np.testing.assert_allclose(got, expected * (1 - 1 / segments), rtol=0.1 / segments)
 
 
@@ -587,7 +587,7 @@ def test_the_warp_follows_the_meshs_texture_coordinates():
     grid = tc.grid_mesh(rows, turns, (1.0, 1.0))
     x = np.stack([radius * np.cos(phi), height, radius * np.sin(phi)], 1)
     cylinder = tc.Mesh(x, grid.triangles, uvs=np.stack([radius * phi, height], 1))
-    warp = elements.warp_directions(cylinder, "uv")
+    warp = warp_directions(cylinder, "uv")
     corners = phi[cylinder.triangles]
     mid = 0.5 * (corners.min(axis=1) + corners.max(axis=1))    # each triangle's two angles
     spread = np.ptp(corners, axis=1)

@@ -7,17 +7,11 @@ import hashlib
 import numpy as np
 import taichi as ti
 
-from .body.elements import (
-    bending_stencils,
-    is_flat,
-    isometric_faces,
-    isometric_matrix,
-    isometric_parts,
-    tangents,
-)
 from .body.material import SpringKind
 from .body.mesh import triangle_edges, unique_rows
 from .body.topology import Cloth, color_springs
+from .energies.bending import bending_stencils, tangents
+from .energies.isometric import is_flat, isometric_faces, isometric_matrix, isometric_parts
 from .inputs.validation import require
 from .runtime import backend
 from .runtime.transfer import upload
@@ -52,16 +46,16 @@ class Model:
                           for a in [start[i], start[i + 1]), in increasing order (the gather's)
     face_indices, face_gradient (grad lambda_1, grad lambda_2 as x1 y1 x2 y2), face_area,
     face_moduli, face_damping, face_bending (00 11 22 01 02 12), face_hinge: a Fabric's
-                          triangles (Cloth's arrays of those names; body/elements.py);
+                          triangles (Cloth's arrays of those names; energies/);
                           face_edge_rest the rest length of each one's edge i (opposite
                           corner i) [m], for tearing
     hinge_indices, hinge_faces, hinge_rest_tangent (tan of half the rest angle, continued as
-                          body/elements.tangents): its hinges
+                          energies/bending.tangents): its hinges
     particle_face_start, adjacency_face: particle i is corner adjacency_face[a] % 3 of
                           triangle adjacency_face[a] // 3 (CSR, as for altitude springs);
     particle_hinge_start, adjacency_hinge: the same for hinges (4 corners)
     particle_bend_start, bend_other, bend_stiffness, bend_damping: with `isometric` (a flat
-                          rest sheet), the bending of body/elements.isometric_matrix, a CSR
+                          rest sheet), the bending of energies/isometric.isometric_matrix, a CSR
                           of each particle's neighbours, gathered in increasing order; the
                           hinges' angles are then not computed; face_stencil,
                           face_stencil_weight (w_i's weights on it, row i at 6 i) and
@@ -81,7 +75,7 @@ class Model:
         self.hinge_count = hinges = cloth.hinge_count
         self.relative_damping = cloth.damping == "relative"
         require(not isometric or is_flat(cloth), "isometric", isometric,
-                "False for a body whose rest sheet is not flat (body/elements.is_flat)")
+                "False for a body whose rest sheet is not flat (energies/isometric.is_flat)")
         self.isometric = bool(isometric)
         bends = len(self._isometric_bending(cloth)[0][1]) if self.isometric else 0
         fields = backend.FieldGroup()
@@ -259,7 +253,7 @@ class Model:
     def element_colourings(self) -> tuple[SpringColouring, SpringColouring]:
         """(membranes, bending): a Fabric's triangles grouped so that no two in a colour share
         a particle, once by their corners and once by the particles their bending moves
-        (body/elements.bending_stencils), for position-based passes."""
+        (energies/bending.bending_stencils), for position-based passes."""
         if self._element_colourings is None:
             self._element_colourings = tuple(
                 SpringColouring(*color_springs(indices, self.particle_count))

@@ -17,7 +17,6 @@ from pathlib import Path
 import numpy as np
 
 from . import saved_state, stepping
-from .body.elements import is_flat
 from .body.topology import Cloth
 from .contact.colliders.attachment import Attachment
 from .contact.colliders.collision import ColliderSet
@@ -27,6 +26,7 @@ from .contact.self_collision import (
     SelfContacts,
     warn_if_thick,
 )
+from .energies.isometric import is_flat
 from .errors import SimulationDiverged, StaleSimulation
 from .inputs import limits
 from .inputs.validation import as_array, in_range, integer, require

@@ -26,9 +26,9 @@ class State:
                             [N], at index 4 a + c (Selle et al. 2008; forces.py)
     face_force              force of a Fabric's triangle f on its corner c [N], at 3 f + c
     hinge_force             bending force of hinge e on its corner k [N], at 4 e + k
-    hinge_tangent, hinge_rate  t - t_rest of each hinge and dt/dt [1/s] (physics/elements.py)
+    hinge_tangent, hinge_rate  t - t_rest of each hinge and dt/dt [1/s] (energies/bending.py)
     particle_bend_force     the isometric bending force on each particle [N] (a flat
-                            sheet's: physics/elements.isometric_forces)
+                            sheet's: energies/isometric.isometric_forces)
     face_moment             dE/dt of triangle f's bending on the hinge across its edge i [J],
                             at 3 f + i
     spring_alive            1 while a spring exists, 0 once torn (Stuyck 4.5); lives here, not

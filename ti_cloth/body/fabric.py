@@ -1,7 +1,7 @@
 """Fabric: a cloth's material in the units a textile lab measures, independent of the mesh.
 
 Where a Material gives every spring its own constant (Stuyck ch. 4, which change meaning when
-the mesh is refined), a Fabric gives the sheet's moduli, and the elements of elements.py turn
+the mesh is refined), a Fabric gives the sheet's moduli, and the elements of energies/ turn
 them into forces that converge as the mesh is refined:
 
   density   surface density [kg/m^2]

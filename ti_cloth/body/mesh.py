@@ -413,3 +413,20 @@ def save_mesh(path, mesh: Mesh, vertices=None) -> None:
                                                              (mesh.vertex_count, 3))
     with atomic_path(path) as tmp:
         meshio.write_points_cells(tmp, points, [("triangle", mesh.triangles)])
+
+
+def uv_warp(mesh: Mesh) -> np.ndarray:
+    """d x / d u of each triangle (T, 3): with edges d1, d2 and their uv differences
+    (a1, b1), (a2, b2), [d1 d2] = J [[a1, a2], [b1, b2]], and J's first column is
+    (b2 d1 - b1 d2) / (a1 b2 - a2 b1) (the tangent of normal mapping). A triangle whose uvs
+    have (almost) no area has none: refused, naming it."""
+    p = mesh.vertices[mesh.triangles]
+    uv = mesh.uvs[mesh.triangles]
+    d1, d2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    (a1, b1), (a2, b2) = (uv[:, 1] - uv[:, 0]).T, (uv[:, 2] - uv[:, 0]).T
+    det = a1 * b2 - a2 * b1
+    scale = np.maximum(np.abs(uv - uv[:, :1]).max(axis=(1, 2)), np.finfo(float).tiny) ** 2
+    flat = np.flatnonzero(np.abs(det) <= 1e-9 * scale)
+    require(len(flat) == 0, f"uvs of triangles {flat[:5].tolist()}", "(no area)",
+            'a uv triangle of non-zero area for warp="uv" (or give warp a direction)')
+    return (b2[:, None] * d1 - b1[:, None] * d2) / det[:, None]

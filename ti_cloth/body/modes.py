@@ -3,9 +3,9 @@ bounds and the stiffest mode of the springs linearised about rest (numpy, on the
 integrator turns these into its own largest stable step (Integrator.stable_step).
 
 An altitude spring (Selle et al. 2008) linearised about rest is k G G^T with G = g (x) n, its
-altitude's gradient over its four corners (topology.altitude_frames): at rest h = h0, so the
+altitude's gradient over its four corners (energies/altitude.py altitude_frames): at rest h = h0, so the
 curvature term k (h - h0) d^2h/dx^2 vanishes and this is exact there. A Fabric's elements are
-sums of such rank-one terms at rest too (elements.rest_rank_one); all of them enter as
+sums of such rank-one terms at rest too (rest_rank_one); all of them enter as
 rank_one_groups.
 """
 
@@ -13,8 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .elements import rest_rank_one
-from .topology import altitude_frames
+from ..energies.altitude import altitude_frames
+from ..energies.bending import HALF_ANGLE_LIMIT, dihedral_angles
+from ..energies.isometric import is_flat, isometric_parts
+from ..energies.membrane import deformation_gradients
 
 LANCZOS_STEPS = 100
 LANCZOS_TOLERANCE = 1e-7      # stop once the largest Ritz value grew by less than this, relative,
@@ -50,7 +52,7 @@ def rank_one_groups(cloth) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """The body's multi-particle terms linearised about rest as rank-one g g^T, in groups of
     (indices (R, k), stiffness vectors (R, k, 3), damping vectors (R, k, 3)): altitude springs
     (g = sqrt(k) g_c n, damping sqrt(kd) g_c n) and a Fabric's elements
-    (elements.rest_rank_one)."""
+    (rest_rank_one)."""
     groups = []
     if cloth.altitude_count:
         n, _, g = altitude_frames(cloth.particle_position, cloth.altitude_indices)
@@ -160,3 +162,63 @@ def lanczos(apply, start: np.ndarray, steps: int):
 def tridiagonal(alpha: list, beta: list) -> np.ndarray:
     """The symmetric tridiagonal matrix of diagonal alpha and off-diagonal beta."""
     return np.diag(alpha) + np.diag(beta[:len(alpha) - 1], 1) + np.diag(beta[:len(alpha) - 1], -1)
+
+
+def rest_rank_one(cloth) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """The elements' stiffness linearised about rest as sums of rank-one terms g g^T, for the
+    stability analyses (modes.py): [(indices (R, k), stiffness vectors g (R, k, 3), damping
+    vectors (R, k, 3))], one group for the membranes (k = 3) and one for bending (k = 12: a
+    triangle's three hinges, four corners each; a particle may appear in several slots, whose
+    vectors add). At rest the stress and moments vanish, so the Gauss-Newton terms are the
+    exact Hessian: membrane A J^T C J = sum_m g_m g_m^T with g = sqrt(A) L^T J (C = L L^T, J the
+    Green strain's gradient); bending sum_ij B_ij G_i G_j^T = sum_m g_m g_m^T with
+    g_m = sqrt(lambda_m) sum_i V_im G_i (B = V diag(lambda) V^T, G_i = t'(theta) grad theta of
+    hinge i); on a flat rest sheet (is_flat) the isometric model's constant Q = sum_ij B'_ij
+    K_i K_j^T (x) I (isometric_matrix), nine terms a triangle (g = sqrt(lambda_m) sum_i V_im
+    K_i along each axis; it holds the mid-edge Hessian's normal part and adds the in-plane one,
+    an upper bound for either model). Rayleigh damping is beta times the same: its vectors are
+    sqrt(beta) g."""
+    if not cloth.face_count:
+        return []
+    x = cloth.particle_position
+    gradients, area = cloth.face_gradient, cloth.face_area
+    f = deformation_gradients(x, cloth.face_indices, gradients)       # (T, 3, 2) at rest
+    warp, weft = f[:, :, 0], f[:, :, 1]
+    gx, gy = gradients[:, :, 0:1], gradients[:, :, 1:2]               # (T, 3 corners, 1)
+    jacobian = np.stack([warp[:, None] * gx, weft[:, None] * gy,
+                         warp[:, None] * gy + weft[:, None] * gx], 1)  # (T, 3 strains, 3, 3)
+    c11, c12, c22, c33 = cloth.face_moduli.T
+    moduli = np.zeros((cloth.face_count, 3, 3))
+    moduli[:, 0, 0], moduli[:, 0, 1], moduli[:, 1, 0] = c11, c12, c12
+    moduli[:, 1, 1], moduli[:, 2, 2] = c22, c33
+    factor = np.linalg.cholesky(moduli)                                # C = L L^T
+    membrane = np.sqrt(area)[:, None, None, None] * np.einsum("tsm,tscx->tmcx", factor, jacobian)
+    beta = np.sqrt(cloth.face_damping)
+    groups = [(np.repeat(cloth.face_indices, 3, axis=0), membrane.reshape(-1, 3, 3),
+               np.repeat(beta, 3)[:, None, None] * membrane.reshape(-1, 3, 3))]
+    if cloth.hinge_count and is_flat(cloth):
+        weights, reduced = isometric_parts(cloth)
+        values, vectors = np.linalg.eigh(reduced)
+        modes = vectors * np.sqrt(np.maximum(values, 0.0))[:, None, :]       # V sqrt(lambda)
+        per_face = np.concatenate([weights, np.zeros((1, 4))])[cloth.face_hinge]  # (F, 3, 4)
+        scalar = np.einsum("fim,fik->fmik", modes, per_face).reshape(-1, 3, 12)
+        bending = (scalar[:, :, None, :, None]                             # (F, mode, axis,
+                   * np.eye(3)[None, None, :, None, :]).reshape(-1, 12, 3)  # slot, xyz)
+        hinge_corners = np.concatenate([cloth.hinge_indices, np.zeros((1, 4), np.int64)])
+        corners = np.repeat(hinge_corners[cloth.face_hinge].reshape(-1, 12), 9, axis=0)
+        groups.append((corners, bending, np.repeat(beta, 9)[:, None, None] * bending))
+    elif cloth.hinge_count:
+        theta, grad = dihedral_angles(x, cloth.hinge_indices, gradient=True)
+        half = 0.5 * theta
+        slope = np.where(np.abs(half) > HALF_ANGLE_LIMIT, 0.5 / np.cos(HALF_ANGLE_LIMIT) ** 2,
+                         0.5 / np.cos(half) ** 2)
+        hinge_vectors = np.concatenate([slope[:, None, None] * grad, np.zeros((1, 4, 3))])
+        hinge_corners = np.concatenate([cloth.hinge_indices, np.zeros((1, 4), np.int64)])
+        per_face = hinge_vectors[cloth.face_hinge]                      # (T, 3 hinges, 4, 3)
+        values, vectors = np.linalg.eigh(cloth.face_bending)
+        weights = vectors * np.sqrt(np.maximum(values, 0.0))[:, None, :]   # V sqrt(lambda)
+        bending = np.einsum("tim,tikx->tmikx", weights, per_face).reshape(-1, 3, 12, 3)
+        corners = np.repeat(hinge_corners[cloth.face_hinge].reshape(-1, 12), 3, axis=0)
+        bending = bending.reshape(-1, 12, 3)
+        groups.append((corners, bending, np.repeat(beta, 3)[:, None, None] * bending))
+    return groups

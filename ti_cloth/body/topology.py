@@ -25,12 +25,13 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..geometry import points_over_triangles
+from ..energies.altitude import altitude_springs
+from ..energies.bending import bending_matrices, dihedral_angles, hinges
+from ..energies.membrane import material_frames
 from ..inputs.validation import as_array, finite_number, require
-from . import elements
 from .fabric import Fabric
 from .material import Material, SpringKind, SpringParams
-from .mesh import Mesh, nonmanifold, triangle_edges, unique_rows
+from .mesh import Mesh, nonmanifold, triangle_edges, unique_rows, uv_warp
 
 
 def grid_springs(rows: int, cols: int) -> dict[SpringKind, np.ndarray]:
@@ -140,44 +141,6 @@ def color_springs(indices: np.ndarray, particle_count: int) -> tuple[np.ndarray,
     return order, np.asarray(offsets, np.int64)
 
 
-def altitude_springs(positions: np.ndarray, tetrahedra) -> tuple[np.ndarray, np.ndarray]:
-    """Selle et al. 2008's point-face altitude springs of tetrahedra: four per tetrahedron,
-    each a corner p and the face (a, b, c) opposite it, ordered so that the rest altitude
-    h0 = (x_p - x_a) . n, n = (x_b - x_a) x (x_c - x_a) / |...|, is positive.
-
-    Returns (indices (4T, 4) [p, a, b, c], rest altitudes (4T,) [m]). Raises ValueError
-    naming the tetrahedron for one of zero volume (no altitude to keep).
-    """
-    tets = as_array("altitude_tetrahedra", tetrahedra, np.int64, (None, 4))
-    bad = np.flatnonzero((tets < 0).any(axis=1) | (tets >= len(positions)).any(axis=1))
-    require(len(bad) == 0, f"altitude_tetrahedra[{bad[:1].tolist()}]", tets[bad[:1]].tolist(),
-            f"four particle indices in [0, {len(positions) - 1}]")
-    corners = positions[tets]
-    volume = np.linalg.det(corners[:, 1:] - corners[:, :1]) / 6.0
-    longest = np.max(np.linalg.norm(corners[:, :, None] - corners[:, None], axis=3), axis=(1, 2))
-    flat = np.flatnonzero(np.abs(volume) <= 1e-9 * longest ** 3)
-    if len(flat):
-        t = int(flat[0])
-        raise ValueError(f"altitude_tetrahedra[{t}] (particles {tets[t].tolist()}) must have a "
-                         f"volume > 0 m^3, got {volume[t]:.3g} m^3 ({len(flat)} flat tetrahedra)")
-    faces = np.array([[0, 1, 2, 3], [1, 0, 2, 3], [2, 0, 1, 3], [3, 0, 1, 2]])
-    indices = tets[:, faces].reshape(-1, 4)
-    _, rest, _ = altitude_frames(positions, indices)
-    indices[rest < 0] = indices[rest < 0][:, [0, 1, 3, 2]]
-    return indices, np.abs(rest)
-
-
-def altitude_frames(positions: np.ndarray, indices: np.ndarray):
-    """(n (A, 3), h (A,), g (A, 4)) of altitude springs [p, a, b, c] at `positions`, in numpy:
-    the face normal, the signed altitude of p and the weights of the altitude's gradient
-    (1, -w_a, -w_b, -w_c), w the barycentric coordinates of p's foot on the face's plane (the
-    host twin of forces.altitude_gradient; zero for a face of zero area)."""
-    n, h, wb, wc, has_area = points_over_triangles(*(positions[indices[:, corner]]
-                                                     for corner in range(4)))
-    g = np.stack([np.where(has_area, 1.0, 0.0), wb + wc - 1.0, -wb, -wc], axis=1)
-    return n, h, g
-
-
 class Cloth:
     """A mass-spring body ready to simulate: rest positions, lumped masses, springs, pins.
 
@@ -205,7 +168,7 @@ class Cloth:
       seam_indices       (P, 2) int, i < j: particle pairs a garment's seams pull together
                          (physics/sewing.py; body/panels.py makes them)
 
-    A body made of a Fabric has no springs but elements (elements.py): its triangles
+    A body made of a Fabric has no springs but elements (energies/): its triangles
       face_indices       (F, 3) int: the membrane and bending triangles (the mesh's)
       face_gradient      (F, 3, 2): barycentric gradients in each one's rest warp/weft frame
       face_area          (F,) rest areas [m^2]
@@ -323,15 +286,15 @@ class Cloth:
         self.triangle_face = (np.arange(count) if fabric is not None
                               else np.full(len(self.mesh.triangles), -1))
         self.face_indices = triangles
-        self.face_gradient, self.face_area = elements.material_frames(
-            x, triangles, elements.warp_directions(self.mesh, warp if fabric else None))
+        self.face_gradient, self.face_area = material_frames(
+            x, triangles, warp_directions(self.mesh, warp if fabric else None))
         self.face_moduli = np.tile(moduli, (count, 1))
         self.face_damping = np.full(count, damping)
         (self.hinge_indices, self.hinge_faces, self.face_hinge,
-         face_sign) = elements.hinges(triangles)
-        self.face_bending = elements.bending_matrices(self.face_gradient, self.face_area,
+         face_sign) = hinges(triangles)
+        self.face_bending = bending_matrices(self.face_gradient, self.face_area,
                                                       face_sign, np.tile(flexural, (count, 1)))
-        self.hinge_rest_angle = elements.hinge_angles(x, self.hinge_indices)
+        self.hinge_rest_angle = dihedral_angles(x, self.hinge_indices)
 
     ELEMENT_ARRAYS = ("face_indices", "face_gradient", "face_area", "face_moduli", "face_damping",
                       "face_bending", "face_hinge", "hinge_indices", "hinge_faces",
@@ -569,3 +532,21 @@ def _edge_springs(triangles: np.ndarray, pairs: np.ndarray, n: int) -> np.ndarra
     wanted = edges[:, 0] * n + edges[:, 1]
     pos = np.minimum(np.searchsorted(keys[order], wanted), len(keys) - 1)
     return np.where(keys[order][pos] == wanted, order[pos], -1).reshape(-1, 3)
+
+
+def warp_directions(mesh: Mesh, warp) -> np.ndarray:
+    """The warp direction of Cloth(warp=...): a given (3,) direction, or "uv": in each triangle
+    the direction in which its texture coordinate u grows at constant v (d x / d u, from the
+    mesh's uvs; (T, 3)); by default a grid's first axis (its columns), or x."""
+    if isinstance(warp, str):
+        require(warp == "uv", "warp", warp, '"uv" or a direction [x, y, z]')
+        require(mesh.uvs is not None, "warp", warp,
+                "a direction, or a mesh with texture coordinates (Mesh.uvs, one per vertex)")
+        return uv_warp(mesh)
+    if warp is not None:
+        direction = as_array("warp", warp, np.float64, (3,))
+        require(np.linalg.norm(direction) > 0, "warp", direction.tolist(), "a non-zero direction")
+        return direction
+    if mesh.grid_shape is not None:
+        return mesh.vertices[1] - mesh.vertices[0]
+    return np.array([1.0, 0.0, 0.0])

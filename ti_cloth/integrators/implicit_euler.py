@@ -9,7 +9,7 @@ df_i/dx_i = -k (n n^T + c (I - n n^T)), c = 1 - L / l. Under compression c < 0 m
 indefinite; c is clamped at 0 (Choi & Ko 2002) so the system matrix stays symmetric positive
 definite and CG applies. A Fabric's triangles and hinges enter K and D through their
 Gauss-Newton Hessians, projected likewise (implicit_elements.py). Damping: axial df_i/dv_i = -kd n n^T, relative (eq. 4.7) -kd I, drag
--drag m I. An altitude spring (Selle et al. 2008; forces.altitude_gradient) contributes
+-drag m I. An altitude spring (Selle et al. 2008; energies/altitude.py) contributes
 -k G G^T to K and -kd G G^T to D, G = g (x) n its altitude's gradient: its curvature term
 -k (h - h0) d^2h/dx^2 is dropped, as c's compressed part is, keeping A positive definite. Wind is treated explicitly (it enters f_n only). Pins: dv is filtered to zero on
 particles of inverse mass 0 (Baraff & Witkin's modified CG with S = 0 there).
@@ -26,10 +26,18 @@ import math
 
 import taichi as ti
 
+from ..energies.altitude import (
+    altitudes_times,
+    linearise_altitude,
+    project_altitude,
+)
+from ..energies.bending import bending_phases
+from ..energies.isometric import isometric_product, isometric_velocity
+from ..energies.springs import block_times, linearise_spring, spring_block, stiffness_times
 from ..inputs import limits
 from ..inputs.validation import count, finite_number, require
-from ..physics import elements, wind
-from ..physics.forces import altitude_gradient, gather_force, spring_loops
+from ..physics import wind
+from ..physics.forces import element_loops, gather_force, spring_loops
 from ..runtime import backend
 from ..runtime.plan import Loop, Once, Phase, Until
 from ..runtime.team import MAX_WORKERS
@@ -78,72 +86,15 @@ class _Workspace:
 
 
 @ti.func
-def _stiffness_times(k, n, c, d):
-    """k (n n^T + c (I - n n^T)) d: the spring's -df_i/dx_i applied to d."""
-    along = n.dot(d) * n
-    return k * (along + c * (d - along))
-
-
-@ti.func
-def _spring_block(k, kd, n, c, dt, relative: ti.template()):
-    """h^2 k (n n^T + c (I - n n^T)) + h D, D = kd n n^T (axial) or kd I (relative): the
-    spring's block of A, symmetric, as (xx, yy, zz, xy, xz, yz)."""
-    stiff = dt * dt * k
-    damp = dt * kd
-    lateral = stiff * c
-    along = stiff - lateral
-    if ti.static(not relative):
-        along += damp
-    diagonal = lateral + along * n * n
-    if ti.static(relative):
-        diagonal += damp
-    return ti.Vector([diagonal[0], diagonal[1], diagonal[2], along * n[0] * n[1],
-                      along * n[0] * n[2], along * n[1] * n[2]])
-
-
-@ti.func
-def _block_times(m, d):
-    """The symmetric 3x3 block m (xx, yy, zz, xy, xz, yz) times d."""
-    return ti.Vector([m[0] * d[0] + m[3] * d[1] + m[4] * d[2],
-                      m[3] * d[0] + m[1] * d[1] + m[5] * d[2],
-                      m[4] * d[0] + m[5] * d[1] + m[2] * d[2]])
-
-
-@ti.func
-def _project_altitude(model: ti.template(), ws: ti.template(), vectors: ti.template(), a):
-    """altitude_projection[a] = G_a . vectors = n . sum_c g_c vectors[corner c]."""
-    corner = model.altitude_indices[a]
-    total = 0.0
-    for c in ti.static(range(4)):
-        total += ws.altitude_weight[4 * a + c] * ws.altitude_normal[a].dot(vectors[corner[c]])
-    ws.altitude_projection[a] = total
-
-
-@ti.func
 def _project_velocity(model: ti.template(), state: ti.template(), forces: ti.template(),
                       ws: ti.template(), stages: ti.template(), a, now: ti.template()):
-    _project_altitude(model, ws, state.particle_velocity, a)
+    project_altitude(model, ws, state.particle_velocity, a)
 
 
 @ti.func
 def _project_direction(model: ti.template(), state: ti.template(), forces: ti.template(),
                        ws: ti.template(), stages: ti.template(), a, now: ti.template()):
-    _project_altitude(model, ws, ws.p, a)
-
-
-@ti.func
-def _altitudes_times(model: ti.template(), ws: ti.template(), i, dt):
-    """Particle i's rows of (h^2 K + h D) times the vector altitude_projection was taken of,
-    over its altitude springs: (h^2 k + h kd) g_i n (G . vector)."""
-    result = ti.Vector([0.0, 0.0, 0.0])
-    if ti.static(model.altitude_count > 0):
-        for a in range(model.particle_altitude_start[i], model.particle_altitude_start[i + 1]):
-            code = model.adjacency_altitude[a]
-            e = code // 4
-            result += ((dt * dt * model.altitude_stiffness[e] + dt * model.altitude_damping[e])
-                       * ws.altitude_weight[code] * ws.altitude_projection[e]
-                       * ws.altitude_normal[e])
-    return result
+    project_altitude(model, ws, ws.p, a)
 
 
 @ti.func
@@ -159,38 +110,6 @@ def _total(ws: ti.template(), partial: ti.template(), zero):
 @ti.func
 def _block_range(block, count):
     return block * BLOCK, ti.min((block + 1) * BLOCK, count)
-
-
-@ti.func
-def linearise_spring(model: ti.template(), state: ti.template(), forces: ti.template(),
-                      ws: ti.template(), stages: ti.template(), s, now: ti.template()):
-    """Spring s: direction and clamped lateral factor at x_n."""
-    i, j = model.spring_indices[s][0], model.spring_indices[s][1]
-    d = state.particle_position[i] - state.particle_position[j]
-    length = d.norm()
-    n = ti.Vector([0.0, 0.0, 0.0])
-    c = 0.0
-    if length > 0:
-        n = d / length
-        c = ti.max(1.0 - model.spring_rest_length[s] / length, 0.0)
-    elif model.spring_rest_length[s] == 0:
-        c = 1.0    # a zero-length spring is linear: -df/dx = k I
-    if ti.static(forces.tearable):
-        if state.spring_alive[s] == 0:
-            c, n = 0.0, ti.Vector([0.0, 0.0, 0.0])
-    ws.spring_normal[s] = n
-    ws.spring_lateral[s] = c
-
-
-@ti.func
-def _linearise_altitude(model: ti.template(), state: ti.template(), forces: ti.template(),
-                        ws: ti.template(), stages: ti.template(), a, now: ti.template()):
-    """Altitude spring a: normal and corner weights at x_n."""
-    corner = model.altitude_indices[a]
-    n, _, g = altitude_gradient(state.particle_position, corner)
-    ws.altitude_normal[a] = n
-    for c in ti.static(range(4)):
-        ws.altitude_weight[4 * a + c] = g[c]
 
 
 @ti.func
@@ -221,11 +140,11 @@ def _start_block(model: ti.template(), state: ti.template(), forces: ti.template
             j = model.adjacency_other[a]
             n, c = ws.spring_normal[s], ws.spring_lateral[s]
             k, kd = model.spring_stiffness[s], model.spring_damping[s]
-            kv += _stiffness_times(k, n, c, vi - state.particle_velocity[j])
+            kv += stiffness_times(k, n, c, vi - state.particle_velocity[j])
             if ti.static(forces.tearable):
                 if state.spring_alive[s] == 0:
                     kd = 0.0
-            m = _spring_block(k, kd, n, c, dt, model.relative_damping)
+            m = spring_block(k, kd, n, c, dt, model.relative_damping)
             ws.adjacency_block[a] = m
             diagonal += ti.Vector([m[0], m[1], m[2]])
         if ti.static(model.altitude_count > 0):
@@ -242,7 +161,7 @@ def _start_block(model: ti.template(), state: ti.template(), forces: ti.template
             kv += implicit_elements.stiffness_times(model, ws, i)
             diagonal += implicit_elements.diagonal(model, ws, i, dt)
         if ti.static(model.isometric):
-            kv += implicit_elements.isometric_velocity(model, state, i)
+            kv += isometric_velocity(model, state, i)
         b = free * dt * (state.particle_force[i] - dt * kv)
         if free == 0:
             diagonal = ti.Vector([1.0, 1.0, 1.0])   # a pin's row is the identity (b = 0 there)
@@ -270,12 +189,12 @@ def _apply_block(model: ti.template(), state: ti.template(), forces: ti.template
         pi = ws.p[i]
         ap = model.particle_mass[i] * (1.0 + dt * drag) * pi
         for a in range(model.particle_spring_start[i], model.particle_spring_start[i + 1]):
-            ap += _block_times(ws.adjacency_block[a], pi - ws.p[model.adjacency_other[a]])
-        ap += _altitudes_times(model, ws, i, dt)
+            ap += block_times(ws.adjacency_block[a], pi - ws.p[model.adjacency_other[a]])
+        ap += altitudes_times(model, ws, i, dt)
         if ti.static(model.face_count > 0):
             ap += implicit_elements.stiffness_times(model, ws, i)
         if ti.static(model.isometric):
-            ap += implicit_elements.isometric_product(model, ws, i, dt)
+            ap += isometric_product(model, ws, i, dt)
         ap *= free
         ws.ap[i] = ap
         pap += pi.dot(ap)
@@ -404,19 +323,19 @@ class ImplicitEuler(Integrator):
     def linearisation(self, model, forces, ws):
         """f_n, the linearisation at x_n and the CG start (r = b, p = z = r / diagonal); a
         Fabric's hinges are linearised between its bending phases (implicit_elements)."""
-        linear = (spring_loops(model) + elements.element_loops(model)
+        linear = (spring_loops(model) + element_loops(model)
                   + implicit_elements.linear_loops(model))
         if model.spring_count:
             linear += (Loop(model.spring_count, linearise_spring),)
         if model.altitude_count:
-            linear += (Loop(model.altitude_count, _linearise_altitude),)
+            linear += (Loop(model.altitude_count, linearise_altitude),)
         gather = Loop(ws.block_count, _gather_block)
         start = Loop(ws.block_count, _start_block)
         if model.altitude_count:
             begin = (Phase(gather, Loop(model.altitude_count, _project_velocity)), Phase(start))
         else:
             begin = (Phase(gather, start),)
-        bending = elements.bending_phases(model, *implicit_elements.bending_loops(model))
+        bending = bending_phases(model, *implicit_elements.bending_loops(model))
         return (wind.phases(model, forces) + ((Phase(*linear),) if linear else ()) + bending
                 + begin + (Once(_begin_solve),))
 

@@ -6,16 +6,28 @@ from collections.abc import Mapping
 import taichi as ti
 
 from ..body.material import SpringKind
+from ..energies.altitude import relax_altitude
+from ..energies.springs import relax
 from ..inputs import limits
 from ..inputs.validation import count, finite_number, require
 from ..physics import wind
-from ..physics.constraints import SweepOrder, relax, relax_altitude
 from ..physics.forces import gather_force
+from ..runtime import backend
 from ..runtime.plan import Loop, Phase, Repeat, Sweep
 from ..state import store_particle
 from . import fused
 from .base import Integrator
 from .verlet import verlet_update
+
+
+@backend.kernel_argument
+class SweepOrder:
+    """A model's spring and altitude-spring colourings, as one kernel argument (pbd's
+    phases sweep them)."""
+
+    def __init__(self, model):
+        self.colours = model.spring_colouring()
+        self.altitude_colours = model.altitude_colouring()
 
 
 @ti.func
@@ -70,7 +82,7 @@ class PBD(Integrator):
     damping: lecture factor d in [0, 1), as Verlet.
     stiffness: fraction of the correction applied per pass, per kind, {"stretch": 1.0, ...};
         "altitude" for the altitude springs (each a corner projected to its rest height over
-        the opposite face of a tetrahedron: constraints.relax_altitude).
+        the opposite face of a tetrahedron: energies/altitude.py relax_altitude).
     Order 1 (velocity from positions); no step-size stability limit: positions are projected,
     never extrapolated by stiff forces.
     """

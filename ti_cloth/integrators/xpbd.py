@@ -1,16 +1,19 @@
 """Extended position-based dynamics (Macklin, Mueller & Chentanez 2016): springs as compliant
 constraints with compliance 1 / k, so the cloth has its material stiffness in N/m; a Fabric's
 triangles as strain and bending constraints with compliance from its moduli
-(physics/element_constraints.py)."""
+(energies/)."""
 
 
 import taichi as ti
 
+from ..energies.altitude import xpbd_altitude
+from ..energies.bending import xpbd_bending
+from ..energies.isometric import xpbd_isometric
+from ..energies.membrane import xpbd_membrane
+from ..energies.springs import damp, xpbd_update
 from ..inputs import limits
 from ..inputs.validation import count
 from ..physics import wind
-from ..physics.constraints import damp, xpbd_altitude, xpbd_update
-from ..physics.element_constraints import xpbd_bending, xpbd_isometric, xpbd_membrane
 from ..physics.forces import gather_force
 from ..runtime import backend
 from ..runtime.plan import Loop, Phase, Repeat, Sweep
@@ -109,15 +112,15 @@ class _Multipliers:
 class XPBD(Integrator):
     """XPBD: predict under external forces (gravity, drag, wind), then `iterations`
     Gauss-Seidel passes over the springs in colour order, each updating the spring's Lagrange
-    multiplier (constraints.xpbd_update), then v = (x_{n+1} - x_n) / h.
+    multiplier (energies/springs.py xpbd_update), then v = (x_{n+1} - x_n) / h.
 
     Unlike pbd, the result does not depend on the iteration count once converged: it is the
     backward Euler step of the same Hookean springs (compliance 1/k) the force-based
     integrators use, with axial damping kd; for a Fabric, nearly that of its membrane and
     bending energies with their Rayleigh damping (a pass sweeps the triangles' strains, then
-    their bending; what XPBD leaves out there: element_constraints.py). On a body with relative damping (Stuyck eq. 4.7)
+    their bending; what XPBD leaves out there: energies/faces.py). On a body with relative damping (Stuyck eq. 4.7)
     the constraints are undamped and one pass of implicit relative damping on the new
-    velocities follows (constraints.damp: each spring's backward Euler step in turn,
+    velocities follows (energies/springs.py damp: each spring's backward Euler step in turn,
     stable at any h); positions keep their solve, as in position-based damping (Mueller et al.
     2007), and the next prediction starts from the damped velocities. Unconverged (few
     iterations, stiff springs, large h), the cloth is softer than its material.

@@ -19,13 +19,16 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from ..body import elements as host_elements
 from ..body.material import SpringKind
-from ..body.topology import altitude_frames
-from ..geometry import point_over_triangle
+from ..energies.altitude import altitude_energy, altitude_forces
+from ..energies.bending import bending_energy, bending_phases, hinge_angles
+from ..energies.faces import gather_corners
+from ..energies.isometric import isometric_energy, isometric_forces
+from ..energies.membrane import membrane_energy, membrane_forces
+from ..energies.springs import spring_energies, spring_forces
 from ..runtime import backend, plan
 from ..runtime.plan import Loop, Phase
-from . import elements, wind
+from . import wind
 
 
 @backend.kernel_argument
@@ -63,79 +66,6 @@ class ForceSettings:
         return self.tearable
 
 
-@ti.func
-def spring_force(xi, xj, vi, vj, rest, k, kd, relative: ti.template()):
-    """Force of one spring on particle i (the force on j is its negation).
-
-    Elastic part: Stuyck eq. 4.5, f_i = -k (|x_ij| - L) x_ij / |x_ij|.
-    Damping: relative = Stuyck eq. 4.7, -kd (v_i - v_j); axial = -kd ((v_i - v_j) . n) n.
-    A spring of zero current length has no direction: its elastic and axial parts are zero.
-    """
-    xij = xi - xj
-    vij = vi - vj
-    length = xij.norm()
-    f = ti.Vector([0.0, 0.0, 0.0])
-    if length > 0:
-        # -k (l - L) n - kd (vij . n) n = s x_ij, n = x_ij / l: one division and one scaling
-        # of x_ij (kernels compute in IEEE arithmetic, unfused: runtime/backend.py)
-        s = -k * (length - rest)
-        if ti.static(not relative):
-            s -= kd * vij.dot(xij) / length
-        f = (s / length) * xij
-    if ti.static(relative):
-        f -= kd * vij
-    return f
-
-
-@ti.func
-def spring_forces(model: ti.template(), state: ti.template(), forces: ti.template(),
-                  work: ti.template(), stages: ti.template(), s, now: ti.template()):
-    """spring_force[s] = force of spring s on its first end (eq. 4.5, 4.7), 0 once torn.
-    (Altitude springs: altitude_forces; they do not tear.)"""
-    i, j = model.spring_indices[s][0], model.spring_indices[s][1]
-    f = ti.Vector([0.0, 0.0, 0.0])
-    alive = True
-    if ti.static(forces.tearable):
-        alive = state.spring_alive[s] != 0
-    if alive:
-        f = spring_force(state.particle_position[i], state.particle_position[j],
-                         state.particle_velocity[i], state.particle_velocity[j],
-                         model.spring_rest_length[s], model.spring_stiffness[s],
-                         model.spring_damping[s], model.relative_damping)
-    state.spring_force[s] = f
-
-
-@ti.func
-def altitude_gradient(positions: ti.template(), corner):
-    """(n, h, g) of the altitude spring (Selle et al. 2008) with corners `corner` (p, a, b, c)
-    at `positions`: the face's unit normal, p's signed altitude over it
-    (geometry.point_over_triangle) and g = (1, -w_a, -w_b, -w_c), w the barycentric
-    coordinates of p's foot, so grad h = g_c n and -k (h - h0) g_c n is the exact force of
-    the energy 1/2 k (h - h0)^2, along n, with zero net force and torque (zero for a face of
-    zero area)."""
-    n, h, w = point_over_triangle(positions[corner[0]], positions[corner[1]], positions[corner[2]],
-                             positions[corner[3]])
-    return n, h, ti.Vector([1.0, -w[0], -w[1], -w[2]])
-
-
-@ti.func
-def altitude_forces(model: ti.template(), state: ti.template(), forces: ti.template(),
-                    work: ti.template(), stages: ti.template(), a, now: ti.template()):
-    """altitude_force[4 a + c] = force of altitude spring a on its corner c (p, a, b, c): with
-    g = (1, -w_a, -w_b, -w_c) and the rate dh/dt = n . sum_c g_c v_c,
-    f_c = -(k (h - h0) + kd dh/dt) g_c n (Stuyck eq. 4.5 and 4.7 with the altitude for the
-    spring's length: damping acts on the altitude's rate)."""
-    corner = model.altitude_indices[a]
-    n, h, g = altitude_gradient(state.particle_position, corner)
-    rate = 0.0
-    for c in ti.static(range(4)):
-        rate += g[c] * n.dot(state.particle_velocity[corner[c]])
-    magnitude = -(model.altitude_stiffness[a] * (h - model.altitude_rest_length[a])
-                  + model.altitude_damping[a] * rate)
-    for c in ti.static(range(4)):
-        state.altitude_force[4 * a + c] = magnitude * g[c] * n
-
-
 def spring_loops(model) -> tuple:
     """The loops that evaluate every spring and altitude spring (spring_forces,
     altitude_forces), none for a body without them."""
@@ -149,10 +79,10 @@ def spring_loops(model) -> tuple:
 
 def spring_phases(model) -> tuple:
     """The phases that evaluate every spring and altitude spring (spring_loops) and a Fabric's
-    elements (physics/elements.py: the membranes and hinge angles beside the springs, then the
+    elements (energies/: the membranes and hinge angles beside the springs, then the
     bending moments and forces), none for a body without them."""
-    loops = spring_loops(model) + elements.element_loops(model)
-    return ((Phase(*loops),) if loops else ()) + elements.bending_phases(model)
+    loops = spring_loops(model) + element_loops(model)
+    return ((Phase(*loops),) if loops else ()) + bending_phases(model)
 
 
 @ti.func
@@ -174,7 +104,7 @@ def gather_force(model: ti.template(), state: ti.template(), forces: ti.template
             for a in range(model.particle_altitude_start[i], model.particle_altitude_start[i + 1]):
                 f += state.altitude_force[model.adjacency_altitude[a]]
         if ti.static(model.face_count > 0):      # compiled only for a body with triangles
-            f += elements.gather_elements(model, state, i)
+            f += gather_elements(model, state, i)
     if ti.static(forces.has_wind):
         f += forces.wind.particle_wind_force[i]
     return f
@@ -226,22 +156,18 @@ def energies(cloth, positions: np.ndarray, velocities: np.ndarray, gravity,
     kinetic = sum 1/2 m |v|^2; gravity = -sum m g . x (Stuyck 4.3.1, zero at the origin);
     spring = sum 1/2 k (|x_i - x_j| - L)^2 (Stuyck eq. 4.4) over intact springs, plus
     sum 1/2 k (h - h0)^2 over altitude springs, plus a Fabric's membrane and bending energies
-    (body/elements.py; of the triangles face_alive keeps, when given; bending by the isometric
+    (energies/; of the triangles face_alive keeps, when given; bending by the isometric
     model with `isometric`, as Model.isometric); also per kind as spring_stretch, spring_shear,
     spring_bend, spring_altitude, membrane and bending; total = kinetic + gravity + spring.
     """
     m = cloth.particle_mass
     kinetic = 0.5 * float(np.sum(m * np.sum(velocities * velocities, axis=1)))
     potential = -float(np.sum(m * (positions @ np.asarray(gravity, np.float64))))
-    i, j = cloth.spring_indices.T
-    stretch = np.linalg.norm(positions[i] - positions[j], axis=1) - cloth.spring_rest_length
-    per_spring = 0.5 * cloth.spring_stiffness * stretch ** 2
-    if alive is not None:
-        per_spring = per_spring * alive
+    per_spring = spring_energies(cloth, positions, alive)
     by_kind = np.bincount(cloth.spring_kind, weights=per_spring, minlength=len(SpringKind))
     altitude = altitude_energy(cloth, positions)
-    membrane = host_elements.membrane_energy(cloth, positions, face_alive)
-    bending = host_elements.bending_energy(cloth, positions, face_alive, isometric)
+    membrane = membrane_energy(cloth, positions, face_alive)
+    bending = (isometric_energy if isometric else bending_energy)(cloth, positions, face_alive)
     result = {"kinetic": kinetic, "gravity": potential,
               "spring": float(by_kind.sum()) + altitude + membrane + bending}
     result.update({f"spring_{k.name.lower()}": float(by_kind[k]) for k in SpringKind})
@@ -252,8 +178,24 @@ def energies(cloth, positions: np.ndarray, velocities: np.ndarray, gravity,
     return result
 
 
-def altitude_energy(cloth, positions: np.ndarray) -> float:
-    """sum 1/2 k (h - h0)^2 over the altitude springs [J], h the signed altitude of p over the
-    face (a, b, c) (altitude_gradient)."""
-    _, h, _ = altitude_frames(positions, cloth.altitude_indices)
-    return float(np.sum(0.5 * cloth.altitude_stiffness * (h - cloth.altitude_rest_length) ** 2))
+@ti.func
+def gather_elements(model: ti.template(), state: ti.template(), i):
+    """The force of particle i's triangles and hinges (a body with triangles: gather_force
+    calls it only then)."""
+    total = gather_corners(model, state.face_force, state.hinge_force, i)
+    if ti.static(model.isometric):
+        total += state.particle_bend_force[i]
+    return total
+
+
+def element_loops(model) -> tuple:
+    """The loops of the first force phase: every membrane triangle and every hinge's angle, or
+    (isometric) every particle's bending force."""
+    loops = ()
+    if model.face_count:
+        loops += (Loop(model.face_count, membrane_forces),)
+    if model.isometric:
+        loops += (Loop(model.particle_count, isometric_forces),)
+    elif model.hinge_count:
+        loops += (Loop(model.hinge_count, hinge_angles),)
+    return loops

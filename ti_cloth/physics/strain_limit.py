@@ -9,11 +9,11 @@ from dataclasses import dataclass
 import taichi as ti
 
 from ..body.material import SpringKind
+from ..energies.springs import relax
 from ..inputs import limits
 from ..inputs.validation import count, finite_number, require
 from ..runtime import backend, plan
 from ..runtime.plan import Loop, Phase, Repeat, Sweep
-from .constraints import relax
 
 
 @dataclass(frozen=True)
@@ -68,7 +68,7 @@ class StrainLimiter:
     def phases(self, model, forces, work) -> tuple:
         """The stage as phases (runtime/plan.py; `work` is this limiter): keep the positions,
         `passes` of the lecture's relaxation on stretched springs colour by colour
-        (constraints.relax with stretched_only), then velocities follow the correction."""
+        (energies.springs.relax with stretched_only), then velocities follow the correction."""
         sweeps = ()
         if model.spring_count:
             colours = model.spring_colouring()

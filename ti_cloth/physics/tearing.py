@@ -1,6 +1,6 @@
 """Tearable cloth (Stuyck 4.5): springs stretched too far are removed; so are a Fabric's
 triangles with an edge stretched too far, and with them the bending of the hinges beside
-them (physics/elements.py reads face_alive)."""
+them (the Fabric terms of energies/ read face_alive)."""
 
 
 import warnings

@@ -115,7 +115,7 @@ def chunked_share(count, part, parts):
 @backend.kernel_argument
 class _Solo:
     """One worker known at compile time: every loop serial, no barriers, no fields (a serial
-    launch of a step's phases: plan.py; strain limiting's serial sweeps: constraints.py)."""
+    launch of a step's phases: plan.py; strain limiting's serial sweeps: energies/springs.py)."""
 
     workers = 1
 

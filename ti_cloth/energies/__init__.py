@@ -1,0 +1,18 @@
+"""One module per energy term, each holding together what every solver needs of it: its rest
+data from the host mesh, its energy (float64, on the host), its force, its Hessian (blocks or
+products, projected to be positive semi-definite) and its position-based projection, with the
+equations cited once.
+
+    springs.py     Stuyck's Hookean springs with damping (eq. 4.4-4.7)
+    altitude.py    Selle et al. 2008's altitude springs of tetrahedra
+    membrane.py    a Fabric's membrane: orthotropic StVK constant-strain triangles
+    bending.py     a Fabric's bending: the mid-edge shape operator, in tangents
+    isometric.py   a flat Fabric sheet's bending: Bergou et al. 2006's isometric model
+    faces.py       what the triangle terms share: deformation gradients, per-corner slots
+                   and their gather, XPBD's update of a vector constraint
+
+Forces are evaluated once per element into per-element or per-corner slots and gathered per
+particle in a fixed order (physics/forces.py composes the terms a model has), so runs are
+deterministic. This package sits below body/ (which builds a Cloth's rest data with it) and
+imports only geometry.py, inputs/ and runtime/.
+"""

@@ -1,0 +1,80 @@
+"""What a Fabric's triangle terms share (membrane.py, bending.py, isometric.py): a triangle's
+deformation gradient from its rest material frame, its per-corner slots and every particle's
+gather of them in the Model's fixed order (no float atomics: the same bits in every plan),
+and XPBD's update of a vector constraint.
+
+XPBD (Macklin, Mueller & Chentanez 2016) for a constraint vector c of three with Jacobian J,
+stiffness K = alpha^-1 and multipliers lambda (their eq. 18, damping as their eq. 26):
+((1 + gamma) J W J^T + alpha~) dlambda = -c - alpha~ lambda - gamma J (x - x_n),
+alpha~ = alpha / h^2; multiplied through by K~ = h^2 K it needs no inverse of K (B may be near
+singular): ((1 + gamma) K~ J W J^T + I) dlambda = -K~ (c + gamma J (x - x_n)) - lambda, a 3x3
+solve per element (multiplier_step). Rayleigh damping (damping matrix beta K) gives
+gamma = beta / h. Then x += W J^T dlambda. Converged, a step is the backward Euler step of the
+energies except for the change of the constraints' gradients within the step, which XPBD
+leaves out (Macklin et al. 2016, section 4): the rest state is O(h) from the energies'
+(tests/test_fabric.py measures it). Triangles are visited colour by colour
+(Model.element_colourings: no two of a colour move a common particle), a Gauss-Seidel sweep in
+a fixed order, deterministic.
+"""
+
+import taichi as ti
+
+
+@ti.func
+def face_columns(model: ti.template(), vectors: ti.template(), f):
+    """The columns (warp, weft) of sum_c vectors[corner c] (x) grad lambda_c over triangle f's
+    corners: the deformation gradient F when `vectors` are positions, its rate or its
+    variation along a direction for velocities or directions."""
+    corner = model.face_indices[f]
+    g = model.face_gradient[f]                 # (grad lambda_1, grad lambda_2), x y each
+    x0 = vectors[corner[0]]
+    d1 = vectors[corner[1]] - x0
+    d2 = vectors[corner[2]] - x0
+    return d1 * g[0] + d2 * g[2], d1 * g[1] + d2 * g[3]
+
+
+@ti.func
+def store_corners(model: ti.template(), target: ti.template(), f, along_warp, along_weft):
+    """target[3 f + c] = P grad lambda_c for triangle f's corners c, P the 3 x 2 matrix of
+    columns (along_warp, along_weft) (grad lambda_0 = -grad lambda_1 - grad lambda_2)."""
+    g = model.face_gradient[f]
+    first = along_warp * g[0] + along_weft * g[1]
+    second = along_warp * g[2] + along_weft * g[3]
+    target[3 * f] = -(first + second)
+    target[3 * f + 1] = first
+    target[3 * f + 2] = second
+
+
+@ti.func
+def gather_corners(model: ti.template(), face_values: ti.template(),
+                   hinge_values: ti.template(), i):
+    """The sum of particle i's corner values of its triangles (face_values[3 f + c]) and its
+    hinges (hinge_values[4 e + k]), in the Model's fixed order."""
+    total = ti.Vector([0.0, 0.0, 0.0])
+    for a in range(model.particle_face_start[i], model.particle_face_start[i + 1]):
+        total += face_values[model.adjacency_face[a]]
+    if ti.static(model.hinge_count > 0 and not model.isometric):
+        for a in range(model.particle_hinge_start[i], model.particle_hinge_start[i + 1]):
+            total += hinge_values[model.adjacency_hinge[a]]
+    return total
+
+
+@ti.func
+def multiplier_step(stiffness, coupling, residual, multiplier, gamma):
+    """dlambda of ((1 + gamma) K~ JWJ + I) dlambda = -K~ residual - lambda."""
+    system = (1.0 + gamma) * stiffness @ coupling + ti.Matrix.identity(float, 3)
+    return system.inverse() @ (-(stiffness @ residual) - multiplier)
+
+
+@ti.func
+def face_intact(state: ti.template(), f, tearable: ti.template()):
+    intact = True
+    if ti.static(tearable):
+        intact = state.face_alive[f] != 0
+    return intact
+
+
+@ti.func
+def motion_in_step(state: ti.template(), p):
+    """x_p - x_p^n: particle p's motion in the step so far."""
+    return state.particle_position[p] - state.particle_prev_position[p]

@@ -1,0 +1,221 @@
+"""A flat Fabric sheet's bending by the isometric model (Bergou, Wardetzky, Harmon, Zorin &
+Grinspun, "A quadratic bending model for inextensible surfaces", SGP 2006), generalised to
+the mid-edge operator's B (bending.py): on each hinge w = sum_k K_k x_k, K the cotangent
+weights of its two rest triangles, so that under any deformation that keeps lengths
+|w| = 2 |e| sin(theta / 2); the energy per triangle is 1/2 sum_ij B'_ij w_i . w_j with
+B'_ij = s_i s_j B_ij / (4 |e_i| |e_j|): the mid-edge energy with sin(theta / 2) in place of
+tan(theta / 2), the same for small angles and in the continuum limit. It is quadratic in the
+positions, 1/2 x^T Q x with one constant Q, merged per particle when the Model is built. It
+has no rest angle, so it serves a sheet whose rest hinges are all flat (is_flat) and that
+cannot tear. Everything each solver needs of it, together:
+
+- rest data: the cotangent weights, the reduced matrices and Q as a CSR per particle
+  (cotangent_weights, isometric_parts, isometric_matrix, isometric_faces); the energy in
+  float64 (isometric_energy);
+- force: one particle loop summing its row of Q times its neighbours' position and velocity
+  differences, in increasing neighbour order (isometric_forces, isometric_sum);
+- Hessian: Q itself, positive semi-definite as it is (isometric_velocity, isometric_product);
+- projection: XPBD with the w_i linear constraints of a triangle on each axis, compliance
+  B'^-1 (xpbd_isometric).
+"""
+
+import numpy as np
+import taichi as ti
+
+from .bending import bending_stencils, hinges, intact_hinges
+from .faces import motion_in_step, multiplier_step
+
+# A flat rest sheet's bending needs no angle: the isometric model (module doc). Rest angles
+# below this [rad] (a planar mesh's rounding) count as flat.
+FLAT_REST_ANGLE = 1e-6
+
+
+def cotangent_weights(positions: np.ndarray, indices: np.ndarray) -> np.ndarray:
+    """K (H, 4) of hinges [a, b, c, d] at rest (Bergou, Wardetzky, Harmon, Zorin & Grinspun,
+    "A quadratic bending model for inextensible surfaces", SGP 2006, sec. 4.1):
+    w = sum_k K_k x_k = (cot b1 + cot b2) a + (cot a1 + cot a2) b - (cot a1 + cot b1) c
+    - (cot a2 + cot b2) d, with a1, b1 the rest angles at a and b in triangle (a, b, c) and
+    a2, b2 in (a, b, d). In each triangle (cot b1 a + cot a1 b) / (cot a1 + cot b1) is the
+    foot of c's altitude, so w is |e| (u1 + u2), u the unit vectors from c and d to the edge
+    in their triangles: 0 on the flat rest sheet and |w| = 2 |e| sin(theta / 2) in any
+    isometric deformation of it."""
+    a, b, c, d = (positions[indices[:, k]] for k in range(4))
+
+    def cot(apex, p, q):
+        u, v = p - apex, q - apex
+        return np.sum(u * v, 1) / np.linalg.norm(np.cross(u, v), axis=1)
+
+    a1, b1 = cot(a, b, c), cot(b, a, c)
+    a2, b2 = cot(a, b, d), cot(b, a, d)
+    return np.stack([b1 + b2, a1 + a2, -(a1 + b1), -(a2 + b2)], 1)
+
+
+def is_flat(cloth) -> bool:
+    """Whether every hinge of `cloth` is flat at rest (FLAT_REST_ANGLE): its bending is then
+    the isometric model (isometric_matrix), else the mid-edge tangents."""
+    return cloth.hinge_count > 0 and bool(np.all(np.abs(cloth.hinge_rest_angle)
+                                                 <= FLAT_REST_ANGLE))
+
+
+def isometric_parts(cloth) -> tuple:
+    """(K (H, 4) the hinges' cotangent weights, B' (F, 3, 3) = s_i s_j B_ij / (4 |e_i| |e_j|),
+    0 across a boundary edge): the isometric model's constants (isometric_matrix)."""
+    weights = cotangent_weights(cloth.particle_position, cloth.hinge_indices)
+    ends = cloth.particle_position[cloth.hinge_indices[:, :2]]
+    lengths = np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1)
+    _, _, face_hinge, face_sign = hinges(cloth.face_indices)
+    present = face_hinge >= 0
+    scale = np.where(present, face_sign / (2.0 * lengths[np.where(present, face_hinge, 0)]), 0.0)
+    return weights, cloth.face_bending * scale[:, :, None] * scale[:, None, :]
+
+
+def isometric_matrix(cloth) -> tuple:
+    """The isometric bending energy of a flat rest sheet, 1/2 sum_kl Q_kl x_k . x_l with a
+    constant Q (Bergou et al. 2006, eq. 8-9, generalised from one hinge to the mid-edge
+    operator's coupling of a triangle's hinges): with w_i = sum_k K_ik x_k of the hinge across
+    edge i (cotangent_weights), a triangle holds
+
+        1/2 sum_ij B'_ij w_i . w_j,   B'_ij = s_i s_j B_ij / (4 |e_i| |e_j|),
+
+    B the mid-edge matrix (bending_matrices) and s its orientation signs. On the flat rest
+    sheet w_i = 2 |e_i| sin(theta_i / 2) n (1 + O(theta)) along the normal, with the sign of
+    s_i theta_i, so for small angles this is the mid-edge energy 1/2 dt^T B dt (t = tan(theta /
+    2) and sin(theta / 2) agree to O(theta^3)); under refinement theta ~ h / R and both converge
+    to the same continuum. Q = sum_f K_f^T B'_f K_f is positive semi-definite, the same in x, y
+    and z, and its rows sum to 0 (a translation moves nothing); the force is
+    -sum_l Q_kl ((x_l - x_k) + beta (v_l - v_k)) with Rayleigh damping beta. Returns (start
+    (N + 1,), other, stiffness (-Q_kl), damping (-beta Q_kl)): particle k's neighbours l != k
+    in increasing order, as a CSR."""
+    n = cloth.particle_count
+    weights, reduced = isometric_parts(cloth)
+    hinge = np.maximum(cloth.face_hinge, 0)
+    corners = cloth.hinge_indices[hinge]                                        # (F, 3, 4)
+    k = weights[hinge] * (cloth.face_hinge >= 0)[:, :, None]
+    local = np.einsum("fik,fij,fjl->fikjl", k, reduced, k)                      # Q per face
+    rows = np.broadcast_to(corners[:, :, :, None, None], local.shape).ravel()
+    cols = np.broadcast_to(corners[:, None, None, :, :], local.shape).ravel()
+    damped = local * cloth.face_damping[:, None, None, None, None]
+    keep = rows != cols
+    unique, inverse = np.unique(rows[keep] * n + cols[keep], return_inverse=True)
+    stiffness = -np.bincount(inverse, weights=local.ravel()[keep], minlength=len(unique))
+    damping = -np.bincount(inverse, weights=damped.ravel()[keep], minlength=len(unique))
+    row, other = np.divmod(unique, n)
+    start = np.concatenate([[0], np.cumsum(np.bincount(row, minlength=n))])
+    return start, other, stiffness, damping
+
+
+def isometric_faces(cloth) -> tuple:
+    """(stencil (F, 6), weights (F, 3, 6)): each triangle's bending stencil (bending_stencils)
+    with w_i = sum_s weights[i, s] x_stencil[s] (the cotangent weights of the hinge across its
+    edge i, isometric_matrix); a particle in two slots has its weights in the first and none in
+    the second, so the slots' particles with weights are distinct (XPBD's per-triangle solve)."""
+    stencil = bending_stencils(cloth)
+    weights = np.zeros((cloth.face_count, 3, 6))
+    present = cloth.face_hinge >= 0
+    hinge = np.where(present, cloth.face_hinge, 0)
+    cot = cotangent_weights(cloth.particle_position, cloth.hinge_indices)[hinge]   # (F, 3, 4)
+    corners = cloth.hinge_indices[hinge]                                          # (F, 3, 4)
+    for k in range(4):
+        for s in range(6):
+            weights[:, :, s] += np.where(present & (corners[:, :, k] == stencil[:, None, s])
+                                         & _first_slot(stencil, s)[:, None], cot[:, :, k], 0.0)
+    return stencil, weights
+
+
+def _first_slot(stencil: np.ndarray, s: int) -> np.ndarray:
+    """(F,) bool: slot s holds its particle's first appearance in the triangle's stencil."""
+    return ~np.any(stencil[:, :s] == stencil[:, s:s + 1], axis=1)
+
+
+@ti.func
+def isometric_sum(model: ti.template(), first: ti.template(), second: ti.template(), i,
+                  a, b):
+    """sum_l (a k_il (first_l - first_i) + b d_il (second_l - second_i)) over particle i's
+    neighbours l in increasing order, k = -Q and d = -beta Q the isometric bending's
+    stiffness and damping (energies/isometric.isometric_matrix): a = b = 1 on positions and
+    velocities is its force, a = h^2, b = h on one direction implicit Euler's product."""
+    x = first[i]
+    v = second[i]
+    total = ti.Vector([0.0, 0.0, 0.0])
+    for c in range(model.particle_bend_start[i], model.particle_bend_start[i + 1]):
+        other = model.bend_other[c]
+        total += (a * model.bend_stiffness[c] * (first[other] - x)
+                  + b * model.bend_damping[c] * (second[other] - v))
+    return total
+
+
+@ti.func
+def isometric_forces(model: ti.template(), state: ti.template(), forces: ti.template(),
+                     work: ti.template(), stages: ti.template(), i, now: ti.template()):
+    """particle_bend_force[i] = the isometric bending force on particle i (with the membranes,
+    before any particle moves: it reads its neighbours' positions and velocities)."""
+    state.particle_bend_force[i] = isometric_sum(model, state.particle_position,
+                                                 state.particle_velocity, i, 1.0, 1.0)
+
+
+@ti.func
+def xpbd_isometric(model: ti.template(), state: ti.template(), f, multiplier: ti.template(), dt):
+    """XPBD for triangle f's isometric bending (a flat rest sheet: energies/isometric.isometric_matrix),
+    its multipliers in multiplier[f] (3 x 3: a hinge's row, an axis's column): the constraint
+    is w_i = sum_s J_is x_s over its stencil s (Model.face_stencil_weight), linear and the same
+    on each axis, with compliance B'^-1. Its gradients do not change within the step, so,
+    converged, this is the backward Euler step of the energy (what XPBD leaves out of the
+    other elements is zero here)."""
+    stencil = model.face_stencil[f]
+    weight = model.face_stencil_weight[f]
+    coupling = ti.Matrix.zero(float, 3, 3)
+    value = ti.Matrix.zero(float, 3, 3)
+    motion = ti.Matrix.zero(float, 3, 3)
+    for s in ti.static(range(6)):
+        p = stencil[s]
+        w = model.particle_inv_mass[p]
+        x = state.particle_position[p]
+        moved = motion_in_step(state, p)
+        for i in ti.static(range(3)):
+            for j in ti.static(range(3)):
+                coupling[i, j] += w * weight[6 * i + s] * weight[6 * j + s]
+            for a in ti.static(range(3)):
+                value[i, a] += weight[6 * i + s] * x[a]
+                motion[i, a] += weight[6 * i + s] * moved[a]
+    b = model.face_isometric[f]                # symmetric: 00, 11, 22, 01, 02, 12
+    bending = ti.Matrix([[b[0], b[3], b[4]], [b[3], b[1], b[5]], [b[4], b[5], b[2]]])
+    gamma = model.face_damping[f] / dt
+    m = multiplier[f]
+    held = ti.Matrix([[m[0], m[1], m[2]], [m[3], m[4], m[5]], [m[6], m[7], m[8]]])
+    step = multiplier_step((dt * dt) * bending, coupling, value + gamma * motion, held, gamma)
+    for i in ti.static(range(3)):
+        for a in ti.static(range(3)):
+            m[3 * i + a] += step[i, a]
+    multiplier[f] = m
+    for s in ti.static(range(6)):
+        p = stencil[s]
+        move = ti.Vector([0.0, 0.0, 0.0])
+        for i in ti.static(range(3)):
+            move += weight[6 * i + s] * ti.Vector([step[i, 0], step[i, 1], step[i, 2]])
+        state.particle_position[p] = state.particle_position[p] + model.particle_inv_mass[p] * move
+
+
+@ti.func
+def isometric_velocity(model: ti.template(), state: ti.template(), i):
+    """Particle i's row of Q v_n, the isometric bending's stiffness times v_n (its Hessian is
+    the constant Q of energies/isometric.isometric_matrix, positive semi-definite as it is)."""
+    return -isometric_sum(model, state.particle_velocity, state.particle_velocity, i, 1.0, 0.0)
+
+
+@ti.func
+def isometric_product(model: ti.template(), ws: ti.template(), i, dt):
+    """Particle i's row of (h^2 + h beta) Q p, the isometric bending's block of A times p."""
+    return -isometric_sum(model, ws.p, ws.p, i, dt * dt, dt)
+
+
+def isometric_energy(cloth, positions: np.ndarray, alive: np.ndarray | None = None) -> float:
+    """The isometric model's 1/2 sum_ij B'_ij w_i . w_j summed over triangles [J]
+    (isometric_matrix); with `alive` ((F,) bool: not torn), a torn triangle holds none and a
+    hinge beside one is gone."""
+    if not cloth.hinge_count:
+        return 0.0
+    weights, reduced = isometric_parts(cloth)
+    w = (np.einsum("hk,hkx->hx", weights, positions[cloth.hinge_indices])
+         * intact_hinges(cloth, alive)[:, None])
+    w = np.concatenate([w, np.zeros((1, 3))])[cloth.face_hinge]          # (F, 3, 3)
+    return float(0.5 * np.einsum("fix,fij,fjx->", w, reduced, w))
