@@ -1,6 +1,7 @@
-"""The package's layers, read from the source: the physics never imports the renderer or the
-application (ti_cloth.app), the renderer never imports the application, and no module imports
-another module's private names."""
+"""The package's structure, read from the source: every room (a top-level module or a folder)
+imports only rooms on the floors below it (FLOORS, the order docs/design.md draws), so the
+physics never imports the renderer or the application; no module imports another module's
+private names; a folder per concern."""
 
 import ast
 from pathlib import Path
@@ -27,25 +28,57 @@ def imports(path: Path) -> list[tuple[str, list[str]]]:
     return found
 
 
-def layer(path: Path) -> str:
-    parts = path.relative_to(PACKAGE).parts
-    return parts[0] if parts[0] in ("app", "render") else "physics"
+# The package's rooms (a top-level module or a folder), lowest first: a room imports only rooms
+# on floors below its own (docs/design.md draws them). Rooms on one floor do not import each
+# other.
+FLOORS = (("errors", "geometry", "stages"),
+          ("inputs",),
+          ("runtime",),
+          ("energies",),
+          ("body",),
+          ("state", "saved_state", "export"),
+          ("model",),
+          ("physics",),
+          ("contact",),
+          ("integrators",),
+          ("stability",),
+          ("stepping",),
+          ("render",),
+          ("simulation",),
+          ("app",))
+FLOOR = {room: k for k, rooms in enumerate(FLOORS) for room in rooms}
 
 
-def test_imports_point_down_the_layers():
-    forbidden = {"physics": ("ti_cloth.app", "ti_cloth.render"), "render": ("ti_cloth.app",),
-                 "app": ()}
-    sources = sorted(PACKAGE.rglob("*.py"))
-    assert len(sources) > 30 and {layer(p) for p in sources} == set(forbidden)
+def room(module: str) -> str:
+    """The room of a dotted ti_cloth module ("ti_cloth.contact.colliders.sdf" -> "contact")."""
+    return module.split(".")[1]
+
+
+def upward_imports(sources) -> list[str]:
+    """Every import of a ti_cloth module by a room on the same floor or a lower one."""
     bad = []
     for path in sources:
+        if path == PACKAGE / "__init__.py":
+            continue   # the package's face: its lazy __getattr__ may name the app for its users
+        here = path.relative_to(PACKAGE).parts[0].removesuffix(".py")
         for module, names in imports(path):
-            targets = [module] + [f"{module}.{name}" for name in names]
-            if path.name == "__init__.py" and path.parent == PACKAGE:
-                continue   # the package's lazy __getattr__ may name the app for its users
-            if any(t == f or t.startswith(f + ".") for t in targets for f in forbidden[layer(path)]):
-                bad.append(f"{path.relative_to(PACKAGE)} imports {module} {names}")
-    assert bad == []
+            if not module.startswith("ti_cloth."):
+                targets = [f"ti_cloth.{name}" for name in names] if module == "ti_cloth" else []
+            else:
+                targets = [module]
+            for target in targets:
+                there = room(target)
+                if there != here and FLOOR[there] >= FLOOR[here]:
+                    bad.append(f"{path.relative_to(PACKAGE)} ({here}, floor {FLOOR[here]}) "
+                               f"imports {target} ({there}, floor {FLOOR[there]})")
+    return bad
+
+
+def test_imports_point_down_the_floors():
+    sources = sorted(PACKAGE.rglob("*.py"))
+    rooms = {p.relative_to(PACKAGE).parts[0].removesuffix(".py") for p in sources}
+    assert rooms - {"__init__"} == set(FLOOR), "every room has a floor, every floor a room"
+    assert upward_imports(sources) == []
 
 
 def test_the_package_init_imports_the_app_only_lazily():
@@ -62,14 +95,21 @@ def test_no_module_imports_private_names_of_another():
 
 
 def test_the_checker_sees_a_forbidden_import(tmp_path, monkeypatch):
-    """The layer test can fail: a physics module importing the renderer is reported."""
+    """The checks can fail: imports are read as written, and a room importing one on its own
+    floor or above is reported."""
     fake = tmp_path / "ti_cloth"
     fake.mkdir()
     (fake / "forces.py").write_text("from .render.image import write_png\nfrom .validation import _x\n")
     monkeypatch.setitem(globals(), "PACKAGE", fake)
     found = imports(fake / "forces.py")
     assert found == [("ti_cloth.render.image", ["write_png"]), ("ti_cloth.validation", ["_x"])]
-    assert layer(fake / "forces.py") == "physics"
+    (fake / "geometry.py").write_text("from .simulation import Simulation\n")
+    (fake / "physics").mkdir()
+    (fake / "physics" / "wind.py").write_text("from ..integrators import make_integrator\n"
+                                              "from ..model import Model\n")
+    bad = upward_imports([fake / "geometry.py", fake / "physics" / "wind.py"])
+    assert [line.split(" imports ")[1] for line in bad] == [
+        "ti_cloth.simulation (simulation, floor 13)", "ti_cloth.integrators (integrators, floor 9)"]
 
 
 def test_the_app_modules_keep_their_old_names():
@@ -121,10 +161,10 @@ def test_the_private_reach_checker_can_fail():
 
 
 def test_the_package_keeps_a_folder_per_concern():
-    """At most 12 modules at the top of ti_cloth; the rest in inputs/, body/, physics/,
-    contact/, integrators/, runtime/, render/ and app/."""
+    """At most 12 modules at the top of ti_cloth; the rest in inputs/, energies/, body/,
+    physics/, contact/, integrators/, runtime/, render/ and app/."""
     top = sorted(p.name for p in PACKAGE.glob("*.py"))
     folders = sorted(p.name for p in PACKAGE.iterdir() if (p / "__init__.py").exists())
     assert len(top) <= 12, top
-    assert folders == ["app", "body", "contact", "inputs", "integrators", "physics", "render",
-                       "runtime"]
+    assert folders == ["app", "body", "contact", "energies", "inputs", "integrators", "physics",
+                       "render", "runtime"]
