@@ -1,4 +1,4 @@
-"""Animated (deforming) mesh colliders (animated_mesh.py, animated_contact.py) against
+"""Animated (deforming) mesh colliders (contact/colliders/animated_*.py) against
 independent geometry: a breathing sphere checked with a winding number written here, a plate
 swung through a particle faster than its thickness per step, a sliding plate carrying a sheet
 by friction, and the same motion as samples and as a callable."""
@@ -236,7 +236,7 @@ def test_auto_edge_contact_tests_the_edges_sharp_enough_to_pass_between_particle
     (0-4, 0-5, 1-5) across which they do not turn: "auto" tests its nine other edges (they turn
     by 90 to 179 degrees, more than 18.4 for a 5 cm cloth edge and 5 mm), each once; True tests
     all twelve; False none. A smooth icosphere (faces 4.6 degrees apart): none."""
-    from ti_cloth.contact.colliders.animated_contact import tested_edges
+    from ti_cloth.contact.colliders.animated_bodies import tested_edges
     thickness, longest = 0.005, 0.05
     threshold = 2 * np.arcsin(thickness / (1.25 * longest / 2))
     for alpha, expected in ((threshold - np.radians(0.5), 4), (threshold + np.radians(0.5), 5)):
@@ -285,8 +285,8 @@ def test_candidate_lists_give_the_bits_of_a_traversal_at_every_step(f64, monkeyp
     its particle or edge traverses the hierarchy at every step), the same positions to the
     bit: the sheet dropped on the breathing sphere (particles' lists), and the sheet lifted
     by the blade (edges' lists, edges touching)."""
-    from ti_cloth.contact.colliders import animated_contact, animated_edges
-    for module, name, run in ((animated_contact, "LISTED", sheet_on_the_sphere),
+    from ti_cloth.contact.colliders import animated_bodies, animated_edges
+    for module, name, run in ((animated_bodies, "LISTED", sheet_on_the_sphere),
                               (animated_edges, "EDGE_LISTED", sheet_on_the_blade)):
         runs = []
         for listed in (getattr(module, name), 1):
@@ -316,7 +316,7 @@ def test_every_valid_candidate_list_holds_every_triangle_a_traversal_would_visit
     """After each step, for every particle whose list still holds (its epoch, within a skin
     of its anchor at the step's start and end), every triangle whose box meets the particle's
     path box is in the list: checked against all 1,280 triangles' boxes read back."""
-    from ti_cloth.contact.colliders.animated_contact import SKIN
+    from ti_cloth.contact.colliders.candidate_lists import SKIN
     sphere = tc.sphere_mesh(RADIUS, CENTRE, subdivisions=3)
     collider = tc.AnimatedMeshCollider(
         sphere, lambda t: CENTRE + (sphere.vertices - CENTRE) * (1.0 + 0.3 * np.sin(6 * t)),

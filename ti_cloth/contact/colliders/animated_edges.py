@@ -6,7 +6,7 @@ such particles, through the cloth edge joining them. So after the particles' con
 cloth edge is tested against the body edges of the triangles whose swept boxes meet its own:
 each body edge once, by the first of its triangles in the hierarchy's order, and only the
 edges sharp enough to reach across a cloth edge unless edge_contact=True (`tested`,
-animated_contact.tested_edges); the triangles are found as the particles find theirs,
+animated_bodies.tested_edges); the triangles are found as the particles find theirs,
 through candidate lists kept while the edge's two particles stay within a skin of where they
 were (animated_contact.py). The test (geometry.edge_contact, the one self-collision makes of
 two cloth edges; Bridson et al. 2002, section 6.2): the closest points at the step's end,
@@ -40,7 +40,8 @@ from ...geometry import edge_contact
 from ...runtime import backend
 from ...runtime.transfer import upload
 from ..broad_phase.contact_pairs import cloth_edges, torn_edge
-from .animated_contact import RESOLVED, CandidateLists, stale_list, visit_near
+from .animated_contact import RESOLVED
+from .candidate_lists import CandidateLists, stale_list, visit_near
 
 EDGE_LISTED = 64    # candidate triangles an edge keeps per body (a path's box is longer)
 EDGE_PASSES = 3     # passes over the edges a step (each particle takes its contacts' mean)

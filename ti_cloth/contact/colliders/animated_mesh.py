@@ -173,7 +173,7 @@ class AnimatedMeshCollider(Collider):
 
 def interpolate(samples: np.ndarray, fps: float, t: float) -> np.ndarray:
     """Positions at time t [s] of samples (S, V, 3) taken at `fps` from t = 0: linear between
-    the two samples around t, the last one after it (the kernels' rule: animated_contact.py)."""
+    the two samples around t, the last one after it (the kernels' rule: animated_bodies.py)."""
     s = max(t, 0.0) * fps
     first = min(int(np.floor(s)), len(samples) - 1)
     if first == len(samples) - 1:

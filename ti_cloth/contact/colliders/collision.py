@@ -14,7 +14,8 @@ from ...runtime.plan import Loop, Phase, Repeat
 from ...runtime.transfer import upload
 from ...state import copy_positions
 from ..broad_phase.contact_pairs import cloth_edges
-from .animated_contact import PASSES, RESOLVED, AnimatedBodies, tested_edges, worst_contact
+from .animated_bodies import AnimatedBodies, tested_edges
+from .animated_contact import PASSES, RESOLVED, worst_contact
 from .animated_edges import EDGE_PASSES, EdgeContacts, edge_against_bodies, follow_edges
 from .animated_mesh import AnimatedMeshCollider
 from .mesh_collider import MeshCollider
@@ -242,7 +243,7 @@ def _longest_edge(cloth) -> float:
 
 def _edge_contact(colliders, cloth) -> bool:
     """Whether the cloth has edges and an animated mesh among `colliders` has edges they
-    meet (animated_contact.tested_edges)."""
+    meet (animated_bodies.tested_edges)."""
     if cloth.mesh.triangle_count == 0:
         return False
     longest = _longest_edge(cloth)
