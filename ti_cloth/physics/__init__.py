@@ -1,1 +1,3 @@
-"""The physics stages of a step, as Taichi functions and kernels: forces, wind, constraints (relaxation, XPBD), strain limiting, tearing, handles and their paths."""
+"""The loads and stages of a step around the energy terms: the force evaluation that composes
+the terms a model has with gravity, drag and the wind (forces.py), the wind, handles and their
+paths, sewing, strain limiting and tearing (each a Stage: ti_cloth/stages.py)."""
