@@ -2,7 +2,10 @@
 launch plan (ti_cloth/stepping.py), by cloth size and by how many steps one
 Simulation.step(n) call asks for.
 
-    launch per step   step(1, plan="per stage") n times: a launch per stage
+    parallel per step step(1, plan="per stage") n times, each phase's loops parallel loops
+                      (plan.SERIAL_SPRING_LIMIT set to 0)
+    launch per step   step(1, plan="per stage") n times: a launch per stage, one serial
+                      launch of the whole step below plan.SERIAL_SPRING_LIMIT springs
     one worker        step(n): n steps in one launch on the launching thread, every loop serial
     team              step(n): n steps in one launch, each Taichi CPU thread owning a slice of
                       every loop, meeting at barriers
@@ -30,19 +33,22 @@ from throughput import scene
 
 import ti_cloth as tc
 from ti_cloth import stepping
+from ti_cloth.runtime import plan as launch_plan
 
-PLANS = ("launch per step", "one worker", "team", "timed choice")
+PLANS = ("parallel per step", "launch per step", "one worker", "team", "timed choice")
 THRESHOLD = stepping.TEAM_MIN_SPRING_STEPS   # work below which step(n) runs on one worker
+SERIAL_LIMIT = launch_plan.SERIAL_SPRING_LIMIT   # springs below which a step is one serial launch
 
 
 def per_step_us(sim, plan: str, count: int, repeats: int) -> np.ndarray:
     """Microseconds per step of `repeats` calls that each advance `count` steps."""
     stepping.TEAM_MIN_SPRING_STEPS = {"one worker": 1 << 62, "team": 0}.get(plan, THRESHOLD)
     sim.many_steps.adaptive = plan == "timed choice"
+    launch_plan.SERIAL_SPRING_LIMIT = 0 if plan == "parallel per step" else SERIAL_LIMIT
     times = []
     for _ in range(repeats + 1):                      # the first call compiles
         start = time.perf_counter()
-        if plan == "launch per step":
+        if plan in ("parallel per step", "launch per step"):
             for _ in range(count):
                 sim.step(1, plan="per stage")
         else:
