@@ -11,8 +11,20 @@ equations cited once.
     faces.py       what the triangle terms share: deformation gradients, per-corner slots
                    and their gather, XPBD's update of a vector constraint
 
-Forces are evaluated once per element into per-element or per-corner slots and gathered per
-particle in a fixed order (physics/forces.py composes the terms a model has), so runs are
-deterministic. This package sits below body/ (which builds a Cloth's rest data with it) and
-imports only geometry.py, inputs/ and runtime/.
+Forces are evaluated once per element into per-element or per-corner slots (each term's
+force_loops: the loops of a force evaluation's first phase, none for a model without the
+term; the mid-edge bending adds its later phases, bending_phases) and gathered per particle
+in a fixed order (each slot kind's gather), so runs are deterministic; physics/forces.py
+runs them in the order of TERMS and SLOTS. A new term is a module here and a line in TERMS
+(and one in SLOTS if it brings a kind of slot of its own). This package sits below body/
+(which builds a Cloth's rest data with it) and imports only geometry.py, inputs/ and
+runtime/.
 """
+
+from . import altitude, bending, faces, isometric, membrane, springs
+
+# the terms a force evaluation visits, in this order (their force_loops)
+TERMS = (springs, altitude, membrane, isometric, bending)
+# the per-particle gathers of the terms' force slots, in this order (their gather): springs',
+# altitude springs', the triangle terms' corners (faces.py)
+SLOTS = (springs, altitude, faces)

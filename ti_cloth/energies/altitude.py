@@ -21,6 +21,7 @@ import taichi as ti
 
 from ..geometry import point_over_triangle, points_over_triangles
 from ..inputs.validation import as_array, require
+from ..runtime.plan import Loop
 
 
 def altitude_springs(positions: np.ndarray, tetrahedra) -> tuple[np.ndarray, np.ndarray]:
@@ -179,3 +180,19 @@ def altitudes_times(model: ti.template(), ws: ti.template(), i, dt):
                        * ws.altitude_weight[code] * ws.altitude_projection[e]
                        * ws.altitude_normal[e])
     return result
+
+
+def force_loops(model) -> tuple:
+    """The loop of the first force phase that evaluates every altitude spring
+    (altitude_forces)."""
+    return (Loop(model.altitude_count, altitude_forces),) if model.altitude_count else ()
+
+
+@ti.func
+def gather(model: ti.template(), state: ti.template(), i, f):
+    """f with the forces of particle i's altitude springs on it, in the Model's fixed order
+    (compiled only for a body with altitude springs)."""
+    if ti.static(model.altitude_count > 0):
+        for a in range(model.particle_altitude_start[i], model.particle_altitude_start[i + 1]):
+            f += state.altitude_force[model.adjacency_altitude[a]]
+    return f

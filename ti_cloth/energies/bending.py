@@ -470,3 +470,11 @@ def intact_hinges(cloth, alive: np.ndarray | None) -> np.ndarray:
     if alive is None:
         return np.ones(cloth.hinge_count, bool)
     return alive[cloth.hinge_faces // 3].all(axis=1)
+
+
+def force_loops(model) -> tuple:
+    """The loop of the first force phase that measures every hinge (hinge_angles), for a
+    model with hinges bent by the tangents (not Model.isometric); bending_phases follow."""
+    if not model.hinge_count or model.isometric:
+        return ()
+    return (Loop(model.hinge_count, hinge_angles),)

@@ -78,3 +78,16 @@ def face_intact(state: ti.template(), f, tearable: ti.template()):
 def motion_in_step(state: ti.template(), p):
     """x_p - x_p^n: particle p's motion in the step so far."""
     return state.particle_position[p] - state.particle_prev_position[p]
+
+
+@ti.func
+def gather(model: ti.template(), state: ti.template(), i, f):
+    """f with the forces of particle i's triangles and hinges (the membrane's and the mid-edge
+    bending's corner slots, then the isometric bending's per-particle force), compiled only
+    for a body with triangles."""
+    if ti.static(model.face_count > 0):
+        total = gather_corners(model, state.face_force, state.hinge_force, i)
+        if ti.static(model.isometric):
+            total += state.particle_bend_force[i]
+        f += total
+    return f

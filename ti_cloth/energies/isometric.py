@@ -22,6 +22,7 @@ cannot tear. Everything each solver needs of it, together:
 import numpy as np
 import taichi as ti
 
+from ..runtime.plan import Loop
 from .bending import bending_stencils, hinges, intact_hinges
 from .faces import motion_in_step, multiplier_step
 
@@ -219,3 +220,9 @@ def isometric_energy(cloth, positions: np.ndarray, alive: np.ndarray | None = No
          * intact_hinges(cloth, alive)[:, None])
     w = np.concatenate([w, np.zeros((1, 3))])[cloth.face_hinge]          # (F, 3, 3)
     return float(0.5 * np.einsum("fix,fij,fjx->", w, reduced, w))
+
+
+def force_loops(model) -> tuple:
+    """The loop of the first force phase that sums every particle's bending force
+    (isometric_forces), for a model bent by this model (Model.isometric)."""
+    return (Loop(model.particle_count, isometric_forces),) if model.isometric else ()

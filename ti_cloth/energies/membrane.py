@@ -25,6 +25,7 @@ TOG 28(4), 2009, sec. 3). Everything each solver needs of it, together:
 import numpy as np
 import taichi as ti
 
+from ..runtime.plan import Loop
 from .faces import face_columns, face_intact, multiplier_step, store_corners
 
 
@@ -230,3 +231,9 @@ def linearise_face(model: ti.template(), state: ti.template(), forces: ti.templa
     ws.face_diagonal[3 * f] = area * (stiff * zero_stiff + h * h * zero_geometric)
     ws.face_diagonal[3 * f + 1] = area * (stiff * first_stiff + h * h * first_geometric)
     ws.face_diagonal[3 * f + 2] = area * (stiff * second_stiff + h * h * second_geometric)
+
+
+def force_loops(model) -> tuple:
+    """The loop of the first force phase that evaluates every triangle's membrane
+    (membrane_forces)."""
+    return (Loop(model.face_count, membrane_forces),) if model.face_count else ()

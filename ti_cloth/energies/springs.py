@@ -20,6 +20,8 @@ Which pairs are springs, their kinds and rest lengths come from the mesh (body/t
 import numpy as np
 import taichi as ti
 
+from ..runtime.plan import Loop
+
 
 @ti.func
 def spring_force(xi, xj, vi, vj, rest, k, kd, relative: ti.template()):
@@ -211,3 +213,20 @@ def spring_energies(cloth, positions: np.ndarray, alive: np.ndarray | None = Non
     if alive is not None:
         per_spring = per_spring * alive
     return per_spring
+
+
+def force_loops(model) -> tuple:
+    """The loop of the first force phase that evaluates every spring (spring_forces)."""
+    return (Loop(model.spring_count, spring_forces),) if model.spring_count else ()
+
+
+@ti.func
+def gather(model: ti.template(), state: ti.template(), i, f):
+    """f with the forces of particle i's springs: - those of which it is the second end, +
+    those of which it is the first (Model adjacency, a fixed order)."""
+    split = model.particle_spring_split[i]
+    for a in range(model.particle_spring_start[i], split):
+        f -= state.spring_force[model.adjacency_spring[a]]
+    for a in range(split, model.particle_spring_start[i + 1]):
+        f += state.spring_force[model.adjacency_spring[a]]
+    return f

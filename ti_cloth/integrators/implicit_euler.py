@@ -37,7 +37,7 @@ from ..energies.springs import block_times, linearise_spring, spring_block, stif
 from ..inputs import limits
 from ..inputs.validation import count, finite_number, require
 from ..physics import wind
-from ..physics.forces import element_loops, gather_force, spring_loops
+from ..physics.forces import force_loops, gather_force
 from ..runtime import backend
 from ..runtime.plan import Loop, Once, Phase, Until
 from ..runtime.team import MAX_WORKERS
@@ -323,8 +323,7 @@ class ImplicitEuler(Integrator):
     def linearisation(self, model, forces, ws):
         """f_n, the linearisation at x_n and the CG start (r = b, p = z = r / diagonal); a
         Fabric's hinges are linearised between its bending phases (implicit_elements)."""
-        linear = (spring_loops(model) + element_loops(model)
-                  + implicit_elements.linear_loops(model))
+        linear = force_loops(model) + implicit_elements.linear_loops(model)
         if model.spring_count:
             linear += (Loop(model.spring_count, linearise_spring),)
         if model.altitude_count:

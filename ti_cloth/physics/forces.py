@@ -20,12 +20,12 @@ import numpy as np
 import taichi as ti
 
 from ..body.material import SpringKind
-from ..energies.altitude import altitude_energy, altitude_forces
-from ..energies.bending import bending_energy, bending_phases, hinge_angles
-from ..energies.faces import gather_corners
-from ..energies.isometric import isometric_energy, isometric_forces
-from ..energies.membrane import membrane_energy, membrane_forces
-from ..energies.springs import spring_energies, spring_forces
+from ..energies import SLOTS, TERMS
+from ..energies.altitude import altitude_energy
+from ..energies.bending import bending_energy, bending_phases
+from ..energies.isometric import isometric_energy
+from ..energies.membrane import membrane_energy
+from ..energies.springs import spring_energies
 from ..runtime import backend, plan
 from ..runtime.plan import Loop, Phase
 from . import wind
@@ -66,45 +66,32 @@ class ForceSettings:
         return self.tearable
 
 
-def spring_loops(model) -> tuple:
-    """The loops that evaluate every spring and altitude spring (spring_forces,
-    altitude_forces), none for a body without them."""
-    loops = ()
-    if model.spring_count:
-        loops += (Loop(model.spring_count, spring_forces),)
-    if model.altitude_count:
-        loops += (Loop(model.altitude_count, altitude_forces),)
-    return loops
+def force_loops(model) -> tuple:
+    """The loops of a force evaluation's first phase: each term's of energies.TERMS that the
+    model has (every spring, altitude spring and triangle membrane, and every hinge's angle or
+    every particle's isometric bending), in that order."""
+    return sum((term.force_loops(model) for term in TERMS), ())
 
 
 def spring_phases(model) -> tuple:
-    """The phases that evaluate every spring and altitude spring (spring_loops) and a Fabric's
-    elements (energies/: the membranes and hinge angles beside the springs, then the
-    bending moments and forces), none for a body without them."""
-    loops = spring_loops(model) + element_loops(model)
+    """The phases that evaluate every term the model has (force_loops, then the mid-edge
+    bending's moments and forces), none for a body without them."""
+    loops = force_loops(model)
     return ((Phase(*loops),) if loops else ()) + bending_phases(model)
 
 
 @ti.func
 def gather_force(model: ti.template(), state: ti.template(), forces: ti.template(), i,
                  springs: ti.template()):
-    """Total force on particle i: m g (Stuyck eq. 4.3) - drag m v + its springs' and elements'
-    forces, as spring_phases left them (springs=False: external loads only) + the wind's
+    """Total force on particle i: m g (Stuyck eq. 4.3) - drag m v + its terms' forces, as
+    spring_phases left them (springs=False: external loads only) + the wind's
     share."""
     f = model.particle_mass[i] * ti.Vector(forces.gravity)
     if ti.static(forces.drag > 0):
         f -= forces.drag * model.particle_mass[i] * state.particle_velocity[i]
     if ti.static(springs):
-        split = model.particle_spring_split[i]
-        for a in range(model.particle_spring_start[i], split):
-            f -= state.spring_force[model.adjacency_spring[a]]
-        for a in range(split, model.particle_spring_start[i + 1]):
-            f += state.spring_force[model.adjacency_spring[a]]
-        if ti.static(model.altitude_count > 0):
-            for a in range(model.particle_altitude_start[i], model.particle_altitude_start[i + 1]):
-                f += state.altitude_force[model.adjacency_altitude[a]]
-        if ti.static(model.face_count > 0):      # compiled only for a body with triangles
-            f += gather_elements(model, state, i)
+        for slots in ti.static(SLOTS):        # the terms' forces, in a fixed order
+            f = slots.gather(model, state, i, f)
     if ti.static(forces.has_wind):
         f += forces.wind.particle_wind_force[i]
     return f
@@ -176,26 +163,3 @@ def energies(cloth, positions: np.ndarray, velocities: np.ndarray, gravity,
     result["bending"] = bending
     result["total"] = kinetic + potential + result["spring"]
     return result
-
-
-@ti.func
-def gather_elements(model: ti.template(), state: ti.template(), i):
-    """The force of particle i's triangles and hinges (a body with triangles: gather_force
-    calls it only then)."""
-    total = gather_corners(model, state.face_force, state.hinge_force, i)
-    if ti.static(model.isometric):
-        total += state.particle_bend_force[i]
-    return total
-
-
-def element_loops(model) -> tuple:
-    """The loops of the first force phase: every membrane triangle and every hinge's angle, or
-    (isometric) every particle's bending force."""
-    loops = ()
-    if model.face_count:
-        loops += (Loop(model.face_count, membrane_forces),)
-    if model.isometric:
-        loops += (Loop(model.particle_count, isometric_forces),)
-    elif model.hinge_count:
-        loops += (Loop(model.hinge_count, hinge_angles),)
-    return loops
