@@ -9,6 +9,7 @@ from helpers import compiled, forget_compiled
 import ti_cloth as tc
 from ti_cloth.contact.broad_phase import contact_pairs
 from ti_cloth.contact.colliders.collision import resolve
+from ti_cloth.energies import springs
 from ti_cloth.integrators import implicit_euler, rk4, xpbd
 from ti_cloth.physics import handles, strain_limit, tearing, wind
 from ti_cloth.state import copy_positions
@@ -17,7 +18,7 @@ OPTIONAL = {
     "wind": wind.wind_on_triangle, "collisions": resolve,
     "collision snapshot": copy_positions, "relaxation": strain_limit.relax_stretched,
     "strain-limit velocity": strain_limit.follow_velocity, "tearing": tearing.tear_spring,
-    "handles": handles.move_held, "xpbd": xpbd.solve_spring,
+    "handles": handles.move_held, "xpbd": springs.xpbd_update,
     "xpbd prediction": xpbd.xpbd_predict, "implicit solve": implicit_euler.linearise_spring,
     "rk4 stages": rk4.rk4_stage, "self-collision": contact_pairs.list_pairs,
 }

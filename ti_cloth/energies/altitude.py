@@ -21,7 +21,7 @@ import taichi as ti
 
 from ..geometry import point_over_triangle, points_over_triangles
 from ..inputs.validation import as_array, require
-from ..runtime.plan import Loop
+from ..runtime.plan import ITEM, STATE, Loop
 
 
 def altitude_springs(positions: np.ndarray, tetrahedra) -> tuple[np.ndarray, np.ndarray]:
@@ -76,8 +76,7 @@ def altitude_gradient(positions: ti.template(), corner):
 
 
 @ti.func
-def altitude_forces(model: ti.template(), state: ti.template(), forces: ti.template(),
-                    work: ti.template(), stages: ti.template(), a, now: ti.template()):
+def altitude_forces(model: ti.template(), state: ti.template(), a):
     """altitude_force[4 a + c] = force of altitude spring a on its corner c (p, a, b, c): with
     g = (1, -w_a, -w_b, -w_c) and the rate dh/dt = n . sum_c g_c v_c,
     f_c = -(k (h - h0) + kd dh/dt) g_c n (Stuyck eq. 4.5 and 4.7 with the altitude for the
@@ -147,8 +146,7 @@ def xpbd_altitude(model: ti.template(), state: ti.template(), a, multiplier: ti.
 
 
 @ti.func
-def linearise_altitude(model: ti.template(), state: ti.template(), forces: ti.template(),
-                        ws: ti.template(), stages: ti.template(), a, now: ti.template()):
+def linearise_altitude(model: ti.template(), state: ti.template(), ws: ti.template(), a):
     """Altitude spring a: normal and corner weights at x_n."""
     corner = model.altitude_indices[a]
     n, _, g = altitude_gradient(state.particle_position, corner)
@@ -182,10 +180,12 @@ def altitudes_times(model: ti.template(), ws: ti.template(), i, dt):
     return result
 
 
-def force_loops(model) -> tuple:
+def force_loops(model, forces) -> tuple:
     """The loop of the first force phase that evaluates every altitude spring
     (altitude_forces)."""
-    return (Loop(model.altitude_count, altitude_forces),) if model.altitude_count else ()
+    if not model.altitude_count:
+        return ()
+    return (Loop(model.altitude_count, altitude_forces, model, STATE, ITEM),)
 
 
 @ti.func

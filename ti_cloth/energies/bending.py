@@ -48,7 +48,7 @@ Everything each solver needs of it, together:
 import numpy as np
 import taichi as ti
 
-from ..runtime.plan import Loop, Phase
+from ..runtime.plan import ITEM, STATE, Loop, Phase
 from .faces import face_intact, motion_in_step, multiplier_step
 
 # |theta / 2| past which t = tan(theta / 2) continues along its tangent line (a crease folded
@@ -224,8 +224,7 @@ def hinge_intact(model: ti.template(), state: ti.template(), e):
 
 
 @ti.func
-def hinge_angles(model: ti.template(), state: ti.template(), forces: ti.template(),
-                 work: ti.template(), stages: ti.template(), e, now: ti.template()):
+def hinge_angles(model: ti.template(), state: ti.template(), forces: ti.template(), e):
     """Hinge e: hinge_tangent = t - t_rest, hinge_rate = dt/dt, and the gradient of t on each
     corner into hinge_force[4 e + k] (hinge_forces scales it); all zero for a hinge without
     an angle or (tearing) beside a torn triangle."""
@@ -251,8 +250,7 @@ def hinge_angles(model: ti.template(), state: ti.template(), forces: ti.template
 
 
 @ti.func
-def face_moments(model: ti.template(), state: ti.template(), forces: ti.template(),
-                 work: ti.template(), stages: ti.template(), f, now: ti.template()):
+def face_moments(model: ti.template(), state: ti.template(), f):
     """face_moment[3 f + i] = dE_f/dt_i = sum_j B_ij (dt_j + beta rate_j), the moment of
     triangle f's bending energy 1/2 dt^T B dt on the hinge across its edge i (0 across a
     boundary edge, which has no hinge)."""
@@ -269,8 +267,7 @@ def face_moments(model: ti.template(), state: ti.template(), forces: ti.template
 
 
 @ti.func
-def hinge_forces(model: ti.template(), state: ti.template(), forces: ti.template(),
-                 work: ti.template(), stages: ti.template(), e, now: ti.template()):
+def hinge_forces(model: ti.template(), state: ti.template(), e):
     """hinge_force[4 e + k] = -(M_1 + M_2) grad_k t: the bending force of hinge e on its
     corner k, M the moments of its two triangles (face_moments)."""
     faces = model.hinge_faces[e]
@@ -285,8 +282,8 @@ def bending_phases(model, with_moments: tuple = (), with_forces: tuple = ()) -> 
     gradients, with_forces everything the moments' phase wrote)."""
     if not model.hinge_count or model.isometric:
         return ()
-    return (Phase(Loop(model.face_count, face_moments), *with_moments),
-            Phase(Loop(model.hinge_count, hinge_forces), *with_forces))
+    return (Phase(Loop(model.face_count, face_moments, model, STATE, ITEM), *with_moments),
+            Phase(Loop(model.hinge_count, hinge_forces, model, STATE, ITEM), *with_forces))
 
 
 @ti.func
@@ -421,8 +418,8 @@ def hinge_weight(model: ti.template(), f, i, dt, rhs: ti.template()):
 
 
 @ti.func
-def linearise_hinge(model: ti.template(), state: ti.template(), forces: ti.template(),
-                    ws: ti.template(), stages: ti.template(), e, now: ti.template()):
+def linearise_hinge(model: ti.template(), state: ti.template(), ws: ti.template(), e,
+                    now: ti.template()):
     """Hinge e at x_n (after hinge_angles left grad t in hinge_force, before hinge_forces):
     its gradient, grad t . v_n and the hinge-diagonal part of its blocks of A."""
     faces = model.hinge_faces[e]
@@ -472,9 +469,9 @@ def intact_hinges(cloth, alive: np.ndarray | None) -> np.ndarray:
     return alive[cloth.hinge_faces // 3].all(axis=1)
 
 
-def force_loops(model) -> tuple:
+def force_loops(model, forces) -> tuple:
     """The loop of the first force phase that measures every hinge (hinge_angles), for a
     model with hinges bent by the tangents (not Model.isometric); bending_phases follow."""
     if not model.hinge_count or model.isometric:
         return ()
-    return (Loop(model.hinge_count, hinge_angles),)
+    return (Loop(model.hinge_count, hinge_angles, model, STATE, forces, ITEM),)

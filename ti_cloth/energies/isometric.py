@@ -22,7 +22,7 @@ cannot tear. Everything each solver needs of it, together:
 import numpy as np
 import taichi as ti
 
-from ..runtime.plan import Loop
+from ..runtime.plan import ITEM, STATE, Loop
 from .bending import bending_stencils, hinges, intact_hinges
 from .faces import motion_in_step, multiplier_step
 
@@ -146,8 +146,7 @@ def isometric_sum(model: ti.template(), first: ti.template(), second: ti.templat
 
 
 @ti.func
-def isometric_forces(model: ti.template(), state: ti.template(), forces: ti.template(),
-                     work: ti.template(), stages: ti.template(), i, now: ti.template()):
+def isometric_forces(model: ti.template(), state: ti.template(), i):
     """particle_bend_force[i] = the isometric bending force on particle i (with the membranes,
     before any particle moves: it reads its neighbours' positions and velocities)."""
     state.particle_bend_force[i] = isometric_sum(model, state.particle_position,
@@ -222,7 +221,9 @@ def isometric_energy(cloth, positions: np.ndarray, alive: np.ndarray | None = No
     return float(0.5 * np.einsum("fix,fij,fjx->", w, reduced, w))
 
 
-def force_loops(model) -> tuple:
+def force_loops(model, forces) -> tuple:
     """The loop of the first force phase that sums every particle's bending force
     (isometric_forces), for a model bent by this model (Model.isometric)."""
-    return (Loop(model.particle_count, isometric_forces),) if model.isometric else ()
+    if not model.isometric:
+        return ()
+    return (Loop(model.particle_count, isometric_forces, model, STATE, ITEM),)

@@ -25,7 +25,7 @@ TOG 28(4), 2009, sec. 3). Everything each solver needs of it, together:
 import numpy as np
 import taichi as ti
 
-from ..runtime.plan import Loop
+from ..runtime.plan import ITEM, STATE, Loop
 from .faces import face_columns, face_intact, multiplier_step, store_corners
 
 
@@ -83,8 +83,7 @@ def membrane_energy(cloth, positions: np.ndarray, alive: np.ndarray | None = Non
 
 
 @ti.func
-def membrane_forces(model: ti.template(), state: ti.template(), forces: ti.template(),
-                    work: ti.template(), stages: ti.template(), f, now: ti.template()):
+def membrane_forces(model: ti.template(), state: ti.template(), forces: ti.template(), f):
     """face_force[3 f + c] = force of triangle f's membrane on its corner c:
     -A (F S) grad lambda_c, S = C (e + beta de/dt) with e = (E11, E22, 2 E12) the Green strain
     in the warp/weft frame (module doc; Bonet & Wood eq. 6.11, 7.13) and beta the
@@ -125,7 +124,8 @@ def xpbd_membrane(model: ti.template(), state: ti.template(), f, multiplier: ti.
 
 
 @ti.func
-def membrane_constraint(model: ti.template(), state: ti.template(), f, multiplier: ti.template(), dt):
+def membrane_constraint(model: ti.template(), state: ti.template(), f, multiplier: ti.template(),
+                        dt):
     corner = model.face_indices[f]
     g = model.face_gradient[f]
     warp, weft = face_columns(model, state.particle_position, f)
@@ -204,7 +204,7 @@ def corner_diagonal(warp, weft, s, c, g0, g1):
 
 @ti.func
 def linearise_face(model: ti.template(), state: ti.template(), forces: ti.template(),
-                   ws: ti.template(), stages: ti.template(), f, now: ti.template()):
+                   ws: ti.template(), f, now: ti.template()):
     """Triangle f at x_n: F's columns, the projected elastic stress, its stiffness times v_n
     (face_product, for the right-hand side) and the diagonal of its blocks of A."""
     warp, weft = face_columns(model, state.particle_position, f)
@@ -233,7 +233,9 @@ def linearise_face(model: ti.template(), state: ti.template(), forces: ti.templa
     ws.face_diagonal[3 * f + 2] = area * (stiff * second_stiff + h * h * second_geometric)
 
 
-def force_loops(model) -> tuple:
+def force_loops(model, forces) -> tuple:
     """The loop of the first force phase that evaluates every triangle's membrane
     (membrane_forces)."""
-    return (Loop(model.face_count, membrane_forces),) if model.face_count else ()
+    if not model.face_count:
+        return ()
+    return (Loop(model.face_count, membrane_forces, model, STATE, forces, ITEM),)

@@ -20,7 +20,7 @@ Which pairs are springs, their kinds and rest lengths come from the mesh (body/t
 import numpy as np
 import taichi as ti
 
-from ..runtime.plan import Loop
+from ..runtime.plan import ITEM, STATE, Loop
 
 
 @ti.func
@@ -48,8 +48,7 @@ def spring_force(xi, xj, vi, vj, rest, k, kd, relative: ti.template()):
 
 
 @ti.func
-def spring_forces(model: ti.template(), state: ti.template(), forces: ti.template(),
-                  work: ti.template(), stages: ti.template(), s, now: ti.template()):
+def spring_forces(model: ti.template(), state: ti.template(), forces: ti.template(), s):
     """spring_force[s] = force of spring s on its first end (eq. 4.5, 4.7), 0 once torn.
     (Altitude springs: altitude_forces; they do not tear.)"""
     i, j = model.spring_indices[s][0], model.spring_indices[s][1]
@@ -185,7 +184,7 @@ def block_times(m, d):
 
 @ti.func
 def linearise_spring(model: ti.template(), state: ti.template(), forces: ti.template(),
-                      ws: ti.template(), stages: ti.template(), s, now: ti.template()):
+                     ws: ti.template(), s):
     """Spring s: direction and clamped lateral factor at x_n."""
     i, j = model.spring_indices[s][0], model.spring_indices[s][1]
     d = state.particle_position[i] - state.particle_position[j]
@@ -215,9 +214,11 @@ def spring_energies(cloth, positions: np.ndarray, alive: np.ndarray | None = Non
     return per_spring
 
 
-def force_loops(model) -> tuple:
+def force_loops(model, forces) -> tuple:
     """The loop of the first force phase that evaluates every spring (spring_forces)."""
-    return (Loop(model.spring_count, spring_forces),) if model.spring_count else ()
+    if not model.spring_count:
+        return ()
+    return (Loop(model.spring_count, spring_forces, model, STATE, forces, ITEM),)
 
 
 @ti.func

@@ -20,13 +20,12 @@ import taichi as ti
 from ..inputs import limits
 from ..physics import wind
 from ..physics.forces import gather_force, spring_phases
-from ..runtime.plan import Loop, Phase
+from ..runtime.plan import ITEM, NOW, STAGES, STATE, Loop, Phase
 
 
 @ti.func
 def move_particle(model: ti.template(), state: ti.template(), forces: ti.template(),
-                  work: ti.template(), stages: ti.template(), i, now: ti.template(),
-                  integrator: ti.template()):
+                  stages: ti.template(), i, now: ti.template(), integrator: ti.template()):
     """Gather particle i's total force (springs already evaluated), keep it in
     particle_force, and move it (integrator.move); then, when stages.collides_on_move, its
     collision stage (stages.collide: the particle and where it was at the step's start)."""
@@ -42,8 +41,9 @@ def move_particle(model: ti.template(), state: ti.template(), forces: ti.templat
 
 def phases(integrator, model, forces) -> tuple:
     """A fused integrator's step: the wind, the springs, every particle's move."""
-    return (wind.phases(model, forces) + spring_phases(model)
-            + (Phase(Loop(model.particle_count, move_particle, integrator)),))
+    return (wind.phases(model, forces) + spring_phases(model, forces)
+            + (Phase(Loop(model.particle_count, move_particle, model, STATE, forces, STAGES, ITEM,
+                          NOW, integrator)),))
 
 
 def spring_work(model) -> int:

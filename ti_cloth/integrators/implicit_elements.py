@@ -27,7 +27,7 @@ from ..energies.bending import hinge_product, linearise_hinge, project_hinge
 from ..energies.faces import gather_corners
 from ..energies.membrane import face_product, linearise_face
 from ..runtime import backend
-from ..runtime.plan import Loop, Phase
+from ..runtime.plan import DT, ITEM, NOW, STATE, Loop, Phase
 
 
 def add_fields(ws, fields, face_count: int, hinge_count: int) -> None:
@@ -47,31 +47,10 @@ def add_fields(ws, fields, face_count: int, hinge_count: int) -> None:
 
 
 @ti.func
-def bend_velocity(model: ti.template(), state: ti.template(), forces: ti.template(),
-                  ws: ti.template(), stages: ti.template(), e, now: ti.template()):
-    """hinge_product = the bending stiffness times v_n on hinge e's corners."""
-    hinge_product(model, ws, e, now.dt, True)
-
-
-@ti.func
-def stretch_direction(model: ti.template(), state: ti.template(), forces: ti.template(),
-                      ws: ti.template(), stages: ti.template(), f, now: ti.template()):
+def stretch_direction(model: ti.template(), ws: ti.template(), f, now: ti.template()):
     """face_product = triangle f's membrane block of A times p."""
     h = now.dt
     face_product(model, ws, f, ws.p, h * h + h * model.face_damping[f], h * h)
-
-
-@ti.func
-def project_direction(model: ti.template(), state: ti.template(), forces: ti.template(),
-                      ws: ti.template(), stages: ti.template(), e, now: ti.template()):
-    project_hinge(model, ws, e, ws.p)
-
-
-@ti.func
-def bend_direction(model: ti.template(), state: ti.template(), forces: ti.template(),
-                   ws: ti.template(), stages: ti.template(), e, now: ti.template()):
-    """hinge_product = hinge e's bending block of A times p."""
-    hinge_product(model, ws, e, now.dt, False)
 
 
 @ti.func
@@ -95,29 +74,32 @@ def diagonal(model: ti.template(), ws: ti.template(), i, dt):
     return total
 
 
-def linear_loops(model) -> tuple:
+def linear_loops(model, forces, ws) -> tuple:
     """Loops of the first phase (beside the forces): every triangle's linearisation."""
-    return (Loop(model.face_count, linearise_face),) if model.face_count else ()
+    if not model.face_count:
+        return ()
+    return (Loop(model.face_count, linearise_face, model, STATE, forces, ws, ITEM, NOW),)
 
 
-def bending_loops(model) -> tuple:
+def bending_loops(model, ws) -> tuple:
     """(with the moments, with the hinge forces): energies/bending.bending_phases' extra
-    loops that linearise every hinge and apply its stiffness to v_n."""
+    loops that linearise every hinge, and apply its stiffness to v_n (hinge_product)."""
     if not model.hinge_count or model.isometric:
         return (), ()
-    return (Loop(model.hinge_count, linearise_hinge),), (Loop(model.hinge_count, bend_velocity),)
+    return ((Loop(model.hinge_count, linearise_hinge, model, STATE, ws, ITEM, NOW),),
+            (Loop(model.hinge_count, hinge_product, model, ws, ITEM, DT, True),))
 
 
-def product_phases(model, first: tuple) -> tuple:
+def product_phases(model, ws, first: tuple) -> tuple:
     """The phases before the particles gather A p: `first` (the caller's loops on p) with every
-    triangle's product and every hinge's projection, then every hinge's product."""
+    triangle's product and every hinge's projection on p, then every hinge's product."""
     loops = first
     if model.face_count:
-        loops += (Loop(model.face_count, stretch_direction),)
+        loops += (Loop(model.face_count, stretch_direction, model, ws, ITEM, NOW),)
     hinges = model.hinge_count and not model.isometric
     if hinges:
-        loops += (Loop(model.hinge_count, project_direction),)
+        loops += (Loop(model.hinge_count, project_hinge, model, ws, ITEM, ws.p),)
     phases = (Phase(*loops),) if loops else ()
     if hinges:
-        phases += (Phase(Loop(model.hinge_count, bend_direction)),)
+        phases += (Phase(Loop(model.hinge_count, hinge_product, model, ws, ITEM, DT, False)),)
     return phases

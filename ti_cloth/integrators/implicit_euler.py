@@ -39,7 +39,7 @@ from ..inputs.validation import count, finite_number, require
 from ..physics import wind
 from ..physics.forces import force_loops, gather_force
 from ..runtime import backend
-from ..runtime.plan import Loop, Once, Phase, Until
+from ..runtime.plan import ITEM, NOW, STATE, Loop, Once, Phase, Until
 from ..runtime.team import MAX_WORKERS
 from ..state import store_particle
 from . import fused, implicit_elements
@@ -86,15 +86,9 @@ class _Workspace:
 
 
 @ti.func
-def _project_velocity(model: ti.template(), state: ti.template(), forces: ti.template(),
-                      ws: ti.template(), stages: ti.template(), a, now: ti.template()):
+def _project_velocity(model: ti.template(), state: ti.template(), ws: ti.template(), a):
+    """altitude_projection[a] = G_a . v_n."""
     project_altitude(model, ws, state.particle_velocity, a)
-
-
-@ti.func
-def _project_direction(model: ti.template(), state: ti.template(), forces: ti.template(),
-                       ws: ti.template(), stages: ti.template(), a, now: ti.template()):
-    project_altitude(model, ws, ws.p, a)
 
 
 @ti.func
@@ -113,8 +107,7 @@ def _block_range(block, count):
 
 
 @ti.func
-def _gather_block(model: ti.template(), state: ti.template(), forces: ti.template(),
-                  ws: ti.template(), stages: ti.template(), block, now: ti.template()):
+def _gather_block(model: ti.template(), state: ti.template(), forces: ti.template(), block):
     """particle_force = f_n on the particles of `block` (springs evaluated)."""
     begin, end = _block_range(block, model.particle_count)
     for i in range(begin, end):
@@ -123,7 +116,7 @@ def _gather_block(model: ti.template(), state: ti.template(), forces: ti.templat
 
 @ti.func
 def _start_block(model: ti.template(), state: ti.template(), forces: ti.template(),
-                 ws: ti.template(), stages: ti.template(), block, now: ti.template()):
+                 ws: ti.template(), block, now: ti.template()):
     """Particles of `block`: right-hand side b = h (f_n + h K v_n), the 3x3 diagonal of A
     (preconditioner) and the CG start dv = 0, r = b, p = z = r / diagonal; the block's
     partial sums of r . z and b . b."""
@@ -177,8 +170,8 @@ def _start_block(model: ti.template(), state: ti.template(), forces: ti.template
 
 
 @ti.func
-def _apply_block(model: ti.template(), state: ti.template(), forces: ti.template(),
-                 ws: ti.template(), stages: ti.template(), block, now: ti.template()):
+def _apply_block(model: ti.template(), forces: ti.template(), ws: ti.template(), block,
+                 now: ti.template()):
     """ap = A p on the particles of `block` (rows of pinned particles 0), and its partial
     sum of p . ap."""
     dt, drag = now.dt, forces.drag
@@ -202,8 +195,7 @@ def _apply_block(model: ti.template(), state: ti.template(), forces: ti.template
 
 
 @ti.func
-def _update_block(model: ti.template(), state: ti.template(), forces: ti.template(),
-                  ws: ti.template(), stages: ti.template(), block, now: ti.template()):
+def _update_block(model: ti.template(), ws: ti.template(), block, now: ti.template()):
     """dv += alpha p, r -= alpha ap, z = r / diag on the particles of `block`; its partial
     sums of r . z and r . r."""
     alpha = ws.scalar[now.row * ROW + ALPHA]
@@ -221,8 +213,7 @@ def _update_block(model: ti.template(), state: ti.template(), forces: ti.templat
 
 
 @ti.func
-def _turn_block(model: ti.template(), state: ti.template(), forces: ti.template(),
-                ws: ti.template(), stages: ti.template(), block, now: ti.template()):
+def _turn_block(model: ti.template(), ws: ti.template(), block, now: ti.template()):
     """p = z + beta p on the particles of `block`."""
     beta = ws.scalar[now.row * ROW + BETA]
     begin, end = _block_range(block, model.particle_count)
@@ -231,8 +222,8 @@ def _turn_block(model: ti.template(), state: ti.template(), forces: ti.template(
 
 
 @ti.func
-def _advance_block(model: ti.template(), state: ti.template(), forces: ti.template(),
-                   ws: ti.template(), stages: ti.template(), block, now: ti.template()):
+def _advance_block(model: ti.template(), state: ti.template(), ws: ti.template(), block,
+                   now: ti.template()):
     """v_{n+1} = v_n + dv, x_{n+1} = x_n + h v_{n+1} on the particles of `block`."""
     begin, end = _block_range(block, model.particle_count)
     for i in range(begin, end):
@@ -241,8 +232,7 @@ def _advance_block(model: ti.template(), state: ti.template(), forces: ti.templa
 
 
 @ti.func
-def _begin_solve(model: ti.template(), state: ti.template(), forces: ti.template(),
-                 ws: ti.template(), now: ti.template()):
+def _begin_solve(ws: ti.template(), now: ti.template()):
     """The start's r . z, r . r and b . b (r = b), in the worker's row; no iteration yet."""
     total = _total(ws, ws.partial, ti.Vector([0.0, 0.0]))
     ws.scalar[now.row * ROW + RZ] = total[0]
@@ -252,15 +242,13 @@ def _begin_solve(model: ti.template(), state: ti.template(), forces: ti.template
 
 
 @ti.func
-def _step_length(model: ti.template(), state: ti.template(), forces: ti.template(),
-                 ws: ti.template(), now: ti.template()):
+def _step_length(ws: ti.template(), now: ti.template()):
     """alpha = r . z / p . Ap."""
     ws.scalar[now.row * ROW + ALPHA] = ws.scalar[now.row * ROW + RZ] / _total(ws, ws.partial_pap, 0.0)
 
 
 @ti.func
-def _next_direction(model: ti.template(), state: ti.template(), forces: ti.template(),
-                    ws: ti.template(), now: ti.template()):
+def _next_direction(ws: ti.template(), now: ti.template()):
     """beta = new r . z / old r . z; the new r . z and r . r; one more iteration."""
     sums = _total(ws, ws.partial, ti.Vector([0.0, 0.0]))
     ws.scalar[now.row * ROW + BETA] = sums[0] / ws.scalar[now.row * ROW + RZ]
@@ -312,8 +300,7 @@ class ImplicitEuler(Integrator):
         self.last_residual = math.sqrt(work.scalar[RR] / bb) if bb > 0 else 0.0
 
     @ti.func
-    def unconverged(self, model: ti.template(), state: ti.template(), forces: ti.template(),
-                    ws: ti.template(), now: ti.template()):
+    def unconverged(self, ws: ti.template(), now: ti.template()):
         """|r|^2 > tolerance^2 |b|^2 (in float64) and iterations left: CG goes on (b = 0,
         no load on a free particle: dv = 0 at once)."""
         row = now.row
@@ -323,35 +310,40 @@ class ImplicitEuler(Integrator):
     def linearisation(self, model, forces, ws):
         """f_n, the linearisation at x_n and the CG start (r = b, p = z = r / diagonal); a
         Fabric's hinges are linearised between its bending phases (implicit_elements)."""
-        linear = force_loops(model) + implicit_elements.linear_loops(model)
+        linear = force_loops(model, forces) + implicit_elements.linear_loops(model, forces, ws)
         if model.spring_count:
-            linear += (Loop(model.spring_count, linearise_spring),)
+            linear += (Loop(model.spring_count, linearise_spring, model, STATE, forces, ws, ITEM),)
         if model.altitude_count:
-            linear += (Loop(model.altitude_count, linearise_altitude),)
-        gather = Loop(ws.block_count, _gather_block)
-        start = Loop(ws.block_count, _start_block)
+            linear += (Loop(model.altitude_count, linearise_altitude, model, STATE, ws, ITEM),)
+        gather = Loop(ws.block_count, _gather_block, model, STATE, forces, ITEM)
+        start = Loop(ws.block_count, _start_block, model, STATE, forces, ws, ITEM, NOW)
         if model.altitude_count:
-            begin = (Phase(gather, Loop(model.altitude_count, _project_velocity)), Phase(start))
+            begin = (Phase(gather, Loop(model.altitude_count, _project_velocity, model, STATE, ws,
+                                        ITEM)),
+                     Phase(start))
         else:
             begin = (Phase(gather, start),)
-        bending = bending_phases(model, *implicit_elements.bending_loops(model))
+        bending = bending_phases(model, *implicit_elements.bending_loops(model, ws))
         return (wind.phases(model, forces) + ((Phase(*linear),) if linear else ()) + bending
-                + begin + (Once(_begin_solve),))
+                + begin + (Once(_begin_solve, ws, NOW),))
 
     def system_product(self, model, forces, ws):
         """ap = A p and its partial sums of p . ap."""
         project = ()
         if model.altitude_count:
-            project = (Loop(model.altitude_count, _project_direction),)
-        return (implicit_elements.product_phases(model, project)
-                + (Phase(Loop(ws.block_count, _apply_block)),))
+            project = (Loop(model.altitude_count, project_altitude, model, ws, ws.p, ITEM),)
+        return (implicit_elements.product_phases(model, ws, project)
+                + (Phase(Loop(ws.block_count, _apply_block, model, forces, ws, ITEM, NOW)),))
 
     def phases(self, model, forces, ws):
         """The linearisation, preconditioned CG until converged (three synchronisation points
         per iteration: after A p, the update, the new direction; every worker sums the same
         partial sums in block order, so all take the same decisions), the step."""
         iteration = (self.system_product(model, forces, ws)
-                     + (Once(_step_length), Phase(Loop(ws.block_count, _update_block)),
-                        Once(_next_direction), Phase(Loop(ws.block_count, _turn_block))))
-        return (self.linearisation(model, forces, ws) + (Until(self.unconverged, *iteration),)
-                + (Phase(Loop(ws.block_count, _advance_block)),))
+                     + (Once(_step_length, ws, NOW),
+                        Phase(Loop(ws.block_count, _update_block, model, ws, ITEM, NOW)),
+                        Once(_next_direction, ws, NOW),
+                        Phase(Loop(ws.block_count, _turn_block, model, ws, ITEM, NOW))))
+        return (self.linearisation(model, forces, ws)
+                + (Until(self.unconverged, *iteration, args=(ws, NOW)),)
+                + (Phase(Loop(ws.block_count, _advance_block, model, STATE, ws, ITEM, NOW)),))

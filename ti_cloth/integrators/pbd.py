@@ -13,7 +13,7 @@ from ..inputs.validation import count, finite_number, require
 from ..physics import wind
 from ..physics.forces import gather_force
 from ..runtime import backend
-from ..runtime.plan import Loop, Phase, Repeat, Sweep
+from ..runtime.plan import ITEM, NOW, STATE, Loop, Phase, Repeat, Sweep
 from ..state import store_particle
 from . import fused
 from .base import Integrator
@@ -31,17 +31,15 @@ class SweepOrder:
 
 
 @ti.func
-def velocity_from_positions(model: ti.template(), state: ti.template(), forces: ti.template(),
-                            work: ti.template(), stages: ti.template(), i, now: ti.template()):
+def velocity_from_positions(state: ti.template(), i, now: ti.template()):
     """v_{n+1} = (x_{n+1} - x_n) / h for particle i, with x_n in particle_prev_position."""
     x = state.particle_position[i]
     store_particle(state, i, x, (x - state.particle_prev_position[i]) / now.dt, now.step)
 
 
 @ti.func
-def _predict(model: ti.template(), state: ti.template(), forces: ti.template(),
-             work: ti.template(), stages: ti.template(), i, now: ti.template(),
-             integrator: ti.template()):
+def _predict(model: ti.template(), state: ti.template(), forces: ti.template(), i,
+             now: ti.template(), integrator: ti.template()):
     """Verlet prediction of particle i under its external forces (kept in particle_force)."""
     f = gather_force(model, state, forces, i, False)
     state.particle_force[i] = f
@@ -51,15 +49,13 @@ def _predict(model: ti.template(), state: ti.template(), forces: ti.template(),
 
 @ti.func
 def _relax_spring(model: ti.template(), state: ti.template(), forces: ti.template(),
-                  work: ti.template(), stages: ti.template(), t, now: ti.template(),
-                  integrator: ti.template()):
+                  work: ti.template(), t, integrator: ti.template()):
     relax(model, state, work.colours, t, ti.Vector(integrator.kind_stiffness), forces.tearable,
           0.0, False)
 
 
 @ti.func
-def _relax_altitude(model: ti.template(), state: ti.template(), forces: ti.template(),
-                    work: ti.template(), stages: ti.template(), t, now: ti.template(),
+def _relax_altitude(model: ti.template(), state: ti.template(), work: ti.template(), t,
                     integrator: ti.template()):
     relax_altitude(model, state, work.altitude_colours.order[t],
                    integrator.stiffness["altitude"])
@@ -124,10 +120,12 @@ class PBD(Integrator):
         colour by colour (work: the SweepOrder), velocities from positions."""
         passes = ()
         if model.spring_count:
-            passes += (Sweep(work.colours, _relax_spring, self),)
+            passes += (Sweep(work.colours, _relax_spring, model, STATE, forces, work, ITEM, self),)
         if model.altitude_count:
-            passes += (Sweep(work.altitude_colours, _relax_altitude, self),)
+            passes += (Sweep(work.altitude_colours, _relax_altitude, model, STATE, work, ITEM,
+                             self),)
         return (wind.phases(model, forces)
-                + (Phase(Loop(model.particle_count, _predict, self)),)
+                + (Phase(Loop(model.particle_count, _predict, model, STATE, forces, ITEM, NOW,
+                              self)),)
                 + ((Repeat(self.iterations, *passes),) if passes else ())
-                + (Phase(Loop(model.particle_count, velocity_from_positions)),))
+                + (Phase(Loop(model.particle_count, velocity_from_positions, STATE, ITEM, NOW)),))

@@ -8,7 +8,7 @@ import taichi as ti
 from ..physics import wind
 from ..physics.forces import gather_force, spring_phases
 from ..runtime import backend
-from ..runtime.plan import Loop, Once, Phase, Repeat
+from ..runtime.plan import ITEM, NOW, STATE, Loop, Once, Phase, Repeat
 from ..runtime.team import MAX_WORKERS
 from ..state import store_particle
 from . import fused
@@ -39,7 +39,7 @@ class _Stages:
 
 @ti.func
 def rk4_stage(model: ti.template(), state: ti.template(), forces: ti.template(),
-              work: ti.template(), stages: ti.template(), i, now: ti.template()):
+              work: ti.template(), i, now: ti.template()):
     """Stage k = (v, M^-1 f) of particle i at the current state (its total force gathered
     and kept in particle_force): add it, weighted, to the sums; move the particle to where
     the next stage is evaluated, or (last stage) to the step's result. The stage (0 to 3) is
@@ -68,14 +68,12 @@ def rk4_stage(model: ti.template(), state: ti.template(), forces: ti.template(),
 
 
 @ti.func
-def first_stage(model: ti.template(), state: ti.template(), forces: ti.template(),
-                work: ti.template(), now: ti.template()):
+def first_stage(work: ti.template(), now: ti.template()):
     work.stage[now.row * ROW] = 0
 
 
 @ti.func
-def next_stage(model: ti.template(), state: ti.template(), forces: ti.template(),
-               work: ti.template(), now: ti.template()):
+def next_stage(work: ti.template(), now: ti.template()):
     work.stage[now.row * ROW] = work.stage[now.row * ROW] + 1
 
 
@@ -101,9 +99,11 @@ class RK4(Integrator):
         """Four times: the wind and the springs at the stage's state, then every particle's
         stage (work: the _Stages), counted per worker: the stage is compiled once, not four
         times (a Fabric's rk4 step compiled in 26 s unrolled)."""
-        stage = (wind.phases(model, forces) + spring_phases(model)
-                 + (Phase(Loop(model.particle_count, rk4_stage)), Once(next_stage)))
-        return (Once(first_stage), Repeat(4, *stage))
+        stage = (wind.phases(model, forces) + spring_phases(model, forces)
+                 + (Phase(Loop(model.particle_count, rk4_stage, model, STATE, forces, work, ITEM,
+                               NOW)),
+                    Once(next_stage, work, NOW)))
+        return (Once(first_stage, work, NOW), Repeat(4, *stage))
 
     def mode_stable_step(self, w2, g):
         """h |lambda| within the stability region: 2 sqrt(2) / w undamped (the region's reach up

@@ -16,15 +16,15 @@ from ..inputs.validation import count
 from ..physics import wind
 from ..physics.forces import gather_force
 from ..runtime import backend
-from ..runtime.plan import Loop, Phase, Repeat, Sweep
+from ..runtime.plan import DT, ITEM, NOW, STATE, Loop, Phase, Repeat, Sweep
 from . import fused
 from .base import Integrator
 from .pbd import velocity_from_positions
 
 
 @ti.func
-def xpbd_predict(model: ti.template(), state: ti.template(), forces: ti.template(),
-             work: ti.template(), stages: ti.template(), i, now: ti.template()):
+def xpbd_predict(model: ti.template(), state: ti.template(), forces: ti.template(), i,
+                 now: ti.template()):
     """x~ = x_n + h (v_n + h M^-1 f_ext) for particle i, f_ext its external loads (kept in
     particle_force); x_n is kept in particle_prev_position."""
     state.particle_force[i] = gather_force(model, state, forces, i, False)
@@ -35,57 +35,42 @@ def xpbd_predict(model: ti.template(), state: ti.template(), forces: ti.template
 
 
 @ti.func
-def clear_spring(model: ti.template(), state: ti.template(), forces: ti.template(),
-                  work: ti.template(), stages: ti.template(), s, now: ti.template()):
+def clear_spring(work: ti.template(), s):
     work.value[s] = 0.0
 
 
 @ti.func
-def clear_altitude(model: ti.template(), state: ti.template(), forces: ti.template(),
-                    work: ti.template(), stages: ti.template(), a, now: ti.template()):
+def clear_altitude(work: ti.template(), a):
     work.altitude[a] = 0.0
 
 
 @ti.func
-def solve_spring(model: ti.template(), state: ti.template(), forces: ti.template(),
-                  work: ti.template(), stages: ti.template(), t, now: ti.template()):
-    xpbd_update(model, state, work.colours, t, work.value, now.dt, forces.tearable)
-
-
-@ti.func
-def solve_altitude(model: ti.template(), state: ti.template(), forces: ti.template(),
-                    work: ti.template(), stages: ti.template(), t, now: ti.template()):
+def solve_altitude(model: ti.template(), state: ti.template(), work: ti.template(), t,
+                   now: ti.template()):
     xpbd_altitude(model, state, work.altitude_colours.order[t], work.altitude, now.dt)
 
 
 @ti.func
-def clear_face(model: ti.template(), state: ti.template(), forces: ti.template(),
-               work: ti.template(), stages: ti.template(), f, now: ti.template()):
+def clear_face(work: ti.template(), f):
     work.membrane[f] = ti.Vector([0.0, 0.0, 0.0])
     work.bending[f] = 0.0 * work.bending[f]
 
 
 @ti.func
 def solve_membrane(model: ti.template(), state: ti.template(), forces: ti.template(),
-                   work: ti.template(), stages: ti.template(), t, now: ti.template()):
+                   work: ti.template(), t, now: ti.template()):
     xpbd_membrane(model, state, work.membrane_colours.order[t], work.membrane, now.dt,
                   forces.tearable)
 
 
 @ti.func
 def solve_bending(model: ti.template(), state: ti.template(), forces: ti.template(),
-                  work: ti.template(), stages: ti.template(), t, now: ti.template()):
+                  work: ti.template(), t, now: ti.template()):
     if ti.static(model.isometric):
         xpbd_isometric(model, state, work.bending_colours.order[t], work.bending, now.dt)
     else:
         xpbd_bending(model, state, work.bending_colours.order[t], work.bending, now.dt,
                      forces.tearable)
-
-
-@ti.func
-def damp_spring(model: ti.template(), state: ti.template(), forces: ti.template(),
-                 work: ti.template(), stages: ti.template(), t, now: ti.template()):
-    damp(model, state, work.colours, t, now.dt, forces.tearable)
 
 
 @backend.kernel_argument
@@ -151,20 +136,26 @@ class XPBD(Integrator):
         positions, and on a relative-damped body one pass of implicit damping."""
         clear, passes = (), ()
         if model.spring_count:
-            clear += (Loop(model.spring_count, clear_spring),)
-            passes += (Sweep(work.colours, solve_spring),)
+            clear += (Loop(model.spring_count, clear_spring, work, ITEM),)
+            passes += (Sweep(work.colours, xpbd_update, model, STATE, work.colours, ITEM,
+                             work.value, DT, forces.tearable),)
         if model.altitude_count:
-            clear += (Loop(model.altitude_count, clear_altitude),)
-            passes += (Sweep(work.altitude_colours, solve_altitude),)
+            clear += (Loop(model.altitude_count, clear_altitude, work, ITEM),)
+            passes += (Sweep(work.altitude_colours, solve_altitude, model, STATE, work, ITEM, NOW),)
         if model.face_count:
-            clear += (Loop(model.face_count, clear_face),)
-            passes += (Sweep(work.membrane_colours, solve_membrane).with_big_body(),)
+            clear += (Loop(model.face_count, clear_face, work, ITEM),)
+            passes += (Sweep(work.membrane_colours, solve_membrane, model, STATE, forces, work,
+                             ITEM, NOW).with_big_body(),)
         if model.hinge_count:
-            passes += (Sweep(work.bending_colours, solve_bending).with_big_body(),)
+            passes += (Sweep(work.bending_colours, solve_bending, model, STATE, forces, work,
+                             ITEM, NOW).with_big_body(),)
         damping = ()
         if model.spring_count and model.relative_damping:
-            damping = (Sweep(work.colours, damp_spring),)
+            damping = (Sweep(work.colours, damp, model, STATE, work.colours, ITEM, DT,
+                             forces.tearable),)
         return (wind.phases(model, forces)
-                + (Phase(Loop(model.particle_count, xpbd_predict), *clear),)
+                + (Phase(Loop(model.particle_count, xpbd_predict, model, STATE, forces, ITEM, NOW),
+                         *clear),)
                 + ((Repeat(self.iterations, *passes),) if passes else ())
-                + (Phase(Loop(model.particle_count, velocity_from_positions)),) + damping)
+                + (Phase(Loop(model.particle_count, velocity_from_positions, STATE, ITEM, NOW)),)
+                + damping)

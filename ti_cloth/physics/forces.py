@@ -27,7 +27,7 @@ from ..energies.isometric import isometric_energy
 from ..energies.membrane import membrane_energy
 from ..energies.springs import spring_energies
 from ..runtime import backend, plan
-from ..runtime.plan import Loop, Phase
+from ..runtime.plan import ITEM, STATE, Loop, Phase
 from . import wind
 
 
@@ -66,17 +66,17 @@ class ForceSettings:
         return self.tearable
 
 
-def force_loops(model) -> tuple:
+def force_loops(model, forces) -> tuple:
     """The loops of a force evaluation's first phase: each term's of energies.TERMS that the
     model has (every spring, altitude spring and triangle membrane, and every hinge's angle or
     every particle's isometric bending), in that order."""
-    return sum((term.force_loops(model) for term in TERMS), ())
+    return sum((term.force_loops(model, forces) for term in TERMS), ())
 
 
-def spring_phases(model) -> tuple:
+def spring_phases(model, forces) -> tuple:
     """The phases that evaluate every term the model has (force_loops, then the mid-edge
     bending's moments and forces), none for a body without them."""
-    loops = force_loops(model)
+    loops = force_loops(model, forces)
     return ((Phase(*loops),) if loops else ()) + bending_phases(model)
 
 
@@ -98,15 +98,13 @@ def gather_force(model: ti.template(), state: ti.template(), forces: ti.template
 
 
 @ti.func
-def total_force(model: ti.template(), state: ti.template(), forces: ti.template(),
-                work: ti.template(), stages: ti.template(), i, now: ti.template()):
+def total_force(model: ti.template(), state: ti.template(), forces: ti.template(), i):
     """particle_force[i] = the total force on particle i (springs evaluated)."""
     state.particle_force[i] = gather_force(model, state, forces, i, True)
 
 
 @ti.func
-def external_force(model: ti.template(), state: ti.template(), forces: ti.template(),
-                   work: ti.template(), stages: ti.template(), i, now: ti.template()):
+def external_force(model: ti.template(), state: ti.template(), forces: ti.template(), i):
     """particle_force[i] = the external loads on particle i (gravity, drag, wind)."""
     state.particle_force[i] = gather_force(model, state, forces, i, False)
 
@@ -117,12 +115,13 @@ class _Evaluation:
 
     def phases(self, model, forces, work):
         """The wind, every spring, every particle's total."""
-        return (wind.phases(model, forces) + spring_phases(model)
-                + (Phase(Loop(model.particle_count, total_force)),))
+        return (wind.phases(model, forces) + spring_phases(model, forces)
+                + (Phase(Loop(model.particle_count, total_force, model, STATE, forces, ITEM)),))
 
     def external(self, model, forces, work):
         """The wind, every particle's external loads."""
-        return wind.phases(model, forces) + (Phase(Loop(model.particle_count, external_force)),)
+        return wind.phases(model, forces) + (Phase(Loop(model.particle_count, external_force,
+                                                        model, STATE, forces, ITEM)),)
 
 
 EVALUATION = _Evaluation()

@@ -14,7 +14,7 @@ import taichi as ti
 from ..inputs import limits
 from ..inputs.validation import as_array, in_range, require
 from ..runtime import backend, plan
-from ..runtime.plan import Loop, Phase
+from ..runtime.plan import ITEM, NOW, STATE, Loop, Phase
 from ..runtime.transfer import upload
 
 
@@ -76,7 +76,7 @@ class HandleTable:
 
     def phases(self, model, forces, work) -> tuple:
         """The handle stage as phases (runtime/plan.py; `work` is this table)."""
-        return (Phase(Loop(self.capacity, move_held)),)
+        return (Phase(Loop(self.capacity, move_held, STATE, work, ITEM, NOW)),)
 
 
 class HandleSet:
@@ -208,8 +208,7 @@ class HandleSet:
 
 
 @ti.func
-def move_held(model: ti.template(), state: ti.template(), forces: ti.template(),
-              table: ti.template(), stages: ti.template(), h, now: ti.template()):
+def move_held(state: ti.template(), table: ti.template(), h, now: ti.template()):
     """Held particle h (if that many are held) on its target of the launch's step now.k, with
     the path's history: the previous position its target a step ago and velocity =
     (target - previous) / dt, whatever the integrator did to it in between (it moves pinned

@@ -25,7 +25,7 @@ import taichi as ti
 from ..inputs import limits
 from ..inputs.validation import in_range
 from ..runtime import backend, plan
-from ..runtime.plan import Loop, Phase
+from ..runtime.plan import ITEM, NOW, STATE, Loop, Phase
 from ..runtime.transfer import upload
 
 
@@ -87,7 +87,8 @@ class Seams:
 
     def phases(self, model, forces, work) -> tuple:
         """Keep the seam particles' positions, then pull each towards its partners."""
-        return (Phase(Loop(self.count, keep_seam_position)), Phase(Loop(self.count, sew)))
+        return (Phase(Loop(self.count, keep_seam_position, STATE, work, ITEM)),
+                Phase(Loop(self.count, sew, model, STATE, work, ITEM, NOW)))
 
     @property
     def launched(self):
@@ -100,14 +101,12 @@ class Seams:
 
 
 @ti.func
-def keep_seam_position(model: ti.template(), state: ti.template(), forces: ti.template(),
-                       seams: ti.template(), stages: ti.template(), s, now: ti.template()):
+def keep_seam_position(state: ti.template(), seams: ti.template(), s):
     seams.before[s] = state.particle_position[seams.particle[s]]
 
 
 @ti.func
-def sew(model: ti.template(), state: ti.template(), forces: ti.template(),
-        seams: ti.template(), stages: ti.template(), s, now: ti.template()):
+def sew(model: ti.template(), state: ti.template(), seams: ti.template(), s, now: ti.template()):
     """Seam particle s moved towards its partners (module doc), its velocity following."""
     i = seams.particle[s]
     w_i = model.particle_inv_mass[i]

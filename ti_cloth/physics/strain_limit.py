@@ -13,7 +13,7 @@ from ..energies.springs import relax
 from ..inputs import limits
 from ..inputs.validation import count, finite_number, require
 from ..runtime import backend, plan
-from ..runtime.plan import Loop, Phase, Repeat, Sweep
+from ..runtime.plan import ITEM, NOW, STATE, Loop, Phase, Repeat, Sweep
 
 
 @dataclass(frozen=True)
@@ -72,13 +72,13 @@ class StrainLimiter:
         sweeps = ()
         if model.spring_count:
             colours = model.spring_colouring()
-            sweeps += (Sweep(colours, relax_stretched, colours),)
+            sweeps += (Sweep(colours, relax_stretched, model, STATE, work, ITEM, colours),)
         if model.face_count:
             edges = model.edge_colouring()
-            sweeps += (Sweep(edges, relax_stretched, edges),)
-        return (Phase(Loop(model.particle_count, keep_position)),
+            sweeps += (Sweep(edges, relax_stretched, model, STATE, work, ITEM, edges),)
+        return (Phase(Loop(model.particle_count, keep_position, STATE, work, ITEM)),
                 Repeat(self.limit.passes, *sweeps),
-                Phase(Loop(model.particle_count, follow_velocity)))
+                Phase(Loop(model.particle_count, follow_velocity, STATE, work, ITEM, NOW)))
 
     @property
     def launched(self):
@@ -92,14 +92,12 @@ class StrainLimiter:
 
 
 @ti.func
-def keep_position(model: ti.template(), state: ti.template(), forces: ti.template(),
-                  limiter: ti.template(), stages: ti.template(), i, now: ti.template()):
+def keep_position(state: ti.template(), limiter: ti.template(), i):
     limiter.before[i] = state.particle_position[i]
 
 
 @ti.func
-def relax_stretched(model: ti.template(), state: ti.template(), forces: ti.template(),
-                    limiter: ti.template(), stages: ti.template(), t, now: ti.template(),
+def relax_stretched(model: ti.template(), state: ti.template(), limiter: ti.template(), t,
                     colours: ti.template()):
     """The spring at position t of the colour order `colours`, pulled back to
     (1 + max_strain) x rest if longer (and of a limited kind)."""
@@ -108,8 +106,7 @@ def relax_stretched(model: ti.template(), state: ti.template(), forces: ti.templ
 
 
 @ti.func
-def follow_velocity(model: ti.template(), state: ti.template(), forces: ti.template(),
-                    limiter: ti.template(), stages: ti.template(), i, now: ti.template()):
+def follow_velocity(state: ti.template(), limiter: ti.template(), i, now: ti.template()):
     """v += correction / dt, so force-based integrators carry on from the corrected motion
     (Verlet-type history already does: it differences positions)."""
     state.particle_velocity[i] = (state.particle_velocity[i]

@@ -11,7 +11,7 @@ import taichi as ti
 
 from ..inputs.validation import finite_number
 from ..runtime import backend, plan
-from ..runtime.plan import Loop, Phase
+from ..runtime.plan import ITEM, NOW, STATE, Loop, Phase
 
 
 @backend.kernel_argument
@@ -46,9 +46,9 @@ class Tearing:
         simulation passes: pool.py)."""
         loops = ()
         if model.spring_count:
-            loops += (Loop(model.spring_count, tear_spring),)
+            loops += (Loop(model.spring_count, tear_spring, model, STATE, work, ITEM, NOW),)
         if model.face_count:
-            loops += (Loop(model.face_count, tear_face),)
+            loops += (Loop(model.face_count, tear_face, model, STATE, work, ITEM, NOW),)
         return (Phase(*loops),)
 
     @property
@@ -71,8 +71,8 @@ RUNAWAY_STRAIN = 0.5
 
 
 @ti.func
-def tear_spring(model: ti.template(), state: ti.template(), forces: ti.template(),
-                tearing: ti.template(), stages: ti.template(), s, now: ti.template()):
+def tear_spring(model: ti.template(), state: ti.template(), tearing: ti.template(), s,
+                now: ti.template()):
     """Remove spring s if intact and longer than (1 + strain) x rest; record the step it tore.
     A tear more than RUNAWAY_STRAIN past the tear strain flags the step as diverged
     (state.first_bad_step)."""
@@ -88,8 +88,8 @@ def tear_spring(model: ti.template(), state: ti.template(), forces: ti.template(
 
 
 @ti.func
-def tear_face(model: ti.template(), state: ti.template(), forces: ti.template(),
-              tearing: ti.template(), stages: ti.template(), f, now: ti.template()):
+def tear_face(model: ti.template(), state: ti.template(), tearing: ti.template(), f,
+              now: ti.template()):
     """Remove a Fabric's triangle f if intact and one of its edges is longer than
     (1 + strain) x its rest length; record the step; flag a runaway as tear_spring does."""
     if state.face_alive[f] != 0:

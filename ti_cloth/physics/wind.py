@@ -28,7 +28,7 @@ from ..body.mesh import vertex_triangles
 from ..inputs import limits
 from ..inputs.validation import as_array, finite_number, in_range, integer, require
 from ..runtime import backend
-from ..runtime.plan import Loop, Phase
+from ..runtime.plan import ITEM, NOW, STATE, Loop, Phase
 from ..runtime.transfer import upload
 
 TURBULENCE_MODES = 8
@@ -172,8 +172,7 @@ class WindField:
 
 
 @ti.func
-def wind_on_triangle(model: ti.template(), state: ti.template(), forces: ti.template(),
-                     work: ti.template(), stages: ti.template(), t, now: ti.template()):
+def wind_on_triangle(state: ti.template(), forces: ti.template(), t, now: ti.template()):
     """Triangle t's aerodynamic force (module doc) in the wind of row now.k of the schedule,
     a third of it kept per corner in triangle_force. The WindField is a template argument, so
     its frozen Wind's coefficients are compile-time constants."""
@@ -211,8 +210,7 @@ def wind_on_triangle(model: ti.template(), state: ti.template(), forces: ti.temp
 
 
 @ti.func
-def wind_on_particle(model: ti.template(), state: ti.template(), forces: ti.template(),
-                     work: ti.template(), stages: ti.template(), i, now: ti.template()):
+def wind_on_particle(forces: ti.template(), i):
     """Particle i's wind force: the forces of its triangles, gathered in a fixed order."""
     wind = forces.wind
     f = ti.Vector([0.0, 0.0, 0.0])
@@ -226,5 +224,5 @@ def phases(model, forces) -> tuple:
     triangle's force, then every particle's share (forces.gather_force adds it)."""
     if forces.wind is None:
         return ()
-    return (Phase(Loop(forces.wind.triangle_count, wind_on_triangle)),
-            Phase(Loop(model.particle_count, wind_on_particle)))
+    return (Phase(Loop(forces.wind.triangle_count, wind_on_triangle, STATE, forces, ITEM, NOW)),
+            Phase(Loop(model.particle_count, wind_on_particle, forces, ITEM)))

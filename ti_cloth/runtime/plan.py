@@ -3,21 +3,26 @@
 An integrator (or any owner of phases: forces.EVALUATION) writes its step once, as a tuple of
 nodes returned by a method (`phases(model, forces, work)`):
 
-    Phase(Loop(count, body), ...)   loops over items that read only what earlier phases wrote;
-                                    they end at a synchronisation point
-    Sweep(colouring, body)          the items of a colouring, colour by colour, a
-                                    synchronisation point after each colour
-    Once(body)                      a scalar computation (a sum of partial sums, a decision),
-                                    done by every worker on its own row of a workspace
-    Repeat(count, leaves...)        the leaves (Phase, Sweep, Once) `count` times
-    Until(test, leaves...)          the leaves while test(...) holds
+    Phase(Loop(count, body, *args), ...)   loops over items that read only what earlier
+                                           phases wrote; they end at a synchronisation point
+    Sweep(colouring, body, *args)          the items of a colouring, colour by colour, a
+                                           synchronisation point after each colour
+    Once(body, *args)                      a scalar computation (a sum of partial sums, a
+                                           decision), done by every worker on its own row of
+                                           a workspace
+    Repeat(count, leaves...)               the leaves (Phase, Sweep, Once) `count` times
+    Until(test, leaves..., args=())        the leaves while test(*args) holds
 
-Bodies are ti.funcs: a Loop's and a Sweep's body(model, state, forces, work, stages, i, now,
-*extra) handles item i; a Once body and an Until test take (model, state, forces, work, now).
-`now` is a struct of dt, step (the step's global index), k (its index in the launch: rows of
-tables scheduled before the launch), start (1: the state has no history yet) and row (the
-worker's row of per-worker scalars; 0 in a launch per phase). `stages` tells a body which
-stages run inside the step (stepping.TeamStages; STAGELESS in a launch per phase).
+Bodies are ti.funcs that take what they need: a node holds its body and the body's arguments,
+`Loop(count, body, *args)`, and the runner calls body(*args) for each item, with these
+placeholders among the args filled in (bind): ITEM, the item (a Loop's index, a Sweep's
+position in its colour order); STATE, the State being stepped; DT, the step [s]; NOW, the step
+as a struct of dt, step (its global index), k (its index in the launch: rows of tables
+scheduled before the launch), start (1: the state has no history yet) and row (the worker's
+row of per-worker scalars; 0 in a launch per phase); STAGES, the stages running inside the
+step (stepping.TeamStages; STAGELESS in a launch per phase). The model, the force settings
+and the workspace are given to the method that writes the nodes (`phases(model, forces,
+work)`), which passes them as they are.
 
 Two runners read the same nodes:
 
@@ -45,12 +50,33 @@ from .team import SOLO
 SERIAL_SPRING_LIMIT = 50_000   # serial launches faster at 24k springs, parallel ones at 97k
 
 
-class Loop:
-    """body(model, state, forces, work, stages, i, now, *extra) for i in 0 .. count - 1
-    (count: a Python int, a compile-time constant)."""
+class Placeholder:
+    """An argument of a body that the runner fills in (module doc)."""
 
-    def __init__(self, count: int, body, *extra):
-        self.count, self.body, self.extra = int(count), body, extra
+    def __init__(self, name: str):
+        self.name = name
+
+    def __repr__(self) -> str:
+        return self.name
+
+
+ITEM, STATE, DT, NOW, STAGES = (Placeholder(name)
+                                for name in ("ITEM", "STATE", "DT", "NOW", "STAGES"))
+
+
+def bind(args: tuple, item, state, now, stages) -> tuple:
+    """`args` with the placeholders filled in (called at compile time: ti.static(bind(...)))."""
+    values = {ITEM: item, STATE: state, DT: now.dt if now is not None else None, NOW: now,
+              STAGES: stages}
+    return tuple(values[a] if isinstance(a, Placeholder) else a for a in args)
+
+
+class Loop:
+    """body(*args) for every item i in 0 .. count - 1 (count: a Python int, a compile-time
+    constant; ITEM among the args is i)."""
+
+    def __init__(self, count: int, body, *args):
+        self.count, self.body, self.args = int(count), body, args
 
 
 class Phase:
@@ -61,7 +87,7 @@ class Phase:
 
 
 class Sweep:
-    """body(..., t, now, *extra) for every position t of a colouring's order, colour by colour
+    """body(*args) for every position t of a colouring's order (ITEM), colour by colour
     (the items of one colour are independent), synchronising after each colour. colouring:
     an object with count, start (field, count + 1) and offsets (the same, a list).
 
@@ -69,8 +95,8 @@ class Sweep:
     a Sweep made with_big_body() is instead compiled once and launched per colour (a
     Fabric's bending constraint unrolled over 14 colours took 247 s to compile)."""
 
-    def __init__(self, colouring, body, *extra):
-        self.colouring, self.body, self.extra = colouring, body, extra
+    def __init__(self, colouring, body, *args):
+        self.colouring, self.body, self.args = colouring, body, args
         self.per_colour = False
 
     def with_big_body(self):
@@ -80,12 +106,12 @@ class Sweep:
 
 
 class Once:
-    """body(model, state, forces, work, now, *extra) once per row (every worker of a team
+    """body(*args) once per row (every worker of a team
     computes it for itself: it reads what the team wrote before the last synchronisation
     point and writes only row now.row of its workspace)."""
 
-    def __init__(self, body, *extra):
-        self.body, self.extra = body, extra
+    def __init__(self, body, *args):
+        self.body, self.args = body, args
 
 
 class Repeat:
@@ -96,11 +122,11 @@ class Repeat:
 
 
 class Until:
-    """The leaves while test(model, state, forces, work, now) is true (test reads only the
-    worker's row, so every worker decides alike)."""
+    """The leaves while test(*args) is true (test reads only the worker's row, so every worker
+    decides alike)."""
 
-    def __init__(self, test, *leaves):
-        self.test, self.leaves = test, leaves
+    def __init__(self, test, *leaves, args: tuple = ()):
+        self.test, self.leaves, self.args = test, leaves, args
 
 
 LEAVES = (Phase, Sweep, Once)
@@ -173,17 +199,17 @@ def launch_phases(owner: ti.template(), part: ti.template(), model: ti.template(
             for loop in ti.static(leaf.loops):
                 for i in range(loop.count):
                     now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0)
-                    loop.body(model, state, forces, work, STAGELESS, i, now, *loop.extra)
+                    loop.body(*ti.static(bind(loop.args, i, state, now, STAGELESS)))
         elif ti.static(isinstance(leaf, Sweep)):
             colours = leaf.colouring
             for c in ti.static(range(colours.count)):
                 for t in range(colours.offsets[c], colours.offsets[c + 1]):
                     now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0)
-                    leaf.body(model, state, forces, work, STAGELESS, t, now, *leaf.extra)
+                    leaf.body(*ti.static(bind(leaf.args, t, state, now, STAGELESS)))
         else:
             for _ in range(1):
                 now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0)
-                leaf.body(model, state, forces, work, now, *leaf.extra)
+                leaf.body(*ti.static(bind(leaf.args, None, state, now, STAGELESS)))
 
 
 @backend.kernel
@@ -195,7 +221,7 @@ def launch_colour(owner: ti.template(), part: ti.template(), model: ti.template(
     for leaf in ti.static(_leaves(nodes_of(owner, part, model, forces, work), path[0])[path[1]:path[1] + 1]):
         for t in range(begin, end):
             now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0)
-            leaf.body(model, state, forces, work, STAGELESS, t, now, *leaf.extra)
+            leaf.body(*ti.static(bind(leaf.args, t, state, now, STAGELESS)))
 
 
 def _launch_leaves(args, nodes, container: tuple, begin: int, end: int) -> None:
@@ -225,7 +251,7 @@ def _holds(owner: ti.template(), part: ti.template(), model: ti.template(), stat
     now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0)
     holds = 0
     for node in ti.static(nodes_of(owner, part, model, forces, work)[index:index + 1]):
-        holds = ti.i32(node.test(model, state, forces, work, now))
+        holds = ti.i32(node.test(*ti.static(bind(node.args, None, state, now, STAGELESS))))
     return holds
 
 
@@ -283,17 +309,17 @@ def _run_leaf(leaf: ti.template(), model: ti.template(), state: ti.template(),
         for loop in ti.static(leaf.loops):
             begin, end = team.share(loop.count, worker)
             for i in range(begin, end):
-                loop.body(model, state, forces, work, stages, i, now, *loop.extra)
+                loop.body(*ti.static(bind(loop.args, i, state, now, stages)))
         team.meet(worker)
     elif ti.static(isinstance(leaf, Sweep)):
         colours = leaf.colouring
         for c in range(colours.count):
             begin, end = team.share_range(colours.start[c], colours.start[c + 1], worker)
             for t in range(begin, end):
-                leaf.body(model, state, forces, work, stages, t, now, *leaf.extra)
+                leaf.body(*ti.static(bind(leaf.args, t, state, now, stages)))
             team.meet(worker)
     else:
-        leaf.body(model, state, forces, work, now, *leaf.extra)
+        leaf.body(*ti.static(bind(leaf.args, None, state, now, stages)))
 
 
 @ti.func
@@ -308,7 +334,7 @@ def run_team(nodes: ti.template(), model: ti.template(), state: ti.template(),
                 for leaf in ti.static(node.leaves):
                     _run_leaf(leaf, model, state, forces, work, stages, team, worker, now)
         elif ti.static(isinstance(node, Until)):
-            while node.test(model, state, forces, work, now):
+            while node.test(*ti.static(bind(node.args, None, state, now, stages))):
                 for leaf in ti.static(node.leaves):
                     _run_leaf(leaf, model, state, forces, work, stages, team, worker, now)
         else:

@@ -17,7 +17,7 @@ import taichi as ti
 from ...body.mesh import triangle_edges, unique_rows
 from ...inputs import limits
 from ...runtime import backend
-from ...runtime.plan import Loop, Phase
+from ...runtime.plan import ITEM, NOW, Loop, Phase
 from ...runtime.transfer import upload
 from .candidate_lists import FAR, LISTED, SKIN, CandidateLists
 
@@ -204,13 +204,15 @@ class AnimatedBodies:
             self._cache[key] = c.vertices_at(t)
         return self._cache[key]
 
-    def phases(self) -> tuple:
+    def phases(self, colliders) -> tuple:
         """Place every vertex, then every triangle's swept box (and each body's epoch), then
-        the blocks', then the groups' (before the particles' loop of the collision stage)."""
-        return (Phase(Loop(self.vertex_total, place_vertex)),
-                Phase(Loop(self.triangle_total, triangle_box), Loop(self.count, body_drift)),
-                Phase(Loop(self.block_total, block_box)),
-                Phase(Loop(self.group_total, group_box)))
+        the blocks', then the groups' (before the particles' loop of the collision stage of
+        `colliders`, the ColliderSet these bodies belong to)."""
+        return (Phase(Loop(self.vertex_total, place_vertex, colliders, ITEM, NOW)),
+                Phase(Loop(self.triangle_total, triangle_box, colliders, ITEM),
+                      Loop(self.count, body_drift, colliders, ITEM)),
+                Phase(Loop(self.block_total, block_box, colliders, ITEM)),
+                Phase(Loop(self.group_total, group_box, colliders, ITEM)))
 
 
 @ti.func
@@ -236,8 +238,7 @@ def _vertex_at(bodies: ti.template(), b, local, boundary, dt):
 
 
 @ti.func
-def place_vertex(model: ti.template(), state: ti.template(), forces: ti.template(),
-                 colliders: ti.template(), stages: ti.template(), v, now: ti.template()):
+def place_vertex(colliders: ti.template(), v, now: ti.template()):
     """Vertex v where its body's motion has it at the step's start and end."""
     bodies = colliders.bodies
     skin = bodies.skin * colliders.thickness[bodies.collider[bodies.vertex_body[v]]]
@@ -263,8 +264,7 @@ def _place_vertex(bodies: ti.template(), v, step, dt, skin):
 
 
 @ti.func
-def triangle_box(model: ti.template(), state: ti.template(), forces: ti.template(),
-                 colliders: ti.template(), stages: ti.template(), f, now: ti.template()):
+def triangle_box(colliders: ti.template(), f):
     """Triangle f's box over the step, grown by its collider's thickness."""
     _triangle_box(colliders, colliders.bodies, f)
 
@@ -292,16 +292,14 @@ def _union(bodies: ti.template(), target, first, end):
 
 
 @ti.func
-def block_box(model: ti.template(), state: ti.template(), forces: ti.template(),
-              colliders: ti.template(), stages: ti.template(), k, now: ti.template()):
+def block_box(colliders: ti.template(), k):
     """Block k's box: the union of its triangles'."""
     bodies = colliders.bodies
     _union(bodies, bodies.triangle_total + k, bodies.block_first[k], bodies.block_first[k + 1])
 
 
 @ti.func
-def group_box(model: ti.template(), state: ti.template(), forces: ti.template(),
-              colliders: ti.template(), stages: ti.template(), g, now: ti.template()):
+def group_box(colliders: ti.template(), g):
     """Group g's box: the union of its blocks'."""
     bodies = colliders.bodies
     offset = bodies.triangle_total
@@ -310,8 +308,7 @@ def group_box(model: ti.template(), state: ti.template(), forces: ti.template(),
 
 
 @ti.func
-def body_drift(model: ti.template(), state: ti.template(), forces: ti.template(),
-               colliders: ti.template(), stages: ti.template(), b, now: ti.template()):
+def body_drift(colliders: ti.template(), b):
     """Body b's vertices against where they were when its candidate lists were made: once
     one has moved more than SKIN x thickness (place_vertex marks it), every list of it is
     stale (a new epoch), and the positions now become the new reference (each vertex takes

@@ -91,8 +91,7 @@ class EdgeContacts:
 
 
 @ti.func
-def edge_against_bodies(model: ti.template(), state: ti.template(), forces: ti.template(),
-                        colliders: ti.template(), stages: ti.template(), e,
+def edge_against_bodies(model: ti.template(), state: ti.template(), colliders: ti.template(), e,
                         now: ti.template()):
     """Cloth edge e against every animated body's edges (module doc): its ends' moves. Only
     an edge one of whose particles is marked moved: every particle for the step's first pass
@@ -166,8 +165,8 @@ def _consider(bodies: ti.template(), f, query, found):
 
 
 @ti.func
-def follow_edges(model: ti.template(), state: ti.template(), forces: ti.template(),
-                 colliders: ti.template(), stages: ti.template(), i, now: ti.template()):
+def follow_edges(model: ti.template(), state: ti.template(), colliders: ti.template(), i,
+                 now: ti.template()):
     """Particle i moved by the mean of its touched edges' moves, without approach velocity
     along it relative to the body points they touched."""
     edges = colliders.edges

@@ -10,7 +10,7 @@ import taichi as ti
 from ...inputs import limits
 from ...inputs.validation import require
 from ...runtime import backend, plan
-from ...runtime.plan import Loop, Phase, Repeat
+from ...runtime.plan import ITEM, NOW, STATE, Loop, Phase, Repeat
 from ...runtime.transfer import upload
 from ...state import copy_positions
 from ..broad_phase.contact_pairs import cloth_edges
@@ -140,11 +140,16 @@ class ColliderSet:
         meshes placed, then every particle out of the colliders where they are placed
         (resolve), from its position at the step's start (step_start), then the cloth's
         edges out of the animated meshes' edges in EDGE_PASSES passes (animated_edges.py)."""
-        placing = self.bodies.phases() if self.animated else ()
-        edges = ((Repeat(EDGE_PASSES, Phase(Loop(self.edges.count, edge_against_bodies)),
-                         Phase(Loop(model.particle_count, follow_edges))),)
+        placing = self.bodies.phases(self) if self.animated else ()
+        edges = ((Repeat(EDGE_PASSES,
+                         Phase(Loop(self.edges.count, edge_against_bodies, model, STATE, work,
+                                    ITEM, NOW)),
+                         Phase(Loop(model.particle_count, follow_edges, model, STATE, work, ITEM,
+                                    NOW))),)
                  if self.edge_contact else ())
-        return placing + (Phase(Loop(model.particle_count, resolve)),) + edges
+        return (placing + (Phase(Loop(model.particle_count, resolve, model, STATE, work, ITEM,
+                                      NOW)),)
+                + edges)
 
     @property
     def launched(self):
@@ -411,8 +416,8 @@ def resolve_particle(model: ti.template(), state: ti.template(), colliders: ti.t
 
 
 @ti.func
-def resolve(model: ti.template(), state: ti.template(), forces: ti.template(),
-            colliders: ti.template(), stages: ti.template(), i, now: ti.template()):
+def resolve(model: ti.template(), state: ti.template(), colliders: ti.template(), i,
+            now: ti.template()):
     """resolve_particle for particle i, from where it was at the step's start; marked for
     the first pass over the cloth's edges (animated_edges.py)."""
     resolve_particle(model, state, colliders, i, colliders.step_start[i], now.dt)
