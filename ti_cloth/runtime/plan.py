@@ -66,8 +66,7 @@ ITEM, STATE, DT, NOW, STAGES = (Placeholder(name)
 
 def bind(args: tuple, item, state, now, stages) -> tuple:
     """`args` with the placeholders filled in (called at compile time: ti.static(bind(...)))."""
-    values = {ITEM: item, STATE: state, DT: now.dt if now is not None else None, NOW: now,
-              STAGES: stages}
+    values = {ITEM: item, STATE: state, DT: now.dt, NOW: now, STAGES: stages}
     return tuple(values[a] if isinstance(a, Placeholder) else a for a in args)
 
 
