@@ -15,8 +15,9 @@ Forces are evaluated once per element into per-element or per-corner slots (each
 force_loops: the loops of a force evaluation's first phase, none for a model without the
 term; the mid-edge bending adds its later phases, bending_phases) and gathered per particle
 in a fixed order (each slot kind's gather), so runs are deterministic; physics/forces.py
-runs them in the order of TERMS and SLOTS. A new term is a module here and a line in TERMS
-(and one in SLOTS if it brings a kind of slot of its own). This package sits below body/
+runs them in the order of TERMS and SLOTS, implicit Euler its rows in the order of ROWS. A
+new term is a module here and a line in TERMS (and one in SLOTS and ROWS if it brings a kind
+of slot of its own). This package sits below body/
 (which builds a Cloth's rest data with it) and imports only geometry.py, inputs/ and
 runtime/.
 """
@@ -28,3 +29,7 @@ TERMS = (springs, altitude, membrane, isometric, bending)
 # the per-particle gathers of the terms' force slots, in this order (their gather): springs',
 # altitude springs', the triangle terms' corners (faces.py)
 SLOTS = (springs, altitude, faces)
+# the rows of implicit Euler's system, in this order (implicit_start: K v_n and A's 3x3
+# diagonal; implicit_product: A p): springs', altitude springs', the triangle terms' (faces.py),
+# the isometric bending's
+ROWS = (springs, altitude, faces, isometric)

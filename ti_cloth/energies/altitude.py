@@ -196,3 +196,26 @@ def gather(model: ti.template(), state: ti.template(), i, f):
         for a in range(model.particle_altitude_start[i], model.particle_altitude_start[i + 1]):
             f += state.altitude_force[model.adjacency_altitude[a]]
     return f
+
+
+@ti.func
+def implicit_start(model: ti.template(), state: ti.template(), forces: ti.template(),
+                   ws: ti.template(), i, dt, kv, diagonal):
+    """(kv, diagonal) with particle i's altitude springs: k g_i n (G . v_n) and
+    (h^2 k + h kd) g_i^2 n n on the diagonal (implicit Euler)."""
+    if ti.static(model.altitude_count > 0):
+        for a in range(model.particle_altitude_start[i], model.particle_altitude_start[i + 1]):
+            code = model.adjacency_altitude[a]
+            e = code // 4
+            n = ws.altitude_normal[e]
+            g = ws.altitude_weight[code]
+            kv += model.altitude_stiffness[e] * g * ws.altitude_projection[e] * n
+            diagonal += ((dt * dt * model.altitude_stiffness[e]
+                          + dt * model.altitude_damping[e]) * g * g * n * n)
+    return kv, diagonal
+
+
+@ti.func
+def implicit_product(model: ti.template(), ws: ti.template(), i, dt, ap):
+    """ap with particle i's rows of the altitude springs' block times the direction."""
+    return ap + altitudes_times(model, ws, i, dt)

@@ -91,3 +91,43 @@ def gather(model: ti.template(), state: ti.template(), i, f):
             total += state.particle_bend_force[i]
         f += total
     return f
+
+
+@ti.func
+def element_products(model: ti.template(), ws: ti.template(), i):
+    """Particle i's rows of the elements' products (stiffness times v_n after the
+    linearisation, the blocks of A times p after product_phases); the isometric bending's
+    (a constant Q) are isometric.py's."""
+    return gather_corners(model, ws.face_product, ws.hinge_product, i)
+
+
+@ti.func
+def element_diagonal(model: ti.template(), ws: ti.template(), i, dt):
+    """The elements' share of particle i's 3x3 diagonal of A (preconditioner); the isometric
+    bending's Q_ii = sum of -Q_il over its neighbours (rows sum to 0), the same on each axis."""
+    total = gather_corners(model, ws.face_diagonal, ws.hinge_diagonal, i)
+    if ti.static(model.isometric):
+        weight = 0.0
+        for c in range(model.particle_bend_start[i], model.particle_bend_start[i + 1]):
+            weight += dt * dt * model.bend_stiffness[c] + dt * model.bend_damping[c]
+        total += weight * ti.Vector([1.0, 1.0, 1.0])
+    return total
+
+
+@ti.func
+def implicit_start(model: ti.template(), state: ti.template(), forces: ti.template(),
+                   ws: ti.template(), i, dt, kv, diagonal):
+    """(kv, diagonal) with particle i's rows of the triangle terms' stiffness times v_n and
+    their share of A's 3x3 diagonal (a body with triangles; implicit Euler)."""
+    if ti.static(model.face_count > 0):
+        kv += element_products(model, ws, i)
+        diagonal += element_diagonal(model, ws, i, dt)
+    return kv, diagonal
+
+
+@ti.func
+def implicit_product(model: ti.template(), ws: ti.template(), i, dt, ap):
+    """ap with particle i's rows of the triangle terms' blocks times the direction."""
+    if ti.static(model.face_count > 0):
+        ap += element_products(model, ws, i)
+    return ap

@@ -227,3 +227,21 @@ def force_loops(model, forces) -> tuple:
     if not model.isometric:
         return ()
     return (Loop(model.particle_count, isometric_forces, model, STATE, ITEM),)
+
+
+@ti.func
+def implicit_start(model: ti.template(), state: ti.template(), forces: ti.template(),
+                   ws: ti.template(), i, dt, kv, diagonal):
+    """(kv, diagonal) with particle i's row of Q v_n (its diagonal is faces.implicit_start's,
+    with the triangles')."""
+    if ti.static(model.isometric):
+        kv += isometric_velocity(model, state, i)
+    return kv, diagonal
+
+
+@ti.func
+def implicit_product(model: ti.template(), ws: ti.template(), i, dt, ap):
+    """ap with particle i's row of (h^2 + h beta) Q p."""
+    if ti.static(model.isometric):
+        ap += isometric_product(model, ws, i, dt)
+    return ap

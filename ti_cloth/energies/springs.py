@@ -231,3 +231,35 @@ def gather(model: ti.template(), state: ti.template(), i, f):
     for a in range(split, model.particle_spring_start[i + 1]):
         f += state.spring_force[model.adjacency_spring[a]]
     return f
+
+
+@ti.func
+def implicit_start(model: ti.template(), state: ti.template(), forces: ti.template(),
+                   ws: ti.template(), i, dt, kv, diagonal):
+    """(kv, diagonal) with particle i's springs: their stiffness times v_n (K v_n's row, the
+    linearisation's normal and lateral factor) and their blocks of h^2 K + h D, each kept per
+    adjacency slot for the products (ws.adjacency_block; a torn spring damps no more) and
+    added to the 3x3 diagonal (implicit Euler)."""
+    vi = state.particle_velocity[i]
+    for a in range(model.particle_spring_start[i], model.particle_spring_start[i + 1]):
+        s = model.adjacency_spring[a]
+        j = model.adjacency_other[a]
+        n, c = ws.spring_normal[s], ws.spring_lateral[s]
+        k, kd = model.spring_stiffness[s], model.spring_damping[s]
+        kv += stiffness_times(k, n, c, vi - state.particle_velocity[j])
+        if ti.static(forces.tearable):
+            if state.spring_alive[s] == 0:
+                kd = 0.0
+        m = spring_block(k, kd, n, c, dt, model.relative_damping)
+        ws.adjacency_block[a] = m
+        diagonal += ti.Vector([m[0], m[1], m[2]])
+    return kv, diagonal
+
+
+@ti.func
+def implicit_product(model: ti.template(), ws: ti.template(), i, dt, ap):
+    """ap with particle i's rows of the springs' blocks times the direction ws.p."""
+    pi = ws.p[i]
+    for a in range(model.particle_spring_start[i], model.particle_spring_start[i + 1]):
+        ap += block_times(ws.adjacency_block[a], pi - ws.p[model.adjacency_other[a]])
+    return ap

@@ -24,7 +24,6 @@ blocks without the cross terms between a triangle's hinges (still positive).
 import taichi as ti
 
 from ..energies.bending import hinge_product, linearise_hinge, project_hinge
-from ..energies.faces import gather_corners
 from ..energies.membrane import face_product, linearise_face
 from ..runtime import backend
 from ..runtime.plan import DT, ITEM, NOW, STATE, Loop, Phase
@@ -51,27 +50,6 @@ def stretch_direction(model: ti.template(), ws: ti.template(), f, now: ti.templa
     """face_product = triangle f's membrane block of A times p."""
     h = now.dt
     face_product(model, ws, f, ws.p, h * h + h * model.face_damping[f], h * h)
-
-
-@ti.func
-def stiffness_times(model: ti.template(), ws: ti.template(), i):
-    """Particle i's rows of the elements' products (stiffness times v_n after the
-    linearisation, the blocks of A times p after product_phases); the isometric bending's
-    (a constant Q) are isometric_velocity's and isometric_product's."""
-    return gather_corners(model, ws.face_product, ws.hinge_product, i)
-
-
-@ti.func
-def diagonal(model: ti.template(), ws: ti.template(), i, dt):
-    """The elements' share of particle i's 3x3 diagonal of A (preconditioner); the isometric
-    bending's Q_ii = sum of -Q_il over its neighbours (rows sum to 0), the same on each axis."""
-    total = gather_corners(model, ws.face_diagonal, ws.hinge_diagonal, i)
-    if ti.static(model.isometric):
-        weight = 0.0
-        for c in range(model.particle_bend_start[i], model.particle_bend_start[i + 1]):
-            weight += dt * dt * model.bend_stiffness[c] + dt * model.bend_damping[c]
-        total += weight * ti.Vector([1.0, 1.0, 1.0])
-    return total
 
 
 def linear_loops(model, forces, ws) -> tuple:

@@ -26,14 +26,13 @@ import math
 
 import taichi as ti
 
+from ..energies import ROWS
 from ..energies.altitude import (
-    altitudes_times,
     linearise_altitude,
     project_altitude,
 )
 from ..energies.bending import bending_phases
-from ..energies.isometric import isometric_product, isometric_velocity
-from ..energies.springs import block_times, linearise_spring, spring_block, stiffness_times
+from ..energies.springs import linearise_spring
 from ..inputs import limits
 from ..inputs.validation import count, finite_number, require
 from ..physics import wind
@@ -125,36 +124,10 @@ def _start_block(model: ti.template(), state: ti.template(), forces: ti.template
     rz, bb = 0.0, 0.0
     for i in range(begin, end):
         free = ti.cast(model.particle_inv_mass[i] > 0, float)
-        vi = state.particle_velocity[i]
         kv = ti.Vector([0.0, 0.0, 0.0])
         diagonal = model.particle_mass[i] * (1.0 + dt * drag) * ti.Vector([1.0, 1.0, 1.0])
-        for a in range(model.particle_spring_start[i], model.particle_spring_start[i + 1]):
-            s = model.adjacency_spring[a]
-            j = model.adjacency_other[a]
-            n, c = ws.spring_normal[s], ws.spring_lateral[s]
-            k, kd = model.spring_stiffness[s], model.spring_damping[s]
-            kv += stiffness_times(k, n, c, vi - state.particle_velocity[j])
-            if ti.static(forces.tearable):
-                if state.spring_alive[s] == 0:
-                    kd = 0.0
-            m = spring_block(k, kd, n, c, dt, model.relative_damping)
-            ws.adjacency_block[a] = m
-            diagonal += ti.Vector([m[0], m[1], m[2]])
-        if ti.static(model.altitude_count > 0):
-            for a in range(model.particle_altitude_start[i],
-                           model.particle_altitude_start[i + 1]):
-                code = model.adjacency_altitude[a]
-                e = code // 4
-                n = ws.altitude_normal[e]
-                g = ws.altitude_weight[code]
-                kv += model.altitude_stiffness[e] * g * ws.altitude_projection[e] * n
-                diagonal += ((dt * dt * model.altitude_stiffness[e]
-                              + dt * model.altitude_damping[e]) * g * g * n * n)
-        if ti.static(model.face_count > 0):
-            kv += implicit_elements.stiffness_times(model, ws, i)
-            diagonal += implicit_elements.diagonal(model, ws, i, dt)
-        if ti.static(model.isometric):
-            kv += isometric_velocity(model, state, i)
+        for term in ti.static(ROWS):          # energies.ROWS, in a fixed order
+            kv, diagonal = term.implicit_start(model, state, forces, ws, i, dt, kv, diagonal)
         b = free * dt * (state.particle_force[i] - dt * kv)
         if free == 0:
             diagonal = ti.Vector([1.0, 1.0, 1.0])   # a pin's row is the identity (b = 0 there)
@@ -181,13 +154,8 @@ def _apply_block(model: ti.template(), forces: ti.template(), ws: ti.template(),
         free = ti.cast(model.particle_inv_mass[i] > 0, float)
         pi = ws.p[i]
         ap = model.particle_mass[i] * (1.0 + dt * drag) * pi
-        for a in range(model.particle_spring_start[i], model.particle_spring_start[i + 1]):
-            ap += block_times(ws.adjacency_block[a], pi - ws.p[model.adjacency_other[a]])
-        ap += altitudes_times(model, ws, i, dt)
-        if ti.static(model.face_count > 0):
-            ap += implicit_elements.stiffness_times(model, ws, i)
-        if ti.static(model.isometric):
-            ap += isometric_product(model, ws, i, dt)
+        for term in ti.static(ROWS):
+            ap = term.implicit_product(model, ws, i, dt, ap)
         ap *= free
         ws.ap[i] = ap
         pap += pi.dot(ap)
