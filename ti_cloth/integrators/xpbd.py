@@ -103,11 +103,12 @@ class XPBD(Integrator):
     backward Euler step of the same Hookean springs (compliance 1/k) the force-based
     integrators use, with axial damping kd; for a Fabric, nearly that of its membrane and
     bending energies with their Rayleigh damping (a pass sweeps the triangles' strains, then
-    their bending; what XPBD leaves out there: energies/faces.py). On a body with relative damping (Stuyck eq. 4.7)
-    the constraints are undamped and one pass of implicit relative damping on the new
-    velocities follows (energies/springs.py damp: each spring's backward Euler step in turn,
-    stable at any h); positions keep their solve, as in position-based damping (Mueller et al.
-    2007), and the next prediction starts from the damped velocities. Unconverged (few
+    their bending; what XPBD leaves out there: energies/faces.py). On a body with relative
+    damping (Stuyck eq. 4.7) the constraints are undamped and one pass of implicit relative
+    damping on the new velocities follows (energies/springs.py damp: each spring's backward
+    Euler step in turn, stable at any h); positions keep their solve, as in position-based
+    damping (Mueller et al. 2007), and the next prediction starts from the damped
+    velocities. Unconverged (few
     iterations, stiff springs, large h), the cloth is softer than its material.
     iterations: Gauss-Seidel passes per step, >= 1.
     Order 1. No step-size stability limit.
