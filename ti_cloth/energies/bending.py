@@ -329,7 +329,8 @@ def hinge_term(model: ti.template(), state: ti.template(), f, i: ti.template(),
         t = model.hinge_rest_tangent[e]
     g0, g1, g2, other_grad = valid * g0, valid * g1, valid * g2, valid * other_grad
     motion = (g0.dot(motion_in_step(state, face[0])) + g1.dot(motion_in_step(state, face[1]))
-              + g2.dot(motion_in_step(state, face[2])) + other_grad.dot(motion_in_step(state, other)))
+              + g2.dot(motion_in_step(state, face[2]))
+              + other_grad.dot(motion_in_step(state, other)))
     return valid * (t - model.hinge_rest_tangent[e]), g0, g1, g2, other_grad, other, motion
 
 

@@ -155,7 +155,7 @@ def isometric_forces(model: ti.template(), state: ti.template(), i):
 
 @ti.func
 def xpbd_isometric(model: ti.template(), state: ti.template(), f, multiplier: ti.template(), dt):
-    """XPBD for triangle f's isometric bending (a flat rest sheet: energies/isometric.isometric_matrix),
+    """XPBD for triangle f's isometric bending (a flat rest sheet: isometric_matrix),
     its multipliers in multiplier[f] (3 x 3: a hinge's row, an axis's column): the constraint
     is w_i = sum_s J_is x_s over its stencil s (Model.face_stencil_weight), linear and the same
     on each axis, with compliance B'^-1. Its gradients do not change within the step, so,
