@@ -1,8 +1,9 @@
-"""Geometry that forces, contact and attachments share, written once: a point over a
-triangle's plane (the unit normal, its signed height, its foot's barycentric coordinates), the
-nearest point of a triangle or of its edges, the closest points of two segments (Ericson,
-Real-Time Collision Detection, 3.4, 5.1.5 and 5.1.9) and the contact of two moving edges. Taichi functions, with numpy twins where
-the host needs the same answer (the altitude springs' rest heights, an attachment's binding).
+"""Geometry that forces, contact and attachments share, written once: a point over a triangle's
+plane (the unit normal, its signed height, its foot's barycentric coordinates), the nearest
+point of a triangle or of its edges, the closest points of two segments (Ericson, Real-Time
+Collision Detection, 3.4, 5.1.5 and 5.1.9) and the contact of two moving edges. Taichi
+functions, with numpy twins where the host needs the same answer (the altitude springs' rest
+heights, an attachment's binding).
 
 Degenerate input (a zero-length segment, a triangle of zero area) gives the distance to what
 is left of it, or a zero normal, never NaN.

@@ -4,9 +4,9 @@ integrator turns these into its own largest stable step (Integrator.stable_step)
 
 An altitude spring (Selle et al. 2008) linearised about rest is k G G^T with G = g (x) n, its
 altitude's gradient over its four corners (energies/altitude.py altitude_frames): at rest
-h = h0, so the curvature term k (h - h0) d^2h/dx^2 vanishes and this is exact there. A Fabric's elements are
-sums of such rank-one terms at rest too (rest_rank_one); all of them enter as
-rank_one_groups.
+h = h0, so the curvature term k (h - h0) d^2h/dx^2 vanishes and this is exact there. A
+Fabric's elements are sums of such rank-one terms at rest too (rest_rank_one); all of them
+enter as rank_one_groups.
 """
 
 from __future__ import annotations
