@@ -1,24 +1,10 @@
-"""A Fabric's elements in implicit Euler's system (implicit_euler.py): their linearisation at
-x_n and their share of the matrix-free product A p, A = M + h^2 H + h beta H_GN.
-
-Membrane triangle f (energies/membrane.membrane_forces; StVK on the Green strain E, S = C e):
-its Hessian is exactly A (J^T C J + S (x) I) (Bonet & Wood eq. 7.13-7.15), J = de/dx with
-de(u) = (warp . dwarp, weft . dweft, warp . dweft + weft . dwarp) for (dwarp, dweft) the
-columns of dF = sum_c u_c (x) grad lambda_c; the Gauss-Newton part A J^T C J is positive
-semi-definite; the geometric part S (x) I is not under compression, so S is projected onto its
-non-negative eigenvalues (the projection of Teran et al. 2005 for this term; Choi & Ko 2002's
-clamp for springs). Rayleigh damping adds h beta A J^T C J.
-
-Bending (E = 1/2 dt^T B dt per triangle, energies/bending.py): the Gauss-Newton Hessian
-sum_ij B_ij grad t_i grad t_j^T, positive semi-definite (B is a Gram matrix); the moments'
-term sum_i M_i Hess t_i is dropped as a spring's compressed lateral term is. Its product with
-p takes two loops: every hinge's s = grad t . p, then every hinge's response
-(sum over its two triangles of (h^2 + h beta) B_i. s) grad t.
-
-Each element writes its response per corner, which particles gather in the Model's fixed order
-(energies/faces.gather_corners): deterministic, no float atomics, as for forces. The
-preconditioner takes the 3x3 diagonals of the membrane blocks exactly and of the bending
-blocks without the cross terms between a triangle's hinges (still positive).
+"""A Fabric's elements in implicit Euler's system (implicit_euler.py): the workspace fields of
+their linearisation at x_n and of their share of the matrix-free product A p,
+A = M + h^2 H + h beta H_GN, and the loops and phases that fill them. The Hessians themselves
+are the terms' (energies/membrane.py: the StVK membrane's, its stress projected onto
+non-negative eigenvalues; energies/bending.py: the mid-edge bending's Gauss-Newton part, its
+product in two loops, every hinge's projection on p then its response; energies/faces.py: the
+per-corner products and 3x3 diagonals every particle gathers in the Model's fixed order).
 """
 
 import taichi as ti
