@@ -92,11 +92,80 @@ def altitude_forces(model: ti.template(), state: ti.template(), a):
         state.altitude_force[4 * a + c] = magnitude * g[c] * n
 
 
-def altitude_energy(cloth, positions: np.ndarray) -> float:
-    """sum 1/2 k (h - h0)^2 over the altitude springs [J], h the signed altitude of p over the
-    face (a, b, c) (altitude_gradient)."""
-    _, h, _ = altitude_frames(positions, cloth.altitude_indices)
-    return float(np.sum(0.5 * cloth.altitude_stiffness * (h - cloth.altitude_rest_length) ** 2))
+def force_loops(model, forces) -> tuple:
+    """The loop of the first force phase that evaluates every altitude spring
+    (altitude_forces)."""
+    if not model.altitude_count:
+        return ()
+    return (Loop(model.altitude_count, altitude_forces, model, STATE, ITEM),)
+
+
+@ti.func
+def gather(model: ti.template(), state: ti.template(), i, f):
+    """f with the forces of particle i's altitude springs on it, in the Model's fixed order
+    (compiled only for a body with altitude springs)."""
+    if ti.static(model.altitude_count > 0):
+        for a in range(model.particle_altitude_start[i], model.particle_altitude_start[i + 1]):
+            f += state.altitude_force[model.adjacency_altitude[a]]
+    return f
+
+
+@ti.func
+def linearise_altitude(model: ti.template(), state: ti.template(), ws: ti.template(), a):
+    """Altitude spring a: normal and corner weights at x_n."""
+    corner = model.altitude_indices[a]
+    n, _, g = altitude_gradient(state.particle_position, corner)
+    ws.altitude_normal[a] = n
+    for c in ti.static(range(4)):
+        ws.altitude_weight[4 * a + c] = g[c]
+
+
+@ti.func
+def project_altitude(model: ti.template(), ws: ti.template(), vectors: ti.template(), a):
+    """altitude_projection[a] = G_a . vectors = n . sum_c g_c vectors[corner c]."""
+    corner = model.altitude_indices[a]
+    total = 0.0
+    for c in ti.static(range(4)):
+        total += ws.altitude_weight[4 * a + c] * ws.altitude_normal[a].dot(vectors[corner[c]])
+    ws.altitude_projection[a] = total
+
+
+@ti.func
+def altitudes_times(model: ti.template(), ws: ti.template(), i, dt):
+    """Particle i's rows of (h^2 K + h D) times the vector altitude_projection was taken of,
+    over its altitude springs: (h^2 k + h kd) g_i n (G . vector)."""
+    result = ti.Vector([0.0, 0.0, 0.0])
+    if ti.static(model.altitude_count > 0):
+        for a in range(model.particle_altitude_start[i], model.particle_altitude_start[i + 1]):
+            code = model.adjacency_altitude[a]
+            e = code // 4
+            result += ((dt * dt * model.altitude_stiffness[e] + dt * model.altitude_damping[e])
+                       * ws.altitude_weight[code] * ws.altitude_projection[e]
+                       * ws.altitude_normal[e])
+    return result
+
+
+@ti.func
+def implicit_start(model: ti.template(), state: ti.template(), forces: ti.template(),
+                   ws: ti.template(), i, dt, kv, diagonal):
+    """(kv, diagonal) with particle i's altitude springs: k g_i n (G . v_n) and
+    (h^2 k + h kd) g_i^2 n n on the diagonal (implicit Euler)."""
+    if ti.static(model.altitude_count > 0):
+        for a in range(model.particle_altitude_start[i], model.particle_altitude_start[i + 1]):
+            code = model.adjacency_altitude[a]
+            e = code // 4
+            n = ws.altitude_normal[e]
+            g = ws.altitude_weight[code]
+            kv += model.altitude_stiffness[e] * g * ws.altitude_projection[e] * n
+            diagonal += ((dt * dt * model.altitude_stiffness[e]
+                          + dt * model.altitude_damping[e]) * g * g * n * n)
+    return kv, diagonal
+
+
+@ti.func
+def implicit_product(model: ti.template(), ws: ti.template(), i, dt, ap):
+    """ap with particle i's rows of the altitude springs' block times the direction."""
+    return ap + altitudes_times(model, ws, i, dt)
 
 
 @ti.func
@@ -145,77 +214,8 @@ def xpbd_altitude(model: ti.template(), state: ti.template(), a, multiplier: ti.
             state.particle_position[corner[c]] = x + weight[c] * dlambda * g[c] * n
 
 
-@ti.func
-def linearise_altitude(model: ti.template(), state: ti.template(), ws: ti.template(), a):
-    """Altitude spring a: normal and corner weights at x_n."""
-    corner = model.altitude_indices[a]
-    n, _, g = altitude_gradient(state.particle_position, corner)
-    ws.altitude_normal[a] = n
-    for c in ti.static(range(4)):
-        ws.altitude_weight[4 * a + c] = g[c]
-
-
-@ti.func
-def project_altitude(model: ti.template(), ws: ti.template(), vectors: ti.template(), a):
-    """altitude_projection[a] = G_a . vectors = n . sum_c g_c vectors[corner c]."""
-    corner = model.altitude_indices[a]
-    total = 0.0
-    for c in ti.static(range(4)):
-        total += ws.altitude_weight[4 * a + c] * ws.altitude_normal[a].dot(vectors[corner[c]])
-    ws.altitude_projection[a] = total
-
-
-@ti.func
-def altitudes_times(model: ti.template(), ws: ti.template(), i, dt):
-    """Particle i's rows of (h^2 K + h D) times the vector altitude_projection was taken of,
-    over its altitude springs: (h^2 k + h kd) g_i n (G . vector)."""
-    result = ti.Vector([0.0, 0.0, 0.0])
-    if ti.static(model.altitude_count > 0):
-        for a in range(model.particle_altitude_start[i], model.particle_altitude_start[i + 1]):
-            code = model.adjacency_altitude[a]
-            e = code // 4
-            result += ((dt * dt * model.altitude_stiffness[e] + dt * model.altitude_damping[e])
-                       * ws.altitude_weight[code] * ws.altitude_projection[e]
-                       * ws.altitude_normal[e])
-    return result
-
-
-def force_loops(model, forces) -> tuple:
-    """The loop of the first force phase that evaluates every altitude spring
-    (altitude_forces)."""
-    if not model.altitude_count:
-        return ()
-    return (Loop(model.altitude_count, altitude_forces, model, STATE, ITEM),)
-
-
-@ti.func
-def gather(model: ti.template(), state: ti.template(), i, f):
-    """f with the forces of particle i's altitude springs on it, in the Model's fixed order
-    (compiled only for a body with altitude springs)."""
-    if ti.static(model.altitude_count > 0):
-        for a in range(model.particle_altitude_start[i], model.particle_altitude_start[i + 1]):
-            f += state.altitude_force[model.adjacency_altitude[a]]
-    return f
-
-
-@ti.func
-def implicit_start(model: ti.template(), state: ti.template(), forces: ti.template(),
-                   ws: ti.template(), i, dt, kv, diagonal):
-    """(kv, diagonal) with particle i's altitude springs: k g_i n (G . v_n) and
-    (h^2 k + h kd) g_i^2 n n on the diagonal (implicit Euler)."""
-    if ti.static(model.altitude_count > 0):
-        for a in range(model.particle_altitude_start[i], model.particle_altitude_start[i + 1]):
-            code = model.adjacency_altitude[a]
-            e = code // 4
-            n = ws.altitude_normal[e]
-            g = ws.altitude_weight[code]
-            kv += model.altitude_stiffness[e] * g * ws.altitude_projection[e] * n
-            diagonal += ((dt * dt * model.altitude_stiffness[e]
-                          + dt * model.altitude_damping[e]) * g * g * n * n)
-    return kv, diagonal
-
-
-@ti.func
-def implicit_product(model: ti.template(), ws: ti.template(), i, dt, ap):
-    """ap with particle i's rows of the altitude springs' block times the direction."""
-    return ap + altitudes_times(model, ws, i, dt)
+def altitude_energy(cloth, positions: np.ndarray) -> float:
+    """sum 1/2 k (h - h0)^2 over the altitude springs [J], h the signed altitude of p over the
+    face (a, b, c) (altitude_gradient)."""
+    _, h, _ = altitude_frames(positions, cloth.altitude_indices)
+    return float(np.sum(0.5 * cloth.altitude_stiffness * (h - cloth.altitude_rest_length) ** 2))

@@ -161,6 +161,22 @@ def face_tangents(cloth, values: np.ndarray) -> np.ndarray:
     return padded[cloth.face_hinge]                    # face_hinge = -1 reads the 0 at the end
 
 
+def intact_hinges(cloth, alive: np.ndarray | None) -> np.ndarray:
+    """(H,) bool: the hinges whose two triangles are both intact (alive: (F,) bool, None: all)."""
+    if alive is None:
+        return np.ones(cloth.hinge_count, bool)
+    return alive[cloth.hinge_faces // 3].all(axis=1)
+
+
+def bending_energy(cloth, positions: np.ndarray, alive: np.ndarray | None = None) -> float:
+    """sum over triangles of 1/2 dt^T B dt [J] (module doc); with `alive` ((F,) bool: not
+    torn), a torn triangle holds none and a hinge beside one is gone."""
+    if not cloth.hinge_count:
+        return 0.0
+    dt = face_tangents(cloth, hinge_tangents(cloth, positions) * intact_hinges(cloth, alive))
+    return float(0.5 * np.einsum("ti,tij,tj->", dt, cloth.face_bending, dt))
+
+
 @ti.func
 def half_angle_tangent(sine, cosine, radius):
     """(t, dt/dtheta) of t = tan(theta / 2) for the angle theta whose sine and cosine are
@@ -276,6 +292,14 @@ def hinge_forces(model: ti.template(), state: ti.template(), e):
         state.hinge_force[4 * e + k] = -moment * state.hinge_force[4 * e + k]
 
 
+def force_loops(model, forces) -> tuple:
+    """The loop of the first force phase that measures every hinge (hinge_angles), for a
+    model with hinges bent by the tangents (not Model.isometric); bending_phases follow."""
+    if not model.hinge_count or model.isometric:
+        return ()
+    return (Loop(model.hinge_count, hinge_angles, model, STATE, forces, ITEM),)
+
+
 def bending_phases(model, with_moments: tuple = (), with_forces: tuple = ()) -> tuple:
     """The phases after the first: the triangles' moments, then the hinges' forces (each with
     the caller's loops that read the same inputs: with_moments read the hinges' angles and
@@ -284,6 +308,77 @@ def bending_phases(model, with_moments: tuple = (), with_forces: tuple = ()) -> 
         return ()
     return (Phase(Loop(model.face_count, face_moments, model, STATE, ITEM), *with_moments),
             Phase(Loop(model.hinge_count, hinge_forces, model, STATE, ITEM), *with_forces))
+
+
+@ti.func
+def project_hinge(model: ti.template(), ws: ti.template(), e, vectors: ti.template()):
+    """hinge_projection[e] = grad t_e . vectors over the hinge's corners."""
+    corner = model.hinge_indices[e]
+    total = 0.0
+    for k in ti.static(range(4)):
+        total += ws.hinge_gradient[4 * e + k].dot(vectors[corner[k]])
+    ws.hinge_projection[e] = total
+
+
+@ti.func
+def bending_row(b, i):
+    """Row i of a triangle's symmetric B stored as (00, 11, 22, 01, 02, 12)."""
+    row = ti.Vector([b[4], b[5], b[2]])
+    if i == 0:
+        row = ti.Vector([b[0], b[3], b[4]])
+    elif i == 1:
+        row = ti.Vector([b[3], b[1], b[5]])
+    return row
+
+
+@ti.func
+def hinge_weight(model: ti.template(), f, i, dt, rhs: ti.template()):
+    """(h^2 + h beta) B_ii of hinge i of triangle f, or B_ii for the right-hand side."""
+    b = model.face_bending[f]
+    weight = b[2]
+    if i == 0:
+        weight = b[0]
+    elif i == 1:
+        weight = b[1]
+    if ti.static(not rhs):
+        weight *= dt * dt + dt * model.face_damping[f]
+    return weight
+
+
+@ti.func
+def linearise_hinge(model: ti.template(), state: ti.template(), ws: ti.template(), e,
+                    now: ti.template()):
+    """Hinge e at x_n (after hinge_angles left grad t in hinge_force, before hinge_forces):
+    its gradient, grad t . v_n and the hinge-diagonal part of its blocks of A."""
+    faces = model.hinge_faces[e]
+    weight = (hinge_weight(model, faces[0] // 3, faces[0] % 3, now.dt, False)
+              + hinge_weight(model, faces[1] // 3, faces[1] % 3, now.dt, False))
+    for k in ti.static(range(4)):
+        gradient = state.hinge_force[4 * e + k]
+        ws.hinge_gradient[4 * e + k] = gradient
+        ws.hinge_diagonal[4 * e + k] = weight * gradient * gradient
+    project_hinge(model, ws, e, state.particle_velocity)
+
+
+@ti.func
+def hinge_product(model: ti.template(), ws: ti.template(), e, dt, rhs: ti.template()):
+    """hinge_product[4 e + k] = sum over hinge e's triangles of (h^2 + h beta) (B s)_i
+    grad_k t_e (B s without the factor for the right-hand side), s the projections."""
+    faces = model.hinge_faces[e]
+    moment = 0.0
+    for side in ti.static(range(2)):
+        f, i = faces[side] // 3, faces[side] % 3
+        row = bending_row(model.face_bending[f], i)
+        hinge = model.face_hinge[f]
+        total = 0.0
+        for j in ti.static(range(3)):
+            if hinge[j] >= 0:
+                total += row[j] * ws.hinge_projection[hinge[j]]
+        if ti.static(not rhs):
+            total *= dt * dt + dt * model.face_damping[f]
+        moment += total
+    for k in ti.static(range(4)):
+        ws.hinge_product[4 * e + k] = moment * ws.hinge_gradient[4 * e + k]
 
 
 @ti.func
@@ -381,98 +476,3 @@ def bending_constraint(model: ti.template(), state: ti.template(), f, multiplier
             p = others[i]
             state.particle_position[p] = (state.particle_position[p]
                                           + model.particle_inv_mass[p] * step[i] * other_grads[i])
-
-
-@ti.func
-def project_hinge(model: ti.template(), ws: ti.template(), e, vectors: ti.template()):
-    """hinge_projection[e] = grad t_e . vectors over the hinge's corners."""
-    corner = model.hinge_indices[e]
-    total = 0.0
-    for k in ti.static(range(4)):
-        total += ws.hinge_gradient[4 * e + k].dot(vectors[corner[k]])
-    ws.hinge_projection[e] = total
-
-
-@ti.func
-def bending_row(b, i):
-    """Row i of a triangle's symmetric B stored as (00, 11, 22, 01, 02, 12)."""
-    row = ti.Vector([b[4], b[5], b[2]])
-    if i == 0:
-        row = ti.Vector([b[0], b[3], b[4]])
-    elif i == 1:
-        row = ti.Vector([b[3], b[1], b[5]])
-    return row
-
-
-@ti.func
-def hinge_weight(model: ti.template(), f, i, dt, rhs: ti.template()):
-    """(h^2 + h beta) B_ii of hinge i of triangle f, or B_ii for the right-hand side."""
-    b = model.face_bending[f]
-    weight = b[2]
-    if i == 0:
-        weight = b[0]
-    elif i == 1:
-        weight = b[1]
-    if ti.static(not rhs):
-        weight *= dt * dt + dt * model.face_damping[f]
-    return weight
-
-
-@ti.func
-def linearise_hinge(model: ti.template(), state: ti.template(), ws: ti.template(), e,
-                    now: ti.template()):
-    """Hinge e at x_n (after hinge_angles left grad t in hinge_force, before hinge_forces):
-    its gradient, grad t . v_n and the hinge-diagonal part of its blocks of A."""
-    faces = model.hinge_faces[e]
-    weight = (hinge_weight(model, faces[0] // 3, faces[0] % 3, now.dt, False)
-              + hinge_weight(model, faces[1] // 3, faces[1] % 3, now.dt, False))
-    for k in ti.static(range(4)):
-        gradient = state.hinge_force[4 * e + k]
-        ws.hinge_gradient[4 * e + k] = gradient
-        ws.hinge_diagonal[4 * e + k] = weight * gradient * gradient
-    project_hinge(model, ws, e, state.particle_velocity)
-
-
-@ti.func
-def hinge_product(model: ti.template(), ws: ti.template(), e, dt, rhs: ti.template()):
-    """hinge_product[4 e + k] = sum over hinge e's triangles of (h^2 + h beta) (B s)_i
-    grad_k t_e (B s without the factor for the right-hand side), s the projections."""
-    faces = model.hinge_faces[e]
-    moment = 0.0
-    for side in ti.static(range(2)):
-        f, i = faces[side] // 3, faces[side] % 3
-        row = bending_row(model.face_bending[f], i)
-        hinge = model.face_hinge[f]
-        total = 0.0
-        for j in ti.static(range(3)):
-            if hinge[j] >= 0:
-                total += row[j] * ws.hinge_projection[hinge[j]]
-        if ti.static(not rhs):
-            total *= dt * dt + dt * model.face_damping[f]
-        moment += total
-    for k in ti.static(range(4)):
-        ws.hinge_product[4 * e + k] = moment * ws.hinge_gradient[4 * e + k]
-
-
-def bending_energy(cloth, positions: np.ndarray, alive: np.ndarray | None = None) -> float:
-    """sum over triangles of 1/2 dt^T B dt [J] (module doc); with `alive` ((F,) bool: not
-    torn), a torn triangle holds none and a hinge beside one is gone."""
-    if not cloth.hinge_count:
-        return 0.0
-    dt = face_tangents(cloth, hinge_tangents(cloth, positions) * intact_hinges(cloth, alive))
-    return float(0.5 * np.einsum("ti,tij,tj->", dt, cloth.face_bending, dt))
-
-
-def intact_hinges(cloth, alive: np.ndarray | None) -> np.ndarray:
-    """(H,) bool: the hinges whose two triangles are both intact (alive: (F,) bool, None: all)."""
-    if alive is None:
-        return np.ones(cloth.hinge_count, bool)
-    return alive[cloth.hinge_faces // 3].all(axis=1)
-
-
-def force_loops(model, forces) -> tuple:
-    """The loop of the first force phase that measures every hinge (hinge_angles), for a
-    model with hinges bent by the tangents (not Model.isometric); bending_phases follow."""
-    if not model.hinge_count or model.isometric:
-        return ()
-    return (Loop(model.hinge_count, hinge_angles, model, STATE, forces, ITEM),)

@@ -60,27 +60,6 @@ def gather_corners(model: ti.template(), face_values: ti.template(),
 
 
 @ti.func
-def multiplier_step(stiffness, coupling, residual, multiplier, gamma):
-    """dlambda of ((1 + gamma) K~ JWJ + I) dlambda = -K~ residual - lambda."""
-    system = (1.0 + gamma) * stiffness @ coupling + ti.Matrix.identity(float, 3)
-    return system.inverse() @ (-(stiffness @ residual) - multiplier)
-
-
-@ti.func
-def face_intact(state: ti.template(), f, tearable: ti.template()):
-    intact = True
-    if ti.static(tearable):
-        intact = state.face_alive[f] != 0
-    return intact
-
-
-@ti.func
-def motion_in_step(state: ti.template(), p):
-    """x_p - x_p^n: particle p's motion in the step so far."""
-    return state.particle_position[p] - state.particle_prev_position[p]
-
-
-@ti.func
 def gather(model: ti.template(), state: ti.template(), i, f):
     """f with the forces of particle i's triangles and hinges (the membrane's and the mid-edge
     bending's corner slots, then the isometric bending's per-particle force), compiled only
@@ -131,3 +110,24 @@ def implicit_product(model: ti.template(), ws: ti.template(), i, dt, ap):
     if ti.static(model.face_count > 0):
         ap += element_products(model, ws, i)
     return ap
+
+
+@ti.func
+def multiplier_step(stiffness, coupling, residual, multiplier, gamma):
+    """dlambda of ((1 + gamma) K~ JWJ + I) dlambda = -K~ residual - lambda."""
+    system = (1.0 + gamma) * stiffness @ coupling + ti.Matrix.identity(float, 3)
+    return system.inverse() @ (-(stiffness @ residual) - multiplier)
+
+
+@ti.func
+def face_intact(state: ti.template(), f, tearable: ti.template()):
+    intact = True
+    if ti.static(tearable):
+        intact = state.face_alive[f] != 0
+    return intact
+
+
+@ti.func
+def motion_in_step(state: ti.template(), p):
+    """x_p - x_p^n: particle p's motion in the step so far."""
+    return state.particle_position[p] - state.particle_prev_position[p]

@@ -128,6 +128,19 @@ def _first_slot(stencil: np.ndarray, s: int) -> np.ndarray:
     return ~np.any(stencil[:, :s] == stencil[:, s:s + 1], axis=1)
 
 
+def isometric_energy(cloth, positions: np.ndarray, alive: np.ndarray | None = None) -> float:
+    """The isometric model's 1/2 sum_ij B'_ij w_i . w_j summed over triangles [J]
+    (isometric_matrix); with `alive` ((F,) bool: not torn), a torn triangle holds none and a
+    hinge beside one is gone."""
+    if not cloth.hinge_count:
+        return 0.0
+    weights, reduced = isometric_parts(cloth)
+    w = (np.einsum("hk,hkx->hx", weights, positions[cloth.hinge_indices])
+         * intact_hinges(cloth, alive)[:, None])
+    w = np.concatenate([w, np.zeros((1, 3))])[cloth.face_hinge]          # (F, 3, 3)
+    return float(0.5 * np.einsum("fix,fij,fjx->", w, reduced, w))
+
+
 @ti.func
 def isometric_sum(model: ti.template(), first: ti.template(), second: ti.template(), i,
                   a, b):
@@ -151,6 +164,45 @@ def isometric_forces(model: ti.template(), state: ti.template(), i):
     before any particle moves: it reads its neighbours' positions and velocities)."""
     state.particle_bend_force[i] = isometric_sum(model, state.particle_position,
                                                  state.particle_velocity, i, 1.0, 1.0)
+
+
+def force_loops(model, forces) -> tuple:
+    """The loop of the first force phase that sums every particle's bending force
+    (isometric_forces), for a model bent by this model (Model.isometric)."""
+    if not model.isometric:
+        return ()
+    return (Loop(model.particle_count, isometric_forces, model, STATE, ITEM),)
+
+
+@ti.func
+def isometric_velocity(model: ti.template(), state: ti.template(), i):
+    """Particle i's row of Q v_n, the isometric bending's stiffness times v_n (its Hessian is
+    the constant Q of energies/isometric.isometric_matrix, positive semi-definite as it is)."""
+    return -isometric_sum(model, state.particle_velocity, state.particle_velocity, i, 1.0, 0.0)
+
+
+@ti.func
+def isometric_product(model: ti.template(), ws: ti.template(), i, dt):
+    """Particle i's row of (h^2 + h beta) Q p, the isometric bending's block of A times p."""
+    return -isometric_sum(model, ws.p, ws.p, i, dt * dt, dt)
+
+
+@ti.func
+def implicit_start(model: ti.template(), state: ti.template(), forces: ti.template(),
+                   ws: ti.template(), i, dt, kv, diagonal):
+    """(kv, diagonal) with particle i's row of Q v_n (its diagonal is faces.implicit_start's,
+    with the triangles')."""
+    if ti.static(model.isometric):
+        kv += isometric_velocity(model, state, i)
+    return kv, diagonal
+
+
+@ti.func
+def implicit_product(model: ti.template(), ws: ti.template(), i, dt, ap):
+    """ap with particle i's row of (h^2 + h beta) Q p."""
+    if ti.static(model.isometric):
+        ap += isometric_product(model, ws, i, dt)
+    return ap
 
 
 @ti.func
@@ -193,55 +245,3 @@ def xpbd_isometric(model: ti.template(), state: ti.template(), f, multiplier: ti
         for i in ti.static(range(3)):
             move += weight[6 * i + s] * ti.Vector([step[i, 0], step[i, 1], step[i, 2]])
         state.particle_position[p] = state.particle_position[p] + model.particle_inv_mass[p] * move
-
-
-@ti.func
-def isometric_velocity(model: ti.template(), state: ti.template(), i):
-    """Particle i's row of Q v_n, the isometric bending's stiffness times v_n (its Hessian is
-    the constant Q of energies/isometric.isometric_matrix, positive semi-definite as it is)."""
-    return -isometric_sum(model, state.particle_velocity, state.particle_velocity, i, 1.0, 0.0)
-
-
-@ti.func
-def isometric_product(model: ti.template(), ws: ti.template(), i, dt):
-    """Particle i's row of (h^2 + h beta) Q p, the isometric bending's block of A times p."""
-    return -isometric_sum(model, ws.p, ws.p, i, dt * dt, dt)
-
-
-def isometric_energy(cloth, positions: np.ndarray, alive: np.ndarray | None = None) -> float:
-    """The isometric model's 1/2 sum_ij B'_ij w_i . w_j summed over triangles [J]
-    (isometric_matrix); with `alive` ((F,) bool: not torn), a torn triangle holds none and a
-    hinge beside one is gone."""
-    if not cloth.hinge_count:
-        return 0.0
-    weights, reduced = isometric_parts(cloth)
-    w = (np.einsum("hk,hkx->hx", weights, positions[cloth.hinge_indices])
-         * intact_hinges(cloth, alive)[:, None])
-    w = np.concatenate([w, np.zeros((1, 3))])[cloth.face_hinge]          # (F, 3, 3)
-    return float(0.5 * np.einsum("fix,fij,fjx->", w, reduced, w))
-
-
-def force_loops(model, forces) -> tuple:
-    """The loop of the first force phase that sums every particle's bending force
-    (isometric_forces), for a model bent by this model (Model.isometric)."""
-    if not model.isometric:
-        return ()
-    return (Loop(model.particle_count, isometric_forces, model, STATE, ITEM),)
-
-
-@ti.func
-def implicit_start(model: ti.template(), state: ti.template(), forces: ti.template(),
-                   ws: ti.template(), i, dt, kv, diagonal):
-    """(kv, diagonal) with particle i's row of Q v_n (its diagonal is faces.implicit_start's,
-    with the triangles')."""
-    if ti.static(model.isometric):
-        kv += isometric_velocity(model, state, i)
-    return kv, diagonal
-
-
-@ti.func
-def implicit_product(model: ti.template(), ws: ti.template(), i, dt, ap):
-    """ap with particle i's row of (h^2 + h beta) Q p."""
-    if ti.static(model.isometric):
-        ap += isometric_product(model, ws, i, dt)
-    return ap

@@ -106,56 +106,12 @@ def membrane_forces(model: ti.template(), state: ti.template(), forces: ti.templ
                   -area * (s12 * warp + s22 * weft))
 
 
-@ti.func
-def moduli_matrix(c):
-    """The 3x3 plane-stress matrix of a triangle's (C11, C12, C22, C33)."""
-    return ti.Matrix([[c[0], c[1], 0.0], [c[1], c[2], 0.0], [0.0, 0.0, c[3]]])
-
-
-@ti.func
-def xpbd_membrane(model: ti.template(), state: ti.template(), f, multiplier: ti.template(), dt,
-                  tearable: ti.template()):
-    """XPBD for triangle f's strain, its multipliers in multiplier[f]. The strain's gradient
-    on corner c with grad lambda_c = (g0, g1) has rows g0 F1, g1 F2, g1 F1 + g0 F2 (F1, F2
-    F's columns), so J W J^T needs only sums of w_c g_c g_c^T. A torn triangle is no
-    constraint."""
-    if face_intact(state, f, tearable):
-        membrane_constraint(model, state, f, multiplier, dt)
-
-
-@ti.func
-def membrane_constraint(model: ti.template(), state: ti.template(), f, multiplier: ti.template(),
-                        dt):
-    corner = model.face_indices[f]
-    g = model.face_gradient[f]
-    warp, weft = face_columns(model, state.particle_position, f)
-    dwarp, dweft = face_columns(model, state.particle_prev_position, f)
-    dwarp, dweft = warp - dwarp, weft - dweft
-    a, b, m = warp.dot(warp), weft.dot(weft), warp.dot(weft)
-    grads = [ti.Vector([-g[0] - g[2], -g[1] - g[3]]), ti.Vector([g[0], g[1]]),
-             ti.Vector([g[2], g[3]])]
-    s00, s11, s01 = 0.0, 0.0, 0.0
-    for c in ti.static(range(3)):
-        w = model.particle_inv_mass[corner[c]]
-        s00 += w * grads[c][0] * grads[c][0]
-        s11 += w * grads[c][1] * grads[c][1]
-        s01 += w * grads[c][0] * grads[c][1]
-    coupling = ti.Matrix([[s00 * a, s01 * m, s01 * a + s00 * m],
-                          [s01 * m, s11 * b, s11 * m + s01 * b],
-                          [s01 * a + s00 * m, s11 * m + s01 * b, s11 * a + 2.0 * s01 * m + s00 * b]])
-    strain = ti.Vector([0.5 * (a - 1.0), 0.5 * (b - 1.0), m])
-    motion = ti.Vector([warp.dot(dwarp), weft.dot(dweft), warp.dot(dweft) + weft.dot(dwarp)])
-    gamma = model.face_damping[f] / dt
-    stiffness = (dt * dt * model.face_area[f]) * moduli_matrix(model.face_moduli[f])
-    step = multiplier_step(stiffness, coupling, strain + gamma * motion, multiplier[f], gamma)
-    multiplier[f] = multiplier[f] + step
-    along_warp = step[0] * warp + step[2] * weft
-    along_weft = step[2] * warp + step[1] * weft
-    for c in ti.static(range(3)):
-        x = state.particle_position[corner[c]]
-        w = model.particle_inv_mass[corner[c]]
-        state.particle_position[corner[c]] = x + w * (along_warp * grads[c][0]
-                                                      + along_weft * grads[c][1])
+def force_loops(model, forces) -> tuple:
+    """The loop of the first force phase that evaluates every triangle's membrane
+    (membrane_forces)."""
+    if not model.face_count:
+        return ()
+    return (Loop(model.face_count, membrane_forces, model, STATE, forces, ITEM),)
 
 
 @ti.func
@@ -233,9 +189,53 @@ def linearise_face(model: ti.template(), state: ti.template(), forces: ti.templa
     ws.face_diagonal[3 * f + 2] = area * (stiff * second_stiff + h * h * second_geometric)
 
 
-def force_loops(model, forces) -> tuple:
-    """The loop of the first force phase that evaluates every triangle's membrane
-    (membrane_forces)."""
-    if not model.face_count:
-        return ()
-    return (Loop(model.face_count, membrane_forces, model, STATE, forces, ITEM),)
+@ti.func
+def moduli_matrix(c):
+    """The 3x3 plane-stress matrix of a triangle's (C11, C12, C22, C33)."""
+    return ti.Matrix([[c[0], c[1], 0.0], [c[1], c[2], 0.0], [0.0, 0.0, c[3]]])
+
+
+@ti.func
+def xpbd_membrane(model: ti.template(), state: ti.template(), f, multiplier: ti.template(), dt,
+                  tearable: ti.template()):
+    """XPBD for triangle f's strain, its multipliers in multiplier[f]. The strain's gradient
+    on corner c with grad lambda_c = (g0, g1) has rows g0 F1, g1 F2, g1 F1 + g0 F2 (F1, F2
+    F's columns), so J W J^T needs only sums of w_c g_c g_c^T. A torn triangle is no
+    constraint."""
+    if face_intact(state, f, tearable):
+        membrane_constraint(model, state, f, multiplier, dt)
+
+
+@ti.func
+def membrane_constraint(model: ti.template(), state: ti.template(), f, multiplier: ti.template(),
+                        dt):
+    corner = model.face_indices[f]
+    g = model.face_gradient[f]
+    warp, weft = face_columns(model, state.particle_position, f)
+    dwarp, dweft = face_columns(model, state.particle_prev_position, f)
+    dwarp, dweft = warp - dwarp, weft - dweft
+    a, b, m = warp.dot(warp), weft.dot(weft), warp.dot(weft)
+    grads = [ti.Vector([-g[0] - g[2], -g[1] - g[3]]), ti.Vector([g[0], g[1]]),
+             ti.Vector([g[2], g[3]])]
+    s00, s11, s01 = 0.0, 0.0, 0.0
+    for c in ti.static(range(3)):
+        w = model.particle_inv_mass[corner[c]]
+        s00 += w * grads[c][0] * grads[c][0]
+        s11 += w * grads[c][1] * grads[c][1]
+        s01 += w * grads[c][0] * grads[c][1]
+    coupling = ti.Matrix([[s00 * a, s01 * m, s01 * a + s00 * m],
+                          [s01 * m, s11 * b, s11 * m + s01 * b],
+                          [s01 * a + s00 * m, s11 * m + s01 * b, s11 * a + 2.0 * s01 * m + s00 * b]])
+    strain = ti.Vector([0.5 * (a - 1.0), 0.5 * (b - 1.0), m])
+    motion = ti.Vector([warp.dot(dwarp), weft.dot(dweft), warp.dot(dweft) + weft.dot(dwarp)])
+    gamma = model.face_damping[f] / dt
+    stiffness = (dt * dt * model.face_area[f]) * moduli_matrix(model.face_moduli[f])
+    step = multiplier_step(stiffness, coupling, strain + gamma * motion, multiplier[f], gamma)
+    multiplier[f] = multiplier[f] + step
+    along_warp = step[0] * warp + step[2] * weft
+    along_weft = step[2] * warp + step[1] * weft
+    for c in ti.static(range(3)):
+        x = state.particle_position[corner[c]]
+        w = model.particle_inv_mass[corner[c]]
+        state.particle_position[corner[c]] = x + w * (along_warp * grads[c][0]
+                                                      + along_weft * grads[c][1])

@@ -64,6 +64,110 @@ def spring_forces(model: ti.template(), state: ti.template(), forces: ti.templat
     state.spring_force[s] = f
 
 
+def force_loops(model, forces) -> tuple:
+    """The loop of the first force phase that evaluates every spring (spring_forces)."""
+    if not model.spring_count:
+        return ()
+    return (Loop(model.spring_count, spring_forces, model, STATE, forces, ITEM),)
+
+
+@ti.func
+def gather(model: ti.template(), state: ti.template(), i, f):
+    """f with the forces of particle i's springs: - those of which it is the second end, +
+    those of which it is the first (Model adjacency, a fixed order)."""
+    split = model.particle_spring_split[i]
+    for a in range(model.particle_spring_start[i], split):
+        f -= state.spring_force[model.adjacency_spring[a]]
+    for a in range(split, model.particle_spring_start[i + 1]):
+        f += state.spring_force[model.adjacency_spring[a]]
+    return f
+
+
+@ti.func
+def stiffness_times(k, n, c, d):
+    """k (n n^T + c (I - n n^T)) d: the spring's -df_i/dx_i applied to d."""
+    along = n.dot(d) * n
+    return k * (along + c * (d - along))
+
+
+@ti.func
+def spring_block(k, kd, n, c, dt, relative: ti.template()):
+    """h^2 k (n n^T + c (I - n n^T)) + h D, D = kd n n^T (axial) or kd I (relative): the
+    spring's block of A, symmetric, as (xx, yy, zz, xy, xz, yz)."""
+    stiff = dt * dt * k
+    damp = dt * kd
+    lateral = stiff * c
+    along = stiff - lateral
+    if ti.static(not relative):
+        along += damp
+    diagonal = lateral + along * n * n
+    if ti.static(relative):
+        diagonal += damp
+    return ti.Vector([diagonal[0], diagonal[1], diagonal[2], along * n[0] * n[1],
+                      along * n[0] * n[2], along * n[1] * n[2]])
+
+
+@ti.func
+def block_times(m, d):
+    """The symmetric 3x3 block m (xx, yy, zz, xy, xz, yz) times d."""
+    return ti.Vector([m[0] * d[0] + m[3] * d[1] + m[4] * d[2],
+                      m[3] * d[0] + m[1] * d[1] + m[5] * d[2],
+                      m[4] * d[0] + m[5] * d[1] + m[2] * d[2]])
+
+
+@ti.func
+def linearise_spring(model: ti.template(), state: ti.template(), forces: ti.template(),
+                     ws: ti.template(), s):
+    """Spring s: direction and clamped lateral factor at x_n."""
+    i, j = model.spring_indices[s][0], model.spring_indices[s][1]
+    d = state.particle_position[i] - state.particle_position[j]
+    length = d.norm()
+    n = ti.Vector([0.0, 0.0, 0.0])
+    c = 0.0
+    if length > 0:
+        n = d / length
+        c = ti.max(1.0 - model.spring_rest_length[s] / length, 0.0)
+    elif model.spring_rest_length[s] == 0:
+        c = 1.0    # a zero-length spring is linear: -df/dx = k I
+    if ti.static(forces.tearable):
+        if state.spring_alive[s] == 0:
+            c, n = 0.0, ti.Vector([0.0, 0.0, 0.0])
+    ws.spring_normal[s] = n
+    ws.spring_lateral[s] = c
+
+
+@ti.func
+def implicit_start(model: ti.template(), state: ti.template(), forces: ti.template(),
+                   ws: ti.template(), i, dt, kv, diagonal):
+    """(kv, diagonal) with particle i's springs: their stiffness times v_n (K v_n's row, the
+    linearisation's normal and lateral factor) and their blocks of h^2 K + h D, each kept per
+    adjacency slot for the products (ws.adjacency_block; a torn spring damps no more) and
+    added to the 3x3 diagonal (implicit Euler)."""
+    vi = state.particle_velocity[i]
+    for a in range(model.particle_spring_start[i], model.particle_spring_start[i + 1]):
+        s = model.adjacency_spring[a]
+        j = model.adjacency_other[a]
+        n, c = ws.spring_normal[s], ws.spring_lateral[s]
+        k, kd = model.spring_stiffness[s], model.spring_damping[s]
+        kv += stiffness_times(k, n, c, vi - state.particle_velocity[j])
+        if ti.static(forces.tearable):
+            if state.spring_alive[s] == 0:
+                kd = 0.0
+        m = spring_block(k, kd, n, c, dt, model.relative_damping)
+        ws.adjacency_block[a] = m
+        diagonal += ti.Vector([m[0], m[1], m[2]])
+    return kv, diagonal
+
+
+@ti.func
+def implicit_product(model: ti.template(), ws: ti.template(), i, dt, ap):
+    """ap with particle i's rows of the springs' blocks times the direction ws.p."""
+    pi = ws.p[i]
+    for a in range(model.particle_spring_start[i], model.particle_spring_start[i + 1]):
+        ap += block_times(ws.adjacency_block[a], pi - ws.p[model.adjacency_other[a]])
+    return ap
+
+
 @ti.func
 def relax(model: ti.template(), state: ti.template(), colours: ti.template(), t, stiffness,
           tearable: ti.template(), max_strain, stretched_only: ti.template()):
@@ -150,59 +254,6 @@ def damp(model: ti.template(), state: ti.template(), colours: ti.template(), t, 
         state.particle_velocity[q] = state.particle_velocity[q] + wq / (wp + wq) * dv
 
 
-@ti.func
-def stiffness_times(k, n, c, d):
-    """k (n n^T + c (I - n n^T)) d: the spring's -df_i/dx_i applied to d."""
-    along = n.dot(d) * n
-    return k * (along + c * (d - along))
-
-
-@ti.func
-def spring_block(k, kd, n, c, dt, relative: ti.template()):
-    """h^2 k (n n^T + c (I - n n^T)) + h D, D = kd n n^T (axial) or kd I (relative): the
-    spring's block of A, symmetric, as (xx, yy, zz, xy, xz, yz)."""
-    stiff = dt * dt * k
-    damp = dt * kd
-    lateral = stiff * c
-    along = stiff - lateral
-    if ti.static(not relative):
-        along += damp
-    diagonal = lateral + along * n * n
-    if ti.static(relative):
-        diagonal += damp
-    return ti.Vector([diagonal[0], diagonal[1], diagonal[2], along * n[0] * n[1],
-                      along * n[0] * n[2], along * n[1] * n[2]])
-
-
-@ti.func
-def block_times(m, d):
-    """The symmetric 3x3 block m (xx, yy, zz, xy, xz, yz) times d."""
-    return ti.Vector([m[0] * d[0] + m[3] * d[1] + m[4] * d[2],
-                      m[3] * d[0] + m[1] * d[1] + m[5] * d[2],
-                      m[4] * d[0] + m[5] * d[1] + m[2] * d[2]])
-
-
-@ti.func
-def linearise_spring(model: ti.template(), state: ti.template(), forces: ti.template(),
-                     ws: ti.template(), s):
-    """Spring s: direction and clamped lateral factor at x_n."""
-    i, j = model.spring_indices[s][0], model.spring_indices[s][1]
-    d = state.particle_position[i] - state.particle_position[j]
-    length = d.norm()
-    n = ti.Vector([0.0, 0.0, 0.0])
-    c = 0.0
-    if length > 0:
-        n = d / length
-        c = ti.max(1.0 - model.spring_rest_length[s] / length, 0.0)
-    elif model.spring_rest_length[s] == 0:
-        c = 1.0    # a zero-length spring is linear: -df/dx = k I
-    if ti.static(forces.tearable):
-        if state.spring_alive[s] == 0:
-            c, n = 0.0, ti.Vector([0.0, 0.0, 0.0])
-    ws.spring_normal[s] = n
-    ws.spring_lateral[s] = c
-
-
 def spring_energies(cloth, positions: np.ndarray, alive: np.ndarray | None = None) -> np.ndarray:
     """1/2 k (|x_i - x_j| - L)^2 of each spring [J] (Stuyck eq. 4.4) at `positions` (N, 3),
     0 for a torn one (alive False), float64 on the host; shape (spring_count,)."""
@@ -212,54 +263,3 @@ def spring_energies(cloth, positions: np.ndarray, alive: np.ndarray | None = Non
     if alive is not None:
         per_spring = per_spring * alive
     return per_spring
-
-
-def force_loops(model, forces) -> tuple:
-    """The loop of the first force phase that evaluates every spring (spring_forces)."""
-    if not model.spring_count:
-        return ()
-    return (Loop(model.spring_count, spring_forces, model, STATE, forces, ITEM),)
-
-
-@ti.func
-def gather(model: ti.template(), state: ti.template(), i, f):
-    """f with the forces of particle i's springs: - those of which it is the second end, +
-    those of which it is the first (Model adjacency, a fixed order)."""
-    split = model.particle_spring_split[i]
-    for a in range(model.particle_spring_start[i], split):
-        f -= state.spring_force[model.adjacency_spring[a]]
-    for a in range(split, model.particle_spring_start[i + 1]):
-        f += state.spring_force[model.adjacency_spring[a]]
-    return f
-
-
-@ti.func
-def implicit_start(model: ti.template(), state: ti.template(), forces: ti.template(),
-                   ws: ti.template(), i, dt, kv, diagonal):
-    """(kv, diagonal) with particle i's springs: their stiffness times v_n (K v_n's row, the
-    linearisation's normal and lateral factor) and their blocks of h^2 K + h D, each kept per
-    adjacency slot for the products (ws.adjacency_block; a torn spring damps no more) and
-    added to the 3x3 diagonal (implicit Euler)."""
-    vi = state.particle_velocity[i]
-    for a in range(model.particle_spring_start[i], model.particle_spring_start[i + 1]):
-        s = model.adjacency_spring[a]
-        j = model.adjacency_other[a]
-        n, c = ws.spring_normal[s], ws.spring_lateral[s]
-        k, kd = model.spring_stiffness[s], model.spring_damping[s]
-        kv += stiffness_times(k, n, c, vi - state.particle_velocity[j])
-        if ti.static(forces.tearable):
-            if state.spring_alive[s] == 0:
-                kd = 0.0
-        m = spring_block(k, kd, n, c, dt, model.relative_damping)
-        ws.adjacency_block[a] = m
-        diagonal += ti.Vector([m[0], m[1], m[2]])
-    return kv, diagonal
-
-
-@ti.func
-def implicit_product(model: ti.template(), ws: ti.template(), i, dt, ap):
-    """ap with particle i's rows of the springs' blocks times the direction ws.p."""
-    pi = ws.p[i]
-    for a in range(model.particle_spring_start[i], model.particle_spring_start[i + 1]):
-        ap += block_times(ws.adjacency_block[a], pi - ws.p[model.adjacency_other[a]])
-    return ap
