@@ -15,9 +15,9 @@ Forces are evaluated once per element into per-element or per-corner slots (each
 force_loops: the loops of a force evaluation's first phase, none for a model without the
 term; the mid-edge bending adds its later phases, bending_phases) and gathered per particle
 in a fixed order (each slot kind's gather), so runs are deterministic; physics/forces.py
-runs them in the order of TERMS and SLOTS, implicit Euler its rows in the order of ROWS. A
-new term is a module here and a line in TERMS (and one in SLOTS and ROWS if it brings a kind
-of slot of its own). This package sits below body/
+runs them in the order of TERMS and SLOTS, implicit Euler its rows in the order of ROWS, xpbd
+its sweeps in the order of PROJECTIONS. A new term is a module here and a line in TERMS and
+PROJECTIONS (and one in SLOTS and ROWS if it brings a kind of slot of its own). This package sits below body/
 (which builds a Cloth's rest data with it) and imports only geometry.py, inputs/ and
 runtime/.
 """
@@ -33,3 +33,6 @@ SLOTS = (springs, altitude, faces)
 # diagonal; implicit_product: A p): springs', altitude springs', the triangle terms' (faces.py),
 # the isometric bending's
 ROWS = (springs, altitude, faces, isometric)
+# the terms XPBD sweeps, in this order (their xpbd_nodes: loops clearing their multipliers,
+# sweeps colour by colour)
+PROJECTIONS = (springs, altitude, membrane, bending, isometric)

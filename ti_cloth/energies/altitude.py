@@ -21,7 +21,7 @@ import taichi as ti
 
 from ..geometry import point_over_triangle, points_over_triangles
 from ..inputs.validation import as_array, require
-from ..runtime.plan import ITEM, STATE, Loop
+from ..runtime.plan import DT, ITEM, STATE, Loop, Sweep
 
 
 def altitude_springs(positions: np.ndarray, tetrahedra) -> tuple[np.ndarray, np.ndarray]:
@@ -212,6 +212,26 @@ def xpbd_altitude(model: ti.template(), state: ti.template(), a, multiplier: ti.
         for c in ti.static(range(4)):
             x = state.particle_position[corner[c]]
             state.particle_position[corner[c]] = x + weight[c] * dlambda * g[c] * n
+
+
+@ti.func
+def clear_multiplier(work: ti.template(), a):
+    work.altitude[a] = 0.0
+
+
+@ti.func
+def xpbd_at(model: ti.template(), state: ti.template(), work: ti.template(), t, dt):
+    """XPBD for the altitude spring at position t of the altitude colouring."""
+    xpbd_altitude(model, state, work.altitude_colours.order[t], work.altitude, dt)
+
+
+def xpbd_nodes(model, forces, work) -> tuple:
+    """(loops clearing the multipliers, sweeps) of XPBD over the altitude springs (xpbd.py's
+    workspace `work`), none without them."""
+    if not model.altitude_count:
+        return (), ()
+    return ((Loop(model.altitude_count, clear_multiplier, work, ITEM),),
+            (Sweep(work.altitude_colours, xpbd_at, model, STATE, work, ITEM, DT),))
 
 
 def altitude_energy(cloth, positions: np.ndarray) -> float:

@@ -48,7 +48,7 @@ Everything each solver needs of it, together:
 import numpy as np
 import taichi as ti
 
-from ..runtime.plan import ITEM, STATE, Loop, Phase
+from ..runtime.plan import DT, ITEM, STATE, Loop, Phase, Sweep
 from .faces import face_intact, motion_in_step, multiplier_step
 
 # |theta / 2| past which t = tan(theta / 2) continues along its tangent line (a crease folded
@@ -476,3 +476,26 @@ def bending_constraint(model: ti.template(), state: ti.template(), f, multiplier
             p = others[i]
             state.particle_position[p] = (state.particle_position[p]
                                           + model.particle_inv_mass[p] * step[i] * other_grads[i])
+
+
+@ti.func
+def clear_multipliers(work: ti.template(), f):
+    work.bending[f] = 0.0 * work.bending[f]
+
+
+@ti.func
+def xpbd_at(model: ti.template(), state: ti.template(), forces: ti.template(),
+            work: ti.template(), t, dt):
+    """XPBD for the triangle at position t of its colouring."""
+    xpbd_bending(model, state, work.bending_colours.order[t], work.bending, dt,
+                 forces.tearable)
+
+
+def xpbd_nodes(model, forces, work) -> tuple:
+    """(loops clearing the multipliers, sweeps) of XPBD over the triangles' hinge tangents (xpbd.py's
+    workspace `work`), none for a model without them."""
+    if not model.hinge_count or model.isometric:
+        return (), ()
+    return ((Loop(model.face_count, clear_multipliers, work, ITEM),),
+            (Sweep(work.bending_colours, xpbd_at, model, STATE, forces, work, ITEM,
+                   DT).with_big_body(),))

@@ -22,7 +22,7 @@ cannot tear. Everything each solver needs of it, together:
 import numpy as np
 import taichi as ti
 
-from ..runtime.plan import ITEM, STATE, Loop
+from ..runtime.plan import DT, ITEM, STATE, Loop, Sweep
 from .bending import bending_stencils, hinges, intact_hinges
 from .faces import motion_in_step, multiplier_step
 
@@ -245,3 +245,24 @@ def xpbd_isometric(model: ti.template(), state: ti.template(), f, multiplier: ti
         for i in ti.static(range(3)):
             move += weight[6 * i + s] * ti.Vector([step[i, 0], step[i, 1], step[i, 2]])
         state.particle_position[p] = state.particle_position[p] + model.particle_inv_mass[p] * move
+
+
+@ti.func
+def clear_multipliers(work: ti.template(), f):
+    work.bending[f] = 0.0 * work.bending[f]
+
+
+@ti.func
+def xpbd_at(model: ti.template(), state: ti.template(), work: ti.template(), t, dt):
+    """XPBD for the triangle at position t of its colouring."""
+    xpbd_isometric(model, state, work.bending_colours.order[t], work.bending, dt)
+
+
+def xpbd_nodes(model, forces, work) -> tuple:
+    """(loops clearing the multipliers, sweeps) of XPBD over the triangles' isometric bending (xpbd.py's
+    workspace `work`), none for a model without them."""
+    if not model.hinge_count or not model.isometric:
+        return (), ()
+    return ((Loop(model.face_count, clear_multipliers, work, ITEM),),
+            (Sweep(work.bending_colours, xpbd_at, model, STATE, work, ITEM,
+                   DT).with_big_body(),))

@@ -25,7 +25,7 @@ TOG 28(4), 2009, sec. 3). Everything each solver needs of it, together:
 import numpy as np
 import taichi as ti
 
-from ..runtime.plan import ITEM, STATE, Loop
+from ..runtime.plan import DT, ITEM, STATE, Loop, Sweep
 from .faces import face_columns, face_intact, multiplier_step, store_corners
 
 
@@ -239,3 +239,26 @@ def membrane_constraint(model: ti.template(), state: ti.template(), f, multiplie
         w = model.particle_inv_mass[corner[c]]
         state.particle_position[corner[c]] = x + w * (along_warp * grads[c][0]
                                                       + along_weft * grads[c][1])
+
+
+@ti.func
+def clear_multipliers(work: ti.template(), f):
+    work.membrane[f] = ti.Vector([0.0, 0.0, 0.0])
+
+
+@ti.func
+def xpbd_at(model: ti.template(), state: ti.template(), forces: ti.template(),
+            work: ti.template(), t, dt):
+    """XPBD for the triangle at position t of its colouring."""
+    xpbd_membrane(model, state, work.membrane_colours.order[t], work.membrane, dt,
+                  forces.tearable)
+
+
+def xpbd_nodes(model, forces, work) -> tuple:
+    """(loops clearing the multipliers, sweeps) of XPBD over the triangles' strains (xpbd.py's
+    workspace `work`), none for a model without them."""
+    if not model.face_count:
+        return (), ()
+    return ((Loop(model.face_count, clear_multipliers, work, ITEM),),
+            (Sweep(work.membrane_colours, xpbd_at, model, STATE, forces, work, ITEM,
+                   DT).with_big_body(),))

@@ -20,7 +20,7 @@ Which pairs are springs, their kinds and rest lengths come from the mesh (body/t
 import numpy as np
 import taichi as ti
 
-from ..runtime.plan import ITEM, STATE, Loop
+from ..runtime.plan import DT, ITEM, STATE, Loop, Sweep
 
 
 @ti.func
@@ -232,6 +232,22 @@ def xpbd_update(model: ti.template(), state: ti.template(), colours: ti.template
         multiplier[t] = multiplier[t] + dlambda
         state.particle_position[p] = state.particle_position[p] + wp * dlambda * n
         state.particle_position[q] = state.particle_position[q] - wq * dlambda * n
+
+
+@ti.func
+def clear_multiplier(work: ti.template(), s):
+    work.value[s] = 0.0
+
+
+def xpbd_nodes(model, forces, work) -> tuple:
+    """(loops clearing the multipliers, sweeps) of XPBD over the springs (xpbd.py's workspace
+    `work`: the spring colouring and one multiplier per spring in its order), none without
+    springs."""
+    if not model.spring_count:
+        return (), ()
+    return ((Loop(model.spring_count, clear_multiplier, work, ITEM),),
+            (Sweep(work.colours, xpbd_update, model, STATE, work.colours, ITEM, work.value, DT,
+                   forces.tearable),))
 
 
 @ti.func

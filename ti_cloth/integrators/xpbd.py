@@ -6,11 +6,8 @@ triangles as strain and bending constraints with compliance from its moduli
 
 import taichi as ti
 
-from ..energies.altitude import xpbd_altitude
-from ..energies.bending import xpbd_bending
-from ..energies.isometric import xpbd_isometric
-from ..energies.membrane import xpbd_membrane
-from ..energies.springs import damp, xpbd_update
+from ..energies import PROJECTIONS
+from ..energies.springs import damp
 from ..inputs import limits
 from ..inputs.validation import count
 from ..physics import wind
@@ -32,45 +29,6 @@ def xpbd_predict(model: ti.template(), state: ti.template(), forces: ti.template
     v = state.particle_velocity[i] + now.dt * model.particle_inv_mass[i] * state.particle_force[i]
     state.particle_prev_position[i] = x
     state.particle_position[i] = x + now.dt * v
-
-
-@ti.func
-def clear_spring(work: ti.template(), s):
-    work.value[s] = 0.0
-
-
-@ti.func
-def clear_altitude(work: ti.template(), a):
-    work.altitude[a] = 0.0
-
-
-@ti.func
-def solve_altitude(model: ti.template(), state: ti.template(), work: ti.template(), t,
-                   now: ti.template()):
-    xpbd_altitude(model, state, work.altitude_colours.order[t], work.altitude, now.dt)
-
-
-@ti.func
-def clear_face(work: ti.template(), f):
-    work.membrane[f] = ti.Vector([0.0, 0.0, 0.0])
-    work.bending[f] = 0.0 * work.bending[f]
-
-
-@ti.func
-def solve_membrane(model: ti.template(), state: ti.template(), forces: ti.template(),
-                   work: ti.template(), t, now: ti.template()):
-    xpbd_membrane(model, state, work.membrane_colours.order[t], work.membrane, now.dt,
-                  forces.tearable)
-
-
-@ti.func
-def solve_bending(model: ti.template(), state: ti.template(), forces: ti.template(),
-                  work: ti.template(), t, now: ti.template()):
-    if ti.static(model.isometric):
-        xpbd_isometric(model, state, work.bending_colours.order[t], work.bending, now.dt)
-    else:
-        xpbd_bending(model, state, work.bending_colours.order[t], work.bending, now.dt,
-                     forces.tearable)
 
 
 @backend.kernel_argument
@@ -108,8 +66,8 @@ class XPBD(Integrator):
     damping on the new velocities follows (energies/springs.py damp: each spring's backward
     Euler step in turn, stable at any h); positions keep their solve, as in position-based
     damping (Mueller et al. 2007), and the next prediction starts from the damped
-    velocities. Unconverged (few
-    iterations, stiff springs, large h), the cloth is softer than its material.
+    velocities. Unconverged (few iterations, stiff springs, large h), the cloth is softer
+    than its material. The terms it sweeps, and their order: energies.PROJECTIONS.
     iterations: Gauss-Seidel passes per step, >= 1.
     Order 1. No step-size stability limit.
     """
@@ -136,20 +94,9 @@ class XPBD(Integrator):
         `iterations` passes colour by colour (work: the _Multipliers), velocities from
         positions, and on a relative-damped body one pass of implicit damping."""
         clear, passes = (), ()
-        if model.spring_count:
-            clear += (Loop(model.spring_count, clear_spring, work, ITEM),)
-            passes += (Sweep(work.colours, xpbd_update, model, STATE, work.colours, ITEM,
-                             work.value, DT, forces.tearable),)
-        if model.altitude_count:
-            clear += (Loop(model.altitude_count, clear_altitude, work, ITEM),)
-            passes += (Sweep(work.altitude_colours, solve_altitude, model, STATE, work, ITEM, NOW),)
-        if model.face_count:
-            clear += (Loop(model.face_count, clear_face, work, ITEM),)
-            passes += (Sweep(work.membrane_colours, solve_membrane, model, STATE, forces, work,
-                             ITEM, NOW).with_big_body(),)
-        if model.hinge_count:
-            passes += (Sweep(work.bending_colours, solve_bending, model, STATE, forces, work,
-                             ITEM, NOW).with_big_body(),)
+        for term in PROJECTIONS:         # energies.PROJECTIONS, in that order
+            clears, sweeps = term.xpbd_nodes(model, forces, work)
+            clear, passes = clear + clears, passes + sweeps
         damping = ()
         if model.spring_count and model.relative_damping:
             damping = (Sweep(work.colours, damp, model, STATE, work.colours, ITEM, DT,
