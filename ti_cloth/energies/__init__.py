@@ -17,9 +17,9 @@ term; the mid-edge bending adds its later phases, bending_phases) and gathered p
 in a fixed order (each slot kind's gather), so runs are deterministic; physics/forces.py
 runs them in the order of TERMS and SLOTS, implicit Euler its rows in the order of ROWS, xpbd
 its sweeps in the order of PROJECTIONS. A new term is a module here and a line in TERMS and
-PROJECTIONS (and one in SLOTS and ROWS if it brings a kind of slot of its own). This package sits below body/
-(which builds a Cloth's rest data with it) and imports only geometry.py, inputs/ and
-runtime/.
+PROJECTIONS (and one in SLOTS and ROWS if it brings a kind of slot of its own). This package
+sits below body/ (which builds a Cloth's rest data with it) and imports only geometry.py,
+inputs/ and runtime/.
 """
 
 from . import altitude, bending, faces, isometric, membrane, springs

@@ -259,8 +259,8 @@ def xpbd_at(model: ti.template(), state: ti.template(), work: ti.template(), t, 
 
 
 def xpbd_nodes(model, forces, work) -> tuple:
-    """(loops clearing the multipliers, sweeps) of XPBD over the triangles' isometric bending (xpbd.py's
-    workspace `work`), none for a model without them."""
+    """(loops clearing the multipliers, sweeps) of XPBD over the triangles' isometric bending
+    (xpbd.py's workspace `work`), none for a model without them."""
     if not model.hinge_count or not model.isometric:
         return (), ()
     return ((Loop(model.face_count, clear_multipliers, work, ITEM),),

@@ -255,8 +255,8 @@ def xpbd_at(model: ti.template(), state: ti.template(), forces: ti.template(),
 
 
 def xpbd_nodes(model, forces, work) -> tuple:
-    """(loops clearing the multipliers, sweeps) of XPBD over the triangles' strains (xpbd.py's
-    workspace `work`), none for a model without them."""
+    """(loops clearing the multipliers, sweeps) of XPBD over the triangles' strains
+    (xpbd.py's workspace `work`), none for a model without them."""
     if not model.face_count:
         return (), ()
     return ((Loop(model.face_count, clear_multipliers, work, ITEM),),
