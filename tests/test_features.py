@@ -10,7 +10,7 @@ import ti_cloth as tc
 from ti_cloth.contact.broad_phase import contact_pairs
 from ti_cloth.contact.colliders.collision import resolve
 from ti_cloth.energies import springs
-from ti_cloth.integrators import implicit_euler, rk4, xpbd
+from ti_cloth.integrators import rk4, xpbd
 from ti_cloth.physics import handles, strain_limit, tearing, wind
 from ti_cloth.state import copy_positions
 
@@ -19,7 +19,7 @@ OPTIONAL = {
     "collision snapshot": copy_positions, "relaxation": strain_limit.relax_stretched,
     "strain-limit velocity": strain_limit.follow_velocity, "tearing": tearing.tear_spring,
     "handles": handles.move_held, "xpbd": springs.xpbd_update,
-    "xpbd prediction": xpbd.xpbd_predict, "implicit solve": implicit_euler.linearise_spring,
+    "xpbd prediction": xpbd.xpbd_predict, "implicit solve": springs.linearise_spring,
     "rk4 stages": rk4.rk4_stage, "self-collision": contact_pairs.list_pairs,
 }
 

@@ -50,7 +50,10 @@ def test_momentum_conserved_without_gravity_or_pins(f64, integrator):
     rng = np.random.default_rng(3)
     # implicit Euler conserves momentum exactly only when its linear system is solved exactly:
     # CG to a relative residual of 1e-14 here (the default 1e-5 drifts by ~1e-7 relative)
-    spec = tc.ImplicitEuler(tolerance=1e-14, max_iterations=1000) if integrator == "implicit_euler" else integrator
+    # (and Newton's solves of implicit midpoint and TR-BDF2 likewise)
+    spec = {"implicit_euler": tc.ImplicitEuler(tolerance=1e-14, max_iterations=1000),
+            "implicit_midpoint": tc.ImplicitMidpoint(tolerance=1e-14, cg_tolerance=1e-14),
+            "tr_bdf2": tc.TRBDF2(tolerance=1e-14, cg_tolerance=1e-14)}.get(integrator, integrator)
     sim = tc.Simulation(cloth, integrator=spec, dt=stable_step(cloth, integrator, 0.3),
                         gravity=(0, 0, 0))
     sim.set_positions(cloth.particle_position + rng.normal(scale=0.003, size=(64, 3)))

@@ -153,6 +153,8 @@ FEATURES = {"none": {}, "tearing": dict(tearing=0.2),
                             ("symplectic_euler", "braced strands", "none"),
                             ("symplectic_euler", "fabric", "all but strain limit"), ("rk4", "fabric", "none"),
                             ("implicit_euler", "fabric", "none"), ("xpbd", "fabric", "none"),
+                            ("implicit_midpoint", "fabric", "none"),
+                            ("implicit_midpoint", "sheet", "all but strain limit"),
                             ("xpbd", "braced strands", "none")])
 def test_every_launch_plan_takes_the_same_steps(threads, integrator, feature, body, monkeypatch):
     """The same bits in a launch per phase, in small launches on the launching thread and in
@@ -163,7 +165,8 @@ def test_every_launch_plan_takes_the_same_steps(threads, integrator, feature, bo
                     "fabric": fabric_sheet, "garment": garment_sheet}[body]()
     runs = []
     kwargs = FEATURES[feature]
-    position_based = integrator in ("pbd", "xpbd", "implicit_euler")   # any step: 1/480 s
+    position_based = integrator in ("pbd", "xpbd", "implicit_euler",
+                                    "implicit_midpoint")   # any step: 1/480 s
     dt = (1 / 480 if position_based else 2e-5 if body == "sheet"
           else 0.5 * tc.stable_dt(cloth, integrator, 0.3))   # strands and fabric: its own
     steps = 2 * 100 + 7 if not position_based else 2 * 20 + 7
@@ -220,6 +223,23 @@ def test_a_team_shares_big_launches_and_one_worker_takes_small_ones(threads):
     assert many.steps_per_launch(tc.SymplecticEuler(), big) == 10
     moving = tc.Simulation(cloth, dt=1e-4, colliders=contact_scene()).many_steps
     assert moving.steps_per_launch(tc.SymplecticEuler(), model) == limits.SCHEDULED_STEPS
+
+
+def test_no_step_count_compiles_a_kernel_after_the_first_step(threads):
+    """advance_many's serial or pool variant is a compile-time choice made per launch by its
+    work: both are built on the first launch, so a later count of either kind (step(6) after
+    step(60), a launch of 4096 steps after one of 1) compiles nothing more."""
+    cloth, _ = sheet(12)
+    for integrator in ("symplectic_euler", tc.ImplicitEuler()):
+        sim = tc.Simulation(cloth, integrator=integrator, dt=1e-4)
+        many = sim.many_steps
+        assert many.serial(sim.integrator, sim.model, 1)
+        assert not many.serial(sim.integrator, sim.model, stepping.MAX_STEPS_PER_LAUNCH)
+        sim.step(1)
+        built = backend.compilations(stepping.advance_many)    # distinct template sets so far
+        for n in (60, 6, stepping.MAX_STEPS_PER_LAUNCH, 1):
+            sim.step(n)
+        assert backend.compilations(stepping.advance_many) == built, integrator
 
 
 def test_big_launches_go_to_the_size_measured_faster_and_probe_the_other(threads):

@@ -35,8 +35,10 @@ from .integrators import (
     XPBD,
     ExplicitEuler,
     ImplicitEuler,
+    ImplicitMidpoint,
     Integrator,
     SymplecticEuler,
+    TRBDF2,
     Verlet,
 )
 from .model import Model
@@ -57,7 +59,7 @@ __all__ = [
     "TeamStalled",
     "ForceSettings",
     "INTEGRATORS", "Integrator", "ExplicitEuler", "SymplecticEuler", "Verlet", "PBD", "XPBD",
-    "ImplicitEuler", "RK4", "PRESETS", "FABRICS", "Fabric", "Material", "SpringKind", "SpringParams", "Mesh", "grid_mesh",
+    "ImplicitEuler", "ImplicitMidpoint", "TRBDF2", "RK4", "PRESETS", "FABRICS", "Fabric", "Material", "SpringKind", "SpringParams", "Mesh", "grid_mesh",
     "box_mesh", "combine_meshes", "disc_mesh", "sphere_mesh",
     "tet_grid_mesh", "load_mesh", "save_mesh", "Model", "Keyframes", "Oscillation", "Handle",
     "Attachment", "panel", "Panel", "Garment", "Sewing",

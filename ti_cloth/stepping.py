@@ -183,6 +183,7 @@ class ManySteps:
         self._cost = {}            # workers -> seconds per spring-step of recent big launches
         self._big_launches = 0
         self._launched = set()     # team sizes that have run a big launch
+        self._built = set()        # (integrator, work) whose launch variants are compiled
 
     def steps_per_launch(self, integrator, model, forces=None) -> int:
         """How many steps one launch of `integrator` on `model` holds at most."""
@@ -220,6 +221,22 @@ class ManySteps:
         the same bits (IEEE arithmetic: runtime/backend.py)."""
         return steps * integrator.step_work(model) < TEAM_MIN_SPRING_STEPS
 
+    def build(self, integrator, model, state, forces, work, dt: float) -> None:
+        """Compile, on the first launch of `integrator` on `work`, every variant of
+        advance_many its launches may take (serial and pool: `serial` is a compile-time
+        choice), each by a launch of no step, so that no later call compiles on the way
+        (step(6) after step(60)); a variant a launch of this integrator can never take is
+        not built."""
+        key = (id(integrator), id(work))
+        if key in self._built:
+            return
+        self._built.add(key)
+        most = self.steps_per_launch(integrator, model, forces)
+        for serial in {self.serial(integrator, model, 1), self.serial(integrator, model, most)}:
+            self.team.set_size(1)
+            advance_many(integrator, model, state, forces, work, self.stages, self.team, dt, 0,
+                         0, 0, 0, serial)
+
     def cost(self, workers: int) -> float:
         """Seconds per spring-step of recent big launches on `workers` workers: the least of
         the last few (one slow wake-up does not condemn a size; a lasting slowdown shows in
@@ -245,6 +262,7 @@ class ManySteps:
         for name in STEP_ORDER[1:]:
             for stage in self.stages.running(name):
                 plan.note_launch(plan.nodes_of(stage, "phases", model, forces, stage), "team")
+        self.build(integrator, model, state, forces, work, dt)   # after nodes_of made their fields
         colliders = self.stages.colliders
         moving = colliders is not None and colliders.moving
         done = 0

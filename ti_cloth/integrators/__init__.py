@@ -5,14 +5,17 @@ from __future__ import annotations
 from .base import Integrator
 from .explicit_euler import ExplicitEuler
 from .implicit_euler import ImplicitEuler
+from .implicit_midpoint import ImplicitMidpoint
 from .pbd import PBD
 from .rk4 import RK4
 from .symplectic_euler import SymplecticEuler
+from .tr_bdf2 import TRBDF2
 from .verlet import Verlet
 from .xpbd import XPBD
 
 INTEGRATORS: dict[str, type[Integrator]] = {
-    cls.name: cls for cls in (ExplicitEuler, SymplecticEuler, Verlet, PBD, XPBD, ImplicitEuler, RK4)
+    cls.name: cls for cls in (ExplicitEuler, SymplecticEuler, Verlet, PBD, XPBD, ImplicitEuler,
+                              ImplicitMidpoint, TRBDF2, RK4)
 }
 
 
@@ -27,4 +30,4 @@ def make_integrator(spec) -> Integrator:
 
 
 __all__ = ["Integrator", "ExplicitEuler", "SymplecticEuler", "Verlet", "PBD", "XPBD", "ImplicitEuler",
-           "RK4", "INTEGRATORS", "make_integrator"]
+           "ImplicitMidpoint", "TRBDF2", "RK4", "INTEGRATORS", "make_integrator"]

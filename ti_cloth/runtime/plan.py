@@ -10,8 +10,11 @@ nodes returned by a method (`phases(model, forces, work)`):
     Once(body, *args)                      a scalar computation (a sum of partial sums, a
                                            decision), done by every worker on its own row of
                                            a workspace
-    Repeat(count, leaves...)               the leaves (Phase, Sweep, Once) `count` times
-    Until(test, leaves..., args=())        the leaves while test(*args) holds
+    Repeat(count, nodes...)                the nodes `count` times
+    Until(test, nodes..., args=())         the nodes while test(*args) holds
+
+(a Repeat or an Until holds leaves (Phase, Sweep, Once) or Repeats and Untils of leaves: two
+levels, as a Newton iteration around a conjugate-gradient loop needs).
 
 Bodies are ti.funcs that take what they need: a node holds its body and the body's arguments,
 `Loop(count, body, *args)`, and the runner calls body(*args) for each item, with these
@@ -64,10 +67,53 @@ ITEM, STATE, DT, NOW, STAGES = (Placeholder(name)
                                 for name in ("ITEM", "STATE", "DT", "NOW", "STAGES"))
 
 
+class Substep(Placeholder):
+    """DT or NOW of a sub-step: the step's dt times `fraction` (the rest of NOW as it is)."""
+
+    def __init__(self, of: Placeholder, fraction: float):
+        super().__init__(f"{of.name} x {fraction:g}")
+        self.of, self.fraction = of, float(fraction)
+
+
 def bind(args: tuple, item, state, now, stages) -> tuple:
     """`args` with the placeholders filled in (called at compile time: ti.static(bind(...)))."""
     values = {ITEM: item, STATE: state, DT: now.dt, NOW: now, STAGES: stages}
-    return tuple(values[a] if isinstance(a, Placeholder) else a for a in args)
+    bound = []
+    for a in args:
+        if isinstance(a, Substep):
+            dt = now.dt * a.fraction
+            a = dt if a.of is DT else ti.Struct(dt=dt, step=now.step, k=now.k, start=now.start,
+                                                row=now.row)
+        elif isinstance(a, Placeholder):
+            a = values[a]
+        bound.append(a)
+    return tuple(bound)
+
+
+def substep(fraction: float, nodes: tuple) -> tuple:
+    """`nodes` (any of this module's) with DT and NOW among their bodies' arguments standing
+    for a sub-step of `fraction` x dt: phases written for a step, run as a part of one
+    (an implicit stage of a Runge-Kutta or TR-BDF2 step, the half step of implicit
+    midpoint)."""
+    def scaled(args):
+        return tuple(Substep(a, fraction) if a is DT or a is NOW else a for a in args)
+
+    out = []
+    for node in nodes:
+        if isinstance(node, Phase):
+            node = Phase(*(Loop(loop.count, loop.body, *scaled(loop.args)) for loop in node.loops))
+        elif isinstance(node, Sweep):
+            copy = Sweep(node.colouring, node.body, *scaled(node.args))
+            copy.per_colour = node.per_colour
+            node = copy
+        elif isinstance(node, Once):
+            node = Once(node.body, *scaled(node.args))
+        elif isinstance(node, Repeat):
+            node = Repeat(node.count, *substep(fraction, node.leaves))
+        else:
+            node = Until(node.test, *substep(fraction, node.leaves), args=scaled(node.args))
+        out.append(node)
+    return tuple(out)
 
 
 class Loop:
@@ -114,14 +160,14 @@ class Once:
 
 
 class Repeat:
-    """The leaves `count` times (count: a Python int)."""
+    """The nodes `count` times (count: a Python int)."""
 
     def __init__(self, count: int, *leaves):
         self.count, self.leaves = int(count), leaves
 
 
 class Until:
-    """The leaves while test(*args) is true (test reads only the worker's row, so every worker
+    """The nodes while test(*args) is true (test reads only the worker's row, so every worker
     decides alike)."""
 
     def __init__(self, test, *leaves, args: tuple = ()):
@@ -129,15 +175,19 @@ class Until:
 
 
 LEAVES = (Phase, Sweep, Once)
+LOOPS = (Repeat, Until)
+DEPTH = 2          # loops within loops at most
 
 
-def _check(nodes) -> tuple:
+def _check(nodes, depth: int = 0) -> tuple:
     for node in nodes:
-        inner = node.leaves if isinstance(node, (Repeat, Until)) else (node,)
-        bad = [leaf for leaf in inner if not isinstance(leaf, LEAVES)]
-        if bad:
-            raise TypeError(f"phases may hold Phase, Sweep, Once, Repeat and Until (Repeat and "
-                            f"Until of leaves only), got {bad[0]!r}")
+        if isinstance(node, LOOPS):
+            if depth >= DEPTH:
+                raise TypeError(f"phases nest Repeat and Until {DEPTH} deep at most, got "
+                                f"{node!r} inside {depth} of them")
+            _check(node.leaves, depth + 1)
+        elif not isinstance(node, LEAVES):
+            raise TypeError(f"phases may hold Phase, Sweep, Once, Repeat and Until, got {node!r}")
     return tuple(nodes)
 
 
@@ -147,9 +197,30 @@ def nodes_of(owner, part: str, model, forces, work) -> tuple:
 
 
 def _leaves(nodes, container: tuple) -> tuple:
-    """The top-level nodes (container ()) or the leaves of node i (container (i,): a Repeat
-    or an Until)."""
-    return nodes[container[0]].leaves if container else nodes
+    """The top-level nodes (container ()) or the nodes in the Repeat or Until at path
+    `container` ((i,): top-level node i; (i, j): node j inside it)."""
+    for index in container:
+        nodes = nodes[index].leaves
+    return nodes
+
+
+def _node(nodes, path: tuple):
+    """The node at `path` (_leaves)."""
+    return _leaves(nodes, path[:-1])[path[-1]]
+
+
+def _flat(nodes) -> tuple:
+    """(node, the Until around it or None) for every leaf in `nodes`, depth first."""
+    found = []
+    for node in nodes:
+        if isinstance(node, LOOPS):
+            for leaf, _ in _flat(node.leaves):
+                found.append((leaf, node if isinstance(node, Until) else None))
+            if isinstance(node, Until):
+                found.append((None, node))
+        else:
+            found.append((node, None))
+    return tuple(found)
 
 
 def _alone(leaf) -> bool:
@@ -169,13 +240,11 @@ def note_launch(nodes, key) -> None:
     tell what a step compiled by its bodies, as by kernels (backend.compilations)."""
     if not backend.counting():
         return
-    for node in nodes:
-        for leaf in node.leaves if isinstance(node, (Repeat, Until)) else (node,):
-            bodies = [loop.body for loop in leaf.loops] if isinstance(leaf, Phase) else [leaf.body]
-            if isinstance(node, Until):
-                bodies.append(node.test)
-            for body in bodies:
-                backend.note_launch(getattr(body, "__func__", body), key)
+    for leaf, until in _flat(nodes):
+        bodies = [until.test] if leaf is None else (
+            [loop.body for loop in leaf.loops] if isinstance(leaf, Phase) else [leaf.body])
+        for body in bodies:
+            backend.note_launch(getattr(body, "__func__", body), key)
 
 
 @backend.kernel_argument
@@ -245,11 +314,11 @@ def _launch_leaves(args, nodes, container: tuple, begin: int, end: int) -> None:
 @backend.kernel
 def _holds(owner: ti.template(), part: ti.template(), model: ti.template(), state: ti.template(),
            forces: ti.template(), work: ti.template(), dt: float, step: ti.i32, start: ti.i32,
-           index: ti.template()) -> ti.i32:
-    """Whether the test of the Until at top-level node `index` holds (row 0)."""
+           path: ti.template()) -> ti.i32:
+    """Whether the test of the Until at `path` (_leaves) holds (row 0)."""
     now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0)
     holds = 0
-    for node in ti.static(nodes_of(owner, part, model, forces, work)[index:index + 1]):
+    for node in ti.static((_node(nodes_of(owner, part, model, forces, work), path),)):
         holds = ti.i32(node.test(*ti.static(bind(node.args, None, state, now, STAGELESS))))
     return holds
 
@@ -282,20 +351,26 @@ def run(owner, model, state, forces, work, dt: float, step: int, start: bool,
     if serial_is_faster(model):
         launch_serial(*args)
         return
+    _run_nodes(args, nodes, ())
+
+
+def _run_nodes(args, nodes, container: tuple) -> None:
+    """The nodes at `container` (_leaves), a launch per run of leaves, loops on the host."""
+    inner = _leaves(nodes, container)
     i = 0
-    while i < len(nodes):
-        node = nodes[i]
+    while i < len(inner):
+        node = inner[i]
         if isinstance(node, Repeat):
             for _ in range(node.count):
-                _launch_leaves(args, nodes, (i,), 0, len(node.leaves))
+                _run_nodes(args, nodes, container + (i,))
         elif isinstance(node, Until):
-            while _holds(*args, i):
-                _launch_leaves(args, nodes, (i,), 0, len(node.leaves))
+            while _holds(*args, container + (i,)):
+                _run_nodes(args, nodes, container + (i,))
         else:
             end = i
-            while end < len(nodes) and isinstance(nodes[end], LEAVES):
+            while end < len(inner) and isinstance(inner[end], LEAVES):
                 end += 1
-            _launch_leaves(args, nodes, (), i, end)
+            _launch_leaves(args, nodes, container, i, end)
             i = end - 1
         i += 1
 
@@ -322,6 +397,31 @@ def _run_leaf(leaf: ti.template(), model: ti.template(), state: ti.template(),
 
 
 @ti.func
+def _run_inner(nodes: ti.template(), model: ti.template(), state: ti.template(),
+               forces: ti.template(), work: ti.template(), stages: ti.template(),
+               team: ti.template(), worker, now: ti.template()):
+    """The nodes of a Repeat or an Until (leaves only: the second level)."""
+    for leaf in ti.static(nodes):
+        _run_leaf(leaf, model, state, forces, work, stages, team, worker, now)
+
+
+@ti.func
+def _run_level(nodes: ti.template(), model: ti.template(), state: ti.template(),
+               forces: ti.template(), work: ti.template(), stages: ti.template(),
+               team: ti.template(), worker, now: ti.template()):
+    """The nodes of a Repeat or an Until of the first level (leaves, Repeats and Untils)."""
+    for node in ti.static(nodes):
+        if ti.static(isinstance(node, Repeat)):
+            for _ in range(node.count):
+                _run_inner(node.leaves, model, state, forces, work, stages, team, worker, now)
+        elif ti.static(isinstance(node, Until)):
+            while node.test(*ti.static(bind(node.args, None, state, now, stages))):
+                _run_inner(node.leaves, model, state, forces, work, stages, team, worker, now)
+        else:
+            _run_leaf(node, model, state, forces, work, stages, team, worker, now)
+
+
+@ti.func
 def run_team(nodes: ti.template(), model: ti.template(), state: ti.template(),
              forces: ti.template(), work: ti.template(), stages: ti.template(),
              team: ti.template(), worker, now: ti.template()):
@@ -330,11 +430,9 @@ def run_team(nodes: ti.template(), model: ti.template(), state: ti.template(),
     for node in ti.static(nodes):
         if ti.static(isinstance(node, Repeat)):
             for _ in range(node.count):
-                for leaf in ti.static(node.leaves):
-                    _run_leaf(leaf, model, state, forces, work, stages, team, worker, now)
+                _run_level(node.leaves, model, state, forces, work, stages, team, worker, now)
         elif ti.static(isinstance(node, Until)):
             while node.test(*ti.static(bind(node.args, None, state, now, stages))):
-                for leaf in ti.static(node.leaves):
-                    _run_leaf(leaf, model, state, forces, work, stages, team, worker, now)
+                _run_level(node.leaves, model, state, forces, work, stages, team, worker, now)
         else:
             _run_leaf(node, model, state, forces, work, stages, team, worker, now)

@@ -1,0 +1,230 @@
+"""Matrix-free preconditioned conjugate gradients on the system of an implicit step,
+
+    A dv = b,   A = M (1 + h drag) - h D - h^2 K,
+
+with K = df/dx and D = df/dv linearised by the terms of energies.ROWS (each term's
+implicit_start fills its blocks and its share of the 3x3 diagonal, implicit_product applies
+them), h the step of the solve (implicit Euler's step, or the sub-step of implicit midpoint
+and TR-BDF2: newton.py). The system is never assembled: each iteration gathers A p per
+particle in the Model's fixed adjacency order, and every dot product is summed in fixed blocks
+of BLOCK particles, so a run is bit-for-bit repeatable. Jacobi (3x3-diagonal) preconditioner.
+Pins: dv is filtered to zero on particles of inverse mass 0 (Baraff & Witkin's modified CG
+with S = 0 there). Three synchronisation points per iteration: after A p, the update, the new
+direction; every worker sums the same partial sums in block order, so all take the same
+decisions (runtime/plan.py's Until).
+"""
+
+import math
+
+import taichi as ti
+
+from ..energies import ROWS
+from ..energies.altitude import linearise_altitude, project_altitude
+from ..energies.bending import bending_phases
+from ..energies.springs import linearise_spring
+from ..physics import wind
+from ..physics.forces import force_loops, gather_force
+from ..runtime import backend
+from ..runtime.plan import ITEM, NOW, STATE, Loop, Once, Phase, Until
+from ..runtime.team import MAX_WORKERS
+from . import implicit_elements
+
+BLOCK = 64                      # particles per partial sum of a dot product
+TYPICAL_ITERATIONS = 20         # CG iterations a step is assumed to take (sizing launches)
+ALPHA, RZ, RR, BB, BETA, CHANGE = range(6)  # slots of a row of the workspace's scalar field
+CG, NEWTON, CG_TOTAL = range(3)     # slots of a row of its iteration counts
+ROW = 16                        # slots per row (a worker's row fills its own cache line)
+
+
+@backend.kernel_argument
+class Workspace:
+    """CG vectors, per-spring linearisation and the partial sums of one State's solve."""
+
+    def __init__(self, particle_count: int, spring_count: int, altitude_count: int,
+                 face_count: int, hinge_count: int, newton: bool = False):
+        real = backend.real()
+        n = particle_count
+        self.block_count = math.ceil(n / BLOCK)
+        fields = backend.FieldGroup()
+        self.dv = fields.vector(3, real, n)
+        self.r = fields.vector(3, real, n)
+        self.z = fields.vector(3, real, n)
+        self.p = fields.vector(3, real, n)
+        self.ap = fields.vector(3, real, n)
+        self.diagonal = fields.vector(3, real, n)
+        self.spring_normal = fields.vector(3, real, max(spring_count, 1))
+        self.spring_lateral = fields.scalar(real, max(spring_count, 1))
+        # h^2 K + h D of each spring, once per end in the model's adjacency order (symmetric:
+        # xx, yy, zz, xy, xz, yz), so A p reads them front to back
+        self.adjacency_block = fields.vector(6, real, max(2 * spring_count, 1))
+        self.altitude_normal = fields.vector(3, real, max(altitude_count, 1))
+        self.altitude_weight = fields.scalar(real, max(4 * altitude_count, 1))   # g, per corner
+        self.altitude_projection = fields.scalar(real, max(altitude_count, 1))   # G . (v or p)
+        self.partial = fields.vector(2, real, self.block_count)
+        self.partial_pap = fields.scalar(real, self.block_count)
+        # each worker's copy of the solve's scalars and iteration count (plan.Once), a row
+        # of ROW slots per worker
+        self.scalar = fields.scalar(real, MAX_WORKERS * ROW)
+        self.iterations = fields.scalar(ti.i32, MAX_WORKERS * ROW)
+        implicit_elements.add_fields(self, fields, face_count, hinge_count)
+        if newton:      # a Newton solve's start and the step's start (newton.py)
+            self.origin_position = fields.vector(3, real, n)
+            self.origin_velocity = fields.vector(3, real, n)
+            self.step_position = fields.vector(3, real, n)
+            self.step_velocity = fields.vector(3, real, n)
+            self.partial_change = fields.scalar(real, self.block_count)
+        fields.finalize(self)
+
+
+@ti.func
+def block_sum(ws: ti.template(), partial: ti.template(), zero):
+    """Sum of the per-block partial sums `partial`, in block order (deterministic), from
+    `zero` (0.0 or a zero vector, its type)."""
+    total = zero
+    for block in range(ws.block_count):
+        total += partial[block]
+    return total
+
+
+@ti.func
+def block_range(block, count):
+    return block * BLOCK, ti.min((block + 1) * BLOCK, count)
+
+
+@ti.func
+def apply_block(model: ti.template(), forces: ti.template(), ws: ti.template(), block,
+                 now: ti.template()):
+    """ap = A p on the particles of `block` (rows of pinned particles 0), and its partial
+    sum of p . ap."""
+    dt, drag = now.dt, forces.drag
+    begin, end = block_range(block, model.particle_count)
+    pap = 0.0
+    for i in range(begin, end):
+        free = ti.cast(model.particle_inv_mass[i] > 0, float)
+        pi = ws.p[i]
+        ap = model.particle_mass[i] * (1.0 + dt * drag) * pi
+        for term in ti.static(ROWS):
+            ap = term.implicit_product(model, ws, i, dt, ap)
+        ap *= free
+        ws.ap[i] = ap
+        pap += pi.dot(ap)
+    ws.partial_pap[block] = pap
+
+
+@ti.func
+def update_block(model: ti.template(), ws: ti.template(), block, now: ti.template()):
+    """dv += alpha p, r -= alpha ap, z = r / diag on the particles of `block`; its partial
+    sums of r . z and r . r."""
+    alpha = ws.scalar[now.row * ROW + ALPHA]
+    begin, end = block_range(block, model.particle_count)
+    rz, rr = 0.0, 0.0
+    for i in range(begin, end):
+        ws.dv[i] = ws.dv[i] + alpha * ws.p[i]
+        r = ws.r[i] - alpha * ws.ap[i]
+        z = r / ws.diagonal[i]
+        ws.r[i] = r
+        ws.z[i] = z
+        rz += r.dot(z)
+        rr += r.dot(r)
+    ws.partial[block] = ti.Vector([rz, rr])
+
+
+@ti.func
+def turn_block(model: ti.template(), ws: ti.template(), block, now: ti.template()):
+    """p = z + beta p on the particles of `block`."""
+    beta = ws.scalar[now.row * ROW + BETA]
+    begin, end = block_range(block, model.particle_count)
+    for i in range(begin, end):
+        ws.p[i] = ws.z[i] + beta * ws.p[i]
+
+
+@ti.func
+def begin_solve(ws: ti.template(), now: ti.template()):
+    """The start's r . z, r . r and b . b (r = b), in the worker's row; no iteration yet."""
+    total = block_sum(ws, ws.partial, ti.Vector([0.0, 0.0]))
+    ws.scalar[now.row * ROW + RZ] = total[0]
+    ws.scalar[now.row * ROW + RR] = total[1]
+    ws.scalar[now.row * ROW + BB] = total[1]
+    ws.iterations[now.row * ROW] = 0
+
+
+@ti.func
+def step_length(ws: ti.template(), now: ti.template()):
+    """alpha = r . z / p . Ap."""
+    ws.scalar[now.row * ROW + ALPHA] = ws.scalar[now.row * ROW + RZ] / block_sum(ws, ws.partial_pap, 0.0)
+
+
+@ti.func
+def next_direction(ws: ti.template(), now: ti.template()):
+    """beta = new r . z / old r . z; the new r . z and r . r; one more iteration."""
+    sums = block_sum(ws, ws.partial, ti.Vector([0.0, 0.0]))
+    ws.scalar[now.row * ROW + BETA] = sums[0] / ws.scalar[now.row * ROW + RZ]
+    ws.scalar[now.row * ROW + RZ] = sums[0]
+    ws.scalar[now.row * ROW + RR] = sums[1]
+    ws.iterations[now.row * ROW] = ws.iterations[now.row * ROW] + 1
+
+
+@ti.func
+def project_velocity(model: ti.template(), state: ti.template(), ws: ti.template(), a):
+    """altitude_projection[a] = G_a . v_n."""
+    project_altitude(model, ws, state.particle_velocity, a)
+
+
+@ti.func
+def gather_block(model: ti.template(), state: ti.template(), forces: ti.template(), block):
+    """particle_force = f_n on the particles of `block` (springs evaluated)."""
+    begin, end = block_range(block, model.particle_count)
+    for i in range(begin, end):
+        state.particle_force[i] = gather_force(model, state, forces, i, True)
+
+
+@ti.func
+def unconverged(ws: ti.template(), now: ti.template(), tolerance: ti.template(),
+                most: ti.template()):
+    """|r|^2 > tolerance^2 |b|^2 (in float64) and fewer than `most` iterations: CG goes on
+    (b = 0, no load on a free particle: dv = 0 at once)."""
+    row = now.row
+    return (ti.f64(ws.scalar[row * ROW + RR]) > ti.f64(tolerance ** 2) * ti.f64(ws.scalar[row * ROW + BB])
+            and ws.iterations[row * ROW] < most)
+
+
+def linearisation(model, forces, ws, start: Loop) -> tuple:
+    """The forces f at the State's positions and velocities, every term's linearisation
+    there (a Fabric's hinges between its bending phases: implicit_elements), the forces
+    gathered per particle, then `start` (a Loop over the blocks writing the right-hand side
+    b, the 3x3 diagonal and the CG start r = b, p = z = r / diagonal) and the start's sums."""
+    linear = force_loops(model, forces) + implicit_elements.linear_loops(model, forces, ws)
+    if model.spring_count:
+        linear += (Loop(model.spring_count, linearise_spring, model, STATE, forces, ws, ITEM),)
+    if model.altitude_count:
+        linear += (Loop(model.altitude_count, linearise_altitude, model, STATE, ws, ITEM),)
+    gather = Loop(ws.block_count, gather_block, model, STATE, forces, ITEM)
+    if model.altitude_count:
+        begin = (Phase(gather, Loop(model.altitude_count, project_velocity, model, STATE, ws,
+                                    ITEM)),
+                 Phase(start))
+    else:
+        begin = (Phase(gather, start),)
+    bending = bending_phases(model, *implicit_elements.bending_loops(model, ws))
+    return (wind.phases(model, forces) + ((Phase(*linear),) if linear else ()) + bending
+            + begin + (Once(begin_solve, ws, NOW),))
+
+
+def system_product(model, forces, ws) -> tuple:
+    """ap = A p and its partial sums of p . ap."""
+    project = ()
+    if model.altitude_count:
+        project = (Loop(model.altitude_count, project_altitude, model, ws, ws.p, ITEM),)
+    return (implicit_elements.product_phases(model, ws, project)
+            + (Phase(Loop(ws.block_count, apply_block, model, forces, ws, ITEM, NOW)),))
+
+
+def solve(model, forces, ws, tolerance: float, most: int) -> Until:
+    """Preconditioned CG from the start `linearisation` left, until |r| <= tolerance |b|
+    or `most` iterations: dv in ws.dv."""
+    iteration = (system_product(model, forces, ws)
+                 + (Once(step_length, ws, NOW),
+                    Phase(Loop(ws.block_count, update_block, model, ws, ITEM, NOW)),
+                    Once(next_direction, ws, NOW),
+                    Phase(Loop(ws.block_count, turn_block, model, ws, ITEM, NOW))))
+    return Until(unconverged, *iteration, args=(ws, NOW, float(tolerance), int(most)))

@@ -1,0 +1,185 @@
+"""A backward Euler sub-step solved to convergence by Newton's method: the implicit stage that
+implicit midpoint and TR-BDF2 are made of.
+
+From an origin (x^, v^) and a sub-step s, find v with
+
+    g(v) = M (v - v^) - s f(x^ + s v, v) = 0,
+
+f the total force (springs, a Fabric's membrane and bending, altitude springs, gravity, drag,
+wind). Newton's iteration k linearises f at the iterate, x_k = x^ + s v_k:
+
+    (M - s D - s^2 K) dv = -g(v_k) = s f(x_k, v_k) - M (v_k - v^),   v_{k+1} = v_k + dv,
+
+with the terms' K = df/dx and D = df/dv (energies.ROWS, their indefinite parts projected away:
+conjugate_gradients.py solves the system, to a relative residual cg_tolerance). The residual is
+the exact force, so the iteration converges to the exact implicit solution whatever the
+Hessians leave out; it stops when the largest position update s |dv| is at most `tolerance`
+[m] (or after most_newton iterations). It starts from the explicit predictor v_0 = v^. A pin
+(inverse mass 0) keeps v^: its row is the identity and its right-hand side 0. Implicit Euler
+(implicit_euler.py) is one such iteration from x_n with s = h, its linearisation at x_n
+instead of at the predictor.
+
+Every sum is over fixed blocks in block order and the largest update a maximum (exact in
+any order): the bits do not depend on the plan or the thread count.
+"""
+
+import taichi as ti
+
+from ..energies import ROWS
+from ..inputs import limits
+from ..inputs.validation import count, finite_number, require
+from ..runtime.plan import ITEM, NOW, STATE, Loop, Once, Phase, Until
+from . import conjugate_gradients, fused
+from .conjugate_gradients import (
+    CG,
+    CG_TOTAL,
+    CHANGE,
+    NEWTON,
+    ROW,
+    TYPICAL_ITERATIONS,
+    Workspace,
+    block_range,
+)
+
+TYPICAL_NEWTON = 3         # Newton iterations a solve is assumed to take (sizing launches)
+
+
+@ti.func
+def _start_block(model: ti.template(), state: ti.template(), forces: ti.template(),
+                 ws: ti.template(), block, now: ti.template()):
+    """Particles of `block`: b = s f(x_k, v_k) - M (v_k - v^), the 3x3 diagonal of
+    A = M (1 + s drag) - s D - s^2 K and the CG start dv = 0, r = b, p = z = r / diagonal;
+    the block's partial sums of r . z and b . b."""
+    s, drag = now.dt, forces.drag
+    begin, end = block_range(block, model.particle_count)
+    rz, bb = 0.0, 0.0
+    for i in range(begin, end):
+        free = ti.cast(model.particle_inv_mass[i] > 0, float)
+        kv = ti.Vector([0.0, 0.0, 0.0])
+        diagonal = model.particle_mass[i] * (1.0 + s * drag) * ti.Vector([1.0, 1.0, 1.0])
+        for term in ti.static(ROWS):          # energies.ROWS, in a fixed order
+            kv, diagonal = term.implicit_start(model, state, forces, ws, i, s, kv, diagonal)
+        b = free * (s * state.particle_force[i]
+                    - model.particle_mass[i] * (state.particle_velocity[i] - ws.origin_velocity[i]))
+        if free == 0:
+            diagonal = ti.Vector([1.0, 1.0, 1.0])   # a pin's row is the identity (b = 0 there)
+        z = b / diagonal
+        ws.dv[i] = ti.Vector([0.0, 0.0, 0.0])
+        ws.r[i] = b
+        ws.z[i] = z
+        ws.p[i] = z
+        ws.diagonal[i] = diagonal
+        rz += b.dot(z)
+        bb += b.dot(b)
+    ws.partial[block] = ti.Vector([rz, bb])
+
+
+@ti.func
+def _update_block(model: ti.template(), state: ti.template(), ws: ti.template(), block,
+                  now: ti.template()):
+    """v_{k+1} = v_k + dv and x_{k+1} = x^ + s v_{k+1} on the particles of `block`; the
+    block's largest position update s |dv|."""
+    s = now.dt
+    begin, end = block_range(block, model.particle_count)
+    change = 0.0
+    for i in range(begin, end):
+        v = state.particle_velocity[i] + ws.dv[i]
+        state.particle_velocity[i] = v
+        state.particle_position[i] = ws.origin_position[i] + s * v
+        change = ti.max(change, s * ws.dv[i].norm())
+    ws.partial_change[block] = change
+
+
+@ti.func
+def _begin_newton(ws: ti.template(), now: ti.template()):
+    """No Newton iteration yet in the worker's row."""
+    ws.iterations[now.row * ROW + NEWTON] = 0
+    ws.iterations[now.row * ROW + CG_TOTAL] = 0
+
+
+@ti.func
+def _end_iteration(ws: ti.template(), now: ti.template()):
+    """The iteration's largest update (a maximum over the blocks) and the counts."""
+    change = 0.0
+    for block in range(ws.block_count):
+        change = ti.max(change, ws.partial_change[block])
+    row = now.row * ROW
+    ws.scalar[row + CHANGE] = change
+    ws.iterations[row + NEWTON] = ws.iterations[row + NEWTON] + 1
+    ws.iterations[row + CG_TOTAL] = ws.iterations[row + CG_TOTAL] + ws.iterations[row + CG]
+
+
+@ti.func
+def _unconverged(ws: ti.template(), now: ti.template(), tolerance: ti.template(),
+                 most: ti.template()):
+    """No iteration yet, or the last one moved a particle by more than `tolerance` and
+    fewer than `most` have run."""
+    row = now.row * ROW
+    done = ws.iterations[row + NEWTON]
+    return done == 0 or (ws.scalar[row + CHANGE] > tolerance and done < most)
+
+
+@ti.func
+def predict(model: ti.template(), state: ti.template(), ws: ti.template(), i,
+            now: ti.template()):
+    """The explicit predictor of particle i's solve: x = x^ + s v^, v = v^."""
+    v = ws.origin_velocity[i]
+    state.particle_velocity[i] = v
+    state.particle_position[i] = ws.origin_position[i] + now.dt * v
+
+
+class NewtonSettings:
+    """The options of a Newton-solved implicit integrator, checked (module doc).
+
+    tolerance: Newton stops when no particle moved more than this [m] in its last
+        iteration, > 0.
+    most_newton: Newton iterations per solve at most, >= 1.
+    cg_tolerance: each linear solve's relative residual, in (0, 1).
+    most_cg: CG iterations per linear solve at most, >= 1.
+    """
+
+    def __init__(self, owner: str, tolerance: float, most_newton: int, cg_tolerance: float,
+                 most_cg: int):
+        self.tolerance = finite_number(f"{owner}.tolerance", tolerance, 0.0, strict=True,
+                                       unit="m")
+        self.most_newton = count(f"{owner}.most_newton", most_newton, limits.ITERATIONS)
+        self.cg_tolerance = finite_number(f"{owner}.cg_tolerance", cg_tolerance, 0.0,
+                                          strict=True)
+        require(self.cg_tolerance < 1.0, f"{owner}.cg_tolerance", cg_tolerance,
+                "a number in (0, 1)")
+        self.most_cg = count(f"{owner}.most_cg", most_cg, limits.ITERATIONS)
+
+    def options(self) -> dict:
+        return {"tolerance": self.tolerance, "most_newton": self.most_newton,
+                "cg_tolerance": self.cg_tolerance, "most_cg": self.most_cg}
+
+
+def workspace(model) -> Workspace:
+    """The CG workspace with a Newton solve's fields."""
+    return Workspace(model.particle_count, model.spring_count, model.altitude_count,
+                     model.face_count, model.hinge_count, newton=True)
+
+
+def solve(settings: NewtonSettings, model, forces, ws) -> tuple:
+    """The nodes of one solve (module doc) from the origin in ws.origin_position and
+    origin_velocity, the State holding the predictor; the State ends on the solution. DT and
+    NOW are the sub-step s (wrap in plan.substep)."""
+    start = Loop(ws.block_count, _start_block, model, STATE, forces, ws, ITEM, NOW)
+    iteration = (conjugate_gradients.linearisation(model, forces, ws, start)
+                 + (conjugate_gradients.solve(model, forces, ws, settings.cg_tolerance,
+                                              settings.most_cg),
+                    Phase(Loop(ws.block_count, _update_block, model, STATE, ws, ITEM, NOW)),
+                    Once(_end_iteration, ws, NOW)))
+    return (Once(_begin_newton, ws, NOW),
+            Until(_unconverged, *iteration,
+                  args=(ws, NOW, settings.tolerance, settings.most_newton)))
+
+
+def step_work(model, solves: int) -> int:
+    """A step of `solves` Newton solves in spring evaluations, for sizing launches."""
+    return solves * TYPICAL_NEWTON * (2 + 2 * TYPICAL_ITERATIONS) * fused.spring_work(model)
+
+
+def reports(work) -> tuple[int, int]:
+    """(Newton iterations, CG iterations in all) of the last solve of the last step."""
+    return int(work.iterations[NEWTON]), int(work.iterations[CG_TOTAL])
