@@ -7,6 +7,7 @@ Simulation.step(n) call asks for.
     launch per step   step(1, plan="per stage") n times: a launch per stage, one serial
                       launch of the whole step below plan.SERIAL_SPRING_LIMIT springs
     one worker        step(n): n steps in one launch on the launching thread, every loop serial
+                      (what a body under stepping.TEAM_MIN_SPRINGS always runs)
     team              step(n): n steps in one launch, each Taichi CPU thread owning a slice of
                       every loop, meeting at barriers
     timed choice      step(n) as Simulation.step runs big launches: the team or one pool
@@ -17,8 +18,10 @@ machine does: spinning team workers then wait for a core, which the timed choice
 
 The scene is throughput.py's (N x N sheet, stretch + shear + bend springs, two pinned corners,
 f32). Each cell is the median (and the 90th percentile, which shows the thread pool's slow
-wake-ups) of --repeats calls. Simulation.step picks between "one worker" and "team" by the work
-in a launch (stepping.TEAM_MIN_SPRING_STEPS); this table is what that threshold rests on.
+wake-ups) of --repeats calls. Simulation.step runs every launch of a body under
+stepping.TEAM_MIN_SPRINGS springs as "one worker", and a bigger body's as pool tasks: on one
+worker below stepping.TEAM_MIN_SPRING_STEPS of work in a launch, else "timed choice"; this
+table is what those thresholds rest on.
 
     python benchmarks/launch_plans.py [--sizes 32 64 128 256] [--counts 16 256] [--threads 2]
 """
@@ -37,12 +40,14 @@ from ti_cloth.runtime import plan as launch_plan
 
 PLANS = ("parallel per step", "launch per step", "one worker", "team", "timed choice")
 THRESHOLD = stepping.TEAM_MIN_SPRING_STEPS   # work below which step(n) runs on one worker
+SMALL = stepping.TEAM_MIN_SPRINGS   # springs below which every step(n) runs on one worker
 SERIAL_LIMIT = launch_plan.SERIAL_SPRING_LIMIT   # springs below which a step is one serial launch
 
 
 def per_step_us(sim, plan: str, count: int, repeats: int) -> np.ndarray:
     """Microseconds per step of `repeats` calls that each advance `count` steps."""
-    stepping.TEAM_MIN_SPRING_STEPS = {"one worker": 1 << 62, "team": 0}.get(plan, THRESHOLD)
+    stepping.TEAM_MIN_SPRING_STEPS = 0 if plan == "team" else THRESHOLD
+    stepping.TEAM_MIN_SPRINGS = {"one worker": 1 << 62, "team": 0}.get(plan, SMALL)
     sim.many_steps.adaptive = plan == "timed choice"
     launch_plan.SERIAL_SPRING_LIMIT = 0 if plan == "parallel per step" else SERIAL_LIMIT
     times = []
@@ -85,10 +90,11 @@ def main(argv=None):
             for plan in PLANS:
                 us = per_step_us(sim, plan, count, args.repeats)
                 cells.append(f"{np.median(us):>12.1f} / {np.percentile(us, 90):>11.1f}")
-            stepping.TEAM_MIN_SPRING_STEPS = THRESHOLD
+            stepping.TEAM_MIN_SPRING_STEPS, stepping.TEAM_MIN_SPRINGS = THRESHOLD, SMALL
             many = sim.many_steps
-            picked = many.workers_for(sim.integrator, sim.model,
-                                      min(count, many.steps_per_launch(sim.integrator, sim.model)))
+            launch = min(count, many.steps_per_launch(sim.integrator, sim.model))
+            picked = (1 if many.serial(sim.model)
+                      else many.workers_for(sim.integrator, sim.model, launch))
             print(f"{n:>5} {cloth.spring_count:>9} {count:>10}  " + "  ".join(cells)
                   + f"  {'team' if picked > 1 else 'one worker':>13}")
     if busy is not None:

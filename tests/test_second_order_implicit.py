@@ -80,7 +80,7 @@ def test_order_two_against_the_chains_exact_motion(f64, name):
     t, amplitude = 2.25 * 2 * np.pi / w, 0.01
     errors = []
     for wh in (0.4, 0.2, 0.1):
-        steps = int(round(t * w / wh))
+        steps = round(t * w / wh)
         _, u, shape, _ = run_chain(tight(name), t / steps, steps, amplitude)
         errors.append(np.abs(u - amplitude * shape * np.cos(w * t)).max())
     orders = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
@@ -121,12 +121,15 @@ def test_energy_is_kept_on_linear_springs_and_bounded_on_a_swinging_pendulum(f64
 @pytest.mark.parametrize("body", ["springs", "fabric"])
 def test_it_settles_where_implicit_euler_does(f64, body):
     """With drag they come to rest where the forces balance, which no integrator changes:
-    the same positions to the solvers' tolerances (1e-7 m), after 12 s of 1/60 s steps.
+    the same positions to the solvers' tolerances (1e-7 m), after 12 s of 1/60 s steps. The
+    sheet hangs in its own plane, which has one equilibrium (hung flat, a small sheet sags
+    into a fold up or down, mirror images either integrator may take).
     TR-BDF2 comes to rest; implicit midpoint's stiffest modes (w h ~ 100 here) ring on at
     |R| = 1 - O(drag / (w^2 h)), about its rest but not to rest (module doc)."""
-    mesh = tc.grid_mesh(6, 6, size=(0.3, 0.3), plane="xz")
+    mesh = tc.grid_mesh(4, 4, size=(0.3, 0.3), plane="xy")      # hanging in its plane: one
+    top = np.flatnonzero(mesh.vertices[:, 1] == mesh.vertices[:, 1].max())   # equilibrium
     material = tc.Fabric.preset("denim") if body == "fabric" else tc.Material()
-    cloth = tc.Cloth(mesh, material, pinned=[0, 5])
+    cloth = tc.Cloth(mesh, material, pinned=[top[0], top[-1]])
     rest = {}
     for name, integrator in (("implicit_euler", tc.ImplicitEuler(tolerance=1e-12, max_iterations=2000)),
                              ("tr_bdf2", tight("tr_bdf2")),
@@ -134,7 +137,7 @@ def test_it_settles_where_implicit_euler_does(f64, body):
         sim = tc.Simulation(cloth, integrator=integrator, dt=1 / 60, drag=4.0)
         sim.step(720)
         rest[name] = (sim.positions(), np.abs(sim.velocities()).max())
-    assert np.abs(rest["implicit_euler"][0] - cloth.particle_position).max() > 0.05, "it hangs"
+    assert np.abs(rest["implicit_euler"][0] - cloth.particle_position).max() > 1e-5, "it sags"
     assert rest["implicit_euler"][1] < 1e-6 and rest["tr_bdf2"][1] < 1e-6
     for name in ("tr_bdf2", "implicit_midpoint"):
         np.testing.assert_allclose(rest[name][0], rest["implicit_euler"][0], atol=1e-7, err_msg=name)

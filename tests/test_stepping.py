@@ -51,7 +51,9 @@ def run(sim, plan, steps, monkeypatch, per_launch=100):
     # one worker: small launches (serial on the launching thread); pool of one and team: big
     # launches, the same kernel on one worker or two, whatever the cores, on the fixture's threads
     monkeypatch.setattr(many, "workers", 2 if plan == "team" else 1)
-    monkeypatch.setattr(stepping, "TEAM_MIN_SPRING_STEPS", 1 << 62 if plan == "one worker" else 0)
+    monkeypatch.setattr(stepping, "TEAM_MIN_SPRING_STEPS", 0)
+    # one worker: the serial variant (a small body's); pool of one and team: the pool's
+    monkeypatch.setattr(stepping, "TEAM_MIN_SPRINGS", 1 << 62 if plan == "one worker" else 0)
     monkeypatch.setattr(stepping, "MAX_STEPS_PER_LAUNCH", per_launch)
     sim.step(steps, plan="many steps")
 
@@ -226,20 +228,22 @@ def test_a_team_shares_big_launches_and_one_worker_takes_small_ones(threads):
 
 
 def test_no_step_count_compiles_a_kernel_after_the_first_step(threads):
-    """advance_many's serial or pool variant is a compile-time choice made per launch by its
-    work: both are built on the first launch, so a later count of either kind (step(6) after
-    step(60), a launch of 4096 steps after one of 1) compiles nothing more."""
-    cloth, _ = sheet(12)
-    for integrator in ("symplectic_euler", tc.ImplicitEuler()):
-        sim = tc.Simulation(cloth, integrator=integrator, dt=1e-4)
-        many = sim.many_steps
-        assert many.serial(sim.integrator, sim.model, 1)
-        assert not many.serial(sim.integrator, sim.model, stepping.MAX_STEPS_PER_LAUNCH)
-        sim.step(1)
-        built = backend.compilations(stepping.advance_many)    # distinct template sets so far
-        for n in (60, 6, stepping.MAX_STEPS_PER_LAUNCH, 1):
-            sim.step(n)
-        assert backend.compilations(stepping.advance_many) == built, integrator
+    """Whether launches run serially or as pool tasks is compiled into advance_many, and
+    chosen by the body (stepping.TEAM_MIN_SPRINGS), not by the launch: a small body's
+    launches are serial, a big body's pool tasks, and once the first step has built it no
+    later count (step(6) after step(60), a launch of 4096 steps after one of 1) compiles
+    another kernel. (Chosen per launch, by its work, step(6) after step(60) built the serial
+    variant on the way.)"""
+    for n, serial in ((8, True), (16, False)):
+        cloth, _ = sheet(n)
+        for integrator in ("symplectic_euler", tc.ImplicitEuler()):
+            sim = tc.Simulation(cloth, integrator=integrator, dt=1e-4)
+            assert sim.many_steps.serial(sim.model) == serial
+            sim.step(60)
+            built = backend.compilations(stepping.advance_many)   # distinct template sets so far
+            for steps in (6, stepping.MAX_STEPS_PER_LAUNCH, 1, 60):
+                sim.step(steps)
+            assert backend.compilations(stepping.advance_many) == built, (n, integrator)
 
 
 def test_big_launches_go_to_the_size_measured_faster_and_probe_the_other(threads):
@@ -284,6 +288,7 @@ def test_a_team_without_threads_for_every_worker_raises_instead_of_hanging(threa
     many = stepping.ManySteps(sim.many_steps.stages)        # a kernel compiled here
     many.workers, many.adaptive = backend.cpu_threads() + 1, False
     monkeypatch.setattr(stepping, "TEAM_MIN_SPRING_STEPS", 0)
+    monkeypatch.setattr(stepping, "TEAM_MIN_SPRINGS", 0)
     sim.set_positions(start)
     with pytest.raises(tc.TeamStalled, match="workers"):
         many.run(sim.integrator, sim.model, sim.state, sim.forces, sim.dt, 0, 50)

@@ -5,9 +5,11 @@ A launch and every parallel loop in it cost tens of microseconds on a CPU (the t
 waking), about a small cloth's whole step of arithmetic, and a step of xpbd is 2 + 17 x
 iterations loops, one per colour (docs/performance.md has the figures). So a run of steps is
 one launch, shared by
-a Team (team.py): one worker runs every loop serially for launches of little work, a worker
-per core otherwise, each owning fixed slices and meeting the others at barriers. A step is,
-per worker:
+a Team (team.py): a small body's launches run serially on the launching thread (no pool
+wake-up), a bigger body's as pool tasks, on one worker for launches of little work and on a
+worker per core otherwise, each owning fixed slices and meeting the others at barriers (the
+serial or pool choice is compiled, so it is the body's: ManySteps.serial). A step is, per
+worker:
 
     stage starts (the colliders keep the positions at the step start)
     ->  the integrator's phases (Integrator.phases, run by plan.run_team: their barriers)
@@ -50,6 +52,7 @@ from .state import NO_BAD_STEP
 MAX_STEPS_PER_LAUNCH = 4096    # bounds one launch (Ctrl-C and the divergence check wait for it)
 SPRING_STEPS_PER_LAUNCH = 25_000_000   # about 0.1 s of one core's work: fewer steps for big cloths
 TEAM_MIN_SPRING_STEPS = 1_000_000   # less work per launch runs on one worker (launch_plans.py)
+TEAM_MIN_SPRINGS = 1_000   # a smaller body runs every launch on one worker (launch_plans.py)
 PROBE_EVERY = 64    # of big launches, one in this many takes the plan not in favour (~1 % cost)
 RECENT_LAUNCHES = 4    # big launches a plan's cost is judged on (the least of them)
 TEAM_MARGIN = 1.25     # one worker takes over when the team costs more than this times its cost
@@ -169,8 +172,10 @@ class ManySteps:
     stages: the TeamStages of the simulation (its Model's lent set). A launch holds at most
     MAX_STEPS_PER_LAUNCH steps, fewer for big cloths (SPRING_STEPS_PER_LAUNCH of the
     integrator's step_work), limits.SCHEDULED_STEPS when a collider moves, the wind blows or
-    a handle holds (their per-step values are tabled before the launch). A launch with less work than TEAM_MIN_SPRING_STEPS runs on one
-    worker, a bigger one on a team of a worker per Taichi CPU thread (at most one per core).
+    a handle holds (their per-step values are tabled before the launch). A body under
+    TEAM_MIN_SPRINGS runs every launch serially; a bigger body's launch with less work than
+    TEAM_MIN_SPRING_STEPS runs on one pool worker, a bigger one on a team of a worker per
+    Taichi CPU thread (at most one per core).
     """
 
     def __init__(self, stages: TeamStages):
@@ -183,7 +188,6 @@ class ManySteps:
         self._cost = {}            # workers -> seconds per spring-step of recent big launches
         self._big_launches = 0
         self._launched = set()     # team sizes that have run a big launch
-        self._built = set()        # (integrator, work) whose launch variants are compiled
 
     def steps_per_launch(self, integrator, model, forces=None) -> int:
         """How many steps one launch of `integrator` on `model` holds at most."""
@@ -214,28 +218,16 @@ class ManySteps:
         best, other = (1, self.workers) if slower else (self.workers, 1)
         return other if self._big_launches % PROBE_EVERY == 0 else best
 
-    def serial(self, integrator, model, steps: int) -> bool:
-        """Whether a launch of `steps` steps runs serially on the launching thread (no pool
-        wake-up): below TEAM_MIN_SPRING_STEPS of work, whatever the thread count. Bigger
-        launches run as pool tasks on any number of workers (workers_for). Every plan gives
-        the same bits (IEEE arithmetic: runtime/backend.py)."""
-        return steps * integrator.step_work(model) < TEAM_MIN_SPRING_STEPS
-
-    def build(self, integrator, model, state, forces, work, dt: float) -> None:
-        """Compile, on the first launch of `integrator` on `work`, every variant of
-        advance_many its launches may take (serial and pool: `serial` is a compile-time
-        choice), each by a launch of no step, so that no later call compiles on the way
-        (step(6) after step(60)); a variant a launch of this integrator can never take is
-        not built."""
-        key = (id(integrator), id(work))
-        if key in self._built:
-            return
-        self._built.add(key)
-        most = self.steps_per_launch(integrator, model, forces)
-        for serial in {self.serial(integrator, model, 1), self.serial(integrator, model, most)}:
-            self.team.set_size(1)
-            advance_many(integrator, model, state, forces, work, self.stages, self.team, dt, 0,
-                         0, 0, 0, serial)
+    def serial(self, model) -> bool:
+        """Whether this body's launches run serially on the launching thread (no pool
+        wake-up): those of a body under TEAM_MIN_SPRINGS spring equivalents, whose loops are
+        too short for a team to pay for its barriers (at 8² a team step took 58 µs against
+        1.6 on one worker, at 16² 4.2 against 5.8: docs/performance.md). A bigger body's
+        launches run as pool tasks, on one worker or a team (workers_for). The choice is the
+        body's, not the launch's, because it is compiled (advance_many's `serial`): a
+        simulation builds one variant of its step, and no later step count compiles another.
+        Every plan gives the same bits (IEEE arithmetic: runtime/backend.py)."""
+        return limits.spring_equivalents(model) < TEAM_MIN_SPRINGS
 
     def cost(self, workers: int) -> float:
         """Seconds per spring-step of recent big launches on `workers` workers: the least of
@@ -262,7 +254,6 @@ class ManySteps:
         for name in STEP_ORDER[1:]:
             for stage in self.stages.running(name):
                 plan.note_launch(plan.nodes_of(stage, "phases", model, forces, stage), "team")
-        self.build(integrator, model, state, forces, work, dt)   # after nodes_of made their fields
         colliders = self.stages.colliders
         moving = colliders is not None and colliders.moving
         done = 0
@@ -278,7 +269,7 @@ class ManySteps:
                 colliders.schedule(step, chunk, dt)
             if forces.wind is not None:
                 forces.wind.schedule(step, chunk, dt)
-            serial = self.serial(integrator, model, chunk)
+            serial = self.serial(model)
             workers = 1 if serial else self.workers_for(integrator, model, chunk)
             team = self.team
             team.set_size(workers)

@@ -47,7 +47,7 @@ from .sweep import Failure, as_workers, run_tasks
 REFERENCE_TOLERANCE = 1e-9     # halving the reference step changes positions by less than this x size
 MAX_REFERENCE_HALVINGS = 8
 DEFAULT_INTEGRATORS = ("explicit_euler", "symplectic_euler", "verlet", "rk4", "implicit_euler",
-                       "pbd", "xpbd")
+                       "implicit_midpoint", "tr_bdf2", "pbd", "xpbd")
 DEFAULT_ITERATIONS = (4, 16)   # passes per step of the position-based integrators
 ENERGY_BLOWUP = 1.0            # a run is diverged once its energy is off the reference's by more
                                # than the energy scale (or its guard trips: scene.GUARD_SIZES)

@@ -209,18 +209,17 @@ def _node(nodes, path: tuple):
     return _leaves(nodes, path[:-1])[path[-1]]
 
 
-def _flat(nodes) -> tuple:
-    """(node, the Until around it or None) for every leaf in `nodes`, depth first."""
-    found = []
+def _bodies(nodes):
+    """Every body in `nodes`, depth first: loop bodies, leaf bodies and Until tests."""
     for node in nodes:
         if isinstance(node, LOOPS):
-            for leaf, _ in _flat(node.leaves):
-                found.append((leaf, node if isinstance(node, Until) else None))
+            yield from _bodies(node.leaves)
             if isinstance(node, Until):
-                found.append((None, node))
+                yield node.test
+        elif isinstance(node, Phase):
+            yield from (loop.body for loop in node.loops)
         else:
-            found.append((node, None))
-    return tuple(found)
+            yield node.body
 
 
 def _alone(leaf) -> bool:
@@ -240,11 +239,8 @@ def note_launch(nodes, key) -> None:
     tell what a step compiled by its bodies, as by kernels (backend.compilations)."""
     if not backend.counting():
         return
-    for leaf, until in _flat(nodes):
-        bodies = [until.test] if leaf is None else (
-            [loop.body for loop in leaf.loops] if isinstance(leaf, Phase) else [leaf.body])
-        for body in bodies:
-            backend.note_launch(getattr(body, "__func__", body), key)
+    for body in _bodies(nodes):
+        backend.note_launch(getattr(body, "__func__", body), key)
 
 
 @backend.kernel_argument
@@ -400,7 +396,7 @@ def _run_leaf(leaf: ti.template(), model: ti.template(), state: ti.template(),
 def _run_inner(nodes: ti.template(), model: ti.template(), state: ti.template(),
                forces: ti.template(), work: ti.template(), stages: ti.template(),
                team: ti.template(), worker, now: ti.template()):
-    """The nodes of a Repeat or an Until (leaves only: the second level)."""
+    """The nodes of a loop of the second level (leaves only)."""
     for leaf in ti.static(nodes):
         _run_leaf(leaf, model, state, forces, work, stages, team, worker, now)
 
@@ -409,7 +405,9 @@ def _run_inner(nodes: ti.template(), model: ti.template(), state: ti.template(),
 def _run_level(nodes: ti.template(), model: ti.template(), state: ti.template(),
                forces: ti.template(), work: ti.template(), stages: ti.template(),
                team: ti.template(), worker, now: ti.template()):
-    """The nodes of a Repeat or an Until of the first level (leaves, Repeats and Untils)."""
+    """The nodes of a loop of the first level: leaves, and loops of leaves (_run_inner).
+    (Two functions: passing the inner one as a template argument did not compile in
+    Taichi 1.7, a parameter reported missing.)"""
     for node in ti.static(nodes):
         if ti.static(isinstance(node, Repeat)):
             for _ in range(node.count):
@@ -426,7 +424,8 @@ def run_team(nodes: ti.template(), model: ti.template(), state: ti.template(),
              forces: ti.template(), work: ti.template(), stages: ti.template(),
              team: ti.template(), worker, now: ti.template()):
     """Worker `worker`'s share of `nodes` (nodes_of) in a team launch (stepping.py), meeting
-    the team at every synchronisation point; now.row is the worker."""
+    the team at every synchronisation point; now.row is the worker. A top-level loop's
+    nodes run as _run_level, which differs from this only in the depth it hands on."""
     for node in ti.static(nodes):
         if ti.static(isinstance(node, Repeat)):
             for _ in range(node.count):
