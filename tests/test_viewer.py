@@ -19,7 +19,7 @@ from helpers import report
 import ti_cloth as tc
 from ti_cloth.app.scene import load_scene
 from ti_cloth.app.view import viewer_for
-from ti_cloth.render.viewer import PICK_PIXELS, Event
+from ti_cloth.render.viewer import HELD_COLOUR, KEYS_HELP, PICK_PIXELS, Event
 
 SCENE = """
 [scene]
@@ -169,6 +169,41 @@ def test_keys_save_a_state_that_loads_reset_pause_and_quit(scene_file, tmp_path,
     assert not viewer.quit
     viewer.handle(Event("key", key="q"))
     assert viewer.quit
+
+
+def test_the_held_particle_is_marked_and_the_status_freezes_while_paused(scene_file, tmp_path,
+                                                                        f64):
+    """A held particle is drawn as a disc of HELD_COLOUR on its image (no pixel of that
+    colour before the press nor after the release). The status's real-time ratio is the
+    simulated time over the wall time spent running (tick): a frame of 1/30 s in 0.5 s of
+    wall time is 0.07 x real time, and 10 s paused leave it there; the keys are listed and
+    "s" is confirmed with the file's path."""
+    viewer = viewer_for(load_scene(scene_file), width=WIDTH, height=HEIGHT, folder=tmp_path)
+    marker = np.round(np.array(HELD_COLOUR) * 255).astype(int)
+
+    def marked(image):
+        return int((np.abs(image.astype(int) - marker).max(axis=2) <= 2).sum())
+
+    assert marked(viewer.image()) == 0
+    x, y = viewer.camera.project(viewer.sim.positions(), WIDTH, HEIGHT)[0][4]
+    viewer.handle(Event("press", x, y, button="left"))
+    image = viewer.image()
+    assert marked(image) >= 50                                # a disc of radius 6 px
+    rows, cols = np.nonzero(np.abs(image.astype(int) - marker).max(axis=2) <= 2)
+    assert abs(cols.mean() - x) < 1.5 and abs((HEIGHT - 1 - rows.mean()) - y) < 1.5
+    viewer.handle(Event("release", x, y, button="left"))
+    assert marked(viewer.image()) == 0
+    viewer.tick(100.0)
+    viewer.advance()
+    viewer.tick(100.5)
+    ratio = f"{viewer.frame_dt / 0.5:.2f} x real time"
+    assert ratio in viewer.status()[0] and KEYS_HELP in viewer.status()
+    viewer.handle(Event("key", key=" "))
+    viewer.tick(110.5)
+    viewer.advance()
+    assert ratio in viewer.status()[0] and viewer.status()[0].endswith("paused")
+    viewer.handle(Event("key", key="s"))
+    assert viewer.status()[-1] == f"saved {tmp_path / 'curtain.view.npz'}"
 
 
 def test_a_run_that_diverges_pauses_the_viewer_until_r(scene_file, tmp_path, f64):

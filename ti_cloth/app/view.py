@@ -103,27 +103,21 @@ def view(subject, *, width: int = 960, height: int = 540, folder=None,
     gui = ti.GUI(f"ti_cloth: {viewer.name}", res=(width, height), fast_gui=False)
     frames = (FrameSequence(viewer.folder, fps=1 / viewer.frame_dt, name=viewer.name)
               if record else None)
-    start, steps0 = time.perf_counter(), viewer.sim.step_count
-    shown = start
+    shown = time.perf_counter()
     try:
         while gui.running and not viewer.quit:
             for event in events_of(gui):
                 viewer.handle(event)
+            viewer.tick(time.perf_counter())
             viewer.advance()
             image = viewer.image()
             if frames is not None:
                 frames.write(image)
             gui.set_image(np.ascontiguousarray(image[::-1].transpose(1, 0, 2)))
-            elapsed = max(time.perf_counter() - start, 1e-9)
-            steps = viewer.sim.step_count - steps0
-            gui.text(f"t = {viewer.sim.time:.3f} s   {viewer.sim.time / elapsed:.2f} x real time"
-                     f"   {steps / elapsed:,.0f} steps/s" + ("   paused" if viewer.paused else ""),
-                     (0.01, 0.98), font_size=16, color=0x202020)
-            if viewer.diverged is not None:
-                gui.text(f"{viewer.diverged}"[:110] + ": press r to start again", (0.01, 0.93),
-                         font_size=14, color=0xA01010)
-            if viewer.unsaved is not None:
-                gui.text(f"{viewer.unsaved}"[:130], (0.01, 0.89), font_size=14, color=0xA01010)
+            for row, line in enumerate(viewer.status()):
+                gui.text(line, (0.01, 0.98 - 0.04 * row), font_size=14 if row else 16,
+                         color=0xA01010 if row == 2 and not line.startswith("saved")
+                         else 0x202020)
             gui.show()
             time.sleep(max(0.0, viewer.frame_dt - (time.perf_counter() - shown)))
             shown = time.perf_counter()

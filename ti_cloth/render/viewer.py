@@ -30,6 +30,10 @@ from ..errors import OutputError, SimulationDiverged
 from .camera import Camera
 
 PICK_PIXELS = 30.0      # a press this far from every particle's image picks none
+HELD_RADIUS = 6.0       # [pixels] of the disc marking the held particle
+HELD_COLOUR = (0.95, 0.45, 0.05)
+KEYS_HELP = ("drag: pull a particle   right drag: orbit   wheel, + -: zoom   space: pause   "
+             ".: one frame   r: reset   s: save   w: wireframe   q: quit")
 ORBIT = math.pi         # radians of turn for a drag across the whole window
 ZOOM = 1.15             # distance factor per wheel notch or +/- press
 KINDS = ("press", "release", "motion", "key", "wheel")
@@ -72,6 +76,10 @@ class Viewer:
         self.saved = self.unsaved = None       # the last state saved; why the last "s" failed
         self.diverged = None                   # the SimulationDiverged that paused it
         self.rest_pinned = sim.pinned()
+        self.running = 0.0          # wall seconds spent running (not paused): tick()
+        self.simulated = 0.0        # simulated seconds advanced while running
+        self.steps_run = 0          # steps taken while running
+        self._ticked = None
 
     # -- events -------------------------------------------------------------------------------
 
@@ -221,6 +229,33 @@ class Viewer:
         except SimulationDiverged as err:
             self.diverged, self.paused, self.held = err, True, None
             return
+        if not self.paused:
+            self.simulated += self.frame_dt
+            self.steps_run += self.substeps
+
+    def tick(self, now: float) -> None:
+        """Count the wall time since the last tick (`now` [s], a monotonic clock) as running
+        unless paused or stopped by a divergence: the real-time ratio of status() is frozen
+        while paused."""
+        if self._ticked is not None and not self.paused and self.diverged is None:
+            self.running += now - self._ticked
+        self._ticked = now
+
+    def status(self) -> list[str]:
+        """The lines the window shows: time, real-time ratio and steps per second of the
+        running time, "paused"; the keys; the last save ("saved <path>"), a refused one, or
+        the divergence that stopped the run."""
+        rate = (f"{self.simulated / self.running:.2f} x real time   "
+                f"{self.steps_run / self.running:,.0f} steps/s") if self.running > 0 else ""
+        lines = [f"t = {self.sim.time:.3f} s   {rate}" + ("   paused" if self.paused else ""),
+                 KEYS_HELP]
+        if self.diverged is not None:
+            lines.append(f"{self.diverged}"[:110] + ": press r to start again")
+        elif self.unsaved is not None:
+            lines.append(f"{self.unsaved}"[:130])
+        elif self.saved is not None:
+            lines.append(f"saved {self.saved}")
+        return lines
 
     def reset(self) -> None:
         """Back to the rest state at time 0, nothing held."""
@@ -241,8 +276,12 @@ class Viewer:
         return self.saved
 
     def image(self) -> np.ndarray:
-        """What the camera sees now, (height, width, 3) uint8."""
+        """What the camera sees now, (height, width, 3) uint8, the held particle marked by a
+        disc of HELD_COLOUR."""
         self.renderer.begin(self.camera)
         self.paint(self.renderer, self.sim, self.wireframe)
+        if self.held is not None:
+            self.renderer.draw_points(self.sim.positions()[[self.held[0]]], radius=HELD_RADIUS,
+                                      colour=HELD_COLOUR)
         return self.renderer.end()
 
