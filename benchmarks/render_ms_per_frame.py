@@ -5,7 +5,9 @@ the same run: symplectic Euler, f32, at half its predicted stable step, 30 frame
     python benchmarks/render_ms_per_frame.py [--sizes 32 128 512] [--arch cpu] [--frames 7]
 
 Render time covers everything a demo pays per frame: reading positions back, the vertex and
-raster kernels, the resolve and the layout conversion to a numpy image (not the PNG write).
+raster kernels, the resolve and the layout conversion to a numpy image (not the PNG write);
+"window ms" the same frame ended as the live viewer's window takes it (Renderer.end_window,
+no layout conversion).
 """
 
 import argparse
@@ -41,7 +43,9 @@ def sim_ms_per_step(sim, repeats):
     return 1e3 * statistics.median(times), substeps
 
 
-def render_ms_per_frame(renderer, sim, frames):
+def render_ms_per_frame(renderer, sim, frames, window=False):
+    """Median ms of a frame ending as an image (Renderer.end: (H, W, 3), top row first) or,
+    with `window`, as a window takes it (Renderer.end_window: the live viewer's)."""
     style = SurfaceStyle(checker=0.1)
     times = []
     for k in range(frames + 2):               # two warm-up frames compile the kernels
@@ -49,7 +53,7 @@ def render_ms_per_frame(renderer, sim, frames):
         renderer.begin()
         renderer.draw_plane(point=(0.0, -1.1, 0.0))
         renderer.draw_simulation(sim, style)
-        renderer.end()
+        renderer.end_window() if window else renderer.end()
         if k >= 2:
             times.append(time.perf_counter() - start)
     return 1e3 * statistics.median(times)
@@ -67,7 +71,8 @@ def main(argv=None):
     print(f"arch={args.arch}, {args.width}x{args.height}, median of {args.frames} frames; "
           f"simulation: symplectic Euler f32 at 0.5 x stable dt, {FPS:.0f} fps")
     print(f"{'N':>5} {'triangles':>10} {'SSAA':>5} {'render ms':>10} {'sim ms/step':>12} "
-          f"{'substeps':>9} {'sim ms/frame':>13} {'render/sim':>11} {'render = steps':>15}")
+          f"{'substeps':>9} {'sim ms/frame':>13} {'render/sim':>11} {'render = steps':>15} "
+          f"{'window ms':>10}")
     for n in args.sizes:
         cloth = hanging_cloth(n)
         dt = 0.5 * tc.stable_dt(cloth, "symplectic_euler")
@@ -78,8 +83,10 @@ def main(argv=None):
         for ss in (1, 2):
             with Renderer(args.width, args.height, camera, supersample=ss) as renderer:
                 ms = render_ms_per_frame(renderer, sim, args.frames)
+                window = render_ms_per_frame(renderer, sim, args.frames, window=True)
             print(f"{n:>5} {len(cloth.mesh.triangles):>10} {ss:>4}x {ms:>10.1f} {step_ms:>12.3f} "
-                  f"{substeps:>9} {sim_ms:>13.0f} {ms / sim_ms:>11.4f} {ms / step_ms:>15.0f}")
+                  f"{substeps:>9} {sim_ms:>13.0f} {ms / sim_ms:>11.4f} {ms / step_ms:>15.0f} "
+                  f"{window:>10.1f}")
 
 
 if __name__ == "__main__":

@@ -154,3 +154,28 @@ def test_ghost_particles_are_never_drawn(f32):
     assert images[0].std() > 1 and images[1].std() > 1, "something is drawn"
     np.testing.assert_array_equal(images[0], images[2])
     np.testing.assert_array_equal(images[1], images[3])
+
+
+def test_a_frame_for_the_window_is_the_image_in_the_windows_layout(f32):
+    """Renderer.end_window is the same frame as end(), in ti.GUI's layout: (width, height, 3),
+    origin bottom-left. A sheet drawn off-centre, to the left and low, lands in the window's
+    low x and low y."""
+    from ti_cloth.render import Camera, Renderer
+
+    cloth = tc.Cloth(tc.grid_mesh(4, 4, size=(0.3, 0.3), plane="xy", origin=(-0.5, -0.4, 0.0)),
+                     tc.Material())
+    sim = tc.Simulation(cloth, dt=1e-3)
+    camera = Camera(position=(0.0, 0.0, 2.0), target=(0.0, 0.0, 0.0), fov=60)
+    with Renderer(48, 32, camera, supersample=1) as r:
+        r.begin()
+        r.draw_simulation(sim)
+        image = r.end()
+        r.begin()
+        r.draw_simulation(sim)
+        window = r.end_window().copy()
+    assert window.shape == (48, 32, 3) and image.shape == (32, 48, 3)
+    np.testing.assert_array_equal(from_taichi(window), image)
+    background = window[-1, -1].astype(int)
+    drawn = np.abs(window.astype(int) - background).max(axis=2) > 30
+    xs, ys = np.nonzero(drawn)
+    assert len(xs) > 20 and xs.mean() < 24 and ys.mean() < 16, (xs.mean(), ys.mean())

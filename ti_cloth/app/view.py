@@ -110,10 +110,12 @@ def view(subject, *, width: int = 960, height: int = 540, folder=None,
                 viewer.handle(event)
             viewer.tick(time.perf_counter())
             viewer.advance()
-            image = viewer.image()
             if frames is not None:
+                image = viewer.image()
                 frames.write(image)
-            gui.set_image(np.ascontiguousarray(image[::-1].transpose(1, 0, 2)))
+                gui.set_image(np.ascontiguousarray(image[::-1].transpose(1, 0, 2)))
+            else:
+                gui.set_image(viewer.window_image())
             for row, line in enumerate(viewer.status()):
                 gui.text(line, (0.01, 0.98 - 0.04 * row), font_size=14 if row else 16,
                          color=0xA01010 if row == 2 and not line.startswith("saved")

@@ -203,11 +203,17 @@ class Renderer:
 
     def end(self) -> np.ndarray:
         """Finish the frame: (height, width, 3) uint8 RGB, row 0 at the top."""
+        return from_taichi(self.end_window())
+
+    def end_window(self) -> np.ndarray:
+        """Finish the frame as a window takes it (ti.GUI.set_image): (width, height, 3) uint8
+        RGB, origin bottom-left, the renderer's own buffer (valid until the next frame ends).
+        It skips the copy into image layout that end() makes (1.5 ms at 960 x 540)."""
         samples = self._samples_ready()
         bg = self.background
         raster.resolve(samples, self._image, bg.top, bg.bottom, self.supersample)
         self._cam = None
-        return from_taichi(self._image)
+        return self._image
 
     def close(self) -> None:
         """Release the buffers; the renderer cannot be used after. ti_cloth.init calls it:
@@ -445,6 +451,9 @@ class NullRenderer:
         self.camera = camera or self.camera
 
     def end(self) -> None:
+        self.frames += 1
+
+    def end_window(self) -> None:
         self.frames += 1
 
     def close(self) -> None:

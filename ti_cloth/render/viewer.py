@@ -278,10 +278,19 @@ class Viewer:
     def image(self) -> np.ndarray:
         """What the camera sees now, (height, width, 3) uint8, the held particle marked by a
         disc of HELD_COLOUR."""
+        self._draw()
+        return self.renderer.end()
+
+    def window_image(self) -> np.ndarray:
+        """image() as a window takes it: (width, height, 3), origin bottom-left, the
+        renderer's buffer (Renderer.end_window)."""
+        self._draw()
+        return self.renderer.end_window()
+
+    def _draw(self) -> None:
         self.renderer.begin(self.camera)
         self.paint(self.renderer, self.sim, self.wireframe)
         if self.held is not None:
             self.renderer.draw_points(self.sim.positions()[[self.held[0]]], radius=HELD_RADIUS,
                                       colour=HELD_COLOUR)
-        return self.renderer.end()
 
