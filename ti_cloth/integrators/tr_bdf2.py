@@ -73,8 +73,8 @@ class TRBDF2(Integrator):
     order = 2
     step_limited = False
 
-    def __init__(self, *, tolerance: float = 1e-5, most_newton: int = 8,
-                 cg_tolerance: float = 1e-2, most_cg: int = 500):
+    def __init__(self, *, tolerance: float = 1e-6, most_newton: int = 8,
+                 cg_tolerance: float = 1e-3, most_cg: int = 500):
         self.settings = newton.NewtonSettings("TRBDF2", tolerance, most_newton, cg_tolerance,
                                               most_cg)
         self.last_newton = self.last_cg = 0
