@@ -10,10 +10,14 @@ and the second is BDF2 on the unequally spaced points t_n, t_n + gamma h, t_n + 
 a = 1 / (gamma (2 - gamma)), b = (1 - gamma)^2 / (gamma (2 - gamma)), s = (1 - gamma) /
 (2 - gamma) h. For this gamma both stages are backward Euler sub-steps of the same length
 s = gamma h / 2 (the midpoint's half of gamma h; the BDF2 stage's s), each solved by Newton's
-method from its origin (newton.py). Its stability function
-R(z) = (1 + (1 - 2 s') z ... ) tends to 0 as |z| grows (L-stable): a mode too stiff for the
-step dies out within it, as physical damping would have it die; modes the step resolves keep
-their amplitude to O((w h)^3) per step (docs/integrators.md).
+method from its origin (newton.py). On y' = lambda y, z = h lambda, a step multiplies y by
+
+    R(z) = (a T(z) - b) / (1 - gamma z / 2),   T(z) = (1 + gamma z / 2) / (1 - gamma z / 2),
+
+which tends to 0 as |z| grows (L-stable: tests/test_second_order_implicit.py checks a spring
+chain's mode against it): a mode too stiff for the step dies out within it, as physical
+damping would have it die; modes the step resolves keep their amplitude to O((w h)^3) per
+step (docs/integrators.md).
 """
 
 import math
