@@ -157,6 +157,7 @@ FEATURES = {"none": {}, "tearing": dict(tearing=0.2),
                             ("implicit_euler", "fabric", "none"), ("xpbd", "fabric", "none"),
                             ("implicit_midpoint", "fabric", "none"),
                             ("implicit_midpoint", "sheet", "all but strain limit"),
+                            ("tr_bdf2", "sheet", "everything"), ("tr_bdf2", "garment", "attached"),
                             ("xpbd", "braced strands", "none")])
 def test_every_launch_plan_takes_the_same_steps(threads, integrator, feature, body, monkeypatch):
     """The same bits in a launch per phase, in small launches on the launching thread and in
@@ -167,8 +168,8 @@ def test_every_launch_plan_takes_the_same_steps(threads, integrator, feature, bo
                     "fabric": fabric_sheet, "garment": garment_sheet}[body]()
     runs = []
     kwargs = FEATURES[feature]
-    position_based = integrator in ("pbd", "xpbd", "implicit_euler",
-                                    "implicit_midpoint")   # any step: 1/480 s
+    position_based = integrator in ("pbd", "xpbd", "implicit_euler", "implicit_midpoint",
+                                    "tr_bdf2")   # any step: 1/480 s
     dt = (1 / 480 if position_based else 2e-5 if body == "sheet"
           else 0.5 * tc.stable_dt(cloth, integrator, 0.3))   # strands and fabric: its own
     steps = 2 * 100 + 7 if not position_based else 2 * 20 + 7
