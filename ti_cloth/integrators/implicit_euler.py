@@ -115,11 +115,20 @@ class ImplicitEuler(Integrator):
         bb = work.scalar[BB]
         self.last_residual = math.sqrt(work.scalar[RR] / bb) if bb > 0 else 0.0
 
-    def phases(self, model, forces, ws):
-        """f_n and the linearisation at x_n, the CG start b = h (f_n + h K v_n), preconditioned
-        CG until converged (conjugate_gradients.py), the step."""
+    def linearisation(self, model, forces, ws):
+        """f_n and the linearisation at x_n, the CG start b = h (f_n + h K v_n) (a part of
+        the step plan.run can launch alone: benchmarks/implicit_solver.py)."""
         start = Loop(ws.block_count, _start_block, model, STATE, forces, ws, ITEM, NOW)
-        return (conjugate_gradients.linearisation(model, forces, ws, start)
+        return conjugate_gradients.linearisation(model, forces, ws, start)
+
+    def system_product(self, model, forces, ws):
+        """ws.ap = A ws.p (likewise)."""
+        return conjugate_gradients.system_product(model, forces, ws)
+
+    def phases(self, model, forces, ws):
+        """The linearisation, preconditioned CG until converged (conjugate_gradients.py), the
+        step."""
+        return (self.linearisation(model, forces, ws)
                 + (conjugate_gradients.solve(model, forces, ws, self.tolerance,
                                              self.max_iterations),)
                 + (Phase(Loop(ws.block_count, _advance_block, model, STATE, ws, ITEM, NOW)),))
