@@ -1,9 +1,10 @@
 """Implicit midpoint and TR-BDF2 (integrators/implicit_midpoint.py, tr_bdf2.py; their Newton
-solve, newton.py): on a
-spring chain's normal mode it is the closed form of its own linear map (every amplitude kept,
-the phase 2 atan(w h / 2) per step) at steps far beyond the explicit limit, order 2 against the
-chain's exact motion; energy kept on linear springs and bounded on a nonlinear pendulum where
-implicit Euler loses it; the equilibrium implicit Euler settles to; its options checked."""
+solve, newton.py): on a spring chain's normal mode each follows its own linear map, R(i w h)
+per step (the midpoint keeps every amplitude and turns by 2 atan(w h / 2); TR-BDF2 damps the
+modes it cannot resolve), at steps far beyond the explicit limit, and both are order 2
+against the chain's exact motion; energy kept on linear springs and bounded on a nonlinear
+pendulum where implicit Euler loses it; the equilibrium implicit Euler settles to; their
+options checked."""
 
 import numpy as np
 import pytest
