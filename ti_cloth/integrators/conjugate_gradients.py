@@ -92,6 +92,36 @@ def block_range(block, count):
 
 
 @ti.func
+def system_row(model: ti.template(), state: ti.template(), forces: ti.template(),
+               ws: ti.template(), i, h):
+    """Particle i's row of the system at the linearisation: (K v's row, with v the State's
+    velocities; the 3x3 diagonal of A = M (1 + h drag) - h D - h^2 K; 1.0 if the particle is
+    free, 0.0 if pinned). Each term of energies.ROWS, in a fixed order, also keeps its
+    blocks for the products."""
+    free = ti.cast(model.particle_inv_mass[i] > 0, float)
+    kv = ti.Vector([0.0, 0.0, 0.0])
+    diagonal = model.particle_mass[i] * (1.0 + h * forces.drag) * ti.Vector([1.0, 1.0, 1.0])
+    for term in ti.static(ROWS):
+        kv, diagonal = term.implicit_start(model, state, forces, ws, i, h, kv, diagonal)
+    return kv, diagonal, free
+
+
+@ti.func
+def start_row(ws: ti.template(), i, b, diagonal, free):
+    """The CG start of particle i for right-hand side b (0 on a pin, whose row is the
+    identity): dv = 0, r = b, p = z = r / diagonal; returns its (r . z, b . b)."""
+    if free == 0:
+        diagonal = ti.Vector([1.0, 1.0, 1.0])
+    z = b / diagonal
+    ws.dv[i] = ti.Vector([0.0, 0.0, 0.0])
+    ws.r[i] = b
+    ws.z[i] = z
+    ws.p[i] = z
+    ws.diagonal[i] = diagonal
+    return b.dot(z), b.dot(b)
+
+
+@ti.func
 def apply_block(model: ti.template(), forces: ti.template(), ws: ti.template(), block,
                  now: ti.template()):
     """ap = A p on the particles of `block` (rows of pinned particles 0), and its partial

@@ -24,14 +24,21 @@ import math
 
 import taichi as ti
 
-from ..energies import ROWS
 from ..inputs import limits
 from ..inputs.validation import count, finite_number, require
 from ..runtime.plan import ITEM, NOW, STATE, Loop, Phase
 from ..state import store_particle
 from . import conjugate_gradients, fused
 from .base import Integrator
-from .conjugate_gradients import BB, RR, TYPICAL_ITERATIONS, Workspace, block_range
+from .conjugate_gradients import (
+    BB,
+    RR,
+    TYPICAL_ITERATIONS,
+    Workspace,
+    block_range,
+    start_row,
+    system_row,
+)
 
 
 @ti.func
@@ -40,26 +47,15 @@ def _start_block(model: ti.template(), state: ti.template(), forces: ti.template
     """Particles of `block`: right-hand side b = h (f_n + h K v_n), the 3x3 diagonal of A
     (preconditioner) and the CG start dv = 0, r = b, p = z = r / diagonal; the block's
     partial sums of r . z and b . b."""
-    dt, drag = now.dt, forces.drag
+    dt = now.dt
     begin, end = block_range(block, model.particle_count)
     rz, bb = 0.0, 0.0
     for i in range(begin, end):
-        free = ti.cast(model.particle_inv_mass[i] > 0, float)
-        kv = ti.Vector([0.0, 0.0, 0.0])
-        diagonal = model.particle_mass[i] * (1.0 + dt * drag) * ti.Vector([1.0, 1.0, 1.0])
-        for term in ti.static(ROWS):          # energies.ROWS, in a fixed order
-            kv, diagonal = term.implicit_start(model, state, forces, ws, i, dt, kv, diagonal)
+        kv, diagonal, free = system_row(model, state, forces, ws, i, dt)
         b = free * dt * (state.particle_force[i] - dt * kv)
-        if free == 0:
-            diagonal = ti.Vector([1.0, 1.0, 1.0])   # a pin's row is the identity (b = 0 there)
-        z = b / diagonal
-        ws.dv[i] = ti.Vector([0.0, 0.0, 0.0])
-        ws.r[i] = b
-        ws.z[i] = z
-        ws.p[i] = z
-        ws.diagonal[i] = diagonal
-        rz += b.dot(z)
-        bb += b.dot(b)
+        row_rz, row_bb = start_row(ws, i, b, diagonal, free)
+        rz += row_rz
+        bb += row_bb
     ws.partial[block] = ti.Vector([rz, bb])
 
 

@@ -15,7 +15,6 @@ import taichi as ti
 from ..runtime.plan import ITEM, NOW, STATE, Loop, Phase, substep
 from ..state import store_particle
 from . import newton
-from .base import Integrator
 
 
 @ti.func
@@ -35,7 +34,7 @@ def _extrapolate(state: ti.template(), ws: ti.template(), i, now: ti.template())
     store_particle(state, i, x, v, now.step)
 
 
-class ImplicitMidpoint(Integrator):
+class ImplicitMidpoint(newton.NewtonIntegrator):
     """Implicit midpoint (module doc), its half step solved by Newton's method.
 
     tolerance, most_newton, cg_tolerance, most_cg: the Newton solve's (newton.NewtonSettings).
@@ -45,28 +44,7 @@ class ImplicitMidpoint(Integrator):
 
     name = "implicit_midpoint"
     order = 2
-    step_limited = False
-
-    def __init__(self, *, tolerance: float = 1e-6, most_newton: int = 8,
-                 cg_tolerance: float = 1e-3, most_cg: int = 500):
-        self.settings = newton.NewtonSettings("ImplicitMidpoint", tolerance, most_newton,
-                                              cg_tolerance, most_cg)
-        self.last_newton = self.last_cg = 0
-
-    def options(self):
-        return self.settings.options()
-
-    def workspace(self, model, state):
-        return self.buffers(state, lambda: newton.workspace(model))
-
-    def step_work(self, model):
-        return newton.step_work(model, 1)
-
-    def after_launch(self, work):
-        self.last_newton, self.last_cg = newton.reports(work)
-
-    def copy_reports(self, stepper):
-        self.last_newton, self.last_cg = stepper.last_newton, stepper.last_cg
+    solves = 1
 
     def phases(self, model, forces, ws):
         """The origin and predictor, the half step's Newton solve, the extrapolation."""

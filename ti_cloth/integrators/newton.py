@@ -23,13 +23,15 @@ Every sum is over fixed blocks in block order and the largest update a maximum (
 any order): the bits do not depend on the plan or the thread count.
 """
 
+from typing import ClassVar
+
 import taichi as ti
 
-from ..energies import ROWS
 from ..inputs import limits
 from ..inputs.validation import count, finite_number, require
 from ..runtime.plan import ITEM, NOW, STATE, Loop, Once, Phase, Until
 from . import conjugate_gradients, fused
+from .base import Integrator
 from .conjugate_gradients import (
     CG,
     CG_TOTAL,
@@ -39,6 +41,8 @@ from .conjugate_gradients import (
     TYPICAL_ITERATIONS,
     Workspace,
     block_range,
+    start_row,
+    system_row,
 )
 
 TYPICAL_NEWTON = 3         # Newton iterations a solve is assumed to take (sizing launches)
@@ -50,27 +54,16 @@ def _start_block(model: ti.template(), state: ti.template(), forces: ti.template
     """Particles of `block`: b = s f(x_k, v_k) - M (v_k - v^), the 3x3 diagonal of
     A = M (1 + s drag) - s D - s^2 K and the CG start dv = 0, r = b, p = z = r / diagonal;
     the block's partial sums of r . z and b . b."""
-    s, drag = now.dt, forces.drag
+    s = now.dt
     begin, end = block_range(block, model.particle_count)
     rz, bb = 0.0, 0.0
     for i in range(begin, end):
-        free = ti.cast(model.particle_inv_mass[i] > 0, float)
-        kv = ti.Vector([0.0, 0.0, 0.0])
-        diagonal = model.particle_mass[i] * (1.0 + s * drag) * ti.Vector([1.0, 1.0, 1.0])
-        for term in ti.static(ROWS):          # energies.ROWS, in a fixed order
-            kv, diagonal = term.implicit_start(model, state, forces, ws, i, s, kv, diagonal)
+        _, diagonal, free = system_row(model, state, forces, ws, i, s)
         b = free * (s * state.particle_force[i]
                     - model.particle_mass[i] * (state.particle_velocity[i] - ws.origin_velocity[i]))
-        if free == 0:
-            diagonal = ti.Vector([1.0, 1.0, 1.0])   # a pin's row is the identity (b = 0 there)
-        z = b / diagonal
-        ws.dv[i] = ti.Vector([0.0, 0.0, 0.0])
-        ws.r[i] = b
-        ws.z[i] = z
-        ws.p[i] = z
-        ws.diagonal[i] = diagonal
-        rz += b.dot(z)
-        bb += b.dot(b)
+        row_rz, row_bb = start_row(ws, i, b, diagonal, free)
+        rz += row_rz
+        bb += row_bb
     ws.partial[block] = ti.Vector([rz, bb])
 
 
@@ -154,12 +147,6 @@ class NewtonSettings:
                 "cg_tolerance": self.cg_tolerance, "most_cg": self.most_cg}
 
 
-def workspace(model) -> Workspace:
-    """The CG workspace with a Newton solve's fields."""
-    return Workspace(model.particle_count, model.spring_count, model.altitude_count,
-                     model.face_count, model.hinge_count, newton=True)
-
-
 def solve(settings: NewtonSettings, model, forces, ws) -> tuple:
     """The nodes of one solve (module doc) from the origin in ws.origin_position and
     origin_velocity, the State holding the predictor; the State ends on the solution. DT and
@@ -175,11 +162,38 @@ def solve(settings: NewtonSettings, model, forces, ws) -> tuple:
                   args=(ws, NOW, settings.tolerance, settings.most_newton)))
 
 
-def step_work(model, solves: int) -> int:
-    """A step of `solves` Newton solves in spring evaluations, for sizing launches."""
-    return solves * TYPICAL_NEWTON * (2 + 2 * TYPICAL_ITERATIONS) * fused.spring_work(model)
+class NewtonIntegrator(Integrator):
+    """An integrator whose step is `solves` backward-Euler stages solved by solve(): the
+    options, workspace, launch sizing and reports they share.
 
+    tolerance, most_newton, cg_tolerance, most_cg: each solve's (NewtonSettings).
+    last_newton and last_cg report the latest solve's Newton and CG iterations.
+    """
 
-def reports(work) -> tuple[int, int]:
-    """(Newton iterations, CG iterations in all) of the last solve of the last step."""
-    return int(work.iterations[NEWTON]), int(work.iterations[CG_TOTAL])
+    step_limited = False
+    solves: ClassVar[int]
+
+    def __init__(self, *, tolerance: float = 1e-6, most_newton: int = 8,
+                 cg_tolerance: float = 1e-3, most_cg: int = 500):
+        self.settings = NewtonSettings(type(self).__name__, tolerance, most_newton,
+                                       cg_tolerance, most_cg)
+        self.last_newton = self.last_cg = 0
+
+    def options(self):
+        return self.settings.options()
+
+    def workspace(self, model, state):
+        return self.buffers(state, lambda: Workspace(
+            model.particle_count, model.spring_count, model.altitude_count, model.face_count,
+            model.hinge_count, newton=True))
+
+    def step_work(self, model):
+        return (self.solves * TYPICAL_NEWTON * (2 + 2 * TYPICAL_ITERATIONS)
+                * fused.spring_work(model))
+
+    def after_launch(self, work):
+        self.last_newton = int(work.iterations[NEWTON])
+        self.last_cg = int(work.iterations[CG_TOTAL])
+
+    def copy_reports(self, stepper):
+        self.last_newton, self.last_cg = stepper.last_newton, stepper.last_cg

@@ -27,7 +27,6 @@ import taichi as ti
 from ..runtime.plan import ITEM, NOW, STATE, Loop, Phase, substep
 from ..state import store_particle
 from . import newton
-from .base import Integrator
 
 GAMMA = 2.0 - math.sqrt(2.0)
 A = 1.0 / (GAMMA * (2.0 - GAMMA))               # BDF2's weights on x_gamma and x_n
@@ -65,7 +64,7 @@ def _finish(state: ti.template(), i, now: ti.template()):
     store_particle(state, i, state.particle_position[i], state.particle_velocity[i], now.step)
 
 
-class TRBDF2(Integrator):
+class TRBDF2(newton.NewtonIntegrator):
     """TR-BDF2 (module doc), both stages solved by Newton's method.
 
     tolerance, most_newton, cg_tolerance, most_cg: each Newton solve's
@@ -75,28 +74,7 @@ class TRBDF2(Integrator):
 
     name = "tr_bdf2"
     order = 2
-    step_limited = False
-
-    def __init__(self, *, tolerance: float = 1e-6, most_newton: int = 8,
-                 cg_tolerance: float = 1e-3, most_cg: int = 500):
-        self.settings = newton.NewtonSettings("TRBDF2", tolerance, most_newton, cg_tolerance,
-                                              most_cg)
-        self.last_newton = self.last_cg = 0
-
-    def options(self):
-        return self.settings.options()
-
-    def workspace(self, model, state):
-        return self.buffers(state, lambda: newton.workspace(model))
-
-    def step_work(self, model):
-        return newton.step_work(model, 2)
-
-    def after_launch(self, work):
-        self.last_newton, self.last_cg = newton.reports(work)
-
-    def copy_reports(self, stepper):
-        self.last_newton, self.last_cg = stepper.last_newton, stepper.last_cg
+    solves = 2
 
     def phases(self, model, forces, ws):
         """The midpoint stage (origin, Newton solve), the BDF2 stage (origin, Newton solve),
