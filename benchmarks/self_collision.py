@@ -7,7 +7,8 @@ warm-up that reaches the part of the motion measured (and compiles the contact k
 - pile: dropped flat from 0.3 m onto a small sphere on the ground, so it drapes, folds and lands
   on itself (xpbd at 1/240 s, timed from 0.4 s, while it folds).
 Medians of several runs; the ratio is measured in the same run. With --profile, the share of
-each self-collision kernel (launches timed one by one, so the total is a little higher).
+each self-collision kernel and of the contact passes (the stage's phases, run by plan.run;
+launches timed one by one, so the total is a little higher).
 
     python benchmarks/self_collision.py [--sizes 32 64 128] [--thickness 0.005] [--profile]
 """
@@ -15,15 +16,16 @@ each self-collision kernel (launches timed one by one, so the total is a little 
 import argparse
 import statistics
 import time
+import types
 
 import ti_cloth as tc
 from ti_cloth.contact import self_collision
 from ti_cloth.contact.broad_phase import box_grid
 
 KERNELS = {self_collision: ("displacement_box", "sweep_boxes", "mean_edge", "list_pairs",
-                            "prefix_pairs", "index_contacts", "evaluate_contacts",
-                            "apply_contacts", "project_out", "follow_corrections"),
+                            "prefix_pairs", "index_contacts"),
            box_grid.BoxGrid: ("build",)}   # where the stage looks them up
+PASSES = "contact passes"   # self_collision's plan.run: the stage's phases
 
 
 def simulation(n, scene, integrator, contact):
@@ -75,11 +77,17 @@ def profile(sim, steps):
     for module, names in KERNELS.items():
         for name in names:
             timed(module, name)
+    plan = self_collision.plan
+    passes = types.SimpleNamespace(run=plan.run)
+    self_collision.plan = passes
+    timed(passes, "run")
     try:
         sim.step(steps)
     finally:
         for (module, name), kernel in originals.items():
             setattr(module, name, kernel)
+        self_collision.plan = plan
+    spent[PASSES] = spent.pop("run", 0.0)
     return {name: t / steps * 1e3 for name, t in sorted(spent.items(), key=lambda kv: -kv[1])}
 
 

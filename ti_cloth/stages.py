@@ -13,8 +13,10 @@ A stage after the integrator is the object Simulation makes for it when the scen
 scene without it compiles and launches none of its code), kept under its STEP_ORDER name: a
 Stage. Its work is written once, as phases (runtime/plan.py), which its after_step launches
 and which many-steps launches (stepping.py) run inside the launch on the stage's `launched`
-object; a stage without one (self-collision) keeps a launch per stage, and a simulation that
-has it steps launch by launch.
+object. Self-collision's contact passes are phases too, but it has no `launched` object: its
+candidate list is made again on the host whenever the cloth has moved more than the list's
+skin (it may grow, and the growth is a new kernel), so it runs launch by launch, and a
+simulation that has it steps launch by launch.
 """
 
 from __future__ import annotations

@@ -25,7 +25,8 @@ after_step launches in a launch per stage:
 the order of stages.STEP_ORDER. What Python computes from the time (scripted paths, the
 wind's gusts) is tabled for the launch's steps; a launch ends at the step after which a
 handle lets go (its particles are free from that step's handle stage on: that step runs stage
-by stage). Self-collision steps one launch per stage, as GPUs always do.
+by stage). Self-collision steps one launch per stage, as GPUs always do (its passes are
+phases, but its candidate list is made on the host between them).
 
 Every worker evaluates each spring and particle with the same formula and in the same order
 as a launch per phase (the same phases: runtime/plan.py), and sums in fixed blocks,

@@ -36,7 +36,8 @@ import taichi as ti
 from ..geometry import edge_contact, point_over_triangle
 from ..inputs import limits
 from ..inputs.validation import count, finite_number, require
-from ..runtime import backend
+from ..runtime import backend, plan
+from ..runtime.plan import DT, ITEM, STATE, Loop, Once, Phase, Until
 from ..runtime.transfer import upload
 from ..state import copy_positions
 from .broad_phase.box_grid import BLOCK, BoxGrid
@@ -52,7 +53,7 @@ from .broad_phase.contact_pairs import (
     torn_edge,
     torn_triangle,
 )
-from .colliders.collision import project_out
+from .colliders.collision import project_particle_out
 
 PAIRS_PER_PARTICLE = 32     # candidate list room at first, per particle
 MAX_PAIRS_PER_PARTICLE = 256
@@ -124,8 +125,9 @@ def warn_if_thick(settings: SelfCollision, cloth) -> None:
 class SelfCollisionStage:
     """The self-collision stage of one simulation: the body's triangles and edges, each
     particle's edges (CSR), the grid, the candidate list and the positions at the start of the
-    step and at the list's making. It runs launch by launch only (its candidate lists are
-    made on the host): no `launched` object (stages.py)."""
+    step and at the list's making. Its contact passes are phases (runtime/plan.py), but it
+    runs launch by launch only (its candidate lists are made on the host, and may grow): no
+    `launched` object (stages.py)."""
 
     launched = None
 
@@ -157,6 +159,13 @@ class SelfCollisionStage:
         self.pair_start = fields.scalar(ti.i32, len(triangles) + len(edges) + 1)
         self.touching = fields.vector(2, ti.i32, ())
         self.deepest = fields.scalar(real, ())    # the smallest gap of a contact evaluated
+        self.thickness = fields.scalar(real, ())  # the settings' (loaded: kernels outlive them)
+        self.friction = fields.scalar(real, ())
+        self.iterations = fields.scalar(ti.i32, ())
+        self.passes = fields.scalar(ti.i32, ())   # passes made in this step
+        self.go = fields.scalar(ti.i32, ())       # 1: another pass (or the last evaluation)
+        self.applying = fields.scalar(ti.i32, ())     # 1: this pass moves the particles
+        self.left_deep = fields.scalar(ti.i32, ())    # 1: the passes ran out, contacts deep
         self.contact_start = fields.scalar(ti.i32, n + 1)
         self.contact_fill = fields.scalar(ti.i32, n)
         fields.finalize(self)
@@ -175,6 +184,9 @@ class SelfCollisionStage:
         require(isinstance(settings, SelfCollision), "self_collision", settings,
                 "None or a SelfCollision")
         self.settings = settings
+        self.thickness[None] = settings.thickness
+        self.friction[None] = settings.friction
+        self.iterations[None] = settings.iterations
         self.colliders = None
         self.forget()
         if self.triangle_count:
@@ -228,7 +240,9 @@ class SelfCollisionStage:
         copy_positions(state, self.step_start)
 
     def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
-        """The self-collision stage of a step ending at time t (stages.STEP_ORDER)."""
+        """The self-collision stage of a step ending at time t (stages.STEP_ORDER): the list
+        made again when the cloth has moved more than the skin since it was made (on the
+        host: it may grow), then the contact passes (phases)."""
         if self.triangle_count == 0:
             return
         thickness = self.settings.thickness
@@ -236,23 +250,34 @@ class SelfCollisionStage:
             self._make_list(model, state, step_index)
         if self.pair_total == 0:
             return
-        copy_positions(state, self.before)
-        for _ in range(self.settings.iterations):
-            touching, deep = evaluate_contacts(self, self.candidates, model, state, thickness,
-                                               self.settings.friction)
-            if touching == 0:
-                break
-            apply_contacts(self, self.candidates, model, state)
-            if self.colliders is not None:
-                project_out(model, state, self.colliders)
-            if deep == 0:
-                break
-        else:                        # the passes ran out with contacts deep: what is left?
-            _, deep = evaluate_contacts(self, self.candidates, model, state, thickness,
-                                        self.settings.friction)
-            if deep:
-                self._report(thickness + float(self.deepest[None]), step_index)
-        follow_corrections(self, state, dt)
+        plan.run(self, model, state, None, self.candidates, dt, step_index, False)
+        if self.left_deep[None]:
+            self._report(thickness + float(self.deepest[None]), step_index)
+
+    def phases(self, model, forces, pairs) -> tuple:
+        """The contact passes as phases (runtime/plan.py; `pairs` the PairList, the
+        workspace: a bigger list is another kernel). At most `iterations` passes, each
+        evaluating every listed pair, moving the particles by their contacts and out of the
+        colliders again; they stop once no contact is left, or none deeper than RESOLVED
+        thicknesses. Passes run out with contacts still deep: one more evaluation measures
+        what is left (left_deep, deepest). Then the velocities follow the corrections."""
+        n = model.particle_count
+        colliders = self.colliders
+        out_of_colliders = (() if colliders is None else
+                            (Phase(Loop(n, project_particle_out, model, STATE, colliders, ITEM,
+                                        self.applying)),))
+        return (Phase(Loop(n, keep_position, STATE, self.before, ITEM)),
+                Once(begin_passes, self),
+                Until(passing,
+                      Once(clear_counts, self),
+                      Phase(Loop(pairs.capacity, evaluate_pair, self, pairs, model, STATE,
+                                 ITEM)),
+                      Once(decide, self),
+                      Phase(Loop(n, apply_contacts, self, pairs, model, STATE, ITEM)),
+                      *out_of_colliders,
+                      Once(end_pass, self),
+                      args=(self,)),
+                Phase(Loop(n, follow_correction, self, STATE, ITEM, DT)))
 
     def _report(self, distance: float, step_index: int) -> None:
         """Keep the nearest contact the passes left (closest_left); warn the first time one is
@@ -363,24 +388,46 @@ def _contact_move(stage: ti.template(), pairs: ti.template(), model: ti.template
                                       * (gap * n + slip * tangential))
 
 
-@backend.kernel
-def evaluate_contacts(stage: ti.template(), pairs: ti.template(), model: ti.template(),
-              state: ti.template(), thickness: float,
-              friction: float) -> ti.types.vector(2, ti.i32):
-    """Evaluate every listed pair at the current positions: active[p] and, for contacts,
-    their moves, and the smallest gap of a contact in `deepest`. Returns how many are in
-    contact and how many of those deeper than RESOLVED thicknesses (integer counts: exact)."""
+@ti.func
+def keep_position(state: ti.template(), kept: ti.template(), i):
+    kept[i] = state.particle_position[i]
+
+
+@ti.func
+def begin_passes(stage: ti.template()):
+    """Before the first pass: passing, none made, nothing left deep."""
+    stage.passes[None] = 0
+    stage.go[None] = 1
+    stage.left_deep[None] = 0
+
+
+@ti.func
+def passing(stage: ti.template()):
+    """Whether another pass (or the evaluation after the last) runs."""
+    return stage.go[None]
+
+
+@ti.func
+def clear_counts(stage: ti.template()):
     stage.touching[None] = ti.Vector([0, 0])
     stage.deepest[None] = 0.0
-    vertex_pairs = stage.pair_start[stage.triangle_count]
-    for p in range(stage.pair_start[stage.triangle_count + stage.edge_count]):
+
+
+@ti.func
+def evaluate_pair(stage: ti.template(), pairs: ti.template(), model: ti.template(),
+                  state: ti.template(), p):
+    """Listed pair p at the current positions (if p is listed): active[p] and, in contact,
+    its moves; counts the contacts and those deeper than RESOLVED thicknesses in touching
+    (integer counts: exact), the smallest gap in deepest (a min: exact, in any order)."""
+    if p < stage.pair_start[stage.triangle_count + stage.edge_count]:
+        thickness = stage.thickness[None]
         corners = pairs.particles[p]
         touching = False
         n = ti.Vector([0.0, 0.0, 0.0])
         gap = 0.0
         weights = ti.Vector([0.0, 0.0, 0.0, 0.0])
         elements = pairs.elements[p]
-        if p < vertex_pairs:
+        if p < stage.pair_start[stage.triangle_count]:
             touching, n, gap, w = _vertex_triangle(state.particle_position, stage.step_start,
                                                    corners, thickness)
             weights = ti.Vector([1.0, -w[0], -w[1], -w[2]])
@@ -393,34 +440,56 @@ def evaluate_contacts(stage: ti.template(), pairs: ti.template(), model: ti.temp
                         and not torn_edge(stage, state, elements[1]))
         pairs.active[p] = ti.select(touching, 1, 0)
         if touching:
-            _contact_move(stage, pairs, model, state, p, corners, weights, n, gap, friction)
+            _contact_move(stage, pairs, model, state, p, corners, weights, n, gap,
+                          stage.friction[None])
             ti.atomic_add(stage.touching[None][0], 1)
-            ti.atomic_min(stage.deepest[None], gap)      # a min: exact, in any order
+            ti.atomic_min(stage.deepest[None], gap)
             if gap < -RESOLVED * thickness:
                 ti.atomic_add(stage.touching[None][1], 1)
-    return stage.touching[None]
 
 
-@backend.kernel
+@ti.func
+def decide(stage: ti.template()):
+    """After an evaluation: no contact ends the passes; after the last pass, the evaluation
+    only measures what is left; otherwise the particles move (applying)."""
+    stage.applying[None] = 0
+    if stage.touching[None][0] == 0:
+        stage.go[None] = 0
+    elif stage.passes[None] == stage.iterations[None]:
+        stage.left_deep[None] = ti.select(stage.touching[None][1] > 0, 1, 0)
+        stage.go[None] = 0
+    else:
+        stage.applying[None] = 1
+
+
+@ti.func
 def apply_contacts(stage: ti.template(), pairs: ti.template(), model: ti.template(),
-                    state: ti.template()):
-    """Each particle moves by the mean of its contacts' moves, gathered in pair order."""
-    for i in range(stage.particle_count):
-        if model.particle_inv_mass[i] > 0:
-            move = ti.Vector([0.0, 0.0, 0.0])
-            contacts = 0
-            for a in range(stage.contact_start[i], stage.contact_start[i + 1]):
-                slot = pairs.contact[a]
-                if pairs.active[slot // 4]:
-                    move += pairs.move[slot]
-                    contacts += 1
-            if contacts > 0:
-                state.particle_position[i] += move / contacts
+                   state: ti.template(), i):
+    """Particle i moves by the mean of its contacts' moves, gathered in pair order (in a
+    pass that applies)."""
+    if stage.applying[None] and model.particle_inv_mass[i] > 0:
+        move = ti.Vector([0.0, 0.0, 0.0])
+        contacts = 0
+        for a in range(stage.contact_start[i], stage.contact_start[i + 1]):
+            slot = pairs.contact[a]
+            if pairs.active[slot // 4]:
+                move += pairs.move[slot]
+                contacts += 1
+        if contacts > 0:
+            state.particle_position[i] += move / contacts
 
 
-@backend.kernel
-def follow_corrections(stage: ti.template(), state: ti.template(), dt: float):
-    """Velocities follow the contact corrections of this stage (v += dx / h)."""
-    for i in range(stage.particle_count):
-        x = state.particle_position[i]
-        state.particle_velocity[i] += (x - stage.before[i]) / dt
+@ti.func
+def end_pass(stage: ti.template()):
+    """A pass that applied counts; none deeper than RESOLVED thicknesses ends the passes."""
+    if stage.applying[None]:
+        stage.passes[None] += 1
+        if stage.touching[None][1] == 0:
+            stage.go[None] = 0
+
+
+@ti.func
+def follow_correction(stage: ti.template(), state: ti.template(), i, dt):
+    """Particle i's velocity follows the contact corrections of this stage (v += dx / h)."""
+    x = state.particle_position[i]
+    state.particle_velocity[i] += (x - stage.before[i]) / dt

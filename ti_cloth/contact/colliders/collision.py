@@ -425,19 +425,19 @@ def resolve(model: ti.template(), state: ti.template(), colliders: ti.template()
         colliders.edges.moved[i] = 1
 
 
-@backend.kernel
-def project_out(model: ti.template(), state: ti.template(), colliders: ti.template()):
-    """Project every free particle out of every collider, positions only (no friction, the
-    velocities left to the caller): for stages that move particles after the collision stage
-    (self-collision) and must not push them back into a collider."""
-    for i in range(model.particle_count):
-        if model.particle_inv_mass[i] > 0:
-            x = state.particle_position[i]
-            v = state.particle_velocity[i]
-            for c in range(colliders.count):
-                x, v, _ = _collide_with(colliders, c, i, colliders.step_start[i], x, v, 1.0,
-                                        False)
-            state.particle_position[i] = x
+@ti.func
+def project_particle_out(model: ti.template(), state: ti.template(), colliders: ti.template(),
+                         i, applying: ti.template()):
+    """Project particle i (if free, and while applying[None]) out of every collider,
+    position only (no friction, the velocity left to the caller): for stages that move
+    particles after the collision stage (self-collision) and must not push them back into a
+    collider."""
+    if applying[None] and model.particle_inv_mass[i] > 0:
+        x = state.particle_position[i]
+        v = state.particle_velocity[i]
+        for c in range(colliders.count):
+            x, v, _ = _collide_with(colliders, c, i, colliders.step_start[i], x, v, 1.0, False)
+        state.particle_position[i] = x
 
 
 @backend.kernel
