@@ -30,8 +30,7 @@ def wind_forces_at(cloth, wind, x=None, v=None):
     forces = ForceSettings(gravity=(0.0, 0.0, 0.0), wind=field)
 
     def at(t):
-        field.set_time(t)
-        compute_forces(model, state, forces)
+        compute_forces(model, state, forces, time=t)
         return state.particle_force.to_numpy()
     return at
 

@@ -2,8 +2,8 @@
 
 Each step runs the integrator, then the stages the simulation has, in STEP_ORDER (stages.py:
 the order and what a stage is); a stage is made, compiled and launched only when the
-simulation has it. The colliders, self-collision and the wind also have before_step(state, t)
-(t: the step's start). The integrator's step and the stages' are written once, as phases
+simulation has it. The colliders and self-collision also have before_step(state, t) (t: the
+step's start). The integrator's step and the stages' are written once, as phases
 (runtime/plan.py): a launch per phase runs them (Integrator.step, Stage.after_step), and on
 the CPU, when every stage has a `launched` object, many steps run in one launch (stepping.py;
 tested against a launch per phase).
@@ -176,7 +176,7 @@ class Simulation:
                                      strain_limit=self.strain_limiter, colliders=self.colliders,
                                      self_collision=self.self_collision, tearing=self._tearing))
         self.stages = ("integrator",) + tuple(self._stages)
-        self._before = [stage for stage in (self.colliders, self.self_collision, self.wind)
+        self._before = [stage for stage in (self.colliders, self.self_collision)
                         if stage is not None]
         self.step_count = 0
         self._diverged: SimulationDiverged | None = None

@@ -22,8 +22,10 @@ worker:
 each stage after the integrator running its own phases (TeamStages.after), the ones its
 after_step launches in a launch per stage:
 
-the order of stages.STEP_ORDER. What Python computes from the time (scripted paths, the
-wind's gusts) is tabled for the launch's steps; a launch ends at the step after which a
+the order of stages.STEP_ORDER. What is a function of time is evaluated in the step from its
+start time (plan.py's NOW.time: the wind's gusts, sampled animations), except what only Python
+can compute, a user's callable (a handle's or a collider's path, a callable animation): that
+is tabled for the launch's steps; a launch ends at the step after which a
 handle lets go (its particles are free from that step's handle stage on: that step runs stage
 by stage). Self-collision steps one launch per stage, as GPUs always do (its passes are
 phases, but its candidate list is made on the host between them).
@@ -139,8 +141,9 @@ def _run(integrator: ti.template(), model: ti.template(), state: ti.template(),
     p_begin, p_end = team.share(model.particle_count, worker)
     for k in range(count):
         stages.begin(state, worker, p_begin, p_end, k, moving)
-        now = ti.Struct(dt=dt, step=first + k, k=k, start=ti.i32(start != 0 and k == 0),
-                        row=worker)
+        now = ti.Struct(dt=ti.cast(dt, float), step=first + k, k=k,
+                        start=ti.i32(start != 0 and k == 0), row=worker,
+                        time=ti.cast(first + k, ti.f64) * dt)
         plan.run_team(ti.static(plan.nodes_of(integrator, "phases", model, forces, work)),
                       model, state, forces, work, stages, team, worker, now)
         stages.after(model, state, forces, team, worker, now, moving)
@@ -149,9 +152,11 @@ def _run(integrator: ti.template(), model: ti.template(), state: ti.template(),
 @backend.kernel
 def advance_many(integrator: ti.template(), model: ti.template(), state: ti.template(),
                  forces: ti.template(), work: ti.template(), stages: ti.template(),
-                 team: ti.template(), dt: float, first: ti.i32, count: ti.i32, start: ti.i32,
+                 team: ti.template(), dt: ti.f64, first: ti.i32, count: ti.i32, start: ti.i32,
                  moving: ti.i32, serial: ti.template()):
-    """Steps first .. first + count - 1 in one launch, shared by `team` (start: 1 when the
+    """Steps first .. first + count - 1 of dt [s] in one launch (the steps' dt in the
+    working precision, their start times (first + k) dt in float64, as Simulation.time
+    computes them), shared by `team` (start: 1 when the
     state has no history yet; moving: 1 when a collider moves, placed from its schedule;
     held particles' targets come from the handles' table)."""
     team.arrived[None] = 0
@@ -172,8 +177,8 @@ class ManySteps:
 
     stages: the TeamStages of the simulation (its Model's lent set). A launch holds at most
     MAX_STEPS_PER_LAUNCH steps, fewer for big cloths (SPRING_STEPS_PER_LAUNCH of the
-    integrator's step_work), limits.SCHEDULED_STEPS when a collider moves, the wind blows or
-    a handle holds (their per-step values are tabled before the launch). A body under
+    integrator's step_work), limits.SCHEDULED_STEPS when a collider moves or a handle holds
+    (the values of their paths, Python callables, are tabled before the launch). A body under
     TEAM_MIN_SPRINGS runs every launch serially; a bigger body's launch with less work than
     TEAM_MIN_SPRING_STEPS runs on one pool worker, a bigger one on a team of a worker per
     Taichi CPU thread (at most one per core).
@@ -190,12 +195,11 @@ class ManySteps:
         self._big_launches = 0
         self._launched = set()     # team sizes that have run a big launch
 
-    def steps_per_launch(self, integrator, model, forces=None) -> int:
+    def steps_per_launch(self, integrator, model) -> int:
         """How many steps one launch of `integrator` on `model` holds at most."""
         most = MAX_STEPS_PER_LAUNCH
         colliders = self.stages.colliders
-        if ((colliders is not None and colliders.moving) or self.stages.holds
-                or (forces is not None and forces.wind is not None)):
+        if (colliders is not None and colliders.moving) or self.stages.holds:
             most = limits.SCHEDULED_STEPS
         return max(1, min(most, SPRING_STEPS_PER_LAUNCH // max(integrator.step_work(model), 1)))
 
@@ -260,7 +264,7 @@ class ManySteps:
         done = 0
         while done < count and (done == 0 or state.first_bad_step[None] == NO_BAD_STEP):
             step = first + done
-            chunk = min(self.steps_per_launch(integrator, model, forces), count - done)
+            chunk = min(self.steps_per_launch(integrator, model), count - done)
             if handles is not None:
                 chunk = min(chunk, handles.steps_before_release(step, dt))
                 if chunk == 0:
@@ -268,8 +272,6 @@ class ManySteps:
                 handles.schedule(step, chunk, dt)
             if moving:
                 colliders.schedule(step, chunk, dt)
-            if forces.wind is not None:
-                forces.wind.schedule(step, chunk, dt)
             serial = self.serial(model)
             workers = 1 if serial else self.workers_for(integrator, model, chunk)
             team = self.team

@@ -89,8 +89,8 @@ MEMORY_SHARE = 0.75            # refuse a body needing more than this share of p
 SPRING_STEPS_PER_SECOND = 1e7
 LONG_RUN_SECONDS = 60.0
 CHECKPOINT_SECONDS = 5.0       # a run saves its state about this often (of estimated work)
-SCHEDULED_STEPS = 64           # steps of a many-steps launch whose colliders, wind or handles
-                               # change with time (their per-step values are tabled before it)
+SCHEDULED_STEPS = 64           # steps of a many-steps launch whose colliders or handles move
+                               # along callable paths (tabled before it)
 LARGE_BODY = 1_000_000         # springs: the stable-step analysis (modes.py) takes seconds
 
 

@@ -127,11 +127,12 @@ class _Evaluation:
 EVALUATION = _Evaluation()
 
 
-def compute_forces(model, state, forces: ForceSettings, springs: bool = True) -> None:
-    """particle_force at the current state (the wind as the schedule's first row sets it:
-    WindField.set_time): with springs, or (springs=False) the external loads only."""
+def compute_forces(model, state, forces: ForceSettings, springs: bool = True,
+                   time: float = 0.0) -> None:
+    """particle_force at the current state and time [s] (the wind's): with springs, or
+    (springs=False) the external loads only."""
     plan.run(EVALUATION, model, state, forces, state, 0.0, 0, False,
-             "phases" if springs else "external")
+             "phases" if springs else "external", time=time)
 
 
 def energies(cloth, positions: np.ndarray, velocities: np.ndarray, gravity,

@@ -94,7 +94,8 @@ class Wind:
 @backend.kernel_argument
 class WindField:
     """A Wind bound to one body: its triangles, the particle -> triangle adjacency used to
-    gather the triangle forces deterministically, the turbulence modes and per-step values."""
+    gather the triangle forces deterministically, the turbulence modes, and the mean wind's
+    velocity and gust, from which a step evaluates the wind of its start time."""
 
     def __init__(self, wind: Wind, cloth):
         self.structure(wind, cloth)
@@ -111,7 +112,8 @@ class WindField:
         self.mode_wave = fields.vector(3, real, TURBULENCE_MODES)
         self.mode_direction = fields.vector(3, real, TURBULENCE_MODES)
         self.mode_phase = fields.scalar(real, TURBULENCE_MODES)
-        self.scheduled = fields.vector(6, real, limits.SCHEDULED_STEPS)   # mean, drift per step
+        self.velocity = fields.vector(3, ti.f64, ())    # float64: evaluated as on the host
+        self.gust = fields.vector(3, ti.f64, ())        # gust, 2 pi, gust_period
         fields.finalize(self)
         self.load(wind, cloth)
 
@@ -129,7 +131,7 @@ class WindField:
         return ("WindField", compiled, cloth.particle_count, len(cloth.mesh.triangles))
 
     def load(self, wind: Wind, cloth) -> None:
-        """Upload `cloth`'s triangles and `wind`'s turbulence; the wind of time 0."""
+        """Upload `cloth`'s triangles and `wind`'s velocity, gust and turbulence."""
         self.wind = wind
         triangles = cloth.mesh.triangles
         start, adjacent = vertex_triangles(triangles, cloth.particle_count)
@@ -139,28 +141,17 @@ class WindField:
                 (self.triangle_face, cloth.triangle_face),
                 (self.adjacency_triangle, adjacent), (self.mode_wave, wave),
                 (self.mode_direction, direction), (self.mode_phase, phase)))
-        self.set_time(0.0)
+        self.velocity[None] = wind.velocity
+        self.gust[None] = (wind.gust, 2 * np.pi, wind.gust_period)
 
-    def before_step(self, state, t: float) -> None:
-        """Set the wind for the step that starts at time t (held fixed during the step), for
-        a launch per phase (plan.run reads row 0 of the schedule)."""
-        self.set_time(t)
-
-    def set_time(self, t: float) -> None:
-        """Make the wind of time t the schedule's first row (the wind of a launch of one
-        step)."""
-        self.scheduled[0] = self._row(t)
-
-    def _row(self, t: float) -> np.ndarray:
-        return np.concatenate([self.wind.mean_velocity(t), np.asarray(self.wind.velocity) * t])
-
-    def schedule(self, first: int, count: int, dt: float) -> None:
-        """Table the wind of the starts of steps first .. first + count - 1 (count at most
-        limits.SCHEDULED_STEPS) for a many-steps launch (stepping.py)."""
-        table = np.zeros((limits.SCHEDULED_STEPS, 6), backend.numpy_real())
-        for k in range(count):
-            table[k] = self._row((first + k) * dt)
-        self.scheduled.from_numpy(table)
+    @ti.func
+    def mean_and_drift(self, t):
+        """(the mean wind [m/s] at time t [s] (Wind.mean_velocity), how far it has carried the
+        turbulence [m]), computed in float64 with the host's operations in its order, then
+        rounded to the working precision."""
+        velocity, gust = self.velocity[None], self.gust[None]
+        mean = velocity * (1.0 + gust[0] * ti.sin(gust[1] * t / gust[2]))
+        return ti.cast(mean, float), ti.cast(velocity * t, float)
 
     @ti.func
     def turbulence_at(self, x):
@@ -173,13 +164,11 @@ class WindField:
 
 @ti.func
 def wind_on_triangle(state: ti.template(), forces: ti.template(), t, now: ti.template()):
-    """Triangle t's aerodynamic force (module doc) in the wind of row now.k of the schedule,
-    a third of it kept per corner in triangle_force. The WindField is a template argument, so
-    its frozen Wind's coefficients are compile-time constants."""
+    """Triangle t's aerodynamic force (module doc) in the wind of the step's start (now.time,
+    held during the step), a third of it kept per corner in triangle_force. The WindField is a
+    template argument, so its frozen Wind's coefficients are compile-time constants."""
     wind = forces.wind
-    row = wind.scheduled[now.k]
-    mean = ti.Vector([row[0], row[1], row[2]])
-    drift = ti.Vector([row[3], row[4], row[5]])
+    mean, drift = wind.mean_and_drift(now.time)
     a, b, c = wind.triangle[t][0], wind.triangle[t][1], wind.triangle[t][2]
     xa, xb, xc = state.particle_position[a], state.particle_position[b], state.particle_position[c]
     u = mean - (state.particle_velocity[a] + state.particle_velocity[b]

@@ -21,8 +21,10 @@ Bodies are ti.funcs that take what they need: a node holds its body and the body
 placeholders among the args filled in (bind): ITEM, the item (a Loop's index, a Sweep's
 position in its colour order); STATE, the State being stepped; DT, the step [s]; NOW, the step
 as a struct of dt, step (its global index), k (its index in the launch: rows of tables
-scheduled before the launch), start (1: the state has no history yet) and row (the worker's
-row of per-worker scalars; 0 in a launch per phase); STAGES, the stages running inside the
+scheduled before the launch), start (1: the state has no history yet), row (the worker's
+row of per-worker scalars; 0 in a launch per phase) and time (the step's start [s], float64,
+step x dt as Simulation.time: what is given as a function of time, the wind's gusts, is
+evaluated from it in the step); STAGES, the stages running inside the
 step (stepping.TeamStages; STAGELESS in a launch per phase). The model, the force settings
 and the workspace are given to the method that writes the nodes (`phases(model, forces,
 work)`), which passes them as they are.
@@ -83,7 +85,7 @@ def bind(args: tuple, item, state, now, stages) -> tuple:
         if isinstance(a, Substep):
             dt = now.dt * a.fraction
             a = dt if a.of is DT else ti.Struct(dt=dt, step=now.step, k=now.k, start=now.start,
-                                                row=now.row)
+                                                row=now.row, time=now.time)
         elif isinstance(a, Placeholder):
             a = values[a]
         bound.append(a)
@@ -256,35 +258,35 @@ STAGELESS = _Stageless()
 @backend.kernel
 def launch_phases(owner: ti.template(), part: ti.template(), model: ti.template(),
                  state: ti.template(), forces: ti.template(), work: ti.template(), dt: float,
-                 step: ti.i32, start: ti.i32, path: ti.template()):
+                 step: ti.i32, start: ti.i32, time: ti.f64, path: ti.template()):
     """The leaves at `path` of owner's nodes, each loop a parallel loop of its own."""
     for leaf in ti.static(_segment(nodes_of(owner, part, model, forces, work), path)):
         if ti.static(isinstance(leaf, Phase)):
             for loop in ti.static(leaf.loops):
                 for i in range(loop.count):
-                    now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0)
+                    now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0, time=time)
                     loop.body(*ti.static(bind(loop.args, i, state, now, STAGELESS)))
         elif ti.static(isinstance(leaf, Sweep)):
             colours = leaf.colouring
             for c in ti.static(range(colours.count)):
                 for t in range(colours.offsets[c], colours.offsets[c + 1]):
-                    now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0)
+                    now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0, time=time)
                     leaf.body(*ti.static(bind(leaf.args, t, state, now, STAGELESS)))
         else:
             for _ in range(1):
-                now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0)
+                now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0, time=time)
                 leaf.body(*ti.static(bind(leaf.args, None, state, now, STAGELESS)))
 
 
 @backend.kernel
 def launch_colour(owner: ti.template(), part: ti.template(), model: ti.template(),
                   state: ti.template(), forces: ti.template(), work: ti.template(), dt: float,
-                  step: ti.i32, start: ti.i32, path: ti.template(), begin: ti.i32,
+                  step: ti.i32, start: ti.i32, time: ti.f64, path: ti.template(), begin: ti.i32,
                   end: ti.i32):
     """Positions begin .. end - 1 (a colour) of the Sweep at `path` (container, index)."""
     for leaf in ti.static(_leaves(nodes_of(owner, part, model, forces, work), path[0])[path[1]:path[1] + 1]):
         for t in range(begin, end):
-            now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0)
+            now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0, time=time)
             leaf.body(*ti.static(bind(leaf.args, t, state, now, STAGELESS)))
 
 
@@ -310,9 +312,9 @@ def _launch_leaves(args, nodes, container: tuple, begin: int, end: int) -> None:
 @backend.kernel
 def _holds(owner: ti.template(), part: ti.template(), model: ti.template(), state: ti.template(),
            forces: ti.template(), work: ti.template(), dt: float, step: ti.i32, start: ti.i32,
-           path: ti.template()) -> ti.i32:
+           time: ti.f64, path: ti.template()) -> ti.i32:
     """Whether the test of the Until at `path` (_leaves) holds (row 0)."""
-    now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0)
+    now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0, time=time)
     holds = 0
     for node in ti.static((_node(nodes_of(owner, part, model, forces, work), path),)):
         holds = ti.i32(node.test(*ti.static(bind(node.args, None, state, now, STAGELESS))))
@@ -328,22 +330,24 @@ def serial_is_faster(model) -> bool:
 @backend.kernel
 def launch_serial(owner: ti.template(), part: ti.template(), model: ti.template(),
                   state: ti.template(), forces: ti.template(), work: ti.template(), dt: float,
-                  step: ti.i32, start: ti.i32):
+                  step: ti.i32, start: ti.i32, time: ti.f64):
     """Every node of owner's `part`, in one serial task (run_team with one worker)."""
     ti.loop_config(serialize=True)
     for _ in range(1):
-        now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0)
+        now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0, time=time)
         run_team(ti.static(nodes_of(owner, part, model, forces, work)), model, state, forces,
                  work, STAGELESS, SOLO, 0, now)
 
 
 def run(owner, model, state, forces, work, dt: float, step: int, start: bool,
-        part: str = "phases") -> None:
-    """owner's nodes (its method `part`): one serial launch when serial_is_faster, else a
-    launch per run of leaves (module doc)."""
+        part: str = "phases", time: float | None = None) -> None:
+    """owner's nodes (its method `part`) for step `step` of dt [s], which starts at `time`
+    [s] (step x dt unless given): one serial launch when serial_is_faster, else a launch per
+    run of leaves (module doc)."""
     nodes = nodes_of(owner, part, model, forces, work)
     note_launch(nodes, ("run", part))
-    args = (owner, part, model, state, forces, work, dt, step, int(start))
+    args = (owner, part, model, state, forces, work, dt, step, int(start),
+            step * dt if time is None else time)
     if serial_is_faster(model):
         launch_serial(*args)
         return
