@@ -36,7 +36,7 @@ def build(scene: str, batched: bool, precision: str) -> dict:
         sim = tc.Simulation(tc.Cloth(mesh, tc.Material(), pinned=[0, 23]), dt=1e-4)
     else:
         sim = tc.Simulation(tc.Cloth(mesh, tc.Fabric.preset("denim"), pinned=[0, 23]),
-                            dt=1e-4, strain_limit=tc.StrainLimit(0.1),
+                            dt=1e-4, strain_limit=tc.StrainLimit(max_strain=0.1),
                             wind=tc.Wind(velocity=(1.0, 0.0, 0.0)))
     built = time.perf_counter()
     sim.step(1)

@@ -27,7 +27,7 @@ def everything(n):
         cloth, integrator="symplectic_euler", dt=1e-5, drag=0.2, tearing=0.5,
         wind=tc.Wind(velocity=(1.0, 0.0, 0.5), turbulence=0.5),
         handles=[tc.Handle([n * n - 1], tc.Oscillation(amplitude=(0.0, 0.05, 0.0), frequency=1.0))],
-        colliders=[tc.Sphere(centre=(0.5, -0.3, 0.5), radius=0.2)], strain_limit=tc.StrainLimit(0.1))
+        colliders=[tc.Sphere(centre=(0.5, -0.3, 0.5), radius=0.2)], strain_limit=tc.StrainLimit(max_strain=0.1))
 
 
 def steps_per_second(sim, steps, repeats):

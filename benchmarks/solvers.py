@@ -38,7 +38,7 @@ def scene(n: int, integrator: str, colliders: bool, strain: float | None = None)
               tc.Sphere(centre=(0.5, -0.4, 0.5), radius=0.2, thickness=0.002,
                         static_friction=0.3)] if colliders else []
     return tc.Simulation(cloth, integrator=integrator, colliders=shapes,
-                         strain_limit=None if strain is None else tc.StrainLimit(strain),
+                         strain_limit=None if strain is None else tc.StrainLimit(max_strain=strain),
                          dt=LONG_STEP if integrator in UNLIMITED else "auto")
 
 

@@ -38,7 +38,7 @@ def full_simulation(integrator, n=8):
         cloth, integrator=integrator, dt=1e-4, drag=0.2, tearing=0.5,
         wind=tc.Wind(velocity=(1.0, 0.0, 0.5), turbulence=0.5),
         handles=[tc.Handle([n * n - 1], tc.Oscillation(amplitude=(0.0, 0.05, 0.0), frequency=1.0))],
-        colliders=[tc.Sphere(centre=(0.5, -0.3, 0.5), radius=0.2)], strain_limit=tc.StrainLimit(0.1),
+        colliders=[tc.Sphere(centre=(0.5, -0.3, 0.5), radius=0.2)], strain_limit=tc.StrainLimit(max_strain=0.1),
         self_collision=tc.SelfCollision(thickness=0.01))
 
 

@@ -302,7 +302,7 @@ API = {
                       (numbers, numbers)),
     "Garment": (lambda a, b: tc.Garment([tc.panel(SQUARE, 0.1)] * 2, [(0, a, 1, b)]),
                 ("seams",), (small_counts, small_counts)),
-    "Sewing": (lambda a, b: tc.Sewing(a), ("Sewing",), (numbers, numbers)),
+    "Sewing": (lambda a, b: tc.Sewing(speed=a), ("Sewing",), (numbers, numbers)),
     "Attachment": (lambda a, b: tc.Attachment([a], tc.Sphere(), release=b), ("Attachment",),
                    (small_counts, numbers)),
     "AnimatedMeshCollider": (lambda a, b: tc.AnimatedMeshCollider(

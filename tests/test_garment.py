@@ -144,7 +144,7 @@ def test_sewing_closes_a_seam_at_its_speed_conserving_momentum_and_keeps_it_shut
     assert abs(gaps[0] - (0.05 - speed / 600)) < ROUNDING
     assert shut <= round(0.05 * 600 / speed) and max(gaps[shut - 1:]) < ROUNDING
     hanging = tc.Cloth(garment.mesh, tc.Material(), seams=pairs, pinned=[0])
-    sim = tc.Simulation(hanging, integrator="xpbd", dt=1 / 600, sewing=tc.Sewing(speed))
+    sim = tc.Simulation(hanging, integrator="xpbd", dt=1 / 600, sewing=tc.Sewing(speed=speed))
     unsewn = tc.Simulation(tc.Cloth(garment.mesh, tc.Material(), pinned=[0]),
                            integrator="xpbd", dt=1 / 600)
     sim.step(120)
@@ -166,7 +166,7 @@ def test_a_sewing_run_resumes_with_the_same_bits(f64, tmp_path):
     cloth = tc.Cloth(garment.mesh, tc.Material(), seams=garment.seam_pairs,
                      pinned=garment.particles(0, 2))
     make = lambda: tc.Simulation(cloth, integrator="xpbd", dt=1 / 600,  # noqa: E731
-                                 sewing=tc.Sewing(0.4))
+                                 sewing=tc.Sewing(speed=0.4))
     whole = make()
     whole.step(90)
     half = make()
@@ -177,7 +177,7 @@ def test_a_sewing_run_resumes_with_the_same_bits(f64, tmp_path):
     resumed.step(45)
     np.testing.assert_array_equal(resumed.positions(), whole.positions())
     np.testing.assert_array_equal(resumed.velocities(), whole.velocities())
-    other = tc.Simulation(cloth, integrator="xpbd", dt=1 / 600, sewing=tc.Sewing(0.5))
+    other = tc.Simulation(cloth, integrator="xpbd", dt=1 / 600, sewing=tc.Sewing(speed=0.5))
     with pytest.raises(tc.StateMismatch):
         other.load_state(tmp_path / "half.npz")
 
@@ -221,7 +221,7 @@ SKIRT = Path(__file__).parents[1] / "demos" / "skirt_walk.toml"
 
 def test_scene_files_build_a_garment_and_refuse_bad_panels(tmp_path):
     scene = load_scene(SKIRT)
-    assert len(scene.cloth.seam_indices) > 0 and scene.sewing == tc.Sewing(0.3)
+    assert len(scene.cloth.seam_indices) > 0 and scene.sewing == tc.Sewing(speed=0.3)
     assert scene.cloth.fabric and scene.cloth.particle_count == sum(
         p.mesh.vertex_count for p in scene.bodies[0].options["garment"].panels)
     text = SKIRT.read_text().replace('path = "assets/', f'path = "{SKIRT.parent}/assets/')

@@ -176,7 +176,7 @@ def test_serial_and_parallel_sweeps_give_the_same_bits(f64, integrator, body, mo
     cloth = (tc.Cloth(tc.grid_mesh(6, 7, plane="xz"), tc.Material(), pinned=[0, 5]) if body == "sheet"
              else tc.hair([[0.0, 0.0, 0.0]], 2, 0.2, directions=[[1.0, 0.0, 0.0]], mass=1e-3))
     results = []
-    sim = tc.Simulation(cloth, integrator=integrator, dt=1 / 120, strain_limit=tc.StrainLimit(0.05))
+    sim = tc.Simulation(cloth, integrator=integrator, dt=1 / 120, strain_limit=tc.StrainLimit(max_strain=0.05))
     for limit in (10**9, -1):                # the plan is chosen at every launch
         monkeypatch.setattr(plan, "SERIAL_SPRING_LIMIT", limit)
         sim.restart()

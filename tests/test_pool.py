@@ -30,7 +30,7 @@ def every_stage(body, integrator="symplectic_euler", radius=0.3, strain=0.1, win
     return tc.Simulation(body, integrator=integrator, dt=1e-3,
                          colliders=[tc.Sphere(centre=(0.5, -0.4, 0.5), radius=radius)],
                          handles=[tc.Handle([63], lambda t: (0, 0.2 * t, 0))], tearing=2.0,
-                         strain_limit=tc.StrainLimit(strain), wind=tc.Wind(velocity=wind))
+                         strain_limit=tc.StrainLimit(max_strain=strain), wind=tc.Wind(velocity=wind))
 
 
 @pytest.mark.parametrize("features", ["plain", "every stage"])

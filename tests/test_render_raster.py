@@ -310,7 +310,7 @@ def test_string_draws_as_lines_with_pins_as_dots(f32):
 
 def test_empty_frame_shows_the_background_gradient(f32):
     top, bottom = (1.0, 1.0, 1.0), (0.0, 0.0, 1.0)
-    r = Renderer(4, 10, pixel_camera(4, 10), supersample=1, background=Background(top, bottom))
+    r = Renderer(4, 10, pixel_camera(4, 10), supersample=1, background=Background(top=top, bottom=bottom))
     r.begin()
     image = r.end().astype(float)          # row k from the top: centre (9.5 - k) / 10 of the way up
     expected_red = [255 * (9.5 - k) / 10 for k in range(10)]

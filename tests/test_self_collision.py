@@ -146,7 +146,7 @@ def test_a_sheet_dropped_on_another_rests_on_it_and_never_passes_through(f64):
     sheet lies one thickness above the lower. Without self-collision it falls through."""
     body = two_sheets(8, height=0.1)
     worst, watched, touching = [], 0, 0
-    sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240, self_collision=tc.SelfCollision(THICKNESS))
+    sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240, self_collision=tc.SelfCollision(thickness=THICKNESS))
     for step in range(240):
         sim.step(1)
         if 30 <= step < 60:                       # from 3 cm above the lower sheet to resting
@@ -184,10 +184,10 @@ def test_bad_settings_are_refused_by_name(kwargs, field):
 def test_a_thickness_above_half_the_mean_edge_is_warned_about(f64):
     cloth = tc.Cloth(tc.grid_mesh(41, 41, size=(1.0, 1.0)), tc.Material())   # edges 2.5-3.5 cm
     with pytest.warns(UserWarning, match=r"SelfCollision.thickness 0.02 m is more than 0.5 x"):
-        tc.Simulation(cloth, self_collision=tc.SelfCollision(0.02))
+        tc.Simulation(cloth, self_collision=tc.SelfCollision(thickness=0.02))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        tc.Simulation(cloth, self_collision=tc.SelfCollision(0.01))
+        tc.Simulation(cloth, self_collision=tc.SelfCollision(thickness=0.01))
 
 
 @pytest.mark.reinitialises
@@ -206,7 +206,7 @@ def test_one_thread_and_all_cores_and_a_rerun_give_the_same_bits():
 
     def run():
         sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240, colliders=[ball],
-                            self_collision=tc.SelfCollision(THICKNESS, friction=0.3))
+                            self_collision=tc.SelfCollision(thickness=THICKNESS, friction=0.3))
         sim.step(40)
         assert len(sim.self_contacts().vertex_triangle) > 20, "the sheets touch"
         lifted = np.linalg.norm(sim.positions() - [0.5, -0.12, 0.5], axis=1) - 0.15
@@ -241,7 +241,7 @@ def test_a_ribbon_folded_onto_itself_stays_two_layers(f64):
         return (-0.9 * s, 0.12 * np.sin(np.pi * s), 0.0)
 
     worst = {}
-    for contact in (tc.SelfCollision(THICKNESS), None):
+    for contact in (tc.SelfCollision(thickness=THICKNESS), None):
         sim = tc.Simulation(cloth, integrator="xpbd", dt=1 / 240, self_collision=contact,
                             handles=[tc.Handle(end, carried)],
                             colliders=[tc.Plane(point=(0.0, -0.01, 0.0), static_friction=0.5)])
@@ -273,7 +273,7 @@ def test_friction_between_layers_is_coulomb_on_a_slope(f64):
     down = -turn @ [1.0, 0.0, 0.0]
     for friction in (0.2, 0.6):
         sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240,
-                            self_collision=tc.SelfCollision(THICKNESS, friction=friction))
+                            self_collision=tc.SelfCollision(thickness=THICKNESS, friction=friction))
         start = sim.positions()[60:].mean(axis=0)
         sim.step(96)
         slid = (sim.positions()[60:].mean(axis=0) - start) @ down
@@ -341,7 +341,7 @@ def test_a_sheet_dropped_from_2_m_onto_a_folded_sheet_makes_a_pile_of_four_layer
     layer[:folded.particle_count][folded.particle_position[:, 1] > first] = 1   # the top fold
     up = np.tile([0.0, 1.0, 0.0], (body.particle_count, 1))
     results = {}
-    for contact in (tc.SelfCollision(THICKNESS), None):
+    for contact in (tc.SelfCollision(thickness=THICKNESS), None):
         sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240, self_collision=contact,
                             colliders=[tc.Plane(point=(0.0, 0.0, 0.0), static_friction=0.5)])
         v = sim.velocities()
@@ -376,7 +376,7 @@ def test_a_contact_the_passes_cannot_resolve_is_reported_with_its_distance(f64):
     body = tc.Cloth.combine([lower, upper])
     press = tc.Handle(np.arange(36, 72), lambda t: (0.0, -min(t / 0.1, 1.0) * (0.05 - height), 0.0))
     sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240, handles=[press],
-                        self_collision=tc.SelfCollision(thickness),
+                        self_collision=tc.SelfCollision(thickness=thickness),
                         colliders=[tc.Plane(point=(0.0, 0.0, 0.0))])
     tris = body.mesh.triangles
     v, t = np.nonzero(body.particle_body[:, None] != body.particle_body[tris[:, 0]][None])
@@ -412,7 +412,7 @@ def test_two_sheets_dropped_on_a_sphere_stay_apart(f64):
     body = tc.Cloth.combine(sheets)
     layer = np.repeat([0, 1], 81)                      # the lower sheet is the "upper" layer here
     results = {}
-    for contact in (tc.SelfCollision(THICKNESS), None):
+    for contact in (tc.SelfCollision(thickness=THICKNESS), None):
         sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240, self_collision=contact,
                             colliders=[ball])
         frames = []
@@ -438,7 +438,7 @@ def test_torn_triangles_stop_colliding(f64):
     body = tc.Cloth.combine([tc.Cloth(mesh, tc.Material(), pinned=left),
                              small_sheet((0.5, 0.02, 0.5))])
     sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240, tearing=0.3,
-                        self_collision=tc.SelfCollision(THICKNESS),
+                        self_collision=tc.SelfCollision(thickness=THICKNESS),
                         handles=[tc.Handle(right, lambda t: (0.5 * min(t / 0.2, 1.0), 0.0, 0.0))])
     for _ in range(30):
         sim.step(4)

@@ -264,3 +264,24 @@ def test_options_by_position_still_work_for_a_release_with_a_warning(f64):
     np.testing.assert_array_equal(positional.positions(), keyword.positions())
     with pytest.warns(DeprecationWarning), pytest.raises(TypeError, match="'dt'"):
         tc.Simulation(cloth, "verlet", 2e-4, dt=1e-4)
+
+
+@pytest.mark.parametrize("make, keywords", [
+    (tc.StrainLimit, dict(max_strain=0.2, passes=3)),
+    (tc.SelfCollision, dict(thickness=0.01, friction=0.3)),
+    (tc.Sewing, dict(speed=0.25)),
+    (tc.Fabric, dict(density=0.3, stretch=(2e3, 1e3))),
+    (tc.Material, dict(density=0.4)),
+])
+def test_settings_are_keyword_only_and_positional_values_warn_for_a_release(make, keywords):
+    """A settings object is made by keyword; values by position (the last release's form)
+    give the same object with a DeprecationWarning naming the keywords, and a value given
+    both ways, or one too many, is a TypeError."""
+    names = list(keywords)
+    with pytest.warns(DeprecationWarning, match=f"{make.__name__}\\({names[0]}=\\.\\.\\."):
+        positional = make(*keywords.values())
+    assert positional == make(**keywords)
+    with pytest.raises(TypeError, match=f"'{names[0]}' both"):
+        make(keywords[names[0]], **{names[0]: keywords[names[0]]})
+    with pytest.raises(TypeError, match="at most"):
+        make(*range(50))

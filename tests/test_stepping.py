@@ -131,7 +131,7 @@ FEATURES = {"none": {}, "tearing": dict(tearing=0.2),
                 wind=tc.Wind(velocity=(1.0, 0.0, 2.0), turbulence=0.5, gust=0.3),
                 handles=[tc.Handle([0, 1], lambda t: (0.3 * t, 0.1 * np.sin(7 * t), 0.0),
                                    release=0.0031)]),
-            "everything": dict(tearing=0.4, strain_limit=tc.StrainLimit(0.05),
+            "everything": dict(tearing=0.4, strain_limit=tc.StrainLimit(max_strain=0.05),
                                colliders=contact_scene(), wind=tc.Wind(velocity=(1.0, 0.0, 2.0)),
                                handles=[tc.Handle([0, 1], lambda t: (0.3 * t, 0.0, 0.0), release=0.0031)])}
 
@@ -299,7 +299,7 @@ def test_every_stage_but_self_collision_runs_in_team_launches(f64):
     cloth, _ = sheet()
     assert tc.Simulation(cloth, dt=1e-4).many_steps is not None
     for kwargs in (dict(colliders=[tc.Plane(point=(0.0, -1.0, 0.0), normal=(0.0, 1.0, 0.0))]),
-                   dict(strain_limit=tc.StrainLimit(0.1)), dict(tearing=0.5),
+                   dict(strain_limit=tc.StrainLimit(max_strain=0.1)), dict(tearing=0.5),
                    dict(wind=tc.Wind(velocity=(1.0, 0.0, 0.0))),
                    dict(handles=[tc.Handle([0], lambda t: (0.0, 0.0, 0.0))])):
         assert tc.Simulation(cloth, dt=1e-4, **kwargs).many_steps is not None, kwargs
@@ -330,7 +330,7 @@ def test_a_step_runs_its_stages_in_step_order(f64, monkeypatch, features):
     STEP_ORDER; the many-steps plan runs each of them inside the launch (its `launched`
     object), in the same order (TeamStages.after)."""
     cloth, _ = sheet()
-    options = {"strain_limit": dict(strain_limit=tc.StrainLimit(0.1)),
+    options = {"strain_limit": dict(strain_limit=tc.StrainLimit(max_strain=0.1)),
                "colliders": dict(colliders=[tc.Plane(point=(0.0, -1.0, 0.0))]),
                "handles": dict(handles=[tc.Handle([0], lambda t: (0.0, 0.0, 0.0))]),
                "tearing": dict(tearing=0.5)}

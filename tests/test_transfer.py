@@ -68,7 +68,7 @@ def test_a_build_compiles_one_upload_and_positions_and_velocities_share_a_kernel
                     state_module.write_particles)
     mesh = tc.grid_mesh(5, 5, (0.2, 0.2))
     sim = tc.Simulation(tc.Cloth(mesh, tc.Fabric.preset("denim"), pinned=[20, 24]), dt=1e-4,
-                        strain_limit=tc.StrainLimit(0.1), wind=tc.Wind(velocity=(1.0, 0.0, 0.0)))
+                        strain_limit=tc.StrainLimit(max_strain=0.1), wind=tc.Wind(velocity=(1.0, 0.0, 0.0)))
     assert backend.compilations(transfer.copy_in) == 1
     sim.step(3)
     np.testing.assert_array_equal(sim.positions(), sim.state.particle_position.to_numpy())

@@ -28,7 +28,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 
 from ..inputs import limits
-from ..inputs.validation import finite_number, in_range, require
+from ..inputs.validation import finite_number, in_range, keyword_only, require
 
 STRETCH = limits.Range(1e-3, 1e9, "N/m", "fabric stretch and shear moduli")
 BENDING = limits.Range(0.0, 1e2, "N m", "fabric flexural rigidity (0 allowed: no bending)")
@@ -45,7 +45,8 @@ def _pair(name: str, value, allowed: limits.Range) -> tuple[float, float]:
     return number, number
 
 
-@dataclass(frozen=True)
+@keyword_only
+@dataclass(frozen=True, kw_only=True)
 class Fabric:
     """A cloth's material in textile units (module doc). `stretch` and `bending` are kept as
     (warp, weft) pairs."""

@@ -6,7 +6,7 @@ import enum
 from dataclasses import dataclass, field
 
 from ..inputs import limits
-from ..inputs.validation import finite_number, in_range, require
+from ..inputs.validation import finite_number, in_range, keyword_only, require
 
 
 class SpringKind(enum.IntEnum):
@@ -36,7 +36,8 @@ class SpringParams:
         object.__setattr__(self, "kd", in_range("SpringParams.kd", self.kd, limits.DAMPING))
 
 
-@dataclass(frozen=True)
+@keyword_only
+@dataclass(frozen=True, kw_only=True)
 class Material:
     """What the cloth is made of.
 

@@ -35,7 +35,7 @@ import taichi as ti
 
 from ..geometry import edge_contact, point_over_triangle
 from ..inputs import limits
-from ..inputs.validation import count, finite_number, require
+from ..inputs.validation import count, finite_number, keyword_only, require
 from ..runtime import backend, plan
 from ..runtime.plan import DT, ITEM, STATE, Loop, Once, Phase, Until
 from ..runtime.transfer import upload
@@ -64,7 +64,8 @@ CROWDED = 0.5               # a contact left nearer than this (in thicknesses) i
 INSIDE = 1e-6               # a foot this far outside a triangle (in barycentric terms) is inside
 
 
-@dataclass(frozen=True)
+@keyword_only
+@dataclass(frozen=True, kw_only=True)
 class SelfCollision:
     """thickness: the distance [m] kept between a particle and any triangle it is not a corner
     of, and between edges that share no particle, > 0 (Blender's self_distance_min, 0.015 m).

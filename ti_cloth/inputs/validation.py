@@ -3,7 +3,10 @@ and what is allowed."""
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import math
+import warnings
 
 import numpy as np
 
@@ -92,3 +95,32 @@ def count(field: str, value, allowed) -> int:
           and allowed.low <= value <= allowed.high)
     require(ok, field, value, f"an int {allowed.text()}")
     return int(value)
+
+
+def keyword_only(cls):
+    """Class decorator for a settings dataclass made with kw_only=True: positional values,
+    the form of the last release, still work for one more, given to the fields in their order,
+    with a DeprecationWarning naming the keywords (a value given both ways is a TypeError)."""
+    init = cls.__init__
+    names = [f.name for f in dataclasses.fields(cls) if f.init]
+
+    @functools.wraps(init)
+    def __init__(self, *positional, **options):
+        if positional:
+            if len(positional) > len(names):
+                raise TypeError(f"{cls.__name__} takes at most {len(names)} values "
+                                f"({', '.join(names)}), got {len(positional)}")
+            given = names[:len(positional)]
+            twice = sorted(set(given) & set(options))
+            if twice:
+                raise TypeError(f"{cls.__name__} got {', '.join(map(repr, twice))} both by "
+                                "position and by keyword")
+            warnings.warn(f"{cls.__name__}'s fields are keyword-only: write "
+                          f"{cls.__name__}({', '.join(f'{n}=...' for n in given)}); values by "
+                          "position work until the next release", DeprecationWarning,
+                          stacklevel=2)
+            options = dict(zip(given, positional)) | options
+        init(self, **options)
+
+    cls.__init__ = __init__
+    return cls

@@ -23,13 +23,14 @@ import numpy as np
 import taichi as ti
 
 from ..inputs import limits
-from ..inputs.validation import in_range
+from ..inputs.validation import in_range, keyword_only
 from ..runtime import backend, plan
 from ..runtime.plan import ITEM, NOW, STATE, Loop, Phase
 from ..runtime.transfer import upload
 
 
-@dataclass(frozen=True)
+@keyword_only
+@dataclass(frozen=True, kw_only=True)
 class Sewing:
     """speed: how fast each seam closes [m/s] (a gap of 5 cm shuts in 0.1 s at 0.5 m/s):
     slow enough that the cloth follows, fast enough to be sewn in the first frames."""

@@ -11,12 +11,13 @@ import taichi as ti
 from ..body.material import SpringKind
 from ..energies.springs import relax
 from ..inputs import limits
-from ..inputs.validation import count, finite_number, require
+from ..inputs.validation import count, finite_number, keyword_only, require
 from ..runtime import backend, plan
 from ..runtime.plan import ITEM, NOW, STATE, Loop, Phase, Repeat, Sweep
 
 
-@dataclass(frozen=True)
+@keyword_only
+@dataclass(frozen=True, kw_only=True)
 class StrainLimit:
     """max_strain: allowed stretch, > 0 (0.1: no spring longer than 110 % of its rest length).
     passes: relaxation sweeps per step, >= 1 (each sweep visits every spring once).

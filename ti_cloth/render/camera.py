@@ -14,12 +14,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..inputs import limits
-from ..inputs.validation import as_array, finite_number, in_range, require
+from ..inputs.validation import as_array, finite_number, in_range, keyword_only, require
 
 DEFAULT_DIRECTION = (0.55, 0.4, 1.0)   # from the target towards the camera: front-right, above
 
 
-@dataclass(frozen=True)
+@keyword_only
+@dataclass(frozen=True, kw_only=True)
 class Camera:
     """position, target [m]; up: which way is up on screen (need not be exactly perpendicular).
 

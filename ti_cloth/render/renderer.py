@@ -24,7 +24,14 @@ from ..contact.colliders.animated_mesh import AnimatedMeshCollider
 from ..contact.colliders.mesh_collider import MeshCollider
 from ..contact.colliders.shapes import BOX, CAPSULE, SPHERE, Box, Capsule, Plane, Sphere
 from ..inputs import limits
-from ..inputs.validation import as_array, finite_number, in_range, integer, require
+from ..inputs.validation import (
+    as_array,
+    finite_number,
+    in_range,
+    integer,
+    keyword_only,
+    require,
+)
 from ..runtime import backend
 from ..runtime.backend import taichi_dtype
 from . import raster, shapes
@@ -54,7 +61,8 @@ def _validate_colours(instance) -> None:
                                                           getattr(instance, f.name)))
 
 
-@dataclass(frozen=True)
+@keyword_only
+@dataclass(frozen=True, kw_only=True)
 class Light:
     """A directional light. direction: towards the light (world, need not be unit).
     ambient: the fraction of the colour shown with no light at all, in [0, 1]."""
@@ -69,7 +77,8 @@ class Light:
         object.__setattr__(self, "ambient", ambient)
 
 
-@dataclass(frozen=True)
+@keyword_only
+@dataclass(frozen=True, kw_only=True)
 class Background:
     """Vertical gradient behind everything: `top` at the top row, `bottom` at the bottom."""
 
@@ -80,7 +89,8 @@ class Background:
         _validate_colours(self)
 
 
-@dataclass(frozen=True)
+@keyword_only
+@dataclass(frozen=True, kw_only=True)
 class SurfaceStyle:
     """How a body is drawn.
 
