@@ -6,6 +6,7 @@ task is retried, Ctrl-C leaves no process behind, a silent scheduler is named.""
 
 import csv
 import json
+import math
 import multiprocessing
 import os
 import signal
@@ -33,8 +34,10 @@ def scene_path(tmp_path):
 
 def test_the_choice_is_the_cheapest_passing_run_and_rerun_meets_the_tolerance(f64, scene_path):
     """The choice against the study's own rows, filtered and ordered here, and its error
-    re-run. How near its cost comes to an independent sweep's cheapest is a timing, not
-    asserted: a 2 ms run's cost swung past 1.5x between sweeps in CI."""
+    re-run: it passes, costs no more than the cheapest passing run within the noise (TIE or
+    the timings' spread), and has the least error of the passing runs that cheap. How near
+    its cost comes to an independent sweep's cheapest is a timing, not asserted: a 2 ms
+    run's cost swung past 1.5x between sweeps in CI."""
     scene = tc.load_scene(scene_path)
     dts = [scene.frame_dt / n for n in (1, 2, 4, 8)]
     tolerance = 1e-3
@@ -42,7 +45,12 @@ def test_the_choice_is_the_cheapest_passing_run_and_rerun_meets_the_tolerance(f6
     passing = [r for r in advice.study.runs if r.max_error <= tolerance and not r.diverged]
     assert 0 < len(passing) < len(advice.study.runs)           # a real choice to make
     pick = advice.choice
-    assert pick in passing and all(pick.cost <= r.cost for r in passing)
+    cheapest = min(passing, key=lambda r: r.cost)
+    noise = max([advisor.TIE] + [r.cost_spread for r in (pick, cheapest)
+                                 if math.isfinite(r.cost_spread)])
+    assert pick in passing and pick.cost <= cheapest.cost * (1 + noise)
+    assert all(pick.max_error <= r.max_error for r in passing
+               if r.cost <= cheapest.cost * (1 + noise))
     rerun = study.run_study(scene, integrators=[pick.integrator], dts=[pick.dt],
                             precisions=[pick.precision], iterations=[pick.iterations or 4],
                             reference=advice.study.reference, repeats=1, progress=False).runs[0]
@@ -224,7 +232,12 @@ def test_the_advisor_weighs_tr_bdf2_at_frame_steps_against_tiny_explicit_ones(f6
     passing = [r for r in runs if r.max_error <= tolerance and not r.diverged]
     pick = advice.choice
     report("pick", (pick.integrator, pick.dt, pick.max_error, pick.cost), "")
-    assert pick in passing and all(pick.cost <= r.cost for r in passing)
+    cheapest = min(passing, key=lambda r: r.cost)
+    noise = max([advisor.TIE] + [r.cost_spread for r in (pick, cheapest)
+                                 if math.isfinite(r.cost_spread)])
+    assert pick in passing and pick.cost <= cheapest.cost * (1 + noise)
+    assert all(pick.max_error <= r.max_error for r in passing
+               if r.cost <= cheapest.cost * (1 + noise))
     rerun = study.run_study(scene, integrators=[pick.integrator], dts=[pick.dt],
                             precisions=["f64"], reference=advice.study.reference, repeats=1,
                             progress=False).runs[0]

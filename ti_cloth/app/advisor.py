@@ -8,11 +8,16 @@ The pilot study sweeps the candidates (integrator x dt x precision x iterations)
 scene's first `window` seconds against the rk4/f64 reference, at each of `resolutions` (the
 scene's bodies refined; the reference then finer than all of them, study.py). A candidate
 passes when it did not diverge and its error (`metric`: max or RMS position error over the
-cloth size, as the study reports them, plus, when resolution is swept, the reference's own
-estimated error: study.StudyResult.reference_error) is within the tolerance; the choice is the passing one with the least
-measured cost (wall seconds per simulated second). The passing runs within RETIME_SPAN of the
-cheapest (at most RETIME_MOST) are timed again, here and alone, `repeats` times, and compared
-on the medians: one timing decides nothing on a shared machine. When none passes, the advice
+cloth size up to the predictability horizon, as the study reports them, plus, when
+resolution is swept, the reference's own estimated error: study.StudyResult.reference_error;
+or observable_error over the whole run, plus the observables' spread over perturbed
+starts: observables.py) is within the tolerance; the choice is the passing one with the
+least measured cost (wall seconds per simulated second), costs within TIE (or the timings'
+spread) counting as equal, the least error deciding among them (choose). The passing runs
+within RETIME_SPAN of the cheapest (at most RETIME_MOST) are timed again, here, `repeats`
+rounds each timing every one of them in turn, and compared on the medians: one timing
+decides nothing on a shared machine. Integrators that cannot run the scene (pbd on a
+Fabric) are left out, and the advice says so. When none passes, the advice
 says so, names the closest and, from the observed order of spatial convergence, the
 resolution it estimates would meet the tolerance.
 """
@@ -30,12 +35,21 @@ from ..inputs.files import atomic_path
 from ..inputs.scene_file import SceneError
 from ..integrators import INTEGRATORS, make_integrator
 from ..saved_state import fingerprint
-from .study import DEFAULT_INTEGRATORS, DEFAULT_ITERATIONS, Run, StudyResult, retime, run_study
+from .study import (
+    DEFAULT_INTEGRATORS,
+    DEFAULT_ITERATIONS,
+    Run,
+    StudyResult,
+    retime_in_turn,
+    run_study,
+)
 
-METRICS = ("max_error", "rms_error")
+METRICS = ("max_error", "rms_error", "observable_error")
 REPEATS = 3          # timings of each contender: the choice rests on costs
 RETIME_SPAN = 2.0    # passing runs up to this x the cheapest one's cost are timed again
 RETIME_MOST = 6
+TIE = 0.10           # costs within this fraction of the cheapest (or within the timings' spread,
+                     # when larger) are equal: then the least error is chosen (choose)
 AROUND = 3           # candidates shown either side of the choice
 
 
@@ -57,7 +71,7 @@ class Advice:
         """What is added to a run's error before it is compared with the tolerance: the
         reference's own estimated error when resolution is swept (its error against the
         converged cloth, not only against the reference), else 0."""
-        return _margin(self.study)
+        return _margin(self.study, self.metric)
 
     def passes(self, run: Run) -> bool:
         return meets(run, self.metric, self.tolerance - self.margin)
@@ -91,12 +105,27 @@ class Advice:
                         f"{math.ceil(needed)} or finer would meet it" if math.isfinite(needed)
                         else "")
             return (f"no candidate meets {self.metric} <= {self.tolerance:g} over the first "
-                    f"{self.window:g} s ({runs} runs){closest}{estimate}")
+                    f"{self.window:g} s ({runs} runs){closest}{estimate}{self._caveats()}")
         c = self.choice
         return (f"{describe(c)}: {self.metric} {getattr(c, self.metric) + self.margin:.2e}"
                 f"{margin} <= {self.tolerance:g} at {c.cost:.3g} s per simulated second, the "
                 f"cheapest of {passing} of {runs} runs that meet it over the first "
-                f"{self.window:g} s")
+                f"{self.window:g} s (costs within {TIE:.0%} or their timings' spread count as "
+                f"equal: the least error among them){self._caveats()}")
+
+    def _caveats(self) -> str:
+        """What the sentence's figures do not cover: pointwise errors cut at the horizon,
+        integrators that cannot run the scene."""
+        out = ""
+        reference = self.study.reference
+        if self.metric != "observable_error" and not reference.whole_run:
+            why = ("the motion is chaotic" if reference.chaotic else
+                   "the reference did not converge")
+            out += (f"; pointwise errors are measured up to t = {reference.horizon:.3g} s: "
+                    f"beyond, {why} (--metric observable_error judges the whole run)")
+        for name, why in self.study.left_out.items():
+            out += f"; {name} left out: it {why}"
+        return out
 
     def simulation_block(self, frame_dt: float) -> str:
         """A [simulation] table of the choice, ready to paste into the scene file."""
@@ -171,16 +200,34 @@ def describe(run: Run) -> str:
     return f"{describe_integrator(run)} {run.precision}{where} at dt = {run.dt:.3g} s"
 
 
-def _margin(study: StudyResult) -> float:
+def _margin(study: StudyResult, metric: str = "max_error") -> float:
+    """What the reference itself leaves uncertain in `metric`: its estimated error against
+    the converged cloth (pointwise metrics, resolution swept), or the observables' spread
+    over perturbed starts (the chaos floor)."""
+    if metric == "observable_error":
+        return study.reference.observable_spread
     estimate = study.reference_error()
     return estimate if math.isfinite(estimate) else 0.0
 
 
+def tied(a: Run, b: Run) -> bool:
+    """Whether b's cost is within the noise of a's (a the cheaper): within TIE, or within
+    either's timing spread when larger."""
+    spreads = [x for x in (a.cost_spread, b.cost_spread) if math.isfinite(x)]
+    return b.cost <= a.cost * (1.0 + max([TIE] + spreads))
+
+
 def choose(runs, metric: str, tolerance: float) -> tuple[Run | None, Run | None]:
-    """(the cheapest run meeting the tolerance or None, the run of least error or None)."""
+    """(the run chosen among those meeting the tolerance or None, the run of least error or
+    None). The rule: the cheapest by median cost, unless other passing runs cost the same
+    within the noise (tied): then, of those, the one of least error (the same cost buys the
+    most accuracy), so that which of near-equal candidates wins is not decided by the
+    machine's noise."""
     passing = [r for r in runs if meets(r, metric, tolerance)]
     finite = [r for r in runs if not r.diverged and math.isfinite(getattr(r, metric))]
-    choice = min(passing, key=lambda r: r.cost, default=None)
+    cheapest = min(passing, key=lambda r: r.cost, default=None)
+    choice = None if cheapest is None else min(
+        (r for r in passing if tied(cheapest, r)), key=lambda r: (getattr(r, metric), r.cost))
     closest = min(finite, key=lambda r: (getattr(r, metric), r.cost), default=None)
     return choice, closest
 
@@ -206,10 +253,10 @@ def advise(scene, tolerance: float, *, metric: str = "max_error", window: float 
     pilot = run_study(scene, integrators=integrators, dts=dts, precisions=precisions,
                       iterations=iterations, duration=window, arch=arch, resolutions=resolutions,
                       executor=executor, progress=progress)
-    within = tolerance - _margin(pilot)
+    within = tolerance - _margin(pilot, metric)
     passing = sorted((r for r in pilot.runs if meets(r, metric, within)), key=lambda r: r.cost)
     contenders = [r for r in passing if r.cost <= RETIME_SPAN * passing[0].cost][:RETIME_MOST]
-    retimed = {id(r): retime(scene, r, pilot, repeats, arch) for r in contenders}
+    retimed = retime_in_turn(scene, contenders, pilot, repeats, arch)
     pilot.runs = [retimed.get(id(r), r) for r in pilot.runs]
     choice, closest = choose(pilot.runs, metric, within)
     return Advice(scene.name, float(tolerance), metric, float(pilot.reference.times[-1]),

@@ -374,8 +374,12 @@ def build_parser() -> argparse.ArgumentParser:
     advise_parser.add_argument("scene", type=Path, help="scene file (TOML)")
     advise_parser.add_argument("--tolerance", type=_fraction, required=True,
                                help="largest error accepted, a fraction of the cloth size")
-    advise_parser.add_argument("--metric", choices=("max_error", "rms_error"), default="max_error",
-                               help="max (default) or RMS position error over the cloth size")
+    advise_parser.add_argument("--metric", choices=("max_error", "rms_error", "observable_error"),
+                               default="max_error",
+                               help="max (default) or RMS position error over the cloth size, up "
+                               "to the predictability horizon; or observable_error, the "
+                               "running means of the centre of mass, bounding box and strain "
+                               "over the whole run (for cloth that moves chaotically)")
     advise_parser.add_argument("--window", type=_seconds, metavar="S",
                                help="advise on the first S seconds (default: the whole scene)")
     advise_parser.add_argument("--out", type=Path, help="output folder (default renders/advise_<name>)")

@@ -280,7 +280,8 @@ def _advice_request(sim: Table, fps: float, frames: int) -> AdviceRequest:
         sim.fail('simulation: integrator = "auto" needs tolerance = the largest error accepted '
                  "(a fraction of the cloth size, e.g. 1e-3)")
     tolerance = sim.number("tolerance", minimum=0.0, strict=True)
-    metric = sim.string("metric", "max_error", ("max_error", "rms_error"))
+    metric = sim.string("metric", "max_error", ("max_error", "rms_error",
+                                                   "observable_error"))
     duration = frames / fps
     window = sim.number("window", min(ADVICE_WINDOW, duration), minimum=0.0, strict=True, unit="s")
     if window > duration:

@@ -31,7 +31,7 @@ import math
 import statistics
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -41,11 +41,12 @@ from ..inputs import limits
 from ..integrators import INTEGRATORS, make_integrator
 from ..runtime import backend
 from ..stability import stable_dt
-from . import study_report
+from . import observables, study_report
 from .sweep import Failure, as_workers, run_tasks
 
 REFERENCE_TOLERANCE = 1e-9     # halving the reference step changes positions by less than this x size
 MAX_REFERENCE_HALVINGS = 8
+ENSEMBLE = 2                   # references from perturbed starts, when halving leaves a change
 DEFAULT_INTEGRATORS = ("explicit_euler", "symplectic_euler", "verlet", "rk4", "implicit_euler",
                        "implicit_midpoint", "tr_bdf2", "pbd", "xpbd")
 DEFAULT_ITERATIONS = (4, 16)   # passes per step of the position-based integrators
@@ -58,7 +59,17 @@ class Reference:
     """Positions (samples, P, 3) [m] of the scene's own particles and total energies [J] at
     `times` [s], computed with rk4 in f64 at step `dt` on the scene at `resolution` (with
     `particles` in all); `change` is the largest position change (fraction of `size`) of the
-    last halving."""
+    last halving.
+
+    observables: (samples, K) the running means of observables.OBSERVABLES. uncertainty:
+    (samples,) the reference's own pointwise uncertainty, a fraction of `size`: the change
+    of its last halving, or the spread of references started ENSEMBLE ways at the rounding
+    level when that is larger; predictable: how many samples have it within `tolerance`
+    (those up to the horizon T*, where pointwise errors are measured); chaotic: whether a
+    perturbation at the rounding level grew beyond `tolerance` (else an uncertainty beyond
+    it is a halving that did not converge in MAX_REFERENCE_HALVINGS); observable_spread:
+    the observables' largest difference across the perturbed starts (0 without them), the
+    level below which an observable's error is chaos."""
 
     times: np.ndarray
     positions: np.ndarray
@@ -69,6 +80,29 @@ class Reference:
     energy_scale: float
     resolution: int = 1
     particles: int = 0
+    observables: np.ndarray | None = None
+    uncertainty: np.ndarray | None = None
+    tolerance: float = REFERENCE_TOLERANCE
+    chaotic: bool = False
+    observable_spread: float = 0.0
+
+    @property
+    def predictable(self) -> int:
+        """How many samples, from the first, lie within the predictability horizon."""
+        if self.uncertainty is None:
+            return len(self.times)
+        return observables.horizon(self.times, self.uncertainty, self.tolerance)
+
+    @property
+    def horizon(self) -> float:
+        """T* [s]: the last sample time of the predictable ones (0 when none is)."""
+        k = self.predictable
+        return float(self.times[k - 1]) if k else 0.0
+
+    @property
+    def whole_run(self) -> bool:
+        """Whether every sample is within the horizon."""
+        return self.predictable == len(self.times)
 
 
 @dataclass(frozen=True)
@@ -76,11 +110,15 @@ class Run:
     """One integrator at one dt, precision and iteration count, with its metrics.
 
     max_error / rms_error: particle position error against the reference, max and RMS over all
-    particles and sample times, as a fraction of the cloth size; energy_drift: largest
+    particles and the sample times up to the reference's horizon (Reference.predictable; NaN
+    when it holds none), as a fraction of the cloth size; observable_error: the largest
+    difference of its observables (observables.py: running means of the centre of mass, the
+    bounding box and the strain) from the reference's over the whole run; energy_drift: largest
     |E - E_ref| at the sample times as a fraction of the energy scale (total weight x cloth
     size, or the reference's largest kinetic + spring energy without gravity); max_strain:
     largest spring strain (|l - L| / L) at the sample times; cost: wall seconds per simulated
-    second. diverged: the divergence guard tripped (NaN, inf, a coordinate beyond scene.GUARD_SIZES
+    second, the median of the timings (cost_spread: their half range over the median, NaN
+    with one timing). diverged: the divergence guard tripped (NaN, inf, a coordinate beyond scene.GUARD_SIZES
     cloth sizes; metrics NaN) or the energy left the reference's by more than ENERGY_BLOWUP
     energy scales (more than gravity can do across the whole cloth: an explicit integrator
     blowing up more slowly; metrics kept); diverged_step: the step where that was seen (-1: none).
@@ -104,6 +142,8 @@ class Run:
     particles: int = 0
     discretisation_error: float = math.nan
     integration_error: float = math.nan
+    observable_error: float = math.nan
+    cost_spread: float = math.nan
 
     @property
     def label(self) -> str:
@@ -145,8 +185,13 @@ def _trajectory(sim, times: np.ndarray, steps_per_frame: int) -> tuple[np.ndarra
 def reference_trajectory(scene, duration: float | None = None, arch: str = "cpu",
                          tolerance: float = REFERENCE_TOLERANCE) -> Reference:
     """rk4 in f64 from the largest frame_dt / 2^k below half its stable step, halved until the
-    positions at every sample change by less than tolerance x cloth size (at most
-    MAX_REFERENCE_HALVINGS halvings; then RuntimeError names the change reached). Positions
+    positions at every sample change by less than tolerance x cloth size, or until a halving
+    no longer moves the horizon (the samples, from the first, within it: on a chaotic scene
+    the late samples never converge), at most MAX_REFERENCE_HALVINGS times. When a change
+    is left, ENSEMBLE more runs at the last step start from positions perturbed at the
+    rounding level (observables.perturbed_start): their spread tells chaos from a halving
+    that did not converge, and bounds what observables can resolve. Never raises on a scene
+    that runs: the Reference says the level it reached (uncertainty, predictable). Positions
     are kept at the scene's own particles."""
     backend.ensure(arch=arch, precision="f64")
     times = sample_times(scene, duration)
@@ -155,26 +200,57 @@ def reference_trajectory(scene, duration: float | None = None, arch: str = "cpu"
     limit = 0.5 * stable_dt(scene.cloth, "rk4", scene.drag)
     substeps = 2 ** max(0, math.ceil(math.log2(scene.frame_dt / limit))) if math.isfinite(limit) else 1
     sim = scene.build(integrator="rk4", dt=scene.frame_dt / substeps)
-    previous, _, _ = _trajectory(sim, times, substeps)
+    positions, energies, _ = _trajectory(sim, times, substeps)
+    reached, change = -1, None
     for _ in range(MAX_REFERENCE_HALVINGS):
         substeps *= 2
         sim.restart(scene.frame_dt / substeps)
+        previous, before = positions, change
         positions, energies, _ = _trajectory(sim, times, substeps)
-        change = float(np.abs(positions - previous).max()) / size
-        if change < tolerance:
-            return Reference(times, positions[:, own], energies, sim.dt, change, size,
-                             _energy_scale(scene, energies, size), scene.resolution,
-                             scene.cloth.particle_count)
-        previous = positions
-    raise RuntimeError(f"reference: halving rk4's step to {sim.dt:.3g} s still changes positions by "
-                       f"{change:.3g} of the cloth size (asked: < {tolerance:g})")
+        change = np.abs(positions - previous).max(axis=(1, 2)) / size
+        within = observables.horizon(times, change, tolerance)
+        if within == len(times) or (within <= reached and not _shrinking(change, before, within)):
+            break
+        reached = within
+    values = observables.observables(scene.cloth, positions, size)
+    spread, observable_spread = np.zeros(len(times)), 0.0
+    if change.max() >= tolerance:
+        for seed in range(ENSEMBLE):
+            sim.restart()
+            observables.perturbed_start(sim, size, seed)
+            other, _, _ = _trajectory(sim, times, substeps)
+            spread = np.maximum(spread, np.abs(other - positions).max(axis=(1, 2)) / size)
+            observable_spread = max(observable_spread, observables.difference(
+                observables.observables(scene.cloth, other, size), values))
+    return Reference(times, positions[:, own], energies, sim.dt, float(change.max()), size,
+                     _energy_scale(scene, energies, size), scene.resolution,
+                     scene.cloth.particle_count, values, np.maximum(change, spread), tolerance,
+                     bool(spread.max() >= tolerance), observable_spread)
+
+
+def _shrinking(change: np.ndarray, before: np.ndarray | None, within: int) -> bool:
+    """Whether the last halving still shrank the changes beyond the horizon (their median by
+    half or more): it converges there, only more slowly; where the motion is chaotic they
+    stay as large."""
+    if before is None:
+        return True
+    ratio = change[within:] / np.maximum(before[within:], 1e-300)
+    return bool(np.median(ratio) <= 0.5)
 
 
 def distance(a: Reference, b: Reference) -> tuple[float, float]:
     """(max, RMS) distance between two trajectories of the same scene's own particles, as
-    fractions of the cloth size."""
-    error = np.linalg.norm(a.positions - b.positions, axis=2) / a.size
+    fractions of the cloth size, over the samples both predict (NaN when none)."""
+    k = min(a.predictable, b.predictable)
+    if k == 0:
+        return math.nan, math.nan
+    error = np.linalg.norm(a.positions[:k] - b.positions[:k], axis=2) / a.size
     return float(error.max()), rms(error)
+
+
+def observable_distance(a: Reference, b: Reference) -> float:
+    """The largest difference of two trajectories' observables over the whole run."""
+    return observables.difference(a.observables, b.observables)
 
 
 def rms(values: np.ndarray) -> float:
@@ -245,6 +321,7 @@ class StudyResult:
     failed: dict[str, str] = field(default_factory=dict)
     incidents: dict[str, tuple[str, bool]] = field(default_factory=dict)
     converged: dict[int, Reference] = field(default_factory=dict)   # by resolution
+    left_out: dict[str, str] = field(default_factory=dict)   # integrators that cannot run it
 
     @property
     def swept(self) -> bool:
@@ -328,11 +405,20 @@ def pareto_front(runs) -> list[Run]:
                                      and (o.cost < r.cost or o.max_error < r.max_error) for o in ok)]
 
 
-def _configurations(integrators, iterations):
-    """(name, iterations or None) of every configuration of the sweep, in order."""
+def left_out(scene, integrators) -> dict[str, str]:
+    """{name: why} of the integrators that cannot run `scene` (pbd on a Fabric)."""
     for name in integrators:
         if name not in INTEGRATORS:
             raise ValueError(f"integrators: {name!r} is not one of {sorted(INTEGRATORS)}")
+    if not scene.cloth.fabric:
+        return {}
+    return {name: "steps springs only, not a Fabric's elements" for name in integrators
+            if not INTEGRATORS[name].runs_fabric}
+
+
+def _configurations(integrators, iterations):
+    """(name, iterations or None) of every configuration of the sweep, in order."""
+    for name in integrators:
         if INTEGRATORS[name].position_based:
             for count in iterations:
                 yield name, count
@@ -370,7 +456,9 @@ _ONE_AT_A_TIME = threading.Lock()    # Taichi runs one task at a time in a proce
 
 def measure_configuration(task: Configuration) -> list[Run]:
     """The runs of one configuration (a Simulation built once, restarted for each dt): the
-    task a worker process runs."""
+    task a worker process runs. With repeats, every dt is timed once per round, in turn
+    with the others (as the benchmarks alternate runs): a slow moment of the machine falls
+    on one timing of several runs, not on all timings of one."""
     with _ONE_AT_A_TIME:
         backend.ensure(arch=task.arch, precision=task.precision, threads=task.threads)
         integrator = (INTEGRATORS[task.integrator](iterations=task.iterations)
@@ -378,11 +466,37 @@ def measure_configuration(task: Configuration) -> list[Run]:
         sim = task.scene.build(integrator=integrator, dt=task.dts[-1])
         sim.step(1)     # compile outside the timing
         predicted = sim.stable_dt()
-        runs = []
+        runs, walls = [], []
         for dt, n in zip(task.dts, task.substeps):
             sim.restart(dt)
             runs.append(_measure(task, sim, n, predicted))
-        return runs
+            walls.append([runs[-1].wall_seconds])
+        for _ in range(task.repeats - 1):
+            for k, (dt, n) in enumerate(zip(task.dts, task.substeps)):
+                if not runs[k].diverged:
+                    sim.restart(dt)
+                    walls[k].append(_trajectory(sim, task.reference.times, n)[2])
+        return [run if run.diverged else with_timings(run, w) for run, w in zip(runs, walls)]
+
+
+def with_timings(run: Run, walls) -> Run:
+    """`run` with its cost the median of the wall times `walls` [s] and their spread."""
+    wall = statistics.median(walls)
+    spread = (max(walls) - min(walls)) / (2 * wall) if len(walls) > 1 and wall > 0 else math.nan
+    return replace(run, wall_seconds=wall, cost=wall * run.cost / run.wall_seconds
+                   if run.wall_seconds > 0 else run.cost, cost_spread=spread)
+
+
+def retime_in_turn(scene, runs, result: "StudyResult", repeats: int,
+                   arch: str = "cpu") -> dict[int, Run]:
+    """{id(run): run re-measured}: `runs` of `result` measured again here, `repeats` rounds
+    each timing every run once, in turn (their errors come out the same: the same bits), each
+    cost the median of its timings, with their spread (with_timings)."""
+    walls = {id(run): [] for run in runs}
+    for _ in range(repeats):
+        for run in runs:
+            walls[id(run)].append(retime(scene, run, result, 1, arch).wall_seconds)
+    return {id(run): with_timings(run, walls[id(run)]) for run in runs}
 
 
 def retime(scene, run: Run, result: "StudyResult", repeats: int, arch: str = "cpu") -> Run:
@@ -426,7 +540,11 @@ def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("
     if not (reference_resolution > resolutions[-1] or resolutions == (reference_resolution,)):
         raise ValueError(f"reference_resolution must be finer than every swept resolution "
                          f"{list(resolutions)} (or the only one), got {reference_resolution!r}")
-    integrators = tuple(integrators)
+    skipped = left_out(scene, integrators)
+    integrators = tuple(name for name in integrators if name not in skipped)
+    if not integrators:
+        raise ValueError(f"integrators: none of {sorted(skipped)} can run this scene "
+                         f"({'; '.join(f'{n} {why}' for n, why in skipped.items())})")
     configurations = list(_configurations(integrators, iterations))
     workers = as_workers(executor)
     if reference is None:
@@ -448,7 +566,7 @@ def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("
                                        lambda i: bar.update(len(tasks[i].dts)))
     result = StudyResult(scene.name, reference,
                          timing="serial" if workers is None else workers.timing,
-                         converged=converged)
+                         converged=converged, left_out=skipped)
     for task, runs in zip(tasks, results):
         if isinstance(runs, Failure):
             result.failed[task.label] = runs.error
@@ -487,17 +605,16 @@ def _measure(task: Configuration, sim, substeps: int, predicted: float) -> Run:
     where = (task.scene.resolution, task.scene.cloth.particle_count)
     try:
         positions, energies, wall = _trajectory(sim, reference.times, substeps)
-        walls = [wall]
-        for _ in range(task.repeats - 1):
-            sim.restart()
-            walls.append(_trajectory(sim, reference.times, substeps)[2])
     except SimulationDiverged as err:
         return Run(task.integrator, task.precision, task.iterations, sim.dt, sim.step_count, nan,
                    nan, True, err.step, nan, nan, nan, nan, predicted, *where)
-    wall = statistics.median(walls)
     own = positions[:, task.scene.own_particles]
-    error = np.linalg.norm(own - reference.positions, axis=2) / reference.size
-    integration = np.linalg.norm(own - converged.positions, axis=2) / reference.size
+    k, j = reference.predictable, min(converged.predictable, reference.predictable)
+    error = np.linalg.norm(own[:k] - reference.positions[:k], axis=2) / reference.size
+    integration = np.linalg.norm(own[:j] - converged.positions[:j], axis=2) / reference.size
+    observable_error = observables.difference(
+        observables.observables(task.scene.cloth, positions, reference.size),
+        reference.observables)
     energy_error = np.abs(energies - converged.energies) / converged.energy_scale
     blown = np.flatnonzero(energy_error > ENERGY_BLOWUP)
     diverged_step = int(round(reference.times[blown[0]] / sim.dt)) if len(blown) else -1
@@ -505,7 +622,8 @@ def _measure(task: Configuration, sim, substeps: int, predicted: float) -> Run:
     discretisation = (distance(converged, reference)[0] if converged is not reference
                       else nan)
     return Run(task.integrator, task.precision, task.iterations, sim.dt, sim.step_count, wall,
-               wall / simulated, len(blown) > 0, diverged_step, float(error.max()),
-               rms(error), float(energy_error.max()),
-               _max_strain(task.scene.cloth, positions), predicted, *where, discretisation,
-               float(integration.max()))
+               wall / simulated, len(blown) > 0, diverged_step,
+               float(error.max()) if k else nan, rms(error) if k else nan,
+               float(energy_error.max()), _max_strain(task.scene.cloth, positions), predicted,
+               *where, discretisation, float(integration.max()) if j else nan,
+               observable_error)

@@ -35,19 +35,20 @@ def markdown(result) -> str:
              + ("" if result.timing == "serial" else
                 f" Costs measured with other runs at once ({result.timing}): compare them "
                 "with each other, not with a serial study."), "",
+             horizon_sentence(ref), "",
              "| integrator | precision | dt [s] | max error | RMS error | energy drift | "
-             "max strain | cost [s/s] | Pareto |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "max strain | observables | cost [s/s] | Pareto |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     swept = result.swept
     if not swept:
         lines[0] += (" Integration error only: the reference is this same mesh's; "
                      "resolutions (--resolutions 1 2 4) measure the mesh's own error too.")
     if swept:
-        lines[2:2] = resolution_lines(result)
+        lines[4:4] = resolution_lines(result)
         lines[-2] = ("| resolution | particles | integrator | precision | dt [s] | max error | "
                      "discretisation | integration | RMS error | energy drift | max strain | "
-                     "cost [s/s] | Pareto |")
-        lines[-1] = "|---" * 13 + "|"
+                     "observables | cost [s/s] | Pareto |")
+        lines[-1] = "|---" * 14 + "|"
     front = {id(r) for r in result.pareto_front()}
     for run in sorted(result.runs, key=lambda r: (r.resolution, r.label, -r.dt)):
         name = run.integrator if run.iterations is None else f"{run.integrator} ({run.iterations} it)"
@@ -55,15 +56,17 @@ def markdown(result) -> str:
                  else "")
         if run.diverged:
             metrics = (f"diverged at step {run.diverged_step} | {'| | ' if swept else ''}"
-                       f"| | | {run.cost:.3g} |")
+                       f"| | | | {run.cost:.3g} |")
         else:
+            spread = f" ± {run.cost_spread:.0%}" if math.isfinite(run.cost_spread) else ""
             metrics = (f"{run.max_error:.2e} | {split}{run.rms_error:.2e} | "
-                       f"{run.energy_drift:.2e} | {run.max_strain:.3f} | {run.cost:.3g} |")
+                       f"{run.energy_drift:.2e} | {run.max_strain:.3f} | "
+                       f"{run.observable_error:.2e} | {run.cost:.3g}{spread} |")
         where = f"{run.resolution} | {run.particles} | " if swept else ""
         lines.append(f"| {where}{name} | {run.precision} | {run.dt:.3g} | {metrics} "
                      f"{'yes' if id(run) in front else ''} |")
     for label, error in result.failed.items():
-        lines.append(f"| {label} | failed: {error} | | | | | | | |")
+        lines.append(f"| {label} | failed: {error} | | | | | | | | |")
     if result.incidents:
         lines.append("")
     lines += [f"{label}: its worker failed ({error}); "
@@ -74,6 +77,23 @@ def markdown(result) -> str:
     for label, dt in result.largest_stable_dt().items():
         lines.append(f"| {label} | {dt:.3g} | {predicted[label]:.3g} |")
     return "\n".join(lines) + "\n"
+
+
+def horizon_sentence(ref) -> str:
+    """What the pointwise errors cover: the whole run, or up to the horizon T* and why."""
+    observables = ("Observables (running means of the centre of mass, bounding box and strain: "
+                   "observables.py) are compared over the whole run")
+    if ref.whole_run:
+        return (f"Pointwise errors cover the whole run (the reference converged at every "
+                f"sample). {observables}.")
+    why = (f"the motion is chaotic: a start perturbed at the rounding level parts from the "
+           f"reference by more than {ref.tolerance:g} of the cloth size" if ref.chaotic else
+           f"the reference's halvings still change positions by up to {ref.change:.1e} of the "
+           "cloth size there")
+    return (f"Pointwise errors are measured up to t = {ref.horizon:.3g} s "
+            f"({ref.predictable} of {len(ref.times)} samples); beyond, {why}. {observables}; "
+            f"below {ref.observable_spread:.1e} their differences are the chaos of the motion "
+            "(the spread over perturbed starts), not error.")
 
 
 def resolution_lines(result) -> list[str]:
@@ -129,7 +149,9 @@ def plot(result, path) -> Path:
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("cost: wall seconds per simulated second")
-    ax.set_ylabel("max position error / cloth size")
+    ref = result.reference
+    ax.set_ylabel("max position error / cloth size"
+                  + ("" if ref.whole_run else f"\nup to the horizon t = {ref.horizon:.3g} s"))
     ax.set_title(f"{result.scene_name}: error against cost (diverged runs left out)"
                  + ("" if result.timing == "serial" else f"\ncosts timed with {result.timing}"),
                  fontsize=10 if result.timing != "serial" else None)
