@@ -12,7 +12,7 @@ import pytest
 from helpers import report
 
 import ti_cloth as tc
-from ti_cloth.app import advisor, cli, study
+from ti_cloth.app import advisor, cli, observables, study
 
 SHEET = """
 [scene]
@@ -182,3 +182,37 @@ def test_the_study_command_takes_resolutions(tmp_path, capsys):
     with pytest.raises(SystemExit):
         cli.main(["study", str(path), "--resolutions", "0"])
     assert "a resolution is an integer in [1, 64], got '0'" in capsys.readouterr().err
+
+
+def observed(scene, resolution, integrator="rk4", dt=None):
+    """The observables (observables.py) of the scene at `resolution`, stepped here."""
+    refined = scene.refined(resolution)
+    dt = dt or scene.frame_dt / (64 * resolution)
+    sim = refined.build(integrator=integrator, dt=dt)
+    frames = []
+    for _ in range(scene.frames):
+        sim.step(round(scene.frame_dt / dt))
+        frames.append(sim.positions())
+    return observables.observables(refined.cloth, np.array(frames), scene.size)
+
+
+def test_with_the_observable_metric_the_resolution_pick_meets_the_tolerance_on_observables(
+        tmp_path, f64):
+    """Resolution under chaos is judged by observables: a tolerance between the observable
+    errors of resolutions 1 and 2 against resolution 8 (computed here) picks a run that,
+    re-run, is within it of resolution 8's observables; the study's table reports each
+    resolution's observable discretisation."""
+    scene = load(tmp_path)
+    finest = observed(scene, 8)
+    e1, e2 = (observables.difference(observed(scene, f), finest) for f in (1, 2))
+    tolerance = math.sqrt(e1 * e2)
+    advice = advisor.advise(scene, tolerance, metric="observable_error", resolutions=(1, 2),
+                            integrators=["symplectic_euler", "implicit_euler"],
+                            precisions=["f64"], repeats=1, progress=False)
+    pick = advice.choice
+    error = observables.difference(observed(scene, pick.resolution, pick.integrator, pick.dt),
+                                   finest)
+    report("observables: e1, e2, the pick's error against resolution 8", (e1, e2, error),
+           f"<= {tolerance:.3g}")
+    assert e1 > e2 and pick.resolution == 2 and error <= tolerance
+    assert "| observables |" in advice.study.markdown()

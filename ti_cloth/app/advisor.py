@@ -120,7 +120,8 @@ class Advice:
         reference = self.study.reference
         if self.metric != "observable_error" and not reference.whole_run:
             why = ("the motion is chaotic" if reference.chaotic else
-                   "the reference did not converge")
+                   "the reference did not converge"
+                   + (f" ({reference.limited})" if reference.limited else ""))
             out += (f"; pointwise errors are measured up to t = {reference.horizon:.3g} s: "
                     f"beyond, {why} (--metric observable_error judges the whole run)")
         for name, why in self.study.left_out.items():

@@ -47,6 +47,7 @@ from .sweep import Failure, as_workers, run_tasks
 REFERENCE_TOLERANCE = 1e-9     # halving the reference step changes positions by less than this x size
 MAX_REFERENCE_HALVINGS = 8
 ENSEMBLE = 2                   # references from perturbed starts, when halving leaves a change
+REFERENCE_BUDGET = 4e9         # particle-steps a reference may take in all (rk4 f64: minutes)
 DEFAULT_INTEGRATORS = ("explicit_euler", "symplectic_euler", "verlet", "rk4", "implicit_euler",
                        "implicit_midpoint", "tr_bdf2", "pbd", "xpbd")
 DEFAULT_ITERATIONS = (4, 16)   # passes per step of the position-based integrators
@@ -85,6 +86,7 @@ class Reference:
     tolerance: float = REFERENCE_TOLERANCE
     chaotic: bool = False
     observable_spread: float = 0.0
+    limited: str = ""       # what stopped the halvings short of the tolerance, if not chaos
 
     @property
     def predictable(self) -> int:
@@ -113,7 +115,8 @@ class Run:
     particles and the sample times up to the reference's horizon (Reference.predictable; NaN
     when it holds none), as a fraction of the cloth size; observable_error: the largest
     difference of its observables (observables.py: running means of the centre of mass, the
-    bounding box and the strain) from the reference's over the whole run; energy_drift: largest
+    bounding box and the strain; and energy_drift) from the reference's over the whole run;
+    energy_drift: largest
     |E - E_ref| at the sample times as a fraction of the energy scale (total weight x cloth
     size, or the reference's largest kinetic + spring energy without gravity); max_strain:
     largest spring strain (|l - L| / L) at the sample times; cost: wall seconds per simulated
@@ -183,59 +186,97 @@ def _trajectory(sim, times: np.ndarray, steps_per_frame: int) -> tuple[np.ndarra
 
 
 def reference_trajectory(scene, duration: float | None = None, arch: str = "cpu",
-                         tolerance: float = REFERENCE_TOLERANCE) -> Reference:
+                         tolerance: float = REFERENCE_TOLERANCE,
+                         budget: float = REFERENCE_BUDGET) -> Reference:
     """rk4 in f64 from the largest frame_dt / 2^k below half its stable step, halved until the
     positions at every sample change by less than tolerance x cloth size, or until a halving
     no longer moves the horizon (the samples, from the first, within it: on a chaotic scene
     the late samples never converge), at most MAX_REFERENCE_HALVINGS times. When a change
     is left, ENSEMBLE more runs at the last step start from positions perturbed at the
     rounding level (observables.perturbed_start): their spread tells chaos from a halving
-    that did not converge, and bounds what observables can resolve. Never raises on a scene
-    that runs: the Reference says the level it reached (uncertainty, predictable). Positions
-    are kept at the scene's own particles."""
+    that did not converge, and bounds what observables can resolve. The runs take at most
+    `budget` particle-steps in all: a halving that would pass it is not made, and a first
+    run that would is made with fewer steps (rk4 may then diverge: the reference is then
+    unknown, NaN). Never raises on a scene that runs: the Reference says the level it
+    reached (uncertainty, predictable) and what limited it. Positions are kept at the
+    scene's own particles."""
     backend.ensure(arch=arch, precision="f64")
     times = sample_times(scene, duration)
     size = scene.size
     own = scene.own_particles
     limit = 0.5 * stable_dt(scene.cloth, "rk4", scene.drag)
     substeps = 2 ** max(0, math.ceil(math.log2(scene.frame_dt / limit))) if math.isfinite(limit) else 1
+    frame_work = len(times) * scene.cloth.particle_count      # particle-steps per substep
+    limited = ""
+    if substeps * frame_work > budget:
+        substeps = 2 ** max(0, math.floor(math.log2(budget / frame_work)))
+        limited = (f"rk4's stable step needs {scene.frame_dt / (2 * limit):.3g} steps per frame, "
+                   f"beyond the budget of {budget:.3g} particle-steps: it ran {substeps}")
     sim = scene.build(integrator="rk4", dt=scene.frame_dt / substeps)
-    positions, energies, _ = _trajectory(sim, times, substeps)
-    reached, change = -1, None
+    try:
+        positions, energies, _ = _trajectory(sim, times, substeps)
+    except SimulationDiverged as err:
+        return _unknown(scene, times, own, sim.dt, f"{limited}, and diverged at step {err.step}",
+                        tolerance)
+    spent = substeps * frame_work
+    reached, change = -1, np.full(len(times), math.inf)
     for _ in range(MAX_REFERENCE_HALVINGS):
+        if spent + 2 * substeps * frame_work > budget:
+            limited = limited or (f"the next halving would pass the budget of {budget:.3g} "
+                                  "particle-steps")
+            break
         substeps *= 2
+        spent += substeps * frame_work
         sim.restart(scene.frame_dt / substeps)
-        previous, before = positions, change
+        previous, before = positions, (None if reached < 0 else change)
         positions, energies, _ = _trajectory(sim, times, substeps)
         change = np.abs(positions - previous).max(axis=(1, 2)) / size
         within = observables.horizon(times, change, tolerance)
         if within == len(times) or (within <= reached and not _shrinking(change, before, within)):
             break
         reached = within
+    else:
+        limited = f"{MAX_REFERENCE_HALVINGS} halvings, the most a reference makes"
     values = observables.observables(scene.cloth, positions, size)
+    energy_scale = _energy_scale(scene, energies, size)
     spread, observable_spread = np.zeros(len(times)), 0.0
-    if change.max() >= tolerance:
+    if change.max() >= tolerance and spent + ENSEMBLE * substeps * frame_work <= budget:
         for seed in range(ENSEMBLE):
             sim.restart()
             observables.perturbed_start(sim, size, seed)
-            other, _, _ = _trajectory(sim, times, substeps)
+            other, other_energies, _ = _trajectory(sim, times, substeps)
             spread = np.maximum(spread, np.abs(other - positions).max(axis=(1, 2)) / size)
-            observable_spread = max(observable_spread, observables.difference(
-                observables.observables(scene.cloth, other, size), values))
+            observable_spread = max(
+                observable_spread, float(np.abs(other_energies - energies).max()) / energy_scale,
+                observables.difference(observables.observables(scene.cloth, other, size), values))
     return Reference(times, positions[:, own], energies, sim.dt, float(change.max()), size,
-                     _energy_scale(scene, energies, size), scene.resolution,
+                     energy_scale, scene.resolution,
                      scene.cloth.particle_count, values, np.maximum(change, spread), tolerance,
-                     bool(spread.max() >= tolerance), observable_spread)
+                     bool(spread.max() >= tolerance), observable_spread,
+                     "" if change.max() < tolerance else limited)
+
+
+def _unknown(scene, times, own, dt: float, why: str, tolerance: float) -> Reference:
+    """A reference that could not be computed (why): NaN positions and energies, no sample
+    predictable; a study against it measures nothing, and says why."""
+    count = scene.cloth.particle_count
+    nan = np.full((len(times), count, 3), math.nan)
+    return Reference(times, nan[:, own], np.full(len(times), math.nan), dt, math.inf,
+                     scene.size, _energy_scale(scene, np.zeros(1), scene.size),
+                     scene.resolution, count, np.full((len(times), len(observables.OBSERVABLES)),
+                                                      math.nan),
+                     np.full(len(times), math.inf), tolerance, False, 0.0, why)
 
 
 def _shrinking(change: np.ndarray, before: np.ndarray | None, within: int) -> bool:
     """Whether the last halving still shrank the changes beyond the horizon (their median by
-    half or more): it converges there, only more slowly; where the motion is chaotic they
-    stay as large."""
+    a quarter or more: a first-order scene, whose forcing is held over each step, halves
+    them): it converges there, only more slowly; where the motion is chaotic they stay as
+    large."""
     if before is None:
         return True
     ratio = change[within:] / np.maximum(before[within:], 1e-300)
-    return bool(np.median(ratio) <= 0.5)
+    return bool(np.median(ratio) <= 0.75)
 
 
 def distance(a: Reference, b: Reference) -> tuple[float, float]:
@@ -333,6 +374,13 @@ class StudyResult:
         swept resolutions coarser than the reference's."""
         return {f: distance(ref, self.reference) for f, ref in sorted(self.converged.items())
                 if f != self.reference.resolution}
+
+    def observable_discretisation(self) -> dict[int, float]:
+        """{resolution: its converged run's largest observable difference from the
+        reference's, over the whole run} (observables compare across resolutions: where
+        folds form changes with the mesh, and under chaos positions do not converge)."""
+        return {f: observable_distance(ref, self.reference)
+                for f, ref in sorted(self.converged.items()) if f != self.reference.resolution}
 
     def spatial_orders(self) -> list[tuple[int, int, float]]:
         """(a, b, p) for successive swept resolutions a < b: the observed order of spatial
@@ -464,7 +512,10 @@ def measure_configuration(task: Configuration) -> list[Run]:
         integrator = (INTEGRATORS[task.integrator](iterations=task.iterations)
                       if task.iterations is not None else make_integrator(task.integrator))
         sim = task.scene.build(integrator=integrator, dt=task.dts[-1])
-        sim.step(1)     # compile outside the timing
+        try:
+            sim.step(1)     # compile outside the timing (a step that diverges compiles too)
+        except SimulationDiverged:
+            pass
         predicted = sim.stable_dt()
         runs, walls = [], []
         for dt, n in zip(task.dts, task.substeps):
@@ -612,10 +663,10 @@ def _measure(task: Configuration, sim, substeps: int, predicted: float) -> Run:
     k, j = reference.predictable, min(converged.predictable, reference.predictable)
     error = np.linalg.norm(own[:k] - reference.positions[:k], axis=2) / reference.size
     integration = np.linalg.norm(own[:j] - converged.positions[:j], axis=2) / reference.size
-    observable_error = observables.difference(
-        observables.observables(task.scene.cloth, positions, reference.size),
-        reference.observables)
     energy_error = np.abs(energies - converged.energies) / converged.energy_scale
+    observable_error = max(observables.difference(
+        observables.observables(task.scene.cloth, positions, reference.size),
+        reference.observables), float(energy_error.max()))
     blown = np.flatnonzero(energy_error > ENERGY_BLOWUP)
     diverged_step = int(round(reference.times[blown[0]] / sim.dt)) if len(blown) else -1
     simulated = reference.times[-1]

@@ -90,6 +90,8 @@ def horizon_sentence(ref) -> str:
            f"reference by more than {ref.tolerance:g} of the cloth size" if ref.chaotic else
            f"the reference's halvings still change positions by up to {ref.change:.1e} of the "
            "cloth size there")
+    if ref.limited:
+        why += f" ({ref.limited})"
     return (f"Pointwise errors are measured up to t = {ref.horizon:.3g} s "
             f"({ref.predictable} of {len(ref.times)} samples); beyond, {why}. {observables}; "
             f"below {ref.observable_spread:.1e} their differences are the chaos of the motion "
@@ -103,11 +105,12 @@ def resolution_lines(result) -> list[str]:
     lines = [f"Resolution: the reference is the scene refined {ref.resolution} times "
              f"({ref.particles} particles); errors are at the scene file's own particles.", "",
              "| resolution | particles | discretisation: max error | RMS error | "
-             "converged step [s] |", "|---|---|---|---|---|"]
+             "observables | converged step [s] |", "|---|---|---|---|---|---|"]
+    observed = result.observable_discretisation()
     for f, (worst, rms) in result.discretisation().items():
         converged = result.converged[f]
         lines.append(f"| {f} | {converged.particles} | {worst:.2e} | {rms:.2e} | "
-                     f"{converged.dt:.3g} |")
+                     f"{observed[f]:.2e} | {converged.dt:.3g} |")
     orders = ", ".join(f"{p:.2f} from {a} to {b}" for a, b, p in result.spatial_orders())
     estimate = result.reference_error()
     lines += ["", f"Observed order of spatial convergence (max error): {orders or 'n/a'}."
