@@ -29,8 +29,9 @@ reference there, so
 
 Not chosen: momentum (for a pinned cloth it follows the centre of mass), the silhouette's
 area (a raster of the projected triangles: its error floor is the raster's cell, and the
-bounding box bounds it), and a drape's coefficient and fold count (defined at rest only:
-docs/integrators.md says how to study a drape at rest with these observables).
+bounding box bounds it), and a drape's coefficient and fold count (defined at rest only,
+where a settled drape's positions converge again and the pointwise errors of a study of
+its last frames apply).
 """
 
 from __future__ import annotations

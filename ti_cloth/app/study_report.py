@@ -123,8 +123,9 @@ def resolution_lines(result) -> list[str]:
 def plot(result, path) -> Path:
     """Log-log max error against cost, one line per configuration (colour: integrator;
     dashed: f32; marker: resolution, o ^ v D ... from the coarsest, or squares for the most
-    pbd/xpbd iterations; the label ends in xN at resolution N), the Pareto front outlined
-    (needs matplotlib: pip install "ti_cloth[study]")."""
+    pbd/xpbd iterations; the label ends in xN at resolution N), the Pareto front outlined;
+    when the reference's horizon is short of the run, beside it the observable error over the
+    whole run against cost (needs matplotlib: pip install "ti_cloth[study]")."""
     try:
         import matplotlib
     except ImportError as err:
@@ -134,31 +135,42 @@ def plot(result, path) -> Path:
     import matplotlib.pyplot as plt
 
     markers = dict(zip(sorted({r.resolution for r in result.runs}), "o^vDPX*"))
-    fig, ax = plt.subplots(figsize=(9.5 if len(markers) > 1 else 8, 5.5), dpi=100)
+    ref = result.reference
+    panels = [("max_error", "max position error / cloth size"
+               + ("" if ref.whole_run else f"\nup to the horizon t = {ref.horizon:.3g} s"))]
+    if not ref.whole_run:      # beyond the horizon only observables compare
+        panels.append(("observable_error", "observable error over the whole run"))
+    width = (9.5 if len(markers) > 1 else 8) + 5 * (len(panels) - 1)
+    fig, axes = plt.subplots(1, len(panels), figsize=(width, 5.5), dpi=100, squeeze=False)
     colours = {name: f"C{i}" for i, name in enumerate(dict.fromkeys(r.integrator for r in result.runs))}
     counts = {name: sorted({r.iterations or 0 for r in result.runs if r.integrator == name}) for name in colours}
-    for label in dict.fromkeys(r.label for r in result.runs):
-        runs = sorted((r for r in result.runs if r.label == label and not r.diverged), key=lambda r: r.cost)
-        if runs:
-            first = runs[0]
-            most = len(counts[first.integrator]) > 1 and first.iterations == counts[first.integrator][-1]
-            ax.plot([r.cost for r in runs], [max(r.max_error, 1e-16) for r in runs], label=label,
-                    color=colours[first.integrator], ls="--" if first.precision == "f32" else "-",
-                    marker="s" if most else markers[first.resolution], ms=4, lw=1)
-    front = sorted(result.pareto_front(), key=lambda r: r.cost)
-    if front:
-        ax.plot([r.cost for r in front], [max(r.max_error, 1e-16) for r in front], "k-", lw=3,
-                alpha=0.25, label="Pareto front")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("cost: wall seconds per simulated second")
-    ref = result.reference
-    ax.set_ylabel("max position error / cloth size"
-                  + ("" if ref.whole_run else f"\nup to the horizon t = {ref.horizon:.3g} s"))
+    for ax, (metric, ylabel) in zip(axes[0], panels):
+        for label in dict.fromkeys(r.label for r in result.runs):
+            runs = sorted((r for r in result.runs if r.label == label and not r.diverged),
+                          key=lambda r: r.cost)
+            if runs:
+                first = runs[0]
+                most = (len(counts[first.integrator]) > 1
+                        and first.iterations == counts[first.integrator][-1])
+                ax.plot([r.cost for r in runs], [max(getattr(r, metric), 1e-16) for r in runs],
+                        label=label, color=colours[first.integrator],
+                        ls="--" if first.precision == "f32" else "-",
+                        marker="s" if most else markers[first.resolution], ms=4, lw=1)
+        if metric == "max_error":
+            front = sorted(result.pareto_front(), key=lambda r: r.cost)
+            if front:
+                ax.plot([r.cost for r in front], [max(r.max_error, 1e-16) for r in front], "k-",
+                        lw=3, alpha=0.25, label="Pareto front")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("cost: wall seconds per simulated second")
+        ax.set_ylabel(ylabel)
+        ax.grid(True, which="both", alpha=0.3)
+    ax = axes[0][0]
     ax.set_title(f"{result.scene_name}: error against cost (diverged runs left out)"
                  + ("" if result.timing == "serial" else f"\ncosts timed with {result.timing}"),
                  fontsize=10 if result.timing != "serial" else None)
-    ax.grid(True, which="both", alpha=0.3)
+    ax = axes[0][-1]
     if len(markers) > 1:          # one entry per colour, marker and line style
         from matplotlib.lines import Line2D
         keys = ([Line2D([], [], color=c, label=name) for name, c in colours.items()]
