@@ -280,7 +280,7 @@ class FaceEdges:
 
     def __init__(self, cloth: Cloth):
         self.spring_indices = unique_rows(triangle_edges(cloth.face_indices)).reshape(-1, 2)
-        x = cloth.particle_position
+        x = cloth.rest_position
         self.spring_rest_length = np.linalg.norm(x[self.spring_indices[:, 0]]
                                                  - x[self.spring_indices[:, 1]], axis=1)
         count = len(self.spring_indices)
@@ -291,7 +291,7 @@ class FaceEdges:
 
 def face_edges(cloth: Cloth) -> np.ndarray:
     """(F, 3): the rest length of each Fabric triangle's edge i (opposite corner i) [m]."""
-    x, corners = cloth.particle_position, cloth.face_indices
+    x, corners = cloth.rest_position, cloth.face_indices
     return np.stack([np.linalg.norm(x[corners[:, (i + 1) % 3]] - x[corners[:, (i + 2) % 3]],
                                     axis=1) for i in range(3)], 1) if len(corners) else np.zeros((0, 3))
 

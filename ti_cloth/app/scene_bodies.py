@@ -99,12 +99,13 @@ class Body:
         return [(h.particles.resolve(names, cloth.particle_position, refinement), h)
                 for h in self.handles]
 
-    def _surface(self, mesh: Mesh, refinement, names: dict, factor: int, seams=None):
+    def _surface(self, mesh: Mesh, refinement, names: dict, factor: int, seams=None,
+                 rest=None):
         everything = mesh.named_vertices() | names
         hem = None if self.hem is None else self.hem.resolve(everything, mesh.vertices, refinement)
         cloth = Cloth(mesh, refine.material_at(self.material, factor),
                       pinned=self.pinned.resolve(everything, mesh.vertices, refinement), hem=hem,
-                      seams=seams, **self.warp)
+                      seams=seams, rest=rest, **self.warp)
         return cloth, refinement, names
 
     def _grid(self, factor: int):
@@ -124,7 +125,7 @@ class Body:
         names = {k: refinement.carry(v) for k, v in garment_names(garment).items()}
         return self._surface(mesh, refinement, names, factor,
                              seams=refine.seams_at(garment.seam_pairs, refinement,
-                                                   mesh.vertices))
+                                                   mesh.vertices), rest="uv")
 
     def _refined_options(self, factor: int) -> dict:
         builder = getattr(builders, self.kind)

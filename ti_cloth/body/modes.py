@@ -55,7 +55,7 @@ def rank_one_groups(cloth) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     (rest_rank_one)."""
     groups = []
     if cloth.altitude_count:
-        n, _, g = altitude_frames(cloth.particle_position, cloth.altitude_indices)
+        n, _, g = altitude_frames(cloth.rest_position, cloth.altitude_indices)
         vectors = g[:, :, None] * n[:, None, :]
         groups.append((cloth.altitude_indices,
                        np.sqrt(cloth.altitude_stiffness)[:, None, None] * vectors,
@@ -88,7 +88,7 @@ def stiffest_mode(cloth, drag: float = 0.0, pinned=None, steps: int = LANCZOS_ST
         return 0.0, 0.0
     scale = np.where(free, 1.0 / np.sqrt(np.where(cloth.particle_mass > 0, cloth.particle_mass, 1.0)), 0.0)
     i, j = cloth.spring_indices.T
-    d = cloth.particle_position[i] - cloth.particle_position[j]
+    d = cloth.rest_position[i] - cloth.rest_position[j]
     length = np.linalg.norm(d, axis=1)
     n = d / np.where(length > 0, length, 1.0)[:, None]
     n[length == 0] = 0.0    # zero-length springs: no direction at rest (linear k I handled as 0)
@@ -180,7 +180,7 @@ def rest_rank_one(cloth) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     sqrt(beta) g."""
     if not cloth.face_count:
         return []
-    x = cloth.particle_position
+    x = cloth.rest_position
     gradients, area = cloth.face_gradient, cloth.face_area
     f = deformation_gradients(x, cloth.face_indices, gradients)       # (T, 3, 2) at rest
     warp, weft = f[:, :, 0], f[:, :, 1]

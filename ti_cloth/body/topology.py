@@ -145,7 +145,10 @@ class Cloth:
     """A mass-spring body ready to simulate: rest positions, lumped masses, springs, pins.
 
     Arrays (read-only numpy, entity-first names):
-      particle_position  rest positions [m], (N, 3)
+      particle_position  start positions [m], (N, 3): where the body is placed
+      rest_position      rest positions [m], (N, 3): the shape it stores no energy in (where
+                         every rest length, area, metric and angle below comes from); the
+                         start positions unless given (rest=)
       particle_mass      masses [kg], (N,): area x density / 3 per triangle corner (Stuyck 4.2),
                          + material.hem_mass on each hem particle, then
                          `particle_mass_override`
@@ -197,12 +200,19 @@ class Cloth:
     direction (default a grid's columns, else x), projected into each triangle, or "uv": along
     the mesh's texture coordinate u in each triangle (Mesh.uvs).
     seams: (P, 2) particle pairs sewn together (Garment.seam_pairs); default none.
+    rest: the rest shape, if not where the mesh places the body: a Mesh or (N, 3) positions
+    [m] of the same particles, or "uv": the flat pattern of the mesh's texture coordinates,
+    taken as metres (a garment's: Garment.mesh), at z = 0. Masses, rest lengths, a Fabric's
+    rest metric and its hinges' rest angles come from it, as Marvelous Designer's and
+    Blender's cloth take a garment's rest state from its pattern, not from where it is
+    placed round a body (a skirt wrapped onto a cone then stores the bending of the flat
+    panels bent round it). Default: the mesh's vertices.
     """
 
     def __init__(self, mesh: Mesh, material: Material | Fabric, pinned=(), springs=None,
                  particle_mass_override: Mapping[int, float] | None = None,
                  particle_mass=None, hem=None, ghost=None, altitude_tetrahedra=None,
-                 altitude: SpringParams | None = None, warp=None, seams=None):
+                 altitude: SpringParams | None = None, warp=None, seams=None, rest=None):
         require(isinstance(mesh, Mesh), "mesh", mesh, "a ti_cloth.Mesh")
         require(isinstance(material, (Material, Fabric)), "material", material,
                 "a ti_cloth.Material or a ti_cloth.Fabric")
@@ -215,6 +225,8 @@ class Cloth:
         self.material = material
         n = mesh.vertex_count
         self.particle_position = mesh.vertices
+        self.rest_position = _rest_positions(rest, mesh)
+        r = self.rest_position
 
         self.pinned = index_mask("pinned", pinned, n)
         self.ghost = index_mask("ghost", () if ghost is None else ghost, n)
@@ -226,7 +238,7 @@ class Cloth:
             require(mesh.triangle_count > 0, "mesh.triangles", mesh.triangles.shape,
                     "at least one triangle (masses come from triangle areas; pass particle_mass= "
                     "for a mesh without triangles)")
-            mass = lumped_masses(mesh.vertices, mesh.triangles, material.density)
+            mass = lumped_masses(r, mesh.triangles, material.density)
             self.hem = _hem_mask(hem, mesh) & ~self.pinned
             mass[self.hem] += material.hem_mass
         for i, m in (particle_mass_override or {}).items():
@@ -253,15 +265,14 @@ class Cloth:
             _warn_if_nonmanifold(mesh, fabric)
         self.spring_indices = pairs
         self.spring_kind = kind
-        x = self.particle_position
-        self.spring_rest_length = np.linalg.norm(x[pairs[:, 0]] - x[pairs[:, 1]], axis=1)
+        self.spring_rest_length = np.linalg.norm(r[pairs[:, 0]] - r[pairs[:, 1]], axis=1)
         params = ([material.springs(k) for k in SpringKind] if not fabric
                   else [SpringParams(0.0)] * len(SpringKind))
         self.spring_stiffness = np.array([p.k for p in params])[kind]
         self.spring_damping = np.array([p.kd for p in params])[kind]
         self.triangle_edge_spring = _edge_springs(mesh.triangles, pairs, n)
         self.altitude_indices, self.altitude_rest_length = (
-            altitude_springs(x, altitude_tetrahedra) if altitude_tetrahedra is not None
+            altitude_springs(r, altitude_tetrahedra) if altitude_tetrahedra is not None
             else (np.zeros((0, 4), np.int64), np.zeros(0)))
         require(altitude is None or isinstance(altitude, SpringParams), "altitude", altitude,
                 "None or a SpringParams(k, kd)")
@@ -282,12 +293,13 @@ class Cloth:
             triangles = np.zeros((0, 3), np.int64)
             moduli, flexural, damping = (0.0,) * 4, (0.0,) * 3, 0.0
         count = len(triangles)
-        x = self.particle_position
+        x = self.rest_position
         self.triangle_face = (np.arange(count) if fabric is not None
                               else np.full(len(self.mesh.triangles), -1))
         self.face_indices = triangles
+        rest = Mesh(x, self.mesh.triangles, grid_shape=self.mesh.grid_shape, uvs=self.mesh.uvs)
         self.face_gradient, self.face_area = material_frames(
-            x, triangles, warp_directions(self.mesh, warp if fabric else None))
+            x, triangles, warp_directions(rest, warp if fabric else None))
         self.face_moduli = np.tile(moduli, (count, 1))
         self.face_damping = np.full(count, damping)
         (self.hinge_indices, self.hinge_faces, self.face_hinge,
@@ -301,7 +313,8 @@ class Cloth:
                       "hinge_rest_angle")
 
     def _freeze(self) -> None:
-        for name in ("particle_mass", "particle_body", "pinned", "hem", "ghost", "spring_indices", "spring_kind", "spring_rest_length",
+        for name in ("rest_position", "particle_mass", "particle_body", "pinned", "hem", "ghost",
+                     "spring_indices", "spring_kind", "spring_rest_length",
                      "spring_stiffness", "spring_damping", "triangle_edge_spring", "triangle_face", "altitude_indices",
                      "altitude_rest_length", "altitude_stiffness", "altitude_damping",
                      "seam_indices") + self.ELEMENT_ARRAYS:
@@ -335,6 +348,7 @@ class Cloth:
                          tetrahedra=mesh_cells("tetrahedra"))
         body.material = bodies[0].material
         body.particle_position = body.mesh.vertices
+        body.rest_position = joined("rest_position")
         body.particle_mass = joined("particle_mass")
         body.pinned = joined("pinned")
         body.hem = joined("hem")
@@ -380,7 +394,7 @@ class Cloth:
                          tetrahedra=rank[mesh.tetrahedra],
                          uvs=None if mesh.uvs is None else mesh.uvs[order])
         body.particle_position = body.mesh.vertices
-        for name in ("particle_mass", "particle_body", "pinned", "hem", "ghost"):
+        for name in ("rest_position", "particle_mass", "particle_body", "pinned", "hem", "ghost"):
             setattr(body, name, getattr(self, name)[order])
         body.spring_indices = np.sort(rank[self.spring_indices], axis=1)
         body.seam_indices = np.sort(rank[self.seam_indices], axis=1)
@@ -440,6 +454,28 @@ class Cloth:
     def __repr__(self) -> str:
         return (f"Cloth(particles={self.particle_count}, springs={self.spring_count_by_kind()}, "
                 f"pinned={int(self.pinned.sum())}, mass={self.particle_mass.sum():.4g} kg)")
+
+
+def _rest_positions(rest, mesh: Mesh) -> np.ndarray:
+    """The (N, 3) rest positions of Cloth(rest=...) (class doc)."""
+    if rest is None:
+        return mesh.vertices
+    if isinstance(rest, str):
+        require(rest == "uv", "rest", rest, 'None, "uv", a Mesh or (N, 3) positions')
+        require(mesh.uvs is not None, "rest", rest,
+                "a mesh with texture coordinates in metres (a garment's pattern) for \"uv\"")
+        flat = np.zeros((mesh.vertex_count, 3))
+        flat[:, :2] = mesh.uvs
+        return flat
+    if isinstance(rest, Mesh):
+        require(rest.vertex_count == mesh.vertex_count
+                and np.array_equal(rest.triangles, mesh.triangles), "rest", rest,
+                f"a Mesh of the same {mesh.vertex_count} vertices and triangles as the body's")
+        rest = rest.vertices
+    positions = as_array("rest", rest, np.float64, (mesh.vertex_count, 3))
+    require(bool(np.isfinite(positions).all()), "rest", "non-finite positions",
+            "finite positions [m]")
+    return positions
 
 
 def index_mask(field: str, value, n: int) -> np.ndarray:

@@ -61,8 +61,8 @@ def is_flat(cloth) -> bool:
 def isometric_parts(cloth) -> tuple:
     """(K (H, 4) the hinges' cotangent weights, B' (F, 3, 3) = s_i s_j B_ij / (4 |e_i| |e_j|),
     0 across a boundary edge): the isometric model's constants (isometric_matrix)."""
-    weights = cotangent_weights(cloth.particle_position, cloth.hinge_indices)
-    ends = cloth.particle_position[cloth.hinge_indices[:, :2]]
+    weights = cotangent_weights(cloth.rest_position, cloth.hinge_indices)
+    ends = cloth.rest_position[cloth.hinge_indices[:, :2]]
     lengths = np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1)
     _, _, face_hinge, face_sign = hinges(cloth.face_indices)
     present = face_hinge >= 0
@@ -114,7 +114,7 @@ def isometric_faces(cloth) -> tuple:
     weights = np.zeros((cloth.face_count, 3, 6))
     present = cloth.face_hinge >= 0
     hinge = np.where(present, cloth.face_hinge, 0)
-    cot = cotangent_weights(cloth.particle_position, cloth.hinge_indices)[hinge]   # (F, 3, 4)
+    cot = cotangent_weights(cloth.rest_position, cloth.hinge_indices)[hinge]   # (F, 3, 4)
     corners = cloth.hinge_indices[hinge]                                          # (F, 3, 4)
     for k in range(4):
         for s in range(6):
