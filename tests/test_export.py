@@ -90,3 +90,63 @@ def test_ghost_particles_are_never_exported_and_strands_are_lines(f64, tmp_path)
 def test_bad_formats_are_refused_by_name(tmp_path):
     with pytest.raises(ValueError, match="export format must be one of"):
         tc.Exporter(tmp_path, ["obj", "fbx"], name="x", cloth=tc.string(4, 1.0), fps=30)
+
+
+def normals_here(points, triangles):
+    """Area-weighted unit vertex normals, computed here with a loop (not export.py's)."""
+    n = np.zeros_like(points)
+    for a, b, c in triangles:
+        face = np.cross(points[b] - points[a], points[c] - points[a])
+        for k in (a, b, c):
+            n[k] += face
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+@pytest.mark.parametrize("kind", ["grid", "garment"])
+def test_sheets_carry_uvs_and_normals_through_obj_ply_and_usd(kind, f64, tmp_path):
+    """A grid's uvs (column / (cols - 1), row / (rows - 1)) or a garment's pattern, and each
+    frame's vertex normals, read back through meshio (OBJ, PLY) and pxr (USD); OBJ faces name
+    their texture and normal indices (f v/vt/vn), as Blender needs."""
+    if kind == "grid":
+        rows, cols = 4, 5
+        mesh = tc.grid_mesh(rows, cols, size=(0.4, 0.3), plane="xz")
+        r, c = np.divmod(np.arange(rows * cols), cols)
+        uvs = np.stack([c / (cols - 1), r / (rows - 1)], axis=1)
+        cloth = tc.Cloth(mesh, tc.Material(), pinned=[0, cols - 1])
+    else:
+        piece = tc.panel([(-0.2, 0.0), (0.2, 0.0), (0.15, 0.3), (-0.15, 0.3)], edge_length=0.08)
+        garment = tc.Garment([piece.wrapped(0.2)], seams=[])
+        mesh, uvs = garment.mesh, garment.mesh.uvs
+        top = np.flatnonzero(mesh.vertices[:, 1] > mesh.vertices[:, 1].max() - 1e-9)
+        cloth = tc.Cloth(mesh, tc.Material(), pinned=top, rest="uv")
+    sim = tc.Simulation(cloth, integrator="xpbd", dt=1 / 240)
+    positions = []
+    with tc.Exporter(tmp_path, ["obj", "ply", "usd"], name="s", cloth=cloth, fps=30) as export:
+        for frame in range(3):
+            if frame:
+                sim.step(8)
+            export.write(sim)
+            positions.append(sim.positions())
+    triangles = cloth.mesh.triangles
+    for frame, x in enumerate(positions):
+        normals = normals_here(x, triangles)
+        obj = meshio.read(tmp_path / f"s_body0_{frame:05d}.obj")
+        np.testing.assert_allclose(obj.point_data["obj:vt"], uvs, atol=1e-12)
+        np.testing.assert_allclose(obj.point_data["obj:vn"], normals, atol=1e-12)
+        faces = [line for line in (tmp_path / f"s_body0_{frame:05d}.obj").read_text().splitlines()
+                 if line.startswith("f ")]
+        a, b, c = triangles[0] + 1
+        assert faces[0] == f"f {a}/{a}/{a} {b}/{b}/{b} {c}/{c}/{c}"
+        ply = meshio.read(tmp_path / f"s_body0_{frame:05d}.ply")
+        np.testing.assert_allclose(np.stack([ply.point_data[k] for k in "st"], 1), uvs, atol=1e-12)
+        np.testing.assert_allclose(np.stack([ply.point_data[f"n{k}"] for k in "xyz"], 1),
+                                   normals, atol=1e-12)
+    from pxr import Usd, UsdGeom
+    stage = Usd.Stage.Open(str(tmp_path / "s.usdc"))
+    usd = UsdGeom.Mesh(stage.GetPrimAtPath("/s/body0"))
+    st = UsdGeom.PrimvarsAPI(usd).GetPrimvar("st")
+    assert st.GetInterpolation() == "vertex" and usd.GetNormalsInterpolation() == "vertex"
+    np.testing.assert_allclose(np.array(st.Get()), uvs, atol=1e-6)
+    for frame, x in enumerate(positions):
+        np.testing.assert_allclose(np.array(usd.GetNormalsAttr().Get(frame)),
+                                   normals_here(x, triangles), atol=1e-6)

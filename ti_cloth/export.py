@@ -8,6 +8,13 @@ and an npz of positions and velocities.
             export.write(sim)              # frame 0 first: the state as it is now
             sim.step(substeps)
 
+A sheet carries texture coordinates and vertex normals in every mesh format: its mesh's uvs
+(a garment's pattern, in metres; a mesh file's), or a grid's (u along its columns, v along its
+rows, each from 0 to 1), and each frame's area-weighted vertex normals (OBJ: `vt` and `vn`,
+faces `f v/vt/vn`; PLY: `s t` and `nx ny nz` per vertex; USD: `primvars:st` per vertex and
+time-sampled `normals`). OBJ is written here rather than by meshio, whose OBJ faces name no
+texture or normal index (Blender then drops both).
+
 Only what a body shows is written: ghost particles (hair) never are, and a torn triangle
 leaves the frame's OBJ / PLY from the frame it tore in (a PC2 cache keeps the rest topology).
 Bodies without triangles (strings, hair) are written as line segments (their stretch
@@ -86,7 +93,8 @@ class Exporter:
         if "pc2" in formats:
             for body in self.bodies:
                 rest = self.folder / f"{name}_{body.name}_rest.obj"
-                _write_mesh(rest, cloth.particle_position[body.points], body.triangles, ())
+                _write_mesh(rest, cloth.particle_position[body.points], body.triangles, (),
+                            body.uvs)
                 self.paths.append(rest)
         streams = set(STREAMS) & set(formats)
         self._journal = None
@@ -119,7 +127,8 @@ class Exporter:
                 if ext in self.formats:
                     path = self.folder / f"{self.name}_{body.name}_{self.frames:05d}.{ext}"
                     _write_mesh(path, x[body.points], body.triangles[~torn[body.triangle_index]],
-                                body.segments[alive[body.segment_index]] if ext == "ply" else ())
+                                body.segments[alive[body.segment_index]] if ext == "ply" else (),
+                                body.uvs)
                     written.append(path)
         if self._journal is not None:
             record = np.zeros((), self._journal.dtype)
@@ -240,21 +249,62 @@ class _Body:
         mine = np.all(local[springs] >= 0, axis=1) & (cloth.spring_kind == SpringKind.STRETCH)
         self.segment_index = np.flatnonzero(mine) if not len(self.triangle_index) else np.zeros(0, int)
         self.segments = local[springs[self.segment_index]]
+        self.uvs = texture_coordinates(cloth.mesh)[self.points] if len(self.triangles) else None
 
 
-def _write_mesh(path: Path, points: np.ndarray, triangles: np.ndarray, segments) -> None:
-    """An OBJ / PLY of `points` with `triangles` and (PLY) line `segments`, atomically. The
-    time meshio stamps in its header comment is taken out: the same frame gives the same bytes
-    (a resumed run's files equal those of a run never stopped)."""
+def texture_coordinates(mesh) -> np.ndarray:
+    """(N, 2) uvs of a mesh: its own, or a grid's (u = column / (cols - 1), v = row /
+    (rows - 1)), else the rest positions projected onto their two widest axes, over the
+    wider extent (a mesh file without uvs, a joined Cloth)."""
+    if mesh.uvs is not None:
+        return mesh.uvs
+    if mesh.grid_shape is not None:
+        rows, cols = mesh.grid_shape
+        r, c = np.divmod(np.arange(mesh.vertex_count), cols)
+        return np.stack([c / max(cols - 1, 1), r / max(rows - 1, 1)], axis=1)
+    x = mesh.vertices
+    extent = x.max(axis=0) - x.min(axis=0)
+    axes = np.sort(np.argsort(extent)[1:])
+    return (x[:, axes] - x[:, axes].min(axis=0)) / max(float(extent.max()), 1e-300)
+
+
+def vertex_normals(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(N, 3) unit area-weighted vertex normals of a triangle mesh (0 at a point no
+    triangle touches), the triangles' corners summed in triangle order."""
+    a, b, c = (points[triangles[:, k]] for k in range(3))
+    face = np.cross(b - a, c - a)
+    normals = np.zeros_like(points, dtype=np.float64)
+    for k in range(3):
+        np.add.at(normals, triangles[:, k], face)
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    return np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
+
+
+def _write_mesh(path: Path, points: np.ndarray, triangles: np.ndarray, segments,
+                uvs: np.ndarray | None = None) -> None:
+    """An OBJ / PLY of `points` with `triangles`, (PLY) line `segments` and, for a sheet
+    (uvs given), texture coordinates and vertex normals, atomically. The time meshio stamps in
+    its header comment is taken out: the same frame gives the same bytes (a resumed run's
+    files equal those of a run never stopped)."""
     import meshio
 
+    points = np.asarray(points, np.float64)
+    normals = None if uvs is None else vertex_normals(points, np.asarray(triangles, np.int64))
+    if path.suffix == ".obj":
+        with atomic_path(path) as tmp:
+            _write_obj(tmp, points, triangles, uvs, normals)
+        return
     cells = []
     if len(triangles):
         cells.append(("triangle", np.asarray(triangles, np.int32)))
     if len(segments):
         cells.append(("line", np.asarray(segments, np.int32)))
+    data = {}
+    if uvs is not None:
+        data = {"nx": normals[:, 0], "ny": normals[:, 1], "nz": normals[:, 2],
+                "s": np.asarray(uvs[:, 0], np.float64), "t": np.asarray(uvs[:, 1], np.float64)}
     with atomic_path(path) as tmp:
-        meshio.write_points_cells(tmp, np.asarray(points, np.float64), cells)
+        meshio.write_points_cells(tmp, points, cells, point_data=data)
         with open(tmp, "r+b") as file:
             head = file.read(HEADER_BYTES)
             stamp = MESHIO_STAMP.search(head)
@@ -263,6 +313,22 @@ def _write_mesh(path: Path, points: np.ndarray, triangles: np.ndarray, segments)
                 file.seek(stamp.start(1))
                 file.write(head[stamp.end(1):] + rest)
                 file.truncate()
+
+
+def _write_obj(path: Path, points: np.ndarray, triangles, uvs, normals) -> None:
+    """Wavefront OBJ: `v` per point, with a sheet's `vt` and `vn` (one per point) and faces
+    `f i/i/i` naming them; numbers in Python's shortest round-trip form (the same frame gives
+    the same bytes)."""
+    lines = ["# ti_cloth"]
+    lines += [f"v {x!r} {y!r} {z!r}" for x, y, z in points.tolist()]
+    if uvs is not None:
+        lines += [f"vt {u!r} {v!r}" for u, v in np.asarray(uvs, np.float64).tolist()]
+        lines += [f"vn {x!r} {y!r} {z!r}" for x, y, z in normals.tolist()]
+        lines += [f"f {a}/{a}/{a} {b}/{b}/{b} {c}/{c}/{c}"
+                  for a, b, c in (np.asarray(triangles, np.int64) + 1).tolist()]
+    else:
+        lines += [f"f {a} {b} {c}" for a, b, c in (np.asarray(triangles, np.int64) + 1).tolist()]
+    Path(path).write_text("\n".join(lines) + "\n")
 
 
 def _write_pc2(path: Path, positions: np.ndarray) -> Path:
@@ -306,6 +372,11 @@ class _UsdStage:
                 mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
                 mesh.CreateDoubleSidedAttr(True)
                 self._faces(mesh, body.triangles, None)
+                st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar(
+                    "st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex)
+                st.Set(np.asarray(body.uvs, np.float32))
+                mesh.CreateNormalsAttr()
+                mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
             else:
                 mesh = UsdGeom.BasisCurves.Define(self.stage, prim_path)
                 mesh.CreateTypeAttr(UsdGeom.Tokens.linear)
@@ -337,6 +408,8 @@ class _UsdStage:
                 self._faces(prim, body.triangles[~torn], frame)
                 self.torn_before[body.name] = torn.copy()
             positions = points
+            normals = vertex_normals(np.asarray(points, np.float64), body.triangles[~torn])
+            prim.GetNormalsAttr().Set(Vt.Vec3fArray.FromNumpy(normals.astype(np.float32)), frame)
         else:
             positions = points[body.segments.ravel()]          # two points per segment
         prim.GetPointsAttr().Set(Vt.Vec3fArray.FromNumpy(np.array(positions, np.float32)),
