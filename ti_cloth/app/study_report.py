@@ -92,10 +92,13 @@ def horizon_sentence(ref) -> str:
            "cloth size there")
     if ref.limited:
         why += f" ({ref.limited})"
+    chaos = (f"below {ref.observable_spread:.1e} their differences are the chaos of the motion "
+             "(the spread over perturbed starts), not error" if ref.observable_spread > 0 else
+             "no perturbed starts were run within the reference's budget, so their chaos is "
+             "not measured")
     return (f"Pointwise errors are measured up to t = {ref.horizon:.3g} s "
             f"({ref.predictable} of {len(ref.times)} samples); beyond, {why}. {observables}; "
-            f"below {ref.observable_spread:.1e} their differences are the chaos of the motion "
-            "(the spread over perturbed starts), not error.")
+            f"{chaos}.")
 
 
 def resolution_lines(result) -> list[str]:
