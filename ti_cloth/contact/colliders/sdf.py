@@ -4,7 +4,7 @@ A grid of nodes spaced `cell` apart covers the mesh's bounding box and a margin.
 the distance to the nearest triangle, negative inside, and the distance's gradient (a unit
 vector). Inside is where the generalised winding number (Jacobson et al. 2013) exceeds 1/2 in
 magnitude, which stays right for meshes with holes, overlapping parts or either orientation.
-Closest surface points are found with libigl (the optional extra `ti_cloth[mesh]`) for the
+Closest surface points are found with libigl (a base dependency) for the
 nodes within `margin` of the surface; a node beyond takes the closest point of the nearest node
 within (a distance at least the true one, exact where both share the closest point: the field
 still grows away from the surface, so a particle deep inside finds the way out). A node's
@@ -141,7 +141,7 @@ def build(vertices: np.ndarray, triangles: np.ndarray, resolution: int,
         from scipy import ndimage
     except ImportError as err:
         raise ImportError("mesh colliders build their distance grid with libigl: "
-                          "pip install 'ti_cloth[mesh]'") from err
+                          "pip install libigl scipy (both are ti_cloth dependencies: reinstall it)") from err
     origin, cell, shape = layout(vertices, resolution, margin)
     axes = [origin[a] + cell * np.arange(shape[a]) for a in range(3)]
     nodes = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
@@ -182,7 +182,7 @@ def mesh_distance(vertices: np.ndarray, triangles: np.ndarray, points: np.ndarra
         import igl
     except ImportError as err:
         raise ImportError("distances to meshes are measured with libigl: "
-                          "pip install 'ti_cloth[mesh]'") from err
+                          "pip install libigl scipy (both are ti_cloth dependencies: reinstall it)") from err
     vertices = np.ascontiguousarray(vertices, np.float64)
     triangles = np.ascontiguousarray(triangles, np.int64)
     unsigned, _, closest, _ = igl.signed_distance(points, vertices, triangles,
@@ -204,7 +204,7 @@ def nearest_triangles(vertices: np.ndarray, triangles: np.ndarray, points: np.nd
         import igl
     except ImportError as err:
         raise ImportError("nearest triangles are found with libigl: "
-                          "pip install 'ti_cloth[mesh]'") from err
+                          "pip install libigl scipy (both are ti_cloth dependencies: reinstall it)") from err
     _, index, _ = igl.point_mesh_squared_distance(np.ascontiguousarray(points, np.float64),
                                                   np.ascontiguousarray(vertices, np.float64),
                                                   np.ascontiguousarray(triangles, np.int64))
