@@ -53,6 +53,25 @@ def test_run_writes_the_requested_frames_and_a_gif(scene, tmp_path, capsys):
     assert "3 frames of 'tiny'" in capsys.readouterr().out
 
 
+def test_run_writes_an_mp4_of_every_frame_with_mp4(scene, tmp_path, capsys, monkeypatch):
+    """ti-cloth run --mp4 (no longer only the demo scripts'): the MP4 read back holds every
+    frame written. Without imageio-ffmpeg it exits 2 naming the extra, before Taichi runs."""
+    import imageio.v3 as iio
+
+    out = tmp_path / "out"
+    assert cli.main(["run", str(scene), "--out", str(out), "--frames", "4", "--mp4",
+                     "--no-progress"]) == 0
+    assert len(frames_in(out)) == 4
+    assert sum(1 for _ in iio.imiter(out / "tiny.mp4")) == 4
+    real = cli.importlib.util.find_spec
+    monkeypatch.setattr(cli.importlib.util, "find_spec",
+                        lambda name: None if name == "imageio_ffmpeg" else real(name))
+    assert cli.main(["run", str(scene), "--out", str(tmp_path / "o2"), "--mp4"]) == 2
+    assert 'pip install ".[video]"' in capsys.readouterr().err
+    assert not (tmp_path / "o2").exists()
+    assert cli.main(["view", str(scene), "--mp4"]) == 2
+
+
 def test_run_exports_the_formats_of_the_flag_or_the_scene(scene, tmp_path, capsys):
     """--export obj,npz writes an OBJ per frame and the npz beside the PNGs; without the flag
     the scene's [output] formats decide (here "pc2")."""

@@ -446,3 +446,19 @@ def test_torn_triangles_stop_colliding(f64):
         assert not torn & set(sim.self_contacts().vertex_triangle[:, 1].tolist())
     assert sim.torn_count > 0
     assert sim.positions()[121:, 1].max() < -0.2, "the small sheet fell through the opening"
+
+
+def test_a_cloth_crushed_through_itself_is_a_divergence_naming_the_step(f64):
+    """More pairs within reach than any cloth near its thickness has (here a 30 cm sheet
+    balled up into 2 cm, every particle within reach of most triangles) is reported as the
+    SimulationDiverged of that step, with a stable dt, and the simulation refuses to go on."""
+    grid = tc.grid_mesh(16, 16, size=(0.3, 0.3))
+    rng = np.random.default_rng(0)
+    balled = tc.Mesh(rng.uniform(-0.01, 0.01, grid.vertices.shape), grid.triangles)
+    cloth = tc.Cloth(balled, tc.Material(), rest=grid)      # a sheet balled up in 2 cm
+    sim = tc.Simulation(cloth, dt=1e-4, self_collision=tc.SelfCollision(thickness=0.005))
+    with pytest.raises(tc.SimulationDiverged, match="crushed far below its thickness") as err:
+        sim.step(2)
+    assert err.value.step == 0 and "stable dt" in str(err.value)
+    with pytest.raises(tc.SimulationDiverged):
+        sim.step(1)

@@ -28,6 +28,16 @@ class SimulationDiverged(RuntimeError):
                          f"{self.reason}; {advice}")
 
 
+class CrushedContact(RuntimeError):
+    """Self-collision found more pairs within reach than any cloth near its thickness has (a
+    step so large that the cloth folded through itself): the stage raises it with the step,
+    and Simulation.step reports it as the SimulationDiverged of that step."""
+
+    def __init__(self, step: int, message: str):
+        super().__init__(message)
+        self.step = step
+
+
 class StaleSimulation(RuntimeError):
     """A Simulation used after ti_cloth.init was called again: that init reset Taichi and
     freed the simulation's fields."""

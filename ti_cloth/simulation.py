@@ -27,7 +27,7 @@ from .contact.self_collision import (
     warn_if_thick,
 )
 from .energies.isometric import is_flat
-from .errors import SimulationDiverged, StaleSimulation
+from .errors import CrushedContact, SimulationDiverged, StaleSimulation
 from .inputs import limits
 from .inputs.validation import as_array, in_range, integer, require
 from .integrators import INTEGRATORS, make_integrator
@@ -295,6 +295,12 @@ class Simulation:
             else:
                 for _ in range(n):
                     self._step_once()
+        except CrushedContact as err:
+            self._diverged = SimulationDiverged(
+                err.step, (err.step + 1) * self.dt, self.dt,
+                stable_dt(self.cloth, self.integrator, self.forces.drag, self.model.pinned),
+                self.integrator.name, str(err))
+            raise self._diverged from err
         finally:
             self.integrator.copy_reports(self._stepper)
         bad = int(self.state.first_bad_step[None])

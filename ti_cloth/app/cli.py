@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import platform
 import sys
 import time
@@ -32,6 +33,8 @@ def _run_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--precision", choices=sorted(backend.PRECISIONS),
                         help="float precision (default: the scene's, else f32)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--mp4", action="store_true", help="also write an MP4 (needs "
+                        "imageio-ffmpeg: pip install \".[video]\" from a clone)")
     parser.add_argument("--export", type=_formats, metavar="FORMATS",
                         help=f"geometry to write with the frames, comma-separated: "
                              f"{','.join(FORMATS)} (default: the scene's [output] formats)")
@@ -86,6 +89,10 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
     from .runner import run_scene
     from .scene import load_scene
 
+    if mp4 and importlib.util.find_spec("imageio_ffmpeg") is None:
+        print("error: --mp4 needs imageio-ffmpeg: pip install \".[video]\" from a clone "
+              "(pip install 'ti_cloth[video]' otherwise)", file=sys.stderr)
+        return 2, []
     try:
         with signals.stop_signals_raise():
             scene = load_scene(scene_path, note=lambda message: print(f"note: {message}",
@@ -272,7 +279,8 @@ def info() -> int:
     return 0
 
 
-def view(scene_path, *, out=None, width=960, height=540, arch="cpu", record=False) -> int:
+def view(scene_path, *, out=None, width=960, height=540, arch="cpu", record=False,
+         mp4=False) -> int:
     """Open a window on the scene (app/view.py); exit code 0 when it closes, 2 for a scene it
     refuses (the message names the key) or no display, 74 for a file it cannot write."""
     from ..inputs.scene_file import SceneError
@@ -280,6 +288,10 @@ def view(scene_path, *, out=None, width=960, height=540, arch="cpu", record=Fals
     from .view import NoDisplay, require_display
     from .view import view as open_view
 
+    if mp4 and importlib.util.find_spec("imageio_ffmpeg") is None:
+        print("error: --mp4 needs imageio-ffmpeg: pip install \".[video]\" from a clone "
+              "(pip install 'ti_cloth[video]' otherwise)", file=sys.stderr)
+        return 2
     try:
         require_display()
         scene = load_scene(scene_path)
@@ -289,7 +301,7 @@ def view(scene_path, *, out=None, width=960, height=540, arch="cpu", record=Fals
             scene, why = resolve(scene, out or scene.output.folder, arch=arch)
             print(f"integrator auto: {why}", file=sys.stderr)
         backend.ensure(arch=arch, precision=scene.precision)
-        open_view(scene, width=width, height=height, folder=out, record=record)
+        open_view(scene, width=width, height=height, folder=out, record=record, mp4=mp4)
     except OutputError as err:                  # a recorded frame, a snapshot, advice
         print(f"error: {err}", file=sys.stderr)
         return OUTPUT_FAILED
@@ -306,7 +318,7 @@ def main(argv=None) -> int:
         return info()
     if args.command == "view":
         return view(args.scene, out=args.out, width=args.width, height=args.height,
-                    arch=args.arch, record=args.record)
+                    arch=args.arch, record=args.record, mp4=args.mp4)
     if args.command == "study":
         if args.duration is not None and not args.duration > 0:
             parser.error(f"--duration must be > 0, got {args.duration}")
@@ -321,7 +333,8 @@ def main(argv=None) -> int:
                       jobs=args.jobs, scheduler=args.scheduler, resolutions=args.resolutions)
     code, _ = run(args.scene, out=args.out, frames=args.frames, arch=args.arch,
                   precision=args.precision, progress=not args.no_progress, export=args.export,
-                  resume=args.resume, checkpoint_every=args.checkpoint_every)
+                  mp4=args.mp4 or None, resume=args.resume,
+                  checkpoint_every=args.checkpoint_every)
     return code
 
 
@@ -402,6 +415,8 @@ def build_parser() -> argparse.ArgumentParser:
     view_parser.add_argument("--arch", choices=sorted(backend.ARCHS), default="cpu")
     view_parser.add_argument("--record", action="store_true",
                              help="write what the window shows as PNG frames and a GIF")
+    view_parser.add_argument("--mp4", action="store_true",
+                             help="record an MP4 too (implies --record; needs imageio-ffmpeg)")
     commands.add_parser("info", help="versions, architecture and threads")
     return parser
 
@@ -415,7 +430,6 @@ def demo_main(scene_path, argv=None, description: str | None = None) -> list[Pat
                         help=f"output folder (default renders/{scene_path.stem})")
     parser.add_argument("--test", action="store_true",
                         help=f"tiny and fast: {TEST_FRAMES} frames at {TEST_SIZE[0]}x{TEST_SIZE[1]}")
-    parser.add_argument("--mp4", action="store_true", help="also write an MP4 (needs imageio-ffmpeg)")
     _run_arguments(parser)
     args = parser.parse_args(argv)
     code, frames = run(scene_path, out=args.out_dir, frames=args.frames, arch=args.arch,

@@ -1,7 +1,8 @@
 """`ti-cloth view SCENE.toml` and `ti_cloth.view(scene_or_simulation)`: a scene running live in
 a window (ti.GUI: X11, no OpenGL or Vulkan), drawn by ti_cloth's own renderer, with the mouse
 and keys of render/viewer.py. The window shows simulated time, the real-time ratio and steps/s;
-`record` writes what it shows as PNG frames (and a GIF when it closes) into the folder.
+`record` writes what it shows as PNG frames (and a GIF, and with `mp4` an MP4, when it
+closes) into the folder.
 """
 
 from __future__ import annotations
@@ -92,7 +93,7 @@ def events_of(gui) -> list[Event]:
 
 
 def view(subject, *, width: int = 960, height: int = 540, folder=None,
-         record: bool = False) -> Viewer:
+         record: bool = False, mp4: bool = False) -> Viewer:
     """Open a window on `subject` (a Scene or a Simulation) and run it until "q", Escape or
     the window is closed, a frame at most every frame_dt of wall time (real time, or as fast
     as it can); returns the Viewer. NoDisplay without an X11 display."""
@@ -101,8 +102,8 @@ def view(subject, *, width: int = 960, height: int = 540, folder=None,
     require_display()
     viewer = viewer_for(subject, width=width, height=height, folder=folder)
     gui = ti.GUI(f"ti_cloth: {viewer.name}", res=(width, height), fast_gui=False)
-    frames = (FrameSequence(viewer.folder, fps=1 / viewer.frame_dt, name=viewer.name)
-              if record else None)
+    frames = (FrameSequence(viewer.folder, fps=1 / viewer.frame_dt, name=viewer.name, mp4=mp4)
+              if record or mp4 else None)
     shown = time.perf_counter()
     try:
         while gui.running and not viewer.quit:

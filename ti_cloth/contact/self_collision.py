@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
+from ..errors import CrushedContact
 from ..geometry import edge_contact, point_over_triangle
 from ..inputs import limits
 from ..inputs.validation import count, finite_number, keyword_only, require
@@ -311,7 +312,8 @@ class SelfCollisionStage:
         total = prefix_pairs(self)
         if total > self.candidates.capacity:
             if total > MAX_PAIRS_PER_PARTICLE * self.particle_count:
-                raise RuntimeError(
+                raise CrushedContact(
+                    step_index,
                     f"self-collision found {total} pairs within {near:.3g} m in step "
                     f"{step_index}, more than {MAX_PAIRS_PER_PARTICLE} per particle: the cloth "
                     "is crushed far below its thickness; use more substeps or a smaller "
