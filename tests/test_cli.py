@@ -1,5 +1,6 @@
 """The ti-cloth command: run, info, strict arguments, Ctrl-C, SIGTERM and divergence."""
 
+import os
 import re
 import signal
 import subprocess
@@ -157,7 +158,18 @@ def test_info_prints_versions_arch_and_threads(capsys):
         assert word in out
 
 
-def test_the_console_script_is_installed(scene, tmp_path):
+def test_info_lists_the_extras_and_their_versions(capsys):
+    from importlib.metadata import version
+
+    assert cli.main(["info"]) == 0
+    out = capsys.readouterr().out
+    for extra, package in cli.EXTRAS.items():        # the test extra installs them all
+        assert f"{extra:8} {package} {version(package)}" in out
+
+
+def test_the_console_script_is_installed_and_quiet(scene, tmp_path):
+    """The command prints its own output: no Taichi banner, no "Starting on arch" line
+    (both back with --verbose)."""
     script = Path(sys.executable).with_name("ti-cloth")
     assert script.is_file(), "pip install the package to get the ti-cloth command"
     out = tmp_path / "cli"
@@ -165,6 +177,28 @@ def test_the_console_script_is_installed(scene, tmp_path):
                              "--no-progress"], capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
     assert len(frames_in(out)) == 2
+    assert "[Taichi]" not in result.stdout + result.stderr
+    env = {k: v for k, v in os.environ.items() if k != "ENABLE_TAICHI_HEADER_PRINT"}
+    verbose = subprocess.run([str(script), "info", "--verbose"], capture_output=True, text=True,
+                             timeout=300, env=env)
+    assert "[Taichi] version" in verbose.stdout + verbose.stderr
+
+
+def test_help_and_version_import_no_taichi():
+    """--help and --version answer from the parser alone: Taichi is never imported (run in a
+    fresh interpreter: this one has it)."""
+    code = ("import sys\nfrom ti_cloth.app import cli\n"
+            "for argv in (['--version'], ['--help'], ['run', '--help'], ['study', '--help']):\n"
+            "    try:\n        cli.main(argv)\n    except SystemExit:\n        pass\n"
+            "print('taichi imported' if 'taichi' in sys.modules else 'no taichi')\n")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            timeout=120)
+    from importlib.metadata import version
+
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip().endswith("no taichi")
+    assert f"ti-cloth {version('ti_cloth')}" in result.stdout
+    assert "--mp4" in result.stdout and "--verbose" in result.stdout
 
 
 def test_a_long_legal_run_is_announced_before_it_starts(tmp_path, capsys, monkeypatch):

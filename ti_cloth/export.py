@@ -38,11 +38,12 @@ import numpy as np
 
 from .body.material import SpringKind
 from .errors import StateMismatch
+from .inputs import limits
 from .inputs.files import atomic_path
 from .inputs.validation import finite_number, require
 from .runtime import backend
 
-FORMATS = ("obj", "ply", "pc2", "npz", "usd")
+FORMATS = limits.EXPORT_FORMATS
 STREAMS = ("pc2", "npz", "usd")            # assembled at close from the journal
 PC2_HEADER = struct.Struct("<12siiffi")   # "POINTCACHE2\0", version 1, points, start, rate, samples
 JOURNAL_MAGIC = b"TICLOTHJ"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import os
 import platform
 import sys
 import time
@@ -11,9 +12,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from ..errors import OutputError
-from ..export import FORMATS
 from ..inputs import limits
-from ..runtime import backend
 
 TEST_FRAMES, TEST_SIZE = 4, (160, 96)
 OUTPUT_FAILED = 74        # sysexits.h's EX_IOERR: a file could not be written
@@ -28,16 +27,17 @@ def _positive(text: str) -> int:
 
 def _run_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--frames", type=_positive, help="frames to write (default: duration x fps)")
-    parser.add_argument("--arch", choices=sorted(backend.ARCHS), default="cpu",
+    parser.add_argument("--arch", choices=list(limits.ARCH_NAMES), default="cpu",
                         help="Taichi backend (gpu: the first GPU backend found, else CPU)")
-    parser.add_argument("--precision", choices=sorted(backend.PRECISIONS),
+    parser.add_argument("--precision", choices=list(limits.PRECISION_NAMES),
                         help="float precision (default: the scene's, else f32)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--verbose", action="store_true", help="let Taichi print its banner")
     parser.add_argument("--mp4", action="store_true", help="also write an MP4 (needs "
                         "imageio-ffmpeg: pip install \".[video]\" from a clone)")
     parser.add_argument("--export", type=_formats, metavar="FORMATS",
                         help=f"geometry to write with the frames, comma-separated: "
-                             f"{','.join(FORMATS)} (default: the scene's [output] formats)")
+                             f"{','.join(limits.EXPORT_FORMATS)} (default: the scene's [output] formats)")
     parser.add_argument("--resume", action="store_true",
                         help="continue from the state saved in the output folder by an earlier, "
                              "stopped run of the same scene (same frames as a run never stopped)")
@@ -69,9 +69,10 @@ def _sweep_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _formats(text: str) -> tuple[str, ...]:
     formats = tuple(f.strip() for f in text.split(",") if f.strip())
-    unknown = [f for f in formats if f not in FORMATS]
+    unknown = [f for f in formats if f not in limits.EXPORT_FORMATS]
     if unknown or not formats:
-        raise argparse.ArgumentTypeError(f"must list some of {','.join(FORMATS)}, got {text!r}")
+        raise argparse.ArgumentTypeError(f"must list some of {','.join(limits.EXPORT_FORMATS)}, "
+                                         f"got {text!r}")
     return formats
 
 
@@ -84,6 +85,7 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
     read-only), 128 + signal when stopped by Ctrl-C (130) or SIGTERM (143)."""
     from ..errors import StateMismatch
     from ..inputs.limits import LONG_RUN_SECONDS
+    from ..runtime import backend
     from ..inputs.scene_file import SceneError
     from . import signals
     from .runner import run_scene
@@ -261,12 +263,19 @@ def advise(scene_path, *, tolerance: float, metric="max_error", window=None, out
     return 0 if advice.choice is not None else 1
 
 
+EXTRAS = {"video": "imageio-ffmpeg", "study": "matplotlib", "usd": "usd-core",
+          "dask": "distributed"}     # pyproject.toml's optional extras and what each installs
+
+
 def info() -> int:
-    """Print versions, the architecture Taichi starts on and the CPU thread count."""
-    from importlib.metadata import version
+    """Print versions, the architecture Taichi starts on, the CPU thread count and which
+    optional extras are installed."""
+    from importlib.metadata import PackageNotFoundError, version
 
     import numpy
     import taichi as ti
+
+    from ..runtime import backend
 
     config = backend.init(arch="cpu")
     print(f"ti_cloth {version('ti_cloth')}\n"
@@ -276,6 +285,12 @@ def info() -> int:
           f"arch     {config.arch} (a GPU with --arch gpu: Taichi falls back to the CPU "
           "without one)\n"
           f"threads  {backend.cpu_threads()} Taichi CPU threads, {backend.cpu_cores()} cores")
+    for extra, package in EXTRAS.items():
+        try:
+            found = version(package)
+        except PackageNotFoundError:
+            found = f"not installed (pip install \".[{extra}]\" from a clone)"
+        print(f"{extra:8} {package} {found}")
     return 0
 
 
@@ -285,6 +300,7 @@ def view(scene_path, *, out=None, width=960, height=540, arch="cpu", record=Fals
     refuses (the message names the key) or no display, 74 for a file it cannot write."""
     from ..inputs.scene_file import SceneError
     from .scene import load_scene
+    from ..runtime import backend
     from .view import NoDisplay, require_display
     from .view import view as open_view
 
@@ -311,9 +327,20 @@ def view(scene_path, *, out=None, width=960, height=540, arch="cpu", record=Fals
     return 0
 
 
+def quiet_taichi(verbose: bool) -> None:
+    """Unless verbose, Taichi prints no banner when it is imported nor its "Starting on arch"
+    line (backend.init), the commands' output being theirs alone; Taichi's own switch, so a
+    user's ENABLE_TAICHI_HEADER_PRINT is kept unless --verbose asks for the banner."""
+    if verbose:
+        os.environ["ENABLE_TAICHI_HEADER_PRINT"] = "True"
+    else:
+        os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")
+
+
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    quiet_taichi(args.verbose)
     if args.command == "info":
         return info()
     if args.command == "view":
@@ -356,15 +383,22 @@ def _resolution(text: str) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The `ti-cloth` command's argument parser (its subcommands run, study, advise, info)."""
+    """The `ti-cloth` command's argument parser (its subcommands run, study, advise, view,
+    info); building it imports no Taichi, so --help and --version answer at once."""
+    from importlib.metadata import version
+
     parser = argparse.ArgumentParser(prog="ti-cloth", description="Mass-spring cloth, strings, "
                                      "hair and soft bodies in Taichi, rendered headlessly.")
+    parser.add_argument("--version", action="version", version=f"ti-cloth {version('ti_cloth')}")
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--verbose", action="store_true", help="let Taichi print its banner")
     commands = parser.add_subparsers(dest="command", required=True)
     run_parser = commands.add_parser("run", help="simulate a scene file and write its frames")
     run_parser.add_argument("scene", type=Path, help="scene file (TOML)")
     run_parser.add_argument("--out", type=Path, help="output folder (default: the scene's)")
     _run_arguments(run_parser)
-    study_parser = commands.add_parser("study", help="speed/accuracy study: integrator x dt "
+    study_parser = commands.add_parser("study", parents=[common],
+                                       help="speed/accuracy study: integrator x dt "
                                        "against an rk4/f64 reference -> CSV, table, plot")
     study_parser.add_argument("scene", type=Path, help="scene file (TOML)")
     study_parser.add_argument("--out", type=Path, help="output folder (default renders/study_<name>)")
@@ -373,16 +407,17 @@ def build_parser() -> argparse.ArgumentParser:
     study_parser.add_argument("--dt", nargs="+", type=float, dest="dts", metavar="DT",
                               help="steps [s], each frame_dt / an integer (default: frame_dt / 2^k "
                                    "down to half the smallest stable step)")
-    study_parser.add_argument("--precisions", nargs="+", choices=sorted(backend.PRECISIONS),
+    study_parser.add_argument("--precisions", nargs="+", choices=list(limits.PRECISION_NAMES),
                               default=["f64", "f32"])
     study_parser.add_argument("--iterations", nargs="+", type=_positive, metavar="N",
                               help="pbd/xpbd passes per step to sweep (default 4 16)")
     study_parser.add_argument("--duration", type=float, help="simulated seconds (default: the scene's)")
-    study_parser.add_argument("--arch", choices=sorted(backend.ARCHS), default="cpu")
+    study_parser.add_argument("--arch", choices=list(limits.ARCH_NAMES), default="cpu")
     study_parser.add_argument("--no-plot", action="store_true", help="skip study.png (no matplotlib)")
     _resolution_argument(study_parser)
     _sweep_arguments(study_parser)
-    advise_parser = commands.add_parser("advise", help="the cheapest integrator, step and "
+    advise_parser = commands.add_parser("advise", parents=[common],
+                                        help="the cheapest integrator, step and "
                                         "precision whose error meets a tolerance (a pilot study)")
     advise_parser.add_argument("scene", type=Path, help="scene file (TOML)")
     advise_parser.add_argument("--tolerance", type=_fraction, required=True,
@@ -398,26 +433,28 @@ def build_parser() -> argparse.ArgumentParser:
     advise_parser.add_argument("--out", type=Path, help="output folder (default renders/advise_<name>)")
     advise_parser.add_argument("--integrators", nargs="+", metavar="NAME",
                                help="candidates (default: all)")
-    advise_parser.add_argument("--precisions", nargs="+", choices=sorted(backend.PRECISIONS),
+    advise_parser.add_argument("--precisions", nargs="+", choices=list(limits.PRECISION_NAMES),
                                default=["f64", "f32"])
     advise_parser.add_argument("--iterations", nargs="+", type=_positive, metavar="N",
                                help="pbd/xpbd passes per step to try (default 4 16)")
-    advise_parser.add_argument("--arch", choices=sorted(backend.ARCHS), default="cpu")
+    advise_parser.add_argument("--arch", choices=list(limits.ARCH_NAMES), default="cpu")
     _resolution_argument(advise_parser)
     _sweep_arguments(advise_parser)
-    view_parser = commands.add_parser("view", help="run a scene live in a window: drag the "
+    view_parser = commands.add_parser("view", parents=[common],
+                                      help="run a scene live in a window: drag the "
                                       "cloth with the left button, orbit with the right")
     view_parser.add_argument("scene", type=Path, help="scene file (TOML)")
     view_parser.add_argument("--out", type=Path, help="folder for saved states and --record "
                              "(default: the scene's)")
     view_parser.add_argument("--width", type=_positive, default=960)
     view_parser.add_argument("--height", type=_positive, default=540)
-    view_parser.add_argument("--arch", choices=sorted(backend.ARCHS), default="cpu")
+    view_parser.add_argument("--arch", choices=list(limits.ARCH_NAMES), default="cpu")
     view_parser.add_argument("--record", action="store_true",
                              help="write what the window shows as PNG frames and a GIF")
     view_parser.add_argument("--mp4", action="store_true",
                              help="record an MP4 too (implies --record; needs imageio-ffmpeg)")
-    commands.add_parser("info", help="versions, architecture and threads")
+    commands.add_parser("info", parents=[common],
+                        help="versions, architecture, threads and the extras installed")
     return parser
 
 
@@ -432,6 +469,7 @@ def demo_main(scene_path, argv=None, description: str | None = None) -> list[Pat
                         help=f"tiny and fast: {TEST_FRAMES} frames at {TEST_SIZE[0]}x{TEST_SIZE[1]}")
     _run_arguments(parser)
     args = parser.parse_args(argv)
+    quiet_taichi(args.verbose)
     code, frames = run(scene_path, out=args.out_dir, frames=args.frames, arch=args.arch,
                        precision=args.precision, progress=not args.no_progress, test=args.test,
                        mp4=args.mp4 or None, export=args.export, resume=args.resume,

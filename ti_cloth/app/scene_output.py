@@ -6,8 +6,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..contact.colliders.shapes import Plane
-from ..export import FORMATS
 from ..inputs import limits
+from ..inputs.limits import EXPORT_FORMATS as FORMATS
 from ..inputs.scene_file import Table
 from ..render.camera import Camera
 from ..render.renderer import SurfaceStyle

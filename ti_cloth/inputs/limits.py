@@ -168,3 +168,10 @@ def spring_equivalents(body) -> int:
     HINGE_SPRINGS per hinge."""
     return (body.spring_count + ALTITUDE_SPRINGS * body.altitude_count
             + FACE_SPRINGS * body.face_count + HINGE_SPRINGS * body.hinge_count)
+
+
+# allowed values of the choices every entry point offers (the command line reads them without
+# importing Taichi)
+ARCH_NAMES = ("cpu", "cuda", "gpu", "vulkan")
+PRECISION_NAMES = ("f32", "f64")
+EXPORT_FORMATS = ("obj", "ply", "pc2", "npz", "usd")

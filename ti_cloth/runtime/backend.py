@@ -14,9 +14,11 @@ Calling `init` again resets Taichi: fields and simulations created before become
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import gc
 import inspect
+import io
 import os
 import weakref
 from dataclasses import dataclass
@@ -27,8 +29,8 @@ import taichi as ti
 from ..inputs import limits
 from ..inputs.validation import count
 
-ARCHS = {"cpu": "cpu", "cuda": "cuda", "vulkan": "vulkan", "gpu": "gpu"}
-PRECISIONS = {"f32": ti.f32, "f64": ti.f64}
+ARCHS = {name: name for name in limits.ARCH_NAMES}          # ti.<value>
+PRECISIONS = dict(zip(limits.PRECISION_NAMES, (ti.f32, ti.f64)))
 NUMPY_PRECISIONS = {"f32": np.float32, "f64": np.float64}
 
 
@@ -73,7 +75,11 @@ def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None,
     for user in list(_closed_by_init):    # dead ones too, until the cycle collector runs
         user.close()
     _closed_by_init.clear()
-    ti.init(**options)
+    if os.environ.get("ENABLE_TAICHI_HEADER_PRINT", "True").lower() in ("false", "0", "f"):
+        with contextlib.redirect_stdout(io.StringIO()):   # its "Starting on arch" line too
+            ti.init(**options)
+    else:
+        ti.init(**options)
     global _generation, _tree_count
     _generation += 1
     _tree_count = 0
