@@ -93,11 +93,11 @@ class Advice:
         """One sentence: what was chosen and why."""
         passing = sum(self.passes(r) for r in self.study.runs)
         runs = len(self.study.runs)
-        margin = (f" (with the reference's own estimated {self.margin:.1e})" if self.margin
-                  else "")
+        what = ("the observables' spread over perturbed starts"
+                if self.metric == "observable_error" else "the reference's own estimated error")
+        margin = f" (with {what}, {self.margin:.1e})" if self.margin else ""
         if self.choice is None:
-            extra = (f" + {self.margin:.1e}, the reference's own estimated error" if self.margin
-                     else "")
+            extra = f" + {self.margin:.1e}, {what}" if self.margin else ""
             closest = (f"; the closest is {describe(self.closest)} at {self.metric} "
                        f"{getattr(self.closest, self.metric):.2e}{extra}" if self.closest else "")
             needed = self.study.resolution_for(self.tolerance)
