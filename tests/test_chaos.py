@@ -149,15 +149,15 @@ def test_with_timings_is_the_median_and_its_spread():
 
 
 def test_costs_equal_within_the_noise_go_to_the_least_error(tmp_path, f64, monkeypatch):
-    """Every frame's step call is made to take 3 ms more (an injected delay, far more than the
-    string's own steps), so every candidate costs the same within the noise. The rule picks
-    the passing one of least error, not the one that the noise made cheapest; without the
-    rule any of them could win."""
+    """Every frame's step call is made to take 20 ms more (an injected delay, far more than
+    the string's own steps), so the candidates cost the same within the noise. The rule picks,
+    of the passing runs as cheap as the cheapest within the noise, the one of least error, not
+    the one that the noise made cheapest; without the rule any of them could win."""
     scene = scene_file(tmp_path, SWINGING_STRING)
     step = tc.Simulation.step
 
     def slowed(sim, n=1):
-        time.sleep(0.003)
+        time.sleep(0.02)
         return step(sim, n)
 
     monkeypatch.setattr(tc.Simulation, "step", slowed)
@@ -165,10 +165,12 @@ def test_costs_equal_within_the_noise_go_to_the_least_error(tmp_path, f64, monke
     advice = advisor.advise(scene, 1e-3, integrators=["rk4", "symplectic_euler"],
                             precisions=["f64"], dts=dts, repeats=3, progress=False)
     passing = [r for r in advice.study.runs if advice.passes(r)]
-    costs = [r.cost for r in passing]
-    report("passing runs' costs [s/s]", costs, "equal within the noise")
-    assert len(passing) >= 3 and max(costs) <= min(costs) * (1 + advisor.TIE)
-    assert advice.choice is min(passing, key=lambda r: r.max_error)
+    cheapest = min(passing, key=lambda r: r.cost)
+    tied = [r for r in passing if r.cost <= cheapest.cost * (1 + max(
+        [advisor.TIE] + [x for x in (r.cost_spread, cheapest.cost_spread) if math.isfinite(x)]))]
+    report("passing runs' costs [s/s]", [r.cost for r in passing], "equal within the noise")
+    assert len(tied) >= 2
+    assert advice.choice is min(tied, key=lambda r: r.max_error)
     assert math.isfinite(advice.choice.cost_spread)
     assert "least error among them" in advice.summary()
 
