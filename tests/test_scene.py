@@ -302,3 +302,46 @@ material = "denim"
     assert n == 58 and scene.frame_dt / n <= 7e-4 < scene.frame_dt / (n - 1)
     with pytest.raises(SceneError, match="either dt or substeps"):
         load_scene(write(tmp_path, text.replace("dt = 7e-4", "dt = 7e-4\nsubsteps = 3")))
+
+
+def test_errors_list_every_allowed_key_suggest_the_nearest_and_quote_values_whole(tmp_path):
+    """A misspelt key lists every key the table allows (also those read only in some cases:
+    fabric, hem) with the nearest; a misspelt preset gets the nearest preset; a long value is
+    summarised, never cut in the middle of its structure; presets take any letter case."""
+    named = GRID.replace('material = { preset = "cotton", hem_mass = 0.001, stretch = { k = 900.0, kd = 0.2 } }',
+                         'fabirc = "denim"')
+    with pytest.raises(SceneError) as err:
+        load_scene(write(tmp_path, named))
+    message = str(err.value)
+    assert "bodies[0].fabirc is not a known key (value 'denim') (did you mean 'fabric'?)" in message
+    allowed = message.split("allowed here: ")[1].split(", ")
+    assert {"fabric", "material", "hem", "warp", "pinned"} <= set(allowed)
+    with pytest.raises(SceneError, match=r"got 'demin' \(did you mean 'denim'\?\)"):
+        load_scene(write(tmp_path, named.replace('fabirc = "denim"', 'fabric = "demin"')))
+    assert load_scene(write(tmp_path, named.replace('fabirc = "denim"', 'fabric = "DeNiM"'))
+                      ).cloth.material == tc.Fabric.preset("denim")
+    assert load_scene(write(tmp_path, named.replace('fabirc = "denim"', 'material = "Cotton"'))
+                      ).cloth.material == tc.Material.preset("cotton")
+    long = named.replace('fabirc = "denim"', "fabirc = [" + ", ".join(["1.5"] * 60) + "]")
+    with pytest.raises(SceneError, match=r"\(value a list of 60 items, starting 1\.5\)"):
+        load_scene(write(tmp_path, long))
+
+
+def test_a_scene_in_centimetres_is_warned_about(tmp_path):
+    big = GRID.replace("size = [0.5, 0.4]", "size = [120.0, 90.0]")
+    assert big != GRID
+    with pytest.warns(UserWarning, match=r"150 m across; scene files are in metres"):
+        load_scene(write(tmp_path, big))
+    heard = []
+    load_scene(write(tmp_path, big), note=heard.append)
+    assert len(heard) == 1 and "centimetres" in heard[0]
+
+
+def test_the_api_takes_the_particle_names_scene_files_take():
+    mesh = tc.grid_mesh(4, 5)
+    by_name = tc.Cloth(mesh, tc.Material(), pinned=["top_left", "top_right", 7])
+    assert np.flatnonzero(by_name.pinned).tolist() == [7, 15, 19]
+    assert np.flatnonzero(tc.Cloth(mesh, tc.Material(), pinned="top").pinned).tolist() == [
+        15, 16, 17, 18, 19]
+    with pytest.raises(ValueError, match="pinned must be particle indices or names of"):
+        tc.Cloth(mesh, tc.Material(), pinned=["tpo"])

@@ -64,7 +64,7 @@ def test_hem_mass_goes_to_the_hem_never_to_pins_and_override_wins():
     np.testing.assert_array_equal(np.flatnonzero(body.hem), mesh.boundary_vertices())
     override = tc.Cloth(tc.grid_mesh(4, 5), tc.Material(hem_mass=0.05), particle_mass_override={2: 1.25})
     assert override.particle_mass[2] == 1.25 and override.hem[2]
-    with pytest.raises(ValueError, match="hem must be one of .* got 'hem'"):
+    with pytest.raises(ValueError, match="hem must be particle indices or names of .* got 'hem'"):
         tc.Cloth(tc.grid_mesh(4, 5), tc.Material(), hem="hem")
     with pytest.raises(ValueError, match=r"hem must be particle indices in \[0, 19\], got \[20\]"):
         tc.Cloth(tc.grid_mesh(4, 5), tc.Material(), hem=[20])

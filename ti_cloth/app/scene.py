@@ -9,6 +9,7 @@ from __future__ import annotations
 import inspect
 import math
 import re
+import warnings
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
@@ -269,6 +270,13 @@ def load_scene(path, note=None) -> Scene:
     if note is not None and cloth.spring_count > limits.LARGE_BODY:
         note(f"'{name}' has {cloth.particle_count:,} particles and {cloth.spring_count:,} "
              "springs: finding its stable step takes a while")
+    if scene.size > limits.CENTIMETRE_SIZE:       # said once: to `note`, else as a warning
+        message = (f"{path}: the bodies are {scene.size:.4g} m across; scene files are in "
+                   "metres (a size in centimetres? divide it by 100)")
+        if note is not None:
+            note(message)
+        else:
+            warnings.warn(message, stacklevel=2)
     check_runnable(scene, root)
     return scene
 

@@ -30,7 +30,7 @@ from ..contact.colliders.attachment import Attachment
 from ..contact.colliders.shapes import Collider
 from ..inputs import limits
 from ..inputs.limits import Range
-from ..inputs.scene_file import Table
+from ..inputs.scene_file import Table, quoted
 from ..physics.handles import Handle
 from ..physics.paths import INTERPOLATIONS, Keyframes, Oscillation
 
@@ -214,6 +214,7 @@ def read_body(table: Table, folder: Path, colliders=()) -> tuple[Body, tuple]:
         else:
             options["garment"] = _garment(table)
             mesh, names = options["garment"].mesh, garment_names(options["garment"])
+        table.allow("hem", "material", "fabric")
         warp = {}
         table.optional(warp, "warp", lambda k: "uv" if table.value(k) == "uv" else table.vector(k))
         hem = (_selection(table, "hem", mesh.vertex_count, mesh.named_vertices() | names,
@@ -335,7 +336,7 @@ def _altitude_springs(table: Table):
             return value
         if not isinstance(value, dict):
             table.fail(f"{table.path(key)} must be true, false or a table {{ k, kd }}, "
-                       f"got {value!r:.80}")
+                       f"got {quoted(value)}")
         return _springs(table.table(key), None)
     return read
 
@@ -353,11 +354,13 @@ def _material(owner: Table) -> Material | Fabric:
     if value is None:
         return Material()
     if isinstance(value, str):
-        if value not in PRESETS:
-            owner.bad("material", value, f"a table or one of the presets {sorted(PRESETS)}")
+        if value.lower() not in PRESETS:
+            owner.bad("material", value, f"a table or one of the presets {sorted(PRESETS)}",
+                      PRESETS)
         return Material.preset(value)
     table = Table(value, owner.path("material"), owner.source)
-    preset = table.string("preset", None, sorted(PRESETS)) if table.has("preset") else None
+    table.allow("preset", "density", "hem_mass", "stretch", "shear", "bend", "damping")
+    preset = _preset(table, PRESETS) if table.has("preset") else None
     base = Material.preset(preset) if preset else Material()
     changes = {}
     for key in ("density", "hem_mass"):
@@ -372,19 +375,30 @@ def _material(owner: Table) -> Material | Fabric:
     return table.build(lambda: Material(**{**base.__dict__, **changes}))
 
 
+def _preset(table: Table, presets) -> str:
+    """A table's `preset`: one of `presets`, in any letter case (returned in lower case)."""
+    value = table.value("preset")
+    if not (isinstance(value, str) and value.lower() in presets):
+        table.bad("preset", value, f"one of {sorted(presets)}", presets)
+    return value.lower()
+
+
 def _fabric(owner: Table) -> Fabric:
     """`fabric = "denim"`, or a [bodies.fabric] table: `preset` plus any of density [kg/m^2],
     stretch and bending (a number or [warp, weft]; N/m, N m), shear [N/m], poisson, damping
     [s], hem_mass [kg]."""
     value = owner.value("fabric")
     if isinstance(value, str):
-        if value not in FABRICS:
-            owner.bad("fabric", value, f"a table or one of the fabrics {sorted(FABRICS)}")
+        if value.lower() not in FABRICS:
+            owner.bad("fabric", value, f"a table or one of the fabrics {sorted(FABRICS)}",
+                      FABRICS)
         return Fabric.preset(value)
     if not isinstance(value, dict):
         owner.bad("fabric", value, f"a table or one of the fabrics {sorted(FABRICS)}")
     table = Table(value, owner.path("fabric"), owner.source)
-    preset = table.string("preset", None, sorted(FABRICS)) if table.has("preset") else None
+    table.allow("preset", "density", "shear", "poisson", "damping", "hem_mass", "stretch",
+                "bending")
+    preset = _preset(table, FABRICS) if table.has("preset") else None
     changes = {}
     for key, unit in (("density", "kg/m^2"), ("shear", "N/m"), ("poisson", ""),
                       ("damping", "s"), ("hem_mass", "kg")):

@@ -97,7 +97,9 @@ class Fabric:
 
     @classmethod
     def preset(cls, name: str, **overrides) -> "Fabric":
-        """A measured fabric (PRESETS); keyword arguments replace single fields."""
+        """A measured fabric (PRESETS, any letter case); keyword arguments replace single
+        fields."""
+        name = name.lower() if isinstance(name, str) else name
         require(isinstance(name, str) and name in PRESETS, "preset", name,
                 f"one of {sorted(PRESETS)}")
         known = {f.name for f in fields(cls)}

@@ -73,7 +73,8 @@ class Material:
 
     @classmethod
     def preset(cls, name: str, **overrides) -> "Material":
-        """A named material; keyword arguments replace single fields."""
+        """A named material (any letter case); keyword arguments replace single fields."""
+        name = name.lower() if isinstance(name, str) else name
         require(name in PRESETS, "preset", name, f"one of {sorted(PRESETS)}")
         return cls(**{**PRESETS[name], **overrides})
 

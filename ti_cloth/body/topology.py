@@ -185,7 +185,9 @@ class Cloth:
       hinge_rest_angle   (H,) dihedral angles of the rest mesh [rad]
     (all empty for a body of springs).
 
-    pinned: particle indices or an (N,) bool mask. springs: explicit springs (see module doc).
+    pinned: particle indices, an (N,) bool mask, or names of mesh.named_vertices() ("top",
+    "top_left", "boundary", ...: the names scene files take), alone or in a list with indices.
+    springs: explicit springs (see module doc).
     hem: the particles on the hem (Stuyck 4.2: the edge "folded double and stitched" carries
     material.hem_mass each): a name of mesh.named_vertices() ("boundary", a grid's "bottom",
     "left", ...), particle indices or an (N,) bool mask; default a grid's bottom edge, else
@@ -228,7 +230,7 @@ class Cloth:
         self.rest_position = _rest_positions(rest, mesh)
         r = self.rest_position
 
-        self.pinned = index_mask("pinned", pinned, n)
+        self.pinned = index_mask("pinned", named_particles("pinned", pinned, mesh), n)
         self.ghost = index_mask("ghost", () if ghost is None else ghost, n)
         self.hem = np.zeros(n, bool)
         if particle_mass is not None:
@@ -513,15 +515,29 @@ def _warn_if_nonmanifold(mesh: Mesh, fabric: bool) -> None:
                       stacklevel=3)
 
 
+def named_particles(field: str, value, mesh: Mesh):
+    """`value` with the names scene files take ("top", "top_left", "boundary", ...:
+    Mesh.named_vertices) replaced by their particles: a name, or a list of names and indices;
+    anything else as it is. ValueError naming the field and the names allowed."""
+    items = [value] if isinstance(value, str) else value
+    if not isinstance(items, (list, tuple)) or not any(isinstance(v, str) for v in items):
+        return value
+    names = mesh.named_vertices()
+    chosen = []
+    for item in items:
+        if isinstance(item, str):
+            require(item in names, field, item, f"particle indices or names of {list(names)}")
+            chosen += names[item].tolist()
+        else:
+            chosen.append(item)
+    return chosen
+
+
 def _hem_mask(hem, mesh: Mesh) -> np.ndarray:
     """The hem particles of Cloth(hem=...) as a mask (see Cloth)."""
-    names = mesh.named_vertices()
     if hem is None:
         hem = "bottom" if mesh.grid_shape is not None else "boundary"
-    if isinstance(hem, str):
-        require(hem in names, "hem", hem, f"one of {list(names)} or particle indices")
-        hem = names[hem]
-    return index_mask("hem", hem, mesh.vertex_count)
+    return index_mask("hem", named_particles("hem", hem, mesh), mesh.vertex_count)
 
 
 def _explicit_springs(springs, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -170,6 +170,8 @@ def spring_equivalents(body) -> int:
             + FACE_SPRINGS * body.face_count + HINGE_SPRINGS * body.hinge_count)
 
 
+CENTIMETRE_SIZE = 20.0   # m: bodies wider than this in a scene file are warned about (cm?)
+
 # allowed values of the choices every entry point offers (the command line reads them without
 # importing Taichi)
 ARCH_NAMES = ("cpu", "cuda", "gpu", "vulkan")

@@ -7,6 +7,7 @@ error naming the key, its value and the keys allowed there, never a silently ign
 
 from __future__ import annotations
 
+import difflib
 import math
 from typing import Any
 
@@ -17,6 +18,31 @@ MISSING = object()
 
 class SceneError(ValueError):
     """A scene file that cannot be run: names the file, the key, the value and what is allowed."""
+
+
+QUOTED = 80       # a value's repr longer than this is summarised in a message
+
+
+def quoted(value) -> str:
+    """`value` as a message shows it: its repr whole when short, else a summary that says
+    what it is (never a repr cut in the middle of a structure)."""
+    text = repr(value)
+    if len(text) <= QUOTED:
+        return text
+    if isinstance(value, str):
+        return f"{value[:40]!r}... ({len(value)} characters)"
+    if isinstance(value, (list, tuple)):
+        return f"a list of {len(value)} items, starting {quoted(value[0])}"
+    if isinstance(value, dict):
+        return f"a table of keys {sorted(value)[:8]}"
+    return text[:QUOTED - 3] + "..."
+
+
+def did_you_mean(word: str, allowed) -> str:
+    """ " (did you mean 'x'?)" for the allowed word nearest to `word`, if any is near."""
+    near = difflib.get_close_matches(str(word).lower(), [str(a) for a in allowed], n=1,
+                                     cutoff=0.6)
+    return f" (did you mean {near[0]!r}?)" if near else ""
 
 
 def load_toml(path) -> dict:
@@ -45,7 +71,7 @@ class Table:
     def __init__(self, data, where: str, source: str):
         self.where, self.source = where, source
         if not isinstance(data, dict):
-            self.fail(f"{where} must be a table, got {data!r:.60}")
+            self.fail(f"{where} must be a table, got {quoted(data)}")
         self.data, self.read, self.known = data, set(), set()
 
     def fail(self, message: str):
@@ -65,9 +91,16 @@ class Table:
             self.fail(f"{self.path(key)} is required")
         return default
 
-    def bad(self, key: str, value, allowed: str):
-        """Raise the scene file's error for `key`: its path, what is allowed, the value."""
-        self.fail(f"{self.path(key)} must be {allowed}, got {value!r:.80}")
+    def bad(self, key: str, value, allowed: str, choices=()):
+        """Raise the scene file's error for `key`: its path, what is allowed, the value (and
+        the nearest of `choices` to it)."""
+        hint = did_you_mean(value, choices) if isinstance(value, str) else ""
+        self.fail(f"{self.path(key)} must be {allowed}, got {quoted(value)}{hint}")
+
+    def allow(self, *keys: str) -> None:
+        """Keys this table may hold that its reader reads only in some cases (the message for
+        an unknown key lists every allowed one, not only those read so far)."""
+        self.known.update(keys)
 
     def number(self, key: str, default=MISSING, minimum: float | None = None, *,
                strict: bool = False, unit: str = "", within: Range | None = None) -> float:
@@ -100,7 +133,8 @@ class Table:
     def string(self, key: str, default=MISSING, choices=None) -> str:
         value = self._get(key, default)
         if not isinstance(value, str) or (choices is not None and value not in choices):
-            self.bad(key, value, "a string" if choices is None else f"one of {list(choices)}")
+            self.bad(key, value, "a string" if choices is None else f"one of {list(choices)}",
+                     choices or ())
         return value
 
     def boolean(self, key: str, default=MISSING) -> bool:
@@ -159,9 +193,9 @@ class Table:
         unknown = [k for k in self.data if k not in self.read]
         if unknown:
             key = unknown[0]
-            allowed = ", ".join(sorted(self.read | self.known | set(also))) or "none"
-            self.fail(f"{self.path(key)} is not a known key (value {self.data[key]!r:.60}); "
-                      f"allowed here: {allowed}")
+            names = sorted(self.read | self.known | set(also))
+            self.fail(f"{self.path(key)} is not a known key (value {quoted(self.data[key])})"
+                      f"{did_you_mean(key, names)}; allowed here: {', '.join(names) or 'none'}")
 
     def build(self, make, *args, **kwargs):
         """Call a constructor, reporting its ValueError under this table's path."""
