@@ -90,6 +90,20 @@ def test_run_exports_the_formats_of_the_flag_or_the_scene(scene, tmp_path, capsy
     assert 'output.formats must be a list of "png" (always)' in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("command", [["run"], ["study"], ["advise", "--tolerance", "0.1"],
+                                     ["view"]])
+@pytest.mark.parametrize("where", ["file", "under a file"])
+def test_an_out_that_is_a_file_exits_74_naming_it(scene, tmp_path, capsys, command, where):
+    """--out that is a file, or lies under one, is refused before anything runs (exit 74,
+    sysexits' EX_IOERR), naming the file, for every command that writes."""
+    blocker = tmp_path / "taken"
+    blocker.write_text("not a folder")
+    out = blocker if where == "file" else blocker / "frames"
+    assert cli.main([command[0], str(scene), "--out", str(out), *command[1:]]) == 74
+    assert f"{blocker} is a file, not a folder" in capsys.readouterr().err
+    assert blocker.read_text() == "not a folder"
+
+
 def test_bad_scene_exits_2_naming_the_key(tmp_path, capsys):
     bad = tmp_path / "bad.toml"
     bad.write_text(SCENE.replace("rows = 5", "rows = 5\nrowz = 5"))
@@ -99,7 +113,11 @@ def test_bad_scene_exits_2_naming_the_key(tmp_path, capsys):
 
 @pytest.mark.parametrize("argv", [["run"], ["run", "x.toml", "--frames", "0"], ["run", "x.toml", "--bogus"],
                                   ["run", "x.toml", "--arch", "tpu"], ["frobnicate"],
-                                  ["run", "x.toml", "--export", "obj,fbx"]])
+                                  ["run", "x.toml", "--export", "obj,fbx"],
+                                  ["study", "x.toml", "--dt", "0"],
+                                  ["study", "x.toml", "--dt", "nan"],
+                                  ["study", "x.toml", "--duration", "inf"],
+                                  ["advise", "x.toml", "--tolerance", "1e-3", "--window", "-1"]])
 def test_arguments_are_parsed_strictly(argv):
     with pytest.raises(SystemExit) as err:
         cli.main(argv)

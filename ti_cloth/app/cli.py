@@ -56,6 +56,27 @@ def _fraction(text: str) -> float:
 _seconds = _fraction
 
 
+def file_in_the_way(folder) -> Path | None:
+    """The file standing where the output `folder` or one of its parents must be a folder,
+    or None (the folder exists, or can be made)."""
+    if folder is None:
+        return None
+    for place in (Path(folder), *Path(folder).parents):
+        if place.exists():
+            return None if place.is_dir() else place
+    return None
+
+
+def refuse_output(folder) -> int | None:
+    """OUTPUT_FAILED, said on stderr, when a file stands where `folder` must be (--out)."""
+    blocked = file_in_the_way(folder)
+    if blocked is None:
+        return None
+    print(f"error: --out {folder}: {blocked} is a file, not a folder; give a folder",
+          file=sys.stderr)
+    return OUTPUT_FAILED
+
+
 def _sweep_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     where = parser.add_mutually_exclusive_group()
@@ -341,14 +362,15 @@ def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     quiet_taichi(args.verbose)
+    refused = refuse_output(getattr(args, "out", None))
+    if refused is not None:
+        return refused
     if args.command == "info":
         return info()
     if args.command == "view":
         return view(args.scene, out=args.out, width=args.width, height=args.height,
                     arch=args.arch, record=args.record, mp4=args.mp4)
     if args.command == "study":
-        if args.duration is not None and not args.duration > 0:
-            parser.error(f"--duration must be > 0, got {args.duration}")
         return study(args.scene, out=args.out, integrators=args.integrators, dts=args.dts,
                      precisions=args.precisions, iterations=args.iterations, duration=args.duration,
                      arch=args.arch, plot=not args.no_plot, progress=not args.no_progress,
@@ -404,14 +426,15 @@ def build_parser() -> argparse.ArgumentParser:
     study_parser.add_argument("--out", type=Path, help="output folder (default renders/study_<name>)")
     study_parser.add_argument("--integrators", nargs="+", metavar="NAME",
                               help="integrators to sweep (default: all)")
-    study_parser.add_argument("--dt", nargs="+", type=float, dest="dts", metavar="DT",
+    study_parser.add_argument("--dt", nargs="+", type=_seconds, dest="dts", metavar="DT",
                               help="steps [s], each frame_dt / an integer (default: frame_dt / 2^k "
                                    "down to half the smallest stable step)")
     study_parser.add_argument("--precisions", nargs="+", choices=list(limits.PRECISION_NAMES),
                               default=["f64", "f32"])
     study_parser.add_argument("--iterations", nargs="+", type=_positive, metavar="N",
                               help="pbd/xpbd passes per step to sweep (default 4 16)")
-    study_parser.add_argument("--duration", type=float, help="simulated seconds (default: the scene's)")
+    study_parser.add_argument("--duration", type=_seconds,
+                              help="simulated seconds (default: the scene's)")
     study_parser.add_argument("--arch", choices=list(limits.ARCH_NAMES), default="cpu")
     study_parser.add_argument("--no-plot", action="store_true", help="skip study.png (no matplotlib)")
     _resolution_argument(study_parser)
@@ -470,6 +493,9 @@ def demo_main(scene_path, argv=None, description: str | None = None) -> list[Pat
     _run_arguments(parser)
     args = parser.parse_args(argv)
     quiet_taichi(args.verbose)
+    refused = refuse_output(args.out_dir)
+    if refused is not None:
+        raise SystemExit(refused)
     code, frames = run(scene_path, out=args.out_dir, frames=args.frames, arch=args.arch,
                        precision=args.precision, progress=not args.no_progress, test=args.test,
                        mp4=args.mp4 or None, export=args.export, resume=args.resume,
