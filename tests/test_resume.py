@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import ti_cloth as tc
 from ti_cloth.app import cli
@@ -237,3 +239,59 @@ def test_a_run_killed_with_sigkill_and_resumed_writes_the_same_bytes(tmp_path, c
     err = capsys.readouterr().err
     assert str(state) in err and "damaged" in err and "without --resume" in err
     assert "Traceback" not in err
+
+
+def _corrupted(saved: Path, target: Path, kind: str, k: int) -> None:
+    """`saved` rewritten to `target` with one corruption of `kind` (k picks where)."""
+    with np.load(saved, allow_pickle=False) as data:
+        arrays = {key: data[key] for key in data.files}
+    header = json.loads(str(arrays["header"]))
+    position = arrays["state.particle_position"]
+    names = sorted(key for key in arrays if key != "header")
+    if kind == "nan":
+        position[k % len(position), k % 3] = np.nan
+    elif kind == "far":
+        position[k % len(position)] = 1e30
+    elif kind == "missing":
+        del arrays[names[k % len(names)]]
+    elif kind == "length":
+        arrays["state.particle_velocity"] = arrays["state.particle_velocity"][:-1 - k % 3]
+    elif kind == "dtype":
+        arrays["state.particle_velocity"] = arrays["state.particle_velocity"].astype(np.float32)
+    elif kind == "steps":
+        header["step_count"] = [-5, "12", 2**40, None][k % 4]
+    elif kind == "header":
+        arrays["header"] = np.array(["[1, 2]", "not json", "{\"format\": "][k % 3])
+    if kind != "header":
+        arrays["header"] = np.array(json.dumps(header))
+    if kind == "forged":
+        del arrays["state.spring_force"]          # written below, forged
+    with open(target, "wb") as file:
+        np.savez(file, **arrays)
+    if kind == "forged":          # an .npy header claiming a huge array over a few bytes
+        with zipfile.ZipFile(target, "a") as archive:
+            head = "{'descr': '<f8', 'fortran_order': False, 'shape': (100000, 100000, 3), }"
+            head = head.ljust(118) + "\n"
+            archive.writestr("state.spring_force.npy",
+                             b"\x93NUMPY\x01\x00" + len(head).to_bytes(2, "little")
+                             + head.encode() + b"\0" * 16)
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(kind=st.sampled_from(["nan", "far", "missing", "length", "dtype", "steps", "header",
+                             "forged"]),
+       k=st.integers(0, 1000))
+def test_a_corrupted_saved_state_is_refused_naming_what_is_wrong(f64, tmp_path_factory, kind, k):
+    """Every corruption of a state whose fingerprint matches (non-finite or far positions, a
+    missing array, a wrong length or dtype, a bad step count or header, an .npy header claiming
+    100 GB) is a StateMismatch before anything is loaded: the simulation keeps its state."""
+    folder = tmp_path_factory.mktemp("corrupt")
+    cloth = tc.Cloth(tc.grid_mesh(4, 4, size=(0.3, 0.3)), tc.Material(), pinned=[12, 15])
+    sim = tc.Simulation(cloth, integrator="verlet", dt=1e-3)
+    sim.step(5)
+    saved = sim.save_state(folder / "good.npz")
+    before = sim.positions()
+    _corrupted(saved, folder / "bad.npz", kind, k)
+    with pytest.raises(StateMismatch):
+        sim.load_state(folder / "bad.npz")
+    np.testing.assert_array_equal(sim.positions(), before)

@@ -99,6 +99,7 @@ def read(path, fingerprint_: str) -> tuple[dict, dict[str, np.ndarray]]:
     if not path.is_file():
         raise FileNotFoundError(f"saved state not found: {path}")
     try:
+        _check_sizes(path)
         with np.load(path, allow_pickle=False) as data:
             header = json.loads(str(data["header"]))
             arrays = {key: data[key] for key in data.files if key != "header"}
@@ -106,6 +107,8 @@ def read(path, fingerprint_: str) -> tuple[dict, dict[str, np.ndarray]]:
         raise StateMismatch(f"{path} is damaged or not a ti_cloth saved state (a copy that "
                             f"stopped half-way, a full disk? {type(err).__name__}: {err})"
                             ) from None
+    if not isinstance(header, dict):
+        raise StateMismatch(f"{path}: its header is not a table of values: {header!r:.80}")
     if header.get("format") != FORMAT:
         raise StateMismatch(f"{path} holds a state of format {header.get('format')!r}; this "
                             f"ti_cloth reads format {FORMAT} only: run the simulation again")
@@ -115,3 +118,43 @@ def read(path, fingerprint_: str) -> tuple[dict, dict[str, np.ndarray]]:
             f"{header.get('fingerprint')}, this one {fingerprint_}): its bodies, integrator, "
             "step, forces, handles, colliders or precision differ; run it from the start")
     return header, arrays
+
+
+def _check_sizes(path: Path) -> None:
+    """Read every array's .npy header before its data: ValueError for an array whose header
+    claims more bytes than the file holds for it (a damaged or forged header would otherwise
+    have numpy allocate what it claims: 179 GiB from a 2 KB file)."""
+    with zipfile.ZipFile(path) as archive:
+        for info in archive.infolist():
+            with archive.open(info) as member:
+                version = np.lib.format.read_magic(member)
+                shape, _, dtype = (np.lib.format.read_array_header_1_0(member) if version == (1, 0)
+                                   else np.lib.format.read_array_header_2_0(member))
+                claimed = int(np.prod(shape, dtype=object)) * dtype.itemsize
+                if claimed > info.file_size:
+                    raise ValueError(f"array {info.filename!r} claims shape {shape} of "
+                                     f"{dtype} ({claimed:,} bytes) but holds {info.file_size:,}")
+
+
+def check_arrays(path, arrays: dict, expected: dict, limit: float) -> None:
+    """StateMismatch naming the array unless `arrays` holds every array of `expected`
+    ({name: an array of the shape and dtype it must have}) with that shape and dtype, and
+    only finite values, coordinates within `limit` [m] for positions."""
+    missing = sorted(set(expected) - set(arrays))
+    if missing:
+        raise StateMismatch(f"{path}: arrays missing: {missing}; it is damaged: run it again")
+    for name, like in expected.items():
+        array = arrays[name]
+        if array.shape != like.shape or array.dtype != like.dtype:
+            raise StateMismatch(f"{path}: array {name!r} is {array.dtype}{list(array.shape)}, "
+                                f"this simulation's is {like.dtype}{list(like.shape)}")
+        if np.issubdtype(array.dtype, np.floating):
+            bad = np.argwhere(~np.isfinite(array))
+            if len(bad):
+                raise StateMismatch(f"{path}: array {name!r} holds non-finite values (at "
+                                    f"{tuple(int(i) for i in bad[0])}); it is damaged: run it "
+                                    "again")
+            if "position" in name and array.size and np.abs(array).max() > limit:
+                raise StateMismatch(f"{path}: array {name!r} holds a coordinate of "
+                                    f"{np.abs(array).max():.3g} m, beyond the simulation's "
+                                    f"position limit {limit:g} m")

@@ -27,7 +27,7 @@ from .contact.self_collision import (
     warn_if_thick,
 )
 from .energies.isometric import is_flat
-from .errors import CrushedContact, SimulationDiverged, StaleSimulation
+from .errors import CrushedContact, SimulationDiverged, StaleSimulation, StateMismatch
 from .inputs import limits
 from .inputs.validation import as_array, in_range, integer, require
 from .integrators import INTEGRATORS, make_integrator
@@ -249,6 +249,13 @@ class Simulation:
         file of another state format or from a different simulation (fingerprint)."""
         self._check_runtime()
         header, arrays = saved_state.read(path, self.fingerprint())
+        expected = {f"state.{k}": v for k, v in self.state.saved().items()}
+        saved_state.check_arrays(path, arrays, expected, float(self.state.limit))
+        steps = header.get("step_count")
+        if not (isinstance(steps, int) and not isinstance(steps, bool)
+                and 0 <= steps <= limits.STEPS.high):
+            raise StateMismatch(f"{path}: its step_count {steps!r} is not a step count "
+                                f"{limits.STEPS.text()}")
         self.state.restore(_prefixed(arrays, "state."))
         if self.self_collision is not None:
             self.self_collision.restore(_prefixed(arrays, "self_contact."))
