@@ -190,7 +190,7 @@ GARMENT = {
     "scene": {"name": "fuzz_garment"},
     "simulation": {"integrator": "xpbd", "fps": 30, "duration": 1.0, "sewing": {"speed": 0.5}},
     "bodies": [{"type": "garment", "material": {"density": 0.2}, "seams": [[0, 1, 1, 3]],
-                "warp": "uv", "pinned": ["panel1_edge2"],
+                "pinned": ["panel1_edge2"],
                 "panels": [{"outline": SQUARE, "edge_length": 0.1, "wrap": 0.3, "flare": 0.1,
                             "translate": [0, 0.5, 0]},
                            {"outline": SQUARE, "edge_length": 0.1, "rotate": [0, 0.1, 0],

@@ -345,3 +345,34 @@ def test_the_api_takes_the_particle_names_scene_files_take():
         15, 16, 17, 18, 19]
     with pytest.raises(ValueError, match="pinned must be particle indices or names of"):
         tc.Cloth(mesh, tc.Material(), pinned=["tpo"])
+
+
+def test_combinations_the_api_refuses_are_refused_by_the_scene_reader(tmp_path):
+    """A Fabric stepped by pbd, a warp on a body of springs, a warp of no finite length: each
+    a SceneError naming the key, from the reader (before a Simulation is built); a warp along
+    a flat sheet's normal is warned about."""
+    fabric = GRID.replace('material = { preset = "cotton", hem_mass = 0.001, stretch = { k = 900.0, kd = 0.2 } }',
+                          'fabric = "denim"')
+    assert fabric != GRID
+    pbd = fabric.replace("[simulation]", '[simulation]\nintegrator = "pbd"')
+    with pytest.raises(SceneError, match=r"simulation\.integrator = 'pbd' cannot step a body "
+                                         r"made of a fabric"):
+        load_scene(write(tmp_path, pbd))
+    springs = GRID.replace('plane = "xy"', 'plane = "xy"\nwarp = [1, 0, 0]')
+    with pytest.raises(SceneError, match=r"bodies\[0\]: warp must be None for a body of springs"):
+        load_scene(write(tmp_path, springs))
+    huge = fabric.replace('plane = "xy"', 'plane = "xy"\nwarp = [1e300, 1e300, 0]')
+    with pytest.raises(SceneError, match=r"warp must be a non-zero direction of finite length"):
+        load_scene(write(tmp_path, huge))
+    normal = fabric.replace('plane = "xy"', 'plane = "xy"\nwarp = [0, 0, 1]')
+    with pytest.warns(UserWarning, match=r"warp \[0\.0, 0\.0, 1\.0\] is along the normal of"):
+        load_scene(write(tmp_path, normal))
+
+
+def test_frames_beyond_the_step_count_are_refused_before_taichi(tmp_path, capsys):
+    from ti_cloth.app import cli
+
+    path = write(tmp_path, GRID)
+    assert cli.main(["run", str(path), "--frames", str(10 ** 12), "--no-progress",
+                     "--out", str(tmp_path / "o")]) == 2
+    assert "more than the 2_147_483_646 a simulation can count" in capsys.readouterr().err

@@ -135,6 +135,12 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
 
                 scene, why = resolve(scene, out or output.folder, arch=arch, progress=progress)
                 print(f"integrator auto: {why}", file=sys.stderr)
+            if frames is not None and not scene.automatic:
+                steps = frames * scene.resolved_substeps()
+                if steps > limits.STEPS.high:
+                    raise SceneError(f"--frames {frames:_}: {steps:_} steps, more than the "
+                                     f"{limits.STEPS.high:_} a simulation can count "
+                                     f"({limits.FRAMES.high:_} frames at most)")
             work = scene.work(frames)
             if work.seconds > LONG_RUN_SECONDS:
                 print(f"note: '{scene.name}' is a long run: {work.describe()}", file=sys.stderr)

@@ -331,6 +331,12 @@ def check_runnable(scene: Scene, root: Table) -> None:
     if scene.wind is not None and scene.cloth.mesh.triangle_count == 0:
         root.fail("forces.wind: wind acts on triangles, and these bodies have none (strings and "
                   "hair: use forces.drag)")
+    if (scene.cloth.fabric and not scene.automatic
+            and not getattr(scene.integrator, "runs_fabric", True)):
+        able = sorted(name for name, cls in INTEGRATORS.items() if cls.runs_fabric)
+        root.fail(f"simulation.integrator = {scene.integrator.name!r} cannot step a body made "
+                  f"of a fabric (its springs only); use one of {able} (xpbd is pbd with the "
+                  "fabric's moduli)")
     if scene.sewing is not None and not len(scene.cloth.seam_indices):
         root.fail("simulation.sewing: no body has seams to sew (a garment body's `seams`)")
     substeps = 1 if scene.automatic else scene.resolved_substeps()   # "auto": the advisor's

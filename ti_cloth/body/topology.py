@@ -223,6 +223,8 @@ class Cloth:
                 springs, "None for a Fabric body (its forces come from its triangles)")
         require(not fabric or mesh.triangle_count > 0, "mesh.triangles", mesh.triangles.shape,
                 "at least one triangle for a Fabric body")
+        require(warp is None or fabric, "warp", warp,
+                "None for a body of springs (a Material has no grain; a Fabric's warp sets it)")
         self.mesh = mesh
         self.material = material
         n = mesh.vertex_count
@@ -300,8 +302,9 @@ class Cloth:
                               else np.full(len(self.mesh.triangles), -1))
         self.face_indices = triangles
         rest = Mesh(x, self.mesh.triangles, grid_shape=self.mesh.grid_shape, uvs=self.mesh.uvs)
-        self.face_gradient, self.face_area = material_frames(
-            x, triangles, warp_directions(rest, warp if fabric else None))
+        direction = warp_directions(rest, warp if fabric else None)
+        _warn_if_warp_is_normal(direction, x, triangles, warp)
+        self.face_gradient, self.face_area = material_frames(x, triangles, direction)
         self.face_moduli = np.tile(moduli, (count, 1))
         self.face_damping = np.full(count, damping)
         (self.hinge_indices, self.hinge_faces, self.face_hinge,
@@ -586,6 +589,23 @@ def _edge_springs(triangles: np.ndarray, pairs: np.ndarray, n: int) -> np.ndarra
     return np.where(keys[order][pos] == wanted, order[pos], -1).reshape(-1, 3)
 
 
+def _warn_if_warp_is_normal(direction, x: np.ndarray, triangles: np.ndarray, warp) -> None:
+    """Warn when a given warp direction is (nearly) normal to most triangles, whose grain
+    then falls back to their first edge (membrane.material_frames): on a flat sheet, a warp
+    along the sheet's normal is a mistake, not a grain."""
+    if warp is None or isinstance(warp, str) or not len(triangles):
+        return
+    p = x[triangles]
+    normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    along = np.abs(normal @ direction) / np.linalg.norm(direction)
+    count = int(np.sum(along > 1.0 - 1e-9))
+    if count > len(triangles) // 2:
+        warnings.warn(f"warp {list(map(float, direction))} is along the normal of {count} of "
+                      f"{len(triangles)} triangles: their grain falls back to their first edge; "
+                      "give a direction in the cloth's plane", stacklevel=4)
+
+
 def warp_directions(mesh: Mesh, warp) -> np.ndarray:
     """The warp direction of Cloth(warp=...): a given (3,) direction, or "uv": in each triangle
     the direction in which its texture coordinate u grows at constant v (d x / d u, from the
@@ -597,7 +617,9 @@ def warp_directions(mesh: Mesh, warp) -> np.ndarray:
         return uv_warp(mesh)
     if warp is not None:
         direction = as_array("warp", warp, np.float64, (3,))
-        require(np.linalg.norm(direction) > 0, "warp", direction.tolist(), "a non-zero direction")
+        length = float(np.linalg.norm(direction))
+        require(0 < length < np.inf, "warp", direction.tolist(),
+                "a non-zero direction of finite length")
         return direction
     if mesh.grid_shape is not None:
         return mesh.vertices[1] - mesh.vertices[0]

@@ -48,11 +48,25 @@ _generation = 0   # bumped by every init: trees of an earlier runtime must not b
 _tree_count = 0   # trees of this runtime FieldGroup allocated and has not destroyed
 
 
+def gpu_arch() -> str:
+    """What arch="gpu" starts: "cuda" where the CUDA driver library is installed, else
+    "vulkan" where the Vulkan loader is, else "cpu". Chosen here rather than by Taichi's own
+    probe, which also tries OpenGL and crashed the process (a segmentation fault) on a
+    machine with OpenGL libraries and no GPU."""
+    import ctypes.util
+
+    for arch, library in (("cuda", "cuda"), ("vulkan", "vulkan")):
+        if ctypes.util.find_library(library):
+            return arch
+    return "cpu"
+
+
 def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None,
          debug: bool = False) -> BackendConfig:
     """Start (or restart) the Taichi runtime.
 
-    arch: "cpu" | "cuda" | "vulkan" | "gpu" (first GPU backend found, else CPU).
+    arch: "cpu" | "cuda" | "vulkan" | "gpu" (the first GPU backend found, else CPU:
+        gpu_arch).
     precision: "f32" | "f64", the float type of every particle and spring field.
     threads: CPU worker threads (None: all cores).
     debug: Taichi's bounds-checking debug mode (slow).
@@ -67,6 +81,8 @@ def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None,
     # cfg_optimization off: Taichi's control-flow-graph passes (store forwarding, dead
     # stores) took most of the compile of big kernels (a Fabric's implicit Euler step 16.5 s,
     # 4.1 s without) for no measured change in steps/s (docs/performance.md)
+    if arch == "gpu":
+        arch = gpu_arch()
     options = dict(arch=getattr(ti, ARCHS[arch]), default_fp=PRECISIONS[precision],
                    default_ip=ti.i32, random_seed=0, debug=debug, log_level=ti.WARN,
                    fast_math=False, cfg_optimization=False)
@@ -93,6 +109,8 @@ def ensure(arch: str = "cpu", precision: str = "f32", threads: int | None = None
     count: a runtime of this arch and precision is kept with the count it was given (a
     caller's ti_cloth.init(threads=...) before run_scene or a demo holds), and a new one gets
     Taichi's default."""
+    if arch == "gpu":
+        arch = gpu_arch()
     if (_config is not None and _config.arch == arch and _config.precision == precision
             and threads in (None, _config.threads)):
         return _config
