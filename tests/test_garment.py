@@ -284,3 +284,18 @@ def test_a_sewn_garment_exports_as_one_body(f64, tmp_path):
     np.testing.assert_array_equal(read.cells_dict["triangle"], garment.mesh.triangles)
     header, cached = read_pc2(tmp_path / "garment_body0.pc2")
     assert header["points"] == garment.mesh.vertex_count and header["samples"] == 3
+
+
+@pytest.mark.parametrize("outline", [[(0.0, 0.0), (1.0, 0.0), (2.0, 0.0)],
+                                     [(0.0, 0.0), (1.0, 0.0), (1.0, 1e-9), (0.0, 1e-9)]])
+def test_an_outline_with_no_width_is_refused_naming_it(outline):
+    """Collinear points, or a sliver thinner than half an edge length, are refused before
+    triangulation (they were a Qhull precision error's traceback)."""
+    with pytest.raises(ValueError, match="outline must be a polygon at least half an "
+                                         "edge_length"):
+        tc.panel(outline, edge_length=0.1)
+
+
+def test_a_disc_too_big_for_the_machine_is_refused_before_it_is_built():
+    with pytest.raises(ValueError, match=r"rings = 10000 makes 300,030,001 particles"):
+        tc.disc_mesh(0.3, rings=10_000)

@@ -243,6 +243,7 @@ def disc_mesh(radius: float = 0.5, rings: int = 8, centre=(0.0, 0.0, 0.0)) -> Me
     numbered after ring k - 1's, from the +x axis towards -z."""
     radius = in_range("radius", radius, limits.LENGTH)
     rings = count("rings", rings, limits.GRID_SIDE)
+    limits.check_memory("rings", rings, 1 + 3 * rings * (rings + 1), 6 * rings * rings)
     centre = as_array("centre", centre, np.float64, (3,))
     points, triangles = [np.zeros(2)], []
     inner = np.array([0])

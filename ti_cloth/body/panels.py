@@ -108,6 +108,10 @@ def panel(outline, edge_length: float) -> Panel:
     require(crossing is None, "outline", outline.tolist(),
             f"a polygon that does not cross itself (edges {crossing} cross)")
     area = 0.5 * np.sum(outline[:, 0] * ends[:, 1] - ends[:, 0] * outline[:, 1])
+    narrowest = 2 * abs(area) / lengths.max()        # the outline's height over its longest edge
+    require(narrowest >= 0.5 * h, "outline", outline.tolist(),
+            f"a polygon at least half an edge_length ({0.5 * h:.3g} m) wide: this one is "
+            f"{narrowest:.3g} m across its longest edge (its points are (nearly) in a line)")
     estimate = abs(area) / (0.43 * h * h) + lengths.sum() / h
     require(estimate <= MAX_PANEL_POINTS, "edge_length", h,
             f"at least {np.sqrt(abs(area) / (0.43 * MAX_PANEL_POINTS)):.3g} m for this outline "
