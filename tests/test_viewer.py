@@ -252,6 +252,17 @@ def test_without_a_display_view_exits_2_naming_display(scene_file, monkeypatch, 
     assert "DISPLAY" in err and "Traceback" not in err
 
 
+def test_a_display_whose_server_does_not_answer_exits_2_naming_it(scene_file, monkeypatch,
+                                                                   capsys):
+    """DISPLAY set to a display no X server serves (was Taichi's RuntimeError traceback)."""
+    from ti_cloth.app import cli
+    free = next(n for n in range(90, 200) if not os.path.exists(f"/tmp/.X11-unix/X{n}"))
+    monkeypatch.setenv("DISPLAY", f":{free}")
+    assert cli.main(["view", str(scene_file)]) == 2
+    err = capsys.readouterr().err
+    assert f"DISPLAY=:{free} names an X server that does not answer" in err
+
+
 def _tools():
     missing = [name for name in ("Xvfb", "xdotool") if shutil.which(name) is None]
     return missing

@@ -8,6 +8,8 @@ closes) into the folder.
 from __future__ import annotations
 
 import os
+import socket
+import sys
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -28,10 +30,41 @@ class NoDisplay(RuntimeError):
 
 
 def require_display() -> None:
-    """NoDisplay, naming DISPLAY, when there is no X11 display to open a window on."""
-    if not os.environ.get("DISPLAY"):
+    """NoDisplay, naming DISPLAY, when there is no X11 display to open a window on: where X11
+    is the window system (Linux and the BSDs; ti.GUI opens native windows on Windows and
+    macOS), DISPLAY unset, or naming a server that does not answer."""
+    if sys.platform in ("win32", "darwin"):
+        return
+    display = os.environ.get("DISPLAY")
+    if not display:
         raise NoDisplay("no display to open a window on: DISPLAY is not set (run under X11, "
                         "or headless with Xvfb: xvfb-run ti-cloth view scene.toml)")
+    if not _x_server_answers(display):
+        raise NoDisplay(f"DISPLAY={display} names an X server that does not answer (start it, "
+                        "or run headless with Xvfb: xvfb-run ti-cloth view scene.toml)")
+
+
+def _x_server_answers(display: str) -> bool:
+    """Whether the X server of `display` ("[host]:number[.screen]") takes a connection: its
+    socket /tmp/.X11-unix/X<number> for a local one, TCP port 6000 + number for a remote one
+    (a display this cannot parse is left to the window to try)."""
+    host, _, rest = display.rpartition(":")
+    try:
+        number = int(rest.split(".")[0])
+    except ValueError:
+        return True
+    if host in ("", "unix", "localhost") and os.path.exists(f"/tmp/.X11-unix/X{number}"):
+        return True
+    try:
+        if host in ("", "unix"):
+            with socket.socket(socket.AF_UNIX) as local:
+                local.settimeout(1.0)
+                local.connect(f"/tmp/.X11-unix/X{number}")
+            return True
+        with socket.create_connection((host, 6000 + number), timeout=1.0):
+            return True
+    except OSError:
+        return False
 
 
 def viewer_for(subject, *, width: int = 960, height: int = 540, folder=None) -> Viewer:
