@@ -32,6 +32,18 @@ def scene_path(tmp_path):
     return path
 
 
+def assert_the_rule_picked(pick, passing):
+    """The advisor's rule, checked from the rows: the pick passes, costs no more than the
+    cheapest passing run within the noise (TIE, or either's timing spread), and has the least
+    max error of the passing runs that cheap."""
+    cheapest = min(passing, key=lambda r: r.cost)
+    noise = max([advisor.TIE] + [r.cost_spread for r in (pick, cheapest)
+                                 if math.isfinite(r.cost_spread)])
+    assert pick in passing and pick.cost <= cheapest.cost * (1 + noise)
+    assert all(pick.max_error <= r.max_error for r in passing
+               if r.cost <= cheapest.cost * (1 + noise))
+
+
 def test_the_choice_is_the_cheapest_passing_run_and_rerun_meets_the_tolerance(f64, scene_path):
     """The choice against the study's own rows, filtered and ordered here, and its error
     re-run: it passes, costs no more than the cheapest passing run within the noise (TIE or
@@ -45,12 +57,7 @@ def test_the_choice_is_the_cheapest_passing_run_and_rerun_meets_the_tolerance(f6
     passing = [r for r in advice.study.runs if r.max_error <= tolerance and not r.diverged]
     assert 0 < len(passing) < len(advice.study.runs)           # a real choice to make
     pick = advice.choice
-    cheapest = min(passing, key=lambda r: r.cost)
-    noise = max([advisor.TIE] + [r.cost_spread for r in (pick, cheapest)
-                                 if math.isfinite(r.cost_spread)])
-    assert pick in passing and pick.cost <= cheapest.cost * (1 + noise)
-    assert all(pick.max_error <= r.max_error for r in passing
-               if r.cost <= cheapest.cost * (1 + noise))
+    assert_the_rule_picked(pick, passing)
     rerun = study.run_study(scene, integrators=[pick.integrator], dts=[pick.dt],
                             precisions=[pick.precision], iterations=[pick.iterations or 4],
                             reference=advice.study.reference, repeats=1, progress=False).runs[0]
@@ -232,12 +239,7 @@ def test_the_advisor_weighs_tr_bdf2_at_frame_steps_against_tiny_explicit_ones(f6
     passing = [r for r in runs if r.max_error <= tolerance and not r.diverged]
     pick = advice.choice
     report("pick", (pick.integrator, pick.dt, pick.max_error, pick.cost), "")
-    cheapest = min(passing, key=lambda r: r.cost)
-    noise = max([advisor.TIE] + [r.cost_spread for r in (pick, cheapest)
-                                 if math.isfinite(r.cost_spread)])
-    assert pick in passing and pick.cost <= cheapest.cost * (1 + noise)
-    assert all(pick.max_error <= r.max_error for r in passing
-               if r.cost <= cheapest.cost * (1 + noise))
+    assert_the_rule_picked(pick, passing)
     rerun = study.run_study(scene, integrators=[pick.integrator], dts=[pick.dt],
                             precisions=["f64"], reference=advice.study.reference, repeats=1,
                             progress=False).runs[0]
