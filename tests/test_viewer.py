@@ -19,6 +19,7 @@ from helpers import report
 import ti_cloth as tc
 from ti_cloth.app.scene import load_scene
 from ti_cloth.app.view import viewer_for
+from ti_cloth.render import viewer as viewer_module
 from ti_cloth.render.viewer import HELD_COLOUR, KEYS_HELP, PICK_PIXELS, Event
 
 SCENE = """
@@ -338,3 +339,27 @@ def test_the_window_shows_the_cloth_follows_a_drag_and_quits_on_q(scene_file, tm
     assert 5000 < before[0] < 0.5 * WIDTH * HEIGHT, "the sheet is in the window"
     assert during[1] > before[1] + 10, "the drag pulled the sheet right"
     assert abs(after[1] - before[1]) < abs(during[1] - before[1]) / 2, "it swung back"
+
+
+def test_no_event_ends_the_session_and_the_zoom_stays_in_range(scene_file, tmp_path, f64):
+    """"s" into a folder that is a file, "s" after a divergence, and a million wheel notches
+    at once: each is said on screen (status) or held at the zoom's range, and the window goes
+    on (was a traceback that killed it)."""
+    scene = load_scene(scene_file)
+    blocker = tmp_path / "taken"
+    blocker.write_text("a file")
+    viewer = viewer_for(scene, width=WIDTH, height=HEIGHT, folder=blocker / "sub")
+    viewer.handle(Event("key", key="s"))
+    assert viewer.unsaved is not None and viewer.saved is None and not viewer.quit
+    assert str(viewer.unsaved)[:40] in "\n".join(viewer.status())
+    viewer.sim.set_velocities(np.full((viewer.sim.cloth.particle_count, 3), 1e12))
+    viewer.advance()                                  # flung: it diverges and pauses
+    assert viewer.diverged is not None
+    viewer.handle(Event("key", key="s"))
+    assert viewer.unsaved is not None and not viewer.quit
+    first = viewer.first_distance
+    for delta, bound in ((1e6, viewer_module.ZOOM_RANGE[0]), (-1e6, viewer_module.ZOOM_RANGE[1])):
+        viewer.handle(Event("wheel", delta=delta))
+        distance = np.linalg.norm(np.subtract(viewer.camera.position, viewer.camera.target))
+        assert distance == pytest.approx(bound * first, rel=1e-9)
+    assert np.isfinite(viewer.image()).all()

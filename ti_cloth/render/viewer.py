@@ -36,6 +36,8 @@ KEYS_HELP = ("drag: pull a particle   right drag: orbit   wheel, + -: zoom   spa
              ".: one frame   r: reset   s: save   w: wireframe   q: quit")
 ORBIT = math.pi         # radians of turn for a drag across the whole window
 ZOOM = 1.15             # distance factor per wheel notch or +/- press
+ZOOM_RANGE = (1e-3, 1e3)   # the camera's distance to its target, over its first distance
+ZOOM_NOTCHES = 100         # wheel notches one event counts at most (1.15^100 = 1.2e6)
 KINDS = ("press", "release", "motion", "key", "wheel")
 
 
@@ -65,6 +67,8 @@ class Viewer:
     def __init__(self, sim, renderer, camera: Camera, *, name: str, frame_dt: float,
                  substeps: int, folder, paint):
         self.sim, self.renderer, self.camera = sim, renderer, camera
+        self.first_distance = max(float(np.linalg.norm(np.subtract(camera.position,
+                                                                    camera.target))), 1e-6)
         self.name, self.frame_dt, self.substeps = name, frame_dt, substeps
         self.folder = Path(folder)
         self.paint = paint                     # paint(renderer, sim, wireframe): the scene
@@ -84,7 +88,15 @@ class Viewer:
     # -- events -------------------------------------------------------------------------------
 
     def handle(self, event: Event) -> None:
-        """Act on one event (module doc)."""
+        """Act on one event (module doc). An event the session cannot act on (a save the disk
+        refuses, a state that cannot be saved) never ends the session: the window says why
+        (status) and goes on."""
+        try:
+            self._handle(event)
+        except Exception as err:         # noqa: BLE001: the window must outlive any event
+            self.unsaved = err
+
+    def _handle(self, event: Event) -> None:
         if event.kind == "press" and event.button == "left":
             self.grab(event.x, event.y)
         elif event.kind == "release" and event.button == "left":
@@ -101,7 +113,8 @@ class Viewer:
                 particle, depth, pinned, _ = self.held
                 self.held = (particle, depth, pinned, self.unproject(event.x, event.y, depth))
         elif event.kind == "wheel":
-            self.zoom(ZOOM ** -event.delta)
+            notches = max(-ZOOM_NOTCHES, min(ZOOM_NOTCHES, float(event.delta)))
+            self.zoom(ZOOM ** -notches)
         elif event.kind == "key":
             self.key(event.key)
 
@@ -208,10 +221,14 @@ class Viewer:
 
     def zoom(self, factor: float) -> None:
         """Move the camera towards (factor < 1) or away from its target (an orthographic one
-        shows factor x the height)."""
+        shows factor x the height), its distance kept within ZOOM_RANGE of the first one (a
+        million wheel notches at once stop at the range's end)."""
         target = np.asarray(self.camera.target)
-        position = target + factor * (np.asarray(self.camera.position) - target)
-        self.camera = replace(self.camera, position=tuple(position),
+        away = np.asarray(self.camera.position) - target
+        distance = float(np.linalg.norm(away))
+        low, high = (ZOOM_RANGE[0] * self.first_distance, ZOOM_RANGE[1] * self.first_distance)
+        factor = min(max(factor, low / distance), high / distance)
+        self.camera = replace(self.camera, position=tuple(target + factor * away),
                               height=self.camera.height * factor)
 
     # -- time ---------------------------------------------------------------------------------
@@ -271,7 +288,7 @@ class Viewer:
         try:
             self.saved = self.sim.save_state(self.folder / f"{self.name}.view.npz")
             self.unsaved = None
-        except OutputError as err:
+        except (OutputError, OSError, ValueError) as err:   # disk, folder, a diverged state
             self.unsaved = err
         return self.saved
 
