@@ -93,7 +93,7 @@ class Viewer:
         (status) and goes on."""
         try:
             self._handle(event)
-        except Exception as err:         # noqa: BLE001: the window must outlive any event
+        except Exception as err:   # noqa: BLE001 (the window must outlive any event)
             self.unsaved = err
 
     def _handle(self, event: Event) -> None:
