@@ -221,3 +221,34 @@ def test_the_study_never_raises_on_a_demo_scene(path, f64):
     ref = result.reference
     assert ref.whole_run or ref.limited or ref.chaotic or ref.change >= ref.tolerance
     assert "Pointwise errors" in result.markdown()
+
+
+def test_a_halving_or_a_perturbed_start_that_diverges_ends_the_reference_not_the_study(
+        tmp_path, f64, monkeypatch):
+    """A run of the reference that diverges after the first (a halving, or a start one
+    rounding away) is made to here by raising on the chosen call: the reference keeps what
+    converged before it, says which run diverged, and raises nothing."""
+    scene = scene_file(tmp_path, SWINGING_STRING)
+    trajectory_of = study._trajectory
+    calls = []
+
+    def diverging_on(call):
+        def run(sim, times, substeps):
+            calls.append(sim.dt)
+            if len(calls) == call:
+                raise tc.SimulationDiverged(7, 0.01, sim.dt, 1e-3, "rk4")
+            return trajectory_of(sim, times, substeps)
+        return run
+
+    monkeypatch.setattr(study, "_trajectory", diverging_on(2))      # the first halving
+    ref = study.reference_trajectory(scene)
+    assert "diverged at step 7" in ref.limited and ref.dt == calls[0]
+    assert not ref.whole_run and np.isfinite(ref.positions).all()
+    calls.clear()
+    monkeypatch.setattr(study, "_trajectory", diverging_on(10 ** 9))
+    converged = study.reference_trajectory(scene, tolerance=1e-30, budget=1e6)
+    halvings = len(calls)
+    calls.clear()
+    monkeypatch.setattr(study, "_trajectory", diverging_on(halvings + 1))   # a perturbed start
+    ref = study.reference_trajectory(scene, tolerance=1e-30, budget=1e6)
+    assert ref.chaotic and ref.predictable == 0 and converged.dt == ref.dt

@@ -67,6 +67,15 @@ def file_in_the_way(folder) -> Path | None:
     return None
 
 
+def video_available() -> bool:
+    """Whether imageio-ffmpeg (the [video] extra) is installed; if not, says how to get it."""
+    if importlib.util.find_spec("imageio_ffmpeg") is not None:
+        return True
+    print("error: --mp4 needs imageio-ffmpeg: pip install \".[video]\" from a clone "
+          "(pip install 'ti_cloth[video]' otherwise)", file=sys.stderr)
+    return False
+
+
 def refuse_output(folder) -> int | None:
     """OUTPUT_FAILED, said on stderr, when a file stands where `folder` must be (--out)."""
     blocked = file_in_the_way(folder)
@@ -112,9 +121,7 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
     from .runner import run_scene
     from .scene import load_scene
 
-    if mp4 and importlib.util.find_spec("imageio_ffmpeg") is None:
-        print("error: --mp4 needs imageio-ffmpeg: pip install \".[video]\" from a clone "
-              "(pip install 'ti_cloth[video]' otherwise)", file=sys.stderr)
+    if mp4 and not video_available():
         return 2, []
     try:
         with signals.stop_signals_raise():
@@ -331,9 +338,7 @@ def view(scene_path, *, out=None, width=960, height=540, arch="cpu", record=Fals
     from .view import NoDisplay, require_display
     from .view import view as open_view
 
-    if mp4 and importlib.util.find_spec("imageio_ffmpeg") is None:
-        print("error: --mp4 needs imageio-ffmpeg: pip install \".[video]\" from a clone "
-              "(pip install 'ti_cloth[video]' otherwise)", file=sys.stderr)
+    if mp4 and not video_available():
         return 2
     try:
         require_display()

@@ -230,7 +230,14 @@ def reference_trajectory(scene, duration: float | None = None, arch: str = "cpu"
         spent += substeps * frame_work
         sim.restart(scene.frame_dt / substeps)
         previous, before = positions, (None if reached < 0 else change)
-        positions, energies, _ = _trajectory(sim, times, substeps)
+        try:
+            positions, energies, _ = _trajectory(sim, times, substeps)
+        except SimulationDiverged as err:     # at a smaller step: not a reference to refine
+            positions = previous
+            limited = f"the halving to {sim.dt:.3g} s diverged at step {err.step}"
+            substeps //= 2
+            sim.restart(scene.frame_dt / substeps)
+            break
         change = np.abs(positions - previous).max(axis=(1, 2)) / size
         within = observables.horizon(times, change, tolerance)
         if within == len(times) or (within <= reached and not _shrinking(change, before, within)):
@@ -245,7 +252,11 @@ def reference_trajectory(scene, duration: float | None = None, arch: str = "cpu"
         for seed in range(ENSEMBLE):
             sim.restart()
             observables.perturbed_start(sim, size, seed)
-            other, other_energies, _ = _trajectory(sim, times, substeps)
+            try:
+                other, other_energies, _ = _trajectory(sim, times, substeps)
+            except SimulationDiverged:            # a start one rounding away diverges
+                spread[:] = math.inf
+                break
             spread = np.maximum(spread, np.abs(other - positions).max(axis=(1, 2)) / size)
             observable_spread = max(
                 observable_spread, float(np.abs(other_energies - energies).max()) / energy_scale,
