@@ -226,29 +226,30 @@ def test_the_study_never_raises_on_a_demo_scene(path, f64):
 def test_a_halving_or_a_perturbed_start_that_diverges_ends_the_reference_not_the_study(
         tmp_path, f64, monkeypatch):
     """A run of the reference that diverges after the first (a halving, or a start one
-    rounding away) is made to here by raising on the chosen call: the reference keeps what
-    converged before it, says which run diverged, and raises nothing."""
+    rounding away) is made to here by raising in the chosen run's first step call (each run
+    steps once per frame): the reference keeps what converged before it, says which run
+    diverged, and raises nothing."""
     scene = scene_file(tmp_path, SWINGING_STRING)
-    trajectory_of = study._trajectory
+    step = tc.Simulation.step
     calls = []
 
-    def diverging_on(call):
-        def run(sim, times, substeps):
+    def diverging_in(run):
+        def stepped(sim, n=1):
             calls.append(sim.dt)
-            if len(calls) == call:
+            if len(calls) == run * scene.frames + 1:
                 raise tc.SimulationDiverged(7, 0.01, sim.dt, 1e-3, "rk4")
-            return trajectory_of(sim, times, substeps)
-        return run
+            return step(sim, n)
+        return stepped
 
-    monkeypatch.setattr(study, "_trajectory", diverging_on(2))      # the first halving
+    monkeypatch.setattr(tc.Simulation, "step", diverging_in(1))     # the first halving
     ref = study.reference_trajectory(scene)
     assert "diverged at step 7" in ref.limited and ref.dt == calls[0]
     assert not ref.whole_run and np.isfinite(ref.positions).all()
     calls.clear()
-    monkeypatch.setattr(study, "_trajectory", diverging_on(10 ** 9))
+    monkeypatch.setattr(tc.Simulation, "step", diverging_in(10 ** 9))
     converged = study.reference_trajectory(scene, tolerance=1e-30, budget=1e6)
-    halvings = len(calls)
+    runs = len(calls) // scene.frames - study.ENSEMBLE
     calls.clear()
-    monkeypatch.setattr(study, "_trajectory", diverging_on(halvings + 1))   # a perturbed start
+    monkeypatch.setattr(tc.Simulation, "step", diverging_in(runs))    # the first perturbed start
     ref = study.reference_trajectory(scene, tolerance=1e-30, budget=1e6)
     assert ref.chaotic and ref.predictable == 0 and converged.dt == ref.dt
