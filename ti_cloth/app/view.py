@@ -46,8 +46,9 @@ def require_display() -> None:
 
 def _x_server_answers(display: str) -> bool:
     """Whether the X server of `display` ("[host]:number[.screen]") takes a connection: its
-    socket /tmp/.X11-unix/X<number> for a local one, TCP port 6000 + number for a remote one
-    (a display this cannot parse is left to the window to try)."""
+    socket /tmp/.X11-unix/X<number> (or the abstract one of that name) for a local one, TCP
+    port 6000 + number for a remote one (a display this cannot parse is left to the window
+    to try)."""
     host, _, rest = display.rpartition(":")
     try:
         number = int(rest.split(".")[0])
@@ -55,12 +56,17 @@ def _x_server_answers(display: str) -> bool:
         return True
     if host in ("", "unix", "localhost") and os.path.exists(f"/tmp/.X11-unix/X{number}"):
         return True
+    if host in ("", "unix"):           # Linux servers also listen on an abstract socket
+        for address in (f"/tmp/.X11-unix/X{number}", f"\0/tmp/.X11-unix/X{number}"):
+            try:
+                with socket.socket(socket.AF_UNIX) as local:
+                    local.settimeout(1.0)
+                    local.connect(address)
+                return True
+            except OSError:
+                continue
+        return False
     try:
-        if host in ("", "unix"):
-            with socket.socket(socket.AF_UNIX) as local:
-                local.settimeout(1.0)
-                local.connect(f"/tmp/.X11-unix/X{number}")
-            return True
         with socket.create_connection((host, 6000 + number), timeout=1.0):
             return True
     except OSError:
