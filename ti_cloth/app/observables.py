@@ -64,8 +64,8 @@ def observables(cloth, positions: np.ndarray, size: float) -> np.ndarray:
     low, high = positions.min(axis=1), positions.max(axis=1)
     pairs = edges(cloth)
     if len(pairs):
-        rest = np.linalg.norm(cloth.particle_position[pairs[:, 0]]
-                              - cloth.particle_position[pairs[:, 1]], axis=1)
+        rest = np.linalg.norm(cloth.rest_position[pairs[:, 0]]
+                              - cloth.rest_position[pairs[:, 1]], axis=1)
         keep = rest > 0
         length = np.linalg.norm(positions[:, pairs[keep, 0]] - positions[:, pairs[keep, 1]],
                                 axis=2)
