@@ -1,6 +1,9 @@
 """Helpers the tests share (imported as `from helpers import ...`; fixtures live in conftest.py)."""
 
 import os
+import re
+import sys
+from contextlib import contextmanager
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -121,3 +124,58 @@ def winding_numbers(points, vertices, triangles, chunk=64):
                        + np.sum(c * a, axis=2) * lb)
         found.append(2.0 * np.arctan2(numerator, denominator).sum(axis=1) / (4.0 * np.pi))
     return np.concatenate(found)
+
+
+# ---------------------------------------------------------------- what the base install holds
+
+ROOT = Path(__file__).parents[1]
+MODULES = {"taichi": "taichi", "numpy": "numpy", "imageio": "imageio", "pillow": "PIL",
+           "meshio": "meshio", "tqdm": "tqdm", "scipy": "scipy", "libigl": "igl",
+           "tomli": "tomli", "imageio-ffmpeg": "imageio_ffmpeg", "matplotlib": "matplotlib",
+           "usd-core": "pxr", "distributed": "distributed"}
+ALSO_FROM = {"distributed": {"dask"}}      # a distribution's other top-level modules
+
+
+def _distributions(requirements) -> set:
+    return {re.split(r"[<>=!;\[ ]", r, maxsplit=1)[0].strip() for r in requirements}
+
+
+def _modules(names) -> set:
+    out = set()
+    for name in names:
+        out |= {MODULES[name]} | ALSO_FROM.get(name, set())
+    return out
+
+
+def base_and_optional_modules() -> tuple[set, set]:
+    """(the top-level modules of pyproject.toml's base dependencies, those only its extras
+    other than [test] bring)."""
+    try:
+        import tomllib
+    except ImportError:          # Python 3.10
+        import tomli as tomllib
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    base = _modules(_distributions(project["dependencies"]))
+    extras = project["optional-dependencies"]
+    optional = _modules(_distributions(r for name, reqs in extras.items() if name != "test"
+                                       for r in reqs)) - base
+    return base, optional
+
+
+@contextmanager
+def base_install():
+    """Run the block as on a base install: importing a module only an extra brings raises
+    ImportError (sys.modules[name] = None), whether or not it was imported before."""
+    _, optional = base_and_optional_modules()
+    saved = {name: module for name, module in sys.modules.items()
+             if name.split(".")[0] in optional}
+    for name in saved:
+        del sys.modules[name]
+    for name in optional:
+        sys.modules[name] = None
+    try:
+        yield optional
+    finally:
+        for name in optional:
+            sys.modules.pop(name, None)
+        sys.modules.update(saved)

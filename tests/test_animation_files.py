@@ -131,8 +131,26 @@ def test_bad_animation_files_are_refused_by_key(tmp_path):
     meshio.write_points_cells(tmp_path / "rest.obj", TETRAHEDRON, [("triangle", FACES)])
     meshio.write_points_cells(tmp_path / "seq_1.obj", TETRAHEDRON, [("triangle", FACES)])
     meshio.write_points_cells(tmp_path / "seq_2.obj", TETRAHEDRON[:3], [("triangle", FACES[:1])])
+    np.savez(tmp_path / "complex.npz", triangles=FACES, positions=SAMPLES + 1j, fps=24.0)
+    np.savez(tmp_path / "text.npz", triangles=FACES, positions=SAMPLES.astype(str), fps=24.0)
+    collapsed = SAMPLES.copy()
+    collapsed[3] = TETRAHEDRON[0]                  # sample 3: every vertex on one point
+    np.savez(tmp_path / "collapsed.npz", triangles=FACES, positions=collapsed, fps=24.0)
+    flat = SAMPLES.copy()
+    flat[2, :, 1:] = 0.0                           # sample 2: every vertex on the x axis
+    write_pc2(tmp_path / "flat.pc2", flat)
+    (tmp_path / "broken.usda").write_text("#usda 1.0\n(\n  garbage (((\n")
+    (tmp_path / "noise.usdc").write_bytes(bytes(range(256)))
     cases = [
         (dict(path=tmp_path / "cut.npz"), "is not a readable npz file"),
+        (dict(path=tmp_path / "complex.npz"), "positions must be real numbers"),
+        (dict(path=tmp_path / "text.npz"), "positions must be real numbers"),
+        (dict(path=tmp_path / "collapsed.npz"), "motion[3] must be a surface in every sample"),
+        (dict(path=tmp_path / "flat.pc2", rest=tmp_path / "rest.obj", fps=24),
+         "motion[2] must be a surface in every sample"),
+        (dict(path=tmp_path / "broken.usda"), "usd-core can open, got "),
+        (dict(path=tmp_path / "broken.usda"), "(line 3, column 3: Expected )"),
+        (dict(path=tmp_path / "noise.usdc"), "(usd-core cannot parse it)"),
         (dict(path=tmp_path / "nofps.npz"), "fps must be the animation's frames per second"),
         (dict(path=tmp_path / "nopositions.npz"), "missing: positions"),
         (dict(path=tmp_path / "ok.npz", rest=tmp_path / "rest.obj"),

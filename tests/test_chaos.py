@@ -204,12 +204,17 @@ def test_pbd_is_left_out_of_a_fabric_study_and_the_advice_says_so(tmp_path, f64)
         study.run_study(scene, integrators=["pbd"], precisions=["f64"], progress=False)
 
 
-DEMOS = sorted((Path(__file__).parent.parent / "demos").glob("*.toml"))
+# one demo scene for each kind of stage a reference can meet (a garment sewn onto an animated
+# body, self-collision, tearing, tetrahedra, ghost-braced hair, wind, a Fabric, a mesh
+# collider): the study of the others is these stages again (the suite's time)
+DEMOS = [Path(__file__).parent.parent / "demos" / f"{name}.toml" for name in (
+    "skirt_walk", "cloth_pile", "tearing", "soft_block", "hair", "flag_in_wind",
+    "study_fabric", "tablecloth")]
 
 
 @pytest.mark.parametrize("path", DEMOS, ids=[p.stem for p in DEMOS])
 def test_the_study_never_raises_on_a_demo_scene(path, f64):
-    """Every demo scene's study at a tiny size (one frame, a reference budget of 3e5
+    """A demo scene's study at a tiny size (one frame, a reference budget of 3e5
     particle-steps, rk4 at the frame step: stiff scenes diverge there, torn ones tear)
     returns a result whose report says what its reference reached."""
     scene = tc.load_scene(path)

@@ -9,7 +9,7 @@ from types import SimpleNamespace
 import imageio.v3 as iio
 import numpy as np
 import pytest
-from helpers import report
+from helpers import base_install, report
 
 import ti_cloth as tc
 from ti_cloth.app.scene import load_scene
@@ -31,10 +31,12 @@ def test_every_system_of_the_source_texts_has_a_demo_with_a_scene_file():
 
 @pytest.mark.parametrize("script", DEMOS, ids=[d.stem for d in DEMOS])
 def test_demo_writes_frames(script, tmp_path):
-    """And for the demos of a dressed figure, their own check right after, on the kernels the
-    demo compiled (the same process: pool.py keeps them)."""
+    """With the modules of every extra made unimportable, as after the README's first
+    command; and for the demos of a dressed figure, their own check right after, on the
+    kernels the demo compiled (the same process: pool.py keeps them)."""
     demo = _load(script)
-    frames = demo.main(["--test", "--no-progress", "--out-dir", str(tmp_path)])
+    with base_install():          # no extra: the README's first command installs none
+        frames = demo.main(["--test", "--no-progress", "--out-dir", str(tmp_path)])
     images = [iio.imread(f).astype(float) for f in frames]
     assert len(images) >= 2
     for image in images:

@@ -4,32 +4,10 @@ extra's module is imported only inside the function that needs it (lazily), so a
 install imports the whole package and runs every demo."""
 
 import ast
-import re
 import sys
 from pathlib import Path
 
-try:
-    import tomllib
-except ImportError:          # Python 3.10
-    import tomli as tomllib
-
-ROOT = Path(__file__).parents[1]
-MODULES = {"taichi": "taichi", "numpy": "numpy", "imageio": "imageio", "pillow": "PIL",
-           "meshio": "meshio", "tqdm": "tqdm", "scipy": "scipy", "libigl": "igl",
-           "tomli": "tomli", "imageio-ffmpeg": "imageio_ffmpeg", "matplotlib": "matplotlib",
-           "usd-core": "pxr", "distributed": "distributed"}
-ALSO_FROM = {"distributed": {"dask"}}      # a distribution's other top-level modules
-
-
-def distributions(requirements) -> set:
-    return {re.split(r"[<>=!;\[ ]", r, maxsplit=1)[0].strip() for r in requirements}
-
-
-def modules(names) -> set:
-    out = set()
-    for name in names:
-        out |= {MODULES[name]} | ALSO_FROM.get(name, set())
-    return out
+from helpers import ROOT, base_and_optional_modules, base_install
 
 
 def third_party_imports(path: Path):
@@ -51,11 +29,7 @@ def third_party_imports(path: Path):
 
 
 def test_the_base_install_holds_what_the_package_and_the_demos_import():
-    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
-    base = modules(distributions(project["dependencies"]))
-    extras = project["optional-dependencies"]
-    optional = modules(distributions(r for name, reqs in extras.items() if name != "test"
-                                     for r in reqs)) - base
+    base, optional = base_and_optional_modules()
     assert {"scipy", "igl"} <= base            # garments and mesh colliders: the showcase
     unknown, eager, demo_needs = set(), set(), set()
     for path in sorted((ROOT / "ti_cloth").rglob("*.py")):
@@ -69,3 +43,20 @@ def test_the_base_install_holds_what_the_package_and_the_demos_import():
     assert not unknown, f"imports of no declared dependency: {sorted(unknown)}"
     assert not eager, f"optional extras imported at module level: {sorted(eager)}"
     assert not demo_needs, f"demos import what the base install lacks: {sorted(demo_needs)}"
+
+
+def test_the_base_install_stand_in_makes_every_extra_unimportable():
+    """test_demos runs the demos inside base_install(): an extra's module, imported before
+    or not, cannot be imported there, and is back after."""
+    import importlib
+
+    import pxr                                  # in the [test] extra: present here
+    with base_install() as optional:
+        assert {"pxr", "matplotlib", "distributed"} <= optional
+        for name in optional:
+            try:
+                importlib.import_module(name)
+            except ImportError:
+                continue
+            raise AssertionError(f"{name} imported inside base_install()")
+    assert importlib.import_module("pxr") is pxr

@@ -15,7 +15,9 @@ from helpers import report, use
 
 import ti_cloth as tc
 from ti_cloth.app import signals
+from ti_cloth.app.runner import Pace
 from ti_cloth.app.scene import load_scene
+from ti_cloth.app.study import run_study
 from ti_cloth.errors import StaleSimulation
 from ti_cloth.inputs import limits
 from ti_cloth.inputs.scene_file import SceneError
@@ -173,6 +175,31 @@ def test_a_long_legal_run_says_so_up_front(tmp_path):
     assert work.steps == 30 * 60 * 2000 and work.spring_steps == springs * work.steps
     assert work.seconds > limits.LONG_RUN_SECONDS and "days" in work.describe()
     assert load_scene(write_scene(tmp_path, scene_text())).work().seconds < limits.LONG_RUN_SECONDS
+
+
+def test_the_pace_of_a_run_is_measured_on_its_own_frames_and_said_once():
+    """The first stepped frame holds the compile and is not counted; the median of the
+    next three sets the pace; a short remainder says nothing."""
+    pace = Pace("walk", frames=101)
+    said = [pace.frame(index, seconds) for index, seconds in
+            enumerate([9.0, 1.0, 0.9, 1.2, 5.0, 5.0])]
+    assert said[:3] == [None] * 3 and said[4:] == [None, None]
+    assert "97 frames to go at 1 s a frame" in said[3] and "1.62 min" in said[3]
+    quick = Pace("walk", frames=101)
+    assert [quick.frame(i, 0.5) for i in range(6)] == [None] * 6     # 48 s to go
+
+
+def test_a_refinement_too_big_for_memory_is_refused_before_it_is_computed(tmp_path):
+    """A 5 x 5 x 5 tet block at resolution 64 would be 5.7e7 particles (grows as the cube):
+    refused at once, naming the resolution; a study whose reference would be refined past
+    the limit (twice the finest swept) says so."""
+    block = load_scene(write_scene(tmp_path, scene_text(
+        body="tet_block", body_keys="cells = [5, 5, 5]\nsize = [0.4, 0.4, 0.4]")))
+    with pytest.raises(SceneError, match=r"resolution = 64 makes 56,623,104 particles"):
+        block.refined(64)
+    assert block.refined(2).cloth.particle_count == 11 ** 3
+    with pytest.raises(ValueError, match=r"the reference is refined 128 times .* up to 32"):
+        run_study(block, resolutions=(64,), duration=0.1)
 
 
 # ---------------------------------------------------------------- the Python API

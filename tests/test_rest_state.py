@@ -35,7 +35,7 @@ def test_a_wrapped_panels_rest_is_its_pattern_angles_zero_lengths_the_patterns()
     report("largest rest angle: placed, pattern", np.abs(placed.hinge_rest_angle).max(), "0")
     assert np.abs(placed.hinge_rest_angle).max() > 0.05
     assert np.abs(pattern.hinge_rest_angle).max() < 1e-12 and is_flat(pattern)
-    springs = tc.Cloth(garment.mesh, tc.Material.preset("cotton"), rest="uv")
+    springs = tc.Cloth(garment.mesh, tc.Material.preset("cotton_springs"), rest="uv")
     uv = garment.mesh.uvs
     i, j = springs.spring_indices.T
     np.testing.assert_allclose(springs.spring_rest_length, np.linalg.norm(uv[i] - uv[j], axis=1),

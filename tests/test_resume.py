@@ -295,3 +295,48 @@ def test_a_corrupted_saved_state_is_refused_naming_what_is_wrong(f64, tmp_path_f
     with pytest.raises(StateMismatch):
         sim.load_state(folder / "bad.npz")
     np.testing.assert_array_equal(sim.positions(), before)
+
+
+CONTACT_CORRUPTIONS = {
+    "capacity": lambda a, k: a.__setitem__("self_contact.capacity", np.array(2**40)),
+    "total": lambda a, k: a.__setitem__("self_contact.pair_total",
+                                        a["self_contact.capacity"] + 1 + k),
+    "vertex pairs": lambda a, k: a.__setitem__("self_contact.vertex_pairs", np.array(-1 - k)),
+    "listed": lambda a, k: a.__setitem__("self_contact.listed", np.array(1.5)),
+    "missing": lambda a, k: a.pop(sorted(n for n in a if n.startswith("self_contact."))[k % 11]),
+    "index": lambda a, k: a["self_contact.particles"].__setitem__(
+        (k % len(a["self_contact.particles"]), k % 4), 10**6),
+    "falling": lambda a, k: a["self_contact.pair_start"].__setitem__(
+        1 + k % (len(a["self_contact.pair_start"]) - 1), -1),
+    "nan": lambda a, k: a["self_contact.listed_at"].__setitem__(
+        (k % len(a["self_contact.listed_at"]), 0), np.nan),
+    "length": lambda a, k: a.__setitem__("self_contact.active", a["self_contact.active"][:-1]),
+    "dtype": lambda a, k: a.__setitem__("self_contact.elements",
+                                        a["self_contact.elements"].astype(np.int64)),
+}
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(kind=st.sampled_from(sorted(CONTACT_CORRUPTIONS)), k=st.integers(0, 1000))
+def test_a_corrupted_self_contact_list_is_refused_before_anything_is_loaded(
+        f64, tmp_path_factory, kind, k):
+    """The self-collision candidate list of a saved state is checked array by array (its
+    counts in range: a capacity of 2^40 would allocate without bound, an index out of the
+    body would read out of the fields) before the state or the list is touched."""
+    folder = tmp_path_factory.mktemp("contact")
+    cloth = tc.Cloth(tc.grid_mesh(6, 6, size=(0.2, 0.2), plane="xz"), tc.Material())
+    sim = tc.Simulation(cloth, integrator="symplectic_euler", dt=5e-4,
+                        self_collision=tc.SelfCollision(thickness=0.05))
+    sim.step(3)
+    saved = sim.save_state(folder / "good.npz")
+    before = sim.positions()
+    with np.load(saved, allow_pickle=False) as data:
+        arrays = {key: data[key].copy() for key in data.files}
+    assert int(arrays["self_contact.pair_total"]) > 0       # the list holds pairs to corrupt
+    CONTACT_CORRUPTIONS[kind](arrays, k)
+    with open(folder / "bad.npz", "wb") as file:
+        np.savez(file, **arrays)
+    with pytest.raises(StateMismatch, match="self_contact|missing"):
+        sim.load_state(folder / "bad.npz")
+    np.testing.assert_array_equal(sim.positions(), before)
+    sim.load_state(saved)                                    # the good one still loads

@@ -33,7 +33,7 @@ cols = 5
 size = [0.5, 0.4]
 plane = "xy"
 pinned = ["top_left", "top_right", 3]
-material = { preset = "cotton", hem_mass = 0.001, stretch = { k = 900.0, kd = 0.2 } }
+material = { preset = "cotton_springs", hem_mass = 0.001, stretch = { k = 900.0, kd = 0.2 } }
 """
 
 
@@ -46,7 +46,7 @@ def write(tmp_path, text, name="scene.toml"):
 def test_a_grid_scene_builds_the_same_simulation_as_the_api(tmp_path, f64):
     scene = load_scene(write(tmp_path, GRID))
     sim = scene.build()
-    material = tc.Material.preset("cotton", hem_mass=0.001, stretch=tc.SpringParams(900.0, 0.2))
+    material = tc.Material.preset("cotton_springs", hem_mass=0.001, stretch=tc.SpringParams(900.0, 0.2))
     cloth = tc.Cloth(tc.grid_mesh(6, 5, size=(0.5, 0.4)), material, pinned=[25, 29, 3])
     api = tc.Simulation(cloth, dt=1 / 50 / 40, drag=0.3)
     sim.step(40)
@@ -62,7 +62,7 @@ def test_a_scene_hem_takes_grid_names_and_indices(tmp_path):
     hemmed = load_scene(write(tmp_path, GRID.replace("pinned =", 'hem = ["left", 4]\npinned ='))).cloth
     left = np.arange(0, 30, 5)
     np.testing.assert_array_equal(np.flatnonzero(hemmed.hem), sorted(set(left) - {25} | {4}))
-    material = tc.Material.preset("cotton", hem_mass=0.001, stretch=tc.SpringParams(900.0, 0.2))
+    material = tc.Material.preset("cotton_springs", hem_mass=0.001, stretch=tc.SpringParams(900.0, 0.2))
     api = tc.Cloth(tc.grid_mesh(6, 5, size=(0.5, 0.4)), material, pinned=[25, 29, 3],
                    hem=[*left, 4])
     np.testing.assert_array_equal(hemmed.particle_mass, api.particle_mass)
@@ -120,7 +120,7 @@ def test_auto_substeps_keep_dt_under_half_the_stable_step(tmp_path):
 def test_a_fabric_scene_builds_the_api_fabric(tmp_path, f64):
     """fabric = "denim", and a [bodies.fabric] table of a preset and fields (pairs for warp and
     weft), give the API's Fabric bodies; a scene may not give both material and fabric."""
-    named = GRID.replace('material = { preset = "cotton", hem_mass = 0.001, stretch = { k = 900.0, kd = 0.2 } }',
+    named = GRID.replace('material = { preset = "cotton_springs", hem_mass = 0.001, stretch = { k = 900.0, kd = 0.2 } }',
                          'fabric = "denim"')
     assert load_scene(write(tmp_path, named)).cloth.material == tc.Fabric.preset("denim")
     table = named.replace('fabric = "denim"', '[bodies.fabric]\npreset = "interlock"\n'
@@ -158,7 +158,7 @@ def test_a_fabric_scene_builds_the_api_fabric(tmp_path, f64):
     (("pinned = [", 'hem = "hemline"\npinned = ['),
      r"bodies\[0\]\.hem must be particle indices in \[0, 29\] or one of \['boundary'"),
     (("size = [0.5, 0.4]", "size = [0.5, -0.4]"), r"bodies\[0\]: size\[1\] must be a finite number in \[1e-06, 10000\] m, got -0.4"),
-    (('preset = "cotton"', 'preset = "tweed"'), r"bodies\[0\]\.material\.preset must be one of"),
+    (('preset = "cotton_springs"', 'preset = "tweed"'), r"bodies\[0\]\.material\.preset must be one of"),
     (("drag = 0.3", "drag = -1"), r"forces\.drag must be a number in \[0, 10000\] 1/s, got -1"),
     (("[forces]", '[forces]\nwind = { velocity = [1, 0] }'), r"forces\.wind\.velocity must be a list of 3 numbers"),
     (("fps = 50", 'fps = 50\nintegrator = "rk5"'), r"simulation\.integrator\.name must be one of"),
@@ -291,13 +291,13 @@ path = "sheet.obj"
 scale = 2.0
 translate = [0.0, 1.0, 0.0]
 pinned = [0, 2]
-material = "denim"
+material = "denim_springs"
 """
     scene = load_scene(write(tmp_path, text))
     x = scene.cloth.particle_position
     np.testing.assert_allclose(x.max(axis=0) - x.min(axis=0), [0.6, 0.4, 0.0], atol=1e-12)
     assert x[:, 1].min() == pytest.approx(1.0)
-    assert scene.cloth.pinned.sum() == 2 and scene.cloth.material == tc.Material.preset("denim")
+    assert scene.cloth.pinned.sum() == 2 and scene.cloth.material == tc.Material.preset("denim_springs")
     n = scene.resolved_substeps()
     assert n == 58 and scene.frame_dt / n <= 7e-4 < scene.frame_dt / (n - 1)
     with pytest.raises(SceneError, match="either dt or substeps"):
@@ -308,7 +308,7 @@ def test_errors_list_every_allowed_key_suggest_the_nearest_and_quote_values_whol
     """A misspelt key lists every key the table allows (also those read only in some cases:
     fabric, hem) with the nearest; a misspelt preset gets the nearest preset; a long value is
     summarised, never cut in the middle of its structure; presets take any letter case."""
-    named = GRID.replace('material = { preset = "cotton", hem_mass = 0.001, stretch = { k = 900.0, kd = 0.2 } }',
+    named = GRID.replace('material = { preset = "cotton_springs", hem_mass = 0.001, stretch = { k = 900.0, kd = 0.2 } }',
                          'fabirc = "denim"')
     with pytest.raises(SceneError) as err:
         load_scene(write(tmp_path, named))
@@ -320,8 +320,8 @@ def test_errors_list_every_allowed_key_suggest_the_nearest_and_quote_values_whol
         load_scene(write(tmp_path, named.replace('fabirc = "denim"', 'fabric = "demin"')))
     assert load_scene(write(tmp_path, named.replace('fabirc = "denim"', 'fabric = "DeNiM"'))
                       ).cloth.material == tc.Fabric.preset("denim")
-    assert load_scene(write(tmp_path, named.replace('fabirc = "denim"', 'material = "Cotton"'))
-                      ).cloth.material == tc.Material.preset("cotton")
+    assert load_scene(write(tmp_path, named.replace('fabirc = "denim"', 'material = "Cotton_Springs"'))
+                      ).cloth.material == tc.Material.preset("cotton_springs")
     long = named.replace('fabirc = "denim"', "fabirc = [" + ", ".join(["1.5"] * 60) + "]")
     with pytest.raises(SceneError, match=r"\(value a list of 60 items, starting 1\.5\)"):
         load_scene(write(tmp_path, long))
@@ -351,7 +351,7 @@ def test_combinations_the_api_refuses_are_refused_by_the_scene_reader(tmp_path):
     """A Fabric stepped by pbd, a warp on a body of springs, a warp of no finite length: each
     a SceneError naming the key, from the reader (before a Simulation is built); a warp along
     a flat sheet's normal is warned about."""
-    fabric = GRID.replace('material = { preset = "cotton", hem_mass = 0.001, stretch = { k = 900.0, kd = 0.2 } }',
+    fabric = GRID.replace('material = { preset = "cotton_springs", hem_mass = 0.001, stretch = { k = 900.0, kd = 0.2 } }',
                           'fabric = "denim"')
     assert fabric != GRID
     pbd = fabric.replace("[simulation]", '[simulation]\nintegrator = "pbd"')

@@ -5,6 +5,7 @@ import pytest
 from helpers import report
 
 import ti_cloth as tc
+from ti_cloth.body.fabric import PRESETS as FABRIC_PRESETS
 from ti_cloth.body.topology import color_springs, mesh_springs, unique_springs
 
 K = tc.SpringKind
@@ -195,4 +196,17 @@ def test_presets_are_valid_materials():
     for name in tc.PRESETS:
         material = tc.Material.preset(name)
         assert material.stretch.k >= material.shear.k > material.bend.k  # cloth bends easily
-    assert tc.Material.preset("denim", hem_mass=0.02).hem_mass == 0.02
+    assert tc.Material.preset("denim_springs", hem_mass=0.02).hem_mass == 0.02
+
+
+def test_spring_and_fabric_presets_cannot_be_taken_for_each_other():
+    """Spring presets end in _springs; a former name still gives its springs, with a
+    DeprecationWarning naming the new one and the fabric of the same name; a spring name
+    asked of Fabric.preset says where it belongs."""
+    assert not set(tc.PRESETS) & set(FABRIC_PRESETS)
+    with pytest.warns(DeprecationWarning, match="'denim' is now 'denim_springs'.*fabric"):
+        former = tc.Material.preset("Denim")
+    assert former == tc.Material.preset("denim_springs")
+    assert tc.Fabric.preset("denim").density == FABRIC_PRESETS["denim"]["density"]
+    with pytest.raises(ValueError, match=r"'silk_springs' names Stuyck's springs"):
+        tc.Fabric.preset("silk_springs")

@@ -256,9 +256,12 @@ class Simulation:
                 and 0 <= steps <= limits.STEPS.high):
             raise StateMismatch(f"{path}: its step_count {steps!r} is not a step count "
                                 f"{limits.STEPS.text()}")
+        contact = _prefixed(arrays, "self_contact.")
+        if self.self_collision is not None:
+            self.self_collision.check_saved(path, contact, float(self.state.limit))
         self.state.restore(_prefixed(arrays, "state."))
         if self.self_collision is not None:
-            self.self_collision.restore(_prefixed(arrays, "self_contact."))
+            self.self_collision.restore(contact)
         self.step_count = int(header["step_count"])
         self._diverged = None
         if self.handles is not None:

@@ -149,7 +149,7 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
                                      f"{limits.STEPS.high:_} a simulation can count "
                                      f"({limits.FRAMES.high:_} frames at most)")
             work = scene.work(frames)
-            if work.seconds > LONG_RUN_SECONDS:
+            if work.seconds > 10 * LONG_RUN_SECONDS:      # a rough bound; Pace measures
                 print(f"note: '{scene.name}' is a long run: {work.describe()}", file=sys.stderr)
             backend.ensure(arch=arch, precision=precision or scene.precision)
     except (SceneError, FileNotFoundError) as err:
@@ -163,7 +163,8 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
         return signals.exit_code(stop), []
     try:
         result = run_scene(scene, folder=out, frames=frames, progress=progress, output=output,
-                           resume=resume)
+                           resume=resume, note=lambda message: print(f"note: {message}",
+                                                                     file=sys.stderr))
     except (FileNotFoundError, StateMismatch) as err:
         way_out = ("\nto start again from the first frame, run it without --resume"
                    if resume else "")

@@ -138,8 +138,34 @@ def checkpoint_interval(scene, output) -> int:
     return max(1, round(limits.CHECKPOINT_SECONDS / max(scene.work(1).seconds, 1e-9)))
 
 
+class Pace:
+    """How long the rest of a run will take, measured on its own frames: the median of the
+    MEASURED frames after the first stepped one (which holds the compile), said once when
+    the frames still to come need more than limits.LONG_RUN_SECONDS at that pace."""
+
+    MEASURED = 3
+
+    def __init__(self, name: str, frames: int):
+        self.name, self.frames, self.times, self.said = name, frames, [], False
+
+    def frame(self, index: int, seconds: float) -> str | None:
+        """The note to give after frame `index` took `seconds` (stepping, drawing, writing),
+        or None."""
+        self.times.append(seconds)
+        if self.said or len(self.times) < self.MEASURED + 1:
+            return None
+        self.said = True
+        each = float(np.median(self.times[1:]))
+        left = self.frames - 1 - index
+        if each * left <= limits.LONG_RUN_SECONDS:
+            return None
+        return (f"'{self.name}' is a long run: {left} frames to go at {each:.3g} s a frame "
+                f"(measured on the last {len(self.times) - 1}), about "
+                f"{limits.describe_duration(each * left)} more")
+
+
 def run_scene(scene, *, folder=None, frames: int | None = None, progress: bool = True,
-              output=None, export=None, resume: bool = False) -> RunResult:
+              output=None, export=None, resume: bool = False, note=None) -> RunResult:
     """Simulate and render `frames` frames (default: the scene's duration x fps) into `folder`
     (default: the output's folder). output: an app.scene.Output replacing the scene's (size,
     formats, style, checkpoint_every). export: geometry formats (ti_cloth.export.FORMATS)
@@ -151,7 +177,8 @@ def run_scene(scene, *, folder=None, frames: int | None = None, progress: bool =
     SimulationDiverged end the run early, in any phase, with every finished frame kept and the
     GIF/MP4 and point caches assembled from them; so does a file that cannot be written
     (errors.OutputError: a full disk, a folder without permission), in RunResult.unwritten,
-    the last checkpoint left as it was."""
+    the last checkpoint left as it was. note: called with a line when the frames measured
+    say the run is long (Pace)."""
     from tqdm import tqdm
 
     if scene.automatic:
@@ -186,8 +213,10 @@ def run_scene(scene, *, folder=None, frames: int | None = None, progress: bool =
             watch = Watch(scene, sim, camera, out.width, out.height)
             bar = tqdm(total=frames, initial=min(first, frames), unit="frame",
                        disable=not progress, dynamic_ncols=True)
+            pace = Pace(scene.name, frames)
             try:
                 for frame in range(first, frames):
+                    began = time.perf_counter()
                     if frame:
                         sim.step(substeps)
                         watch.frame(frame)
@@ -200,6 +229,11 @@ def run_scene(scene, *, folder=None, frames: int | None = None, progress: bool =
                     bar.set_postfix_str(f"t={sim.time:.3f} s, "
                                         f"{sim.step_count / max(elapsed, 1e-9):,.0f} steps/s")
                     bar.update()
+                    said = pace.frame(frame, time.perf_counter() - began)
+                    if said and note is not None:
+                        bar.clear()
+                        note(said)
+                        bar.refresh()
             finally:
                 bar.close()
         except KeyboardInterrupt as err:

@@ -32,7 +32,7 @@ from ..render.camera import Camera
 from ..runtime import backend
 from ..simulation import Simulation
 from ..stability import auto_substeps
-from .scene_bodies import build_bodies, read_body, read_mesh_file, read_path
+from .scene_bodies import DIMENSION, build_bodies, read_body, read_mesh_file, read_path
 from .scene_output import Output, read_camera, read_output
 
 COLLIDER_TYPES = {"plane": Plane, "sphere": Sphere, "box": Box, "capsule": Capsule,
@@ -106,10 +106,18 @@ class Scene:
         if not self.bodies:
             raise ValueError("resolution: this scene keeps no body descriptions to refine "
                              "(read it with load_scene)")
+        # the bodies grow as the resolution to their dimension: refused before a refinement
+        # that would not fit in memory is computed (an interrupt is not heard inside numpy)
+        scale = (resolution / self.resolution) ** max(DIMENSION.get(body.kind, 2)
+                                                      for body in self.bodies)
         try:
+            limits.check_memory("resolution", resolution, int(self.cloth.particle_count * scale),
+                                int(self.cloth.spring_count * scale))
             cloth, handles, _ = build_bodies(self.bodies, int(resolution))
         except ValueError as err:
-            raise SceneError(f"{self.source}: resolution = {resolution}: {err}") from None
+            said = str(err) if str(err).startswith(f"resolution = {resolution} ") else \
+                f"resolution = {resolution}: {err}"
+            raise SceneError(f"{self.source}: {said}") from None
         return replace(self, cloth=cloth, handles=handles, resolution=int(resolution))
 
     @property

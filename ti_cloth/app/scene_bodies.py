@@ -22,7 +22,7 @@ from ..body import bodies as builders
 from ..body import refine
 from ..body.fabric import PRESETS as FABRICS
 from ..body.fabric import Fabric
-from ..body.material import DAMPING_MODELS, PRESETS, Material, SpringParams
+from ..body.material import DAMPING_MODELS, PRESETS, Material, SpringParams, preset_name
 from ..body.mesh import PLANES, Mesh, grid_mesh, load_mesh
 from ..body.panels import Garment, panel
 from ..body.topology import Cloth
@@ -354,13 +354,16 @@ def _material(owner: Table) -> Material | Fabric:
     if value is None:
         return Material()
     if isinstance(value, str):
-        if value.lower() not in PRESETS:
-            owner.bad("material", value, f"a table or one of the presets {sorted(PRESETS)}",
-                      PRESETS)
+        if preset_name(value) not in PRESETS:
+            fabric = (f" ({value!r} is a measured fabric: fabric = {value!r})"
+                      if value.lower() in FABRICS else "")
+            owner.bad("material", value, f"a table or one of the presets {sorted(PRESETS)}"
+                      f"{fabric}", PRESETS)
         return Material.preset(value)
     table = Table(value, owner.path("material"), owner.source)
     table.allow("preset", "density", "hem_mass", "stretch", "shear", "bend", "damping")
-    preset = _preset(table, PRESETS) if table.has("preset") else None
+    preset = (_preset(table, PRESETS, preset_name(table.value("preset")))
+              if table.has("preset") else None)
     base = Material.preset(preset) if preset else Material()
     changes = {}
     for key in ("density", "hem_mass"):
@@ -375,12 +378,14 @@ def _material(owner: Table) -> Material | Fabric:
     return table.build(lambda: Material(**{**base.__dict__, **changes}))
 
 
-def _preset(table: Table, presets) -> str:
-    """A table's `preset`: one of `presets`, in any letter case (returned in lower case)."""
+def _preset(table: Table, presets, name=None) -> str:
+    """A table's `preset`: one of `presets`, in any letter case (returned in lower case);
+    name: the value as the presets spell it, when that is not merely its lower case."""
     value = table.value("preset")
-    if not (isinstance(value, str) and value.lower() in presets):
+    name = value.lower() if name is None and isinstance(value, str) else name
+    if not (isinstance(name, str) and name in presets):
         table.bad("preset", value, f"one of {sorted(presets)}", presets)
-    return value.lower()
+    return name
 
 
 def _fabric(owner: Table) -> Fabric:

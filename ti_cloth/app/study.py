@@ -600,6 +600,11 @@ def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("
     if reference_resolution is None:
         reference_resolution = (scene.resolution if resolutions == (scene.resolution,)
                                 else 2 * resolutions[-1])
+    if reference_resolution > limits.RESOLUTION.high:
+        raise ValueError(f"resolutions: the reference is refined {reference_resolution} times "
+                         f"(twice the finest swept, {resolutions[-1]}), beyond the limit "
+                         f"{limits.RESOLUTION.high}; sweep resolutions up to "
+                         f"{limits.RESOLUTION.high // 2}, or give a reference_resolution")
     if not (reference_resolution > resolutions[-1] or resolutions == (reference_resolution,)):
         raise ValueError(f"reference_resolution must be finer than every swept resolution "
                          f"{list(resolutions)} (or the only one), got {reference_resolution!r}")

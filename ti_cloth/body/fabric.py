@@ -28,6 +28,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 
 from ..inputs import limits
+from . import material
 from ..inputs.validation import finite_number, in_range, keyword_only, require
 
 STRETCH = limits.Range(1e-3, 1e9, "N/m", "fabric stretch and shear moduli")
@@ -100,8 +101,11 @@ class Fabric:
         """A measured fabric (PRESETS, any letter case); keyword arguments replace single
         fields."""
         name = name.lower() if isinstance(name, str) else name
+        springs = isinstance(name, str) and (name in material.PRESETS
+                                             or name in material.FORMER_NAMES)
         require(isinstance(name, str) and name in PRESETS, "preset", name,
-                f"one of {sorted(PRESETS)}")
+                f"one of {sorted(PRESETS)}" + (f" ({name!r} names Stuyck's springs: "
+                                               f"Material.preset({name!r}))" if springs else ""))
         known = {f.name for f in fields(cls)}
         for key in overrides:
             require(key in known, "Fabric field", key, f"one of {sorted(known)}")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import enum
+import warnings
 from dataclasses import dataclass, field
 
 from ..inputs import limits
@@ -73,23 +74,42 @@ class Material:
 
     @classmethod
     def preset(cls, name: str, **overrides) -> "Material":
-        """A named material (any letter case); keyword arguments replace single fields."""
-        name = name.lower() if isinstance(name, str) else name
+        """A named material (PRESETS, any letter case); keyword arguments replace single
+        fields."""
+        name = preset_name(name)
         require(name in PRESETS, "preset", name, f"one of {sorted(PRESETS)}")
         return cls(**{**PRESETS[name], **overrides})
+
+
+def preset_name(name):
+    """`name` in lower case as PRESETS spells it: a spring preset's former name (before the
+    `_springs` ending kept them apart from the measured Fabric presets: "denim" was both)
+    gives its new one with a DeprecationWarning."""
+    if not isinstance(name, str):
+        return name
+    name = name.lower()
+    if name in FORMER_NAMES:
+        warnings.warn(f"the spring Material preset {name!r} is now {FORMER_NAMES[name]!r} "
+                      "(spring presets end in _springs, apart from the measured fabrics: "
+                      f"Fabric.preset / fabric = {name!r} is another cloth where one exists)",
+                      DeprecationWarning, stacklevel=3)
+        return FORMER_NAMES[name]
+    return name
 
 
 # Densities are typical fabric weights; stiffnesses are per-spring constants chosen so the
 # fabrics look right at 16-64 particles per metre (on a square grid a spring constant is a 2-D
 # modulus of the sheet, the same at every resolution for stretch and shear; no bend spring
 # gives the sheet a bending stiffness that stays: docs/integrators.md, resolution).
+# Named "<cloth>_springs" so that none is taken for a measured Fabric preset (body/fabric.py).
 PRESETS: dict[str, dict] = {
-    "silk": dict(density=0.06, stretch=SpringParams(2e3, 0.2), shear=SpringParams(50.0, 0.02),
-                 bend=SpringParams(0.5, 0.001)),
-    "cotton": dict(density=0.15, stretch=SpringParams(5e3, 0.5), shear=SpringParams(2e2, 0.05),
-                   bend=SpringParams(5.0, 0.005)),
-    "denim": dict(density=0.40, stretch=SpringParams(2e4, 2.0), shear=SpringParams(1e3, 0.2),
-                  bend=SpringParams(50.0, 0.02)),
-    "rubber": dict(density=1.0, stretch=SpringParams(1e3, 0.5), shear=SpringParams(1e3, 0.5),
-                   bend=SpringParams(20.0, 0.02)),
+    "silk_springs": dict(density=0.06, stretch=SpringParams(2e3, 0.2),
+                         shear=SpringParams(50.0, 0.02), bend=SpringParams(0.5, 0.001)),
+    "cotton_springs": dict(density=0.15, stretch=SpringParams(5e3, 0.5),
+                           shear=SpringParams(2e2, 0.05), bend=SpringParams(5.0, 0.005)),
+    "denim_springs": dict(density=0.40, stretch=SpringParams(2e4, 2.0),
+                          shear=SpringParams(1e3, 0.2), bend=SpringParams(50.0, 0.02)),
+    "rubber_springs": dict(density=1.0, stretch=SpringParams(1e3, 0.5),
+                           shear=SpringParams(1e3, 0.5), bend=SpringParams(20.0, 0.02)),
 }
+FORMER_NAMES = {name.removesuffix("_springs"): name for name in PRESETS}

@@ -33,7 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from ..errors import CrushedContact
+from .. import saved_state
+from ..errors import CrushedContact, StateMismatch
 from ..geometry import edge_contact, point_over_triangle
 from ..inputs import limits
 from ..inputs.validation import count, finite_number, keyword_only, require
@@ -221,8 +222,55 @@ class SelfCollisionStage:
                 "active": self.candidates.active.to_numpy()[:total],
                 "contact": self.candidates.contact.to_numpy()[:4 * total]}
 
+    def check_saved(self, path, arrays: dict, limit: float) -> None:
+        """errors.StateMismatch naming the array unless `arrays` is what saved() of this body
+        returns: every array in its shape and dtype, finite, and its counts in range (the
+        list's capacity within what it may grow to, its pairs within the capacity, starts
+        rising within the pairs, indices within the body), so that restore() allocates
+        nothing unbounded and no kernel reads out of its fields."""
+        scalars = ("listed", "pair_total", "vertex_pairs", "capacity")
+        missing = sorted(set(scalars) - set(arrays))
+        if missing:
+            raise StateMismatch(f"{path}: self_contact arrays missing: {missing}; it is "
+                                "damaged: run it again")
+        values = {}
+        for name, high in (("capacity", MAX_PAIRS_PER_PARTICLE * self.particle_count),
+                           ("pair_total", None), ("vertex_pairs", None), ("listed", 1)):
+            value = arrays[name]
+            high = {"pair_total": values.get("capacity"),
+                    "vertex_pairs": values.get("pair_total")}.get(name, high)
+            if not (value.shape == () and (np.issubdtype(value.dtype, np.integer)
+                                           or value.dtype == bool) and 0 <= value <= high):
+                raise StateMismatch(f"{path}: self_contact {name} is {value!r}, not a count "
+                                    f"in [0, {high}]")
+            values[name] = int(value)
+        total = values["pair_total"]
+        pairs = self.candidates
+        expected = {name: np.empty((rows * total,) + field.shape[1:] if field.ndim > 1
+                                   else (rows * total,), field.dtype)
+                    for name, rows, field in (
+                        ("elements", 1, pairs.elements.to_numpy()[:1]),
+                        ("particles", 1, pairs.particles.to_numpy()[:1]),
+                        ("active", 1, pairs.active.to_numpy()[:1]),
+                        ("contact", 4, pairs.contact.to_numpy()[:1]))}
+        expected |= {name: getattr(self, name).to_numpy()
+                     for name in ("listed_at", "pair_start", "contact_start")}
+        saved_state.check_arrays(path, {f"self_contact.{k}": arrays[k] for k in expected
+                                        if k in arrays},
+                                 {f"self_contact.{k}": v for k, v in expected.items()}, limit)
+        for name, high in (("pair_start", total), ("contact_start", 4 * total),
+                           ("elements", max(self.triangle_count, self.edge_count, 1) - 1),
+                           ("particles", self.particle_count - 1), ("active", 1),
+                           ("contact", 4 * total - 1)):
+            array = arrays[name]
+            rising = "start" not in name or bool((np.diff(array) >= 0).all())
+            if array.size and not (rising and array.min() >= 0 and array.max() <= high):
+                raise StateMismatch(f"{path}: self_contact {name} holds values outside "
+                                    f"[0, {high}]{'' if rising else ' or falling'}; it is "
+                                    "damaged: run it again")
+
     def restore(self, arrays: dict) -> None:
-        """Load what saved() returned (for this body)."""
+        """Load what saved() returned (for this body; check_saved first)."""
         capacity = int(arrays["capacity"])
         if capacity != self.candidates.capacity:
             self.candidates = PairList(capacity)

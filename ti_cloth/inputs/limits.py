@@ -134,8 +134,10 @@ class Work:
         return self.spring_steps / SPRING_STEPS_PER_SECOND
 
     def describe(self) -> str:
-        return (f"{self.steps:,} steps, {self.spring_steps:.3g} spring updates, about "
-                f"{_duration(self.seconds)} at {SPRING_STEPS_PER_SECOND:.0e} spring updates/s")
+        return (f"{self.steps:,} steps, {self.spring_steps:.3g} spring updates: up to about "
+                f"{describe_duration(self.seconds)} at {SPRING_STEPS_PER_SECOND:.0e} spring "
+                "updates/s (the slow integrators' pace; the pace measured on the first frames "
+                "follows)")
 
 
 def work(particles: int, springs: int, steps: int, passes: int = 1) -> Work:
@@ -143,7 +145,7 @@ def work(particles: int, springs: int, steps: int, passes: int = 1) -> Work:
     return Work(steps=steps, spring_steps=float(max(springs, particles)) * steps * passes)
 
 
-def _duration(seconds: float) -> str:
+def describe_duration(seconds: float) -> str:
     for unit, size in (("days", 86400.0), ("h", 3600.0), ("min", 60.0)):
         if seconds >= size:
             return f"{seconds / size:.3g} {unit}"

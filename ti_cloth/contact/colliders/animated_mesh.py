@@ -71,10 +71,12 @@ class AnimatedMeshCollider(Collider):
             self.vertices_at(0.0)
         elif self.motion is not None:
             try:
+                if np.iscomplexobj(self.motion):
+                    raise TypeError("complex")
                 motion = np.asarray(self.motion, dtype=np.float64)
             except (TypeError, ValueError, OverflowError):
                 raise ValueError(f"{name}.motion must be None, a callable t -> (V, 3) or an "
-                                 f"array (samples, {vertices}, 3) of numbers, got "
+                                 f"array (samples, {vertices}, 3) of real numbers, got "
                                  f"{self.motion!r:.80}") from None
             require(motion.ndim == 3 and motion.shape[1:] == (vertices, 3),
                     f"{name}.motion.shape", getattr(motion, "shape", None),
@@ -90,6 +92,10 @@ class AnimatedMeshCollider(Collider):
             motion.setflags(write=False)
             object.__setattr__(self, "motion", motion)
             object.__setattr__(self, "fps", in_range(f"{name}.fps", self.fps, limits.FPS))
+            collapsed = _collapsed(mesh.triangles, motion)
+            require(len(collapsed) == 0, f"{name}.motion[{collapsed[0] if len(collapsed) else 0}]",
+                    "a mesh collapsed to no area (its vertices on a point or a line)",
+                    "a surface in every sample")
         else:
             require(self.fps is None, f"{name}.fps", self.fps, "None without a motion")
 
@@ -169,6 +175,13 @@ class AnimatedMeshCollider(Collider):
 
     def packed(self):
         return ANIMATED, np.zeros(3), np.zeros(3), 0.0
+
+
+def _collapsed(triangles: np.ndarray, samples: np.ndarray) -> np.ndarray:
+    """The samples (S, V, 3) whose triangles have no area left, against the largest."""
+    a, b, c = (samples[:, triangles[:, k]] for k in range(3))
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=-1).sum(axis=1)
+    return np.flatnonzero(area <= 1e-12 * max(float(area.max()), 1e-300))
 
 
 def interpolate(samples: np.ndarray, fps: float, t: float) -> np.ndarray:

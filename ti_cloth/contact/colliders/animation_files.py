@@ -75,11 +75,19 @@ def _needed(fps: float | None, what: str) -> float:
     return fps
 
 
+def _real(name: str, values: np.ndarray) -> np.ndarray:
+    """`values` as float64 when they are real numbers (not complex, text or objects)."""
+    require(values.dtype != bool and (np.issubdtype(values.dtype, np.floating)
+                                      or np.issubdtype(values.dtype, np.integer)),
+            name, f"an array of {values.dtype}", "real numbers (float or integer positions)")
+    return values.astype(np.float64)
+
+
 def _checked(name: str, samples: np.ndarray, vertices: int) -> np.ndarray:
     require(samples.ndim == 3 and samples.shape[1:] == (vertices, 3), name,
             f"positions of shape {samples.shape}",
             f"positions (samples, {vertices}, 3) for the rest mesh's {vertices} vertices")
-    return samples.astype(np.float64)
+    return _real(name, samples)
 
 
 def _npz(path: Path):
@@ -98,7 +106,7 @@ def _npz(path: Path):
         raise ValueError(f"path: {path} is not a readable npz file ({err})") from None
     require(positions.ndim == 3 and positions.shape[0] > 0, f"{path.name}: positions",
             f"an array of shape {positions.shape}", "(samples, V, 3), at least one sample")
-    mesh = Mesh(positions[0], triangles)
+    mesh = Mesh(_real(f"{path.name}: positions", positions[0]), triangles)
     if fps is not None:
         require(fps.shape == () and np.issubdtype(fps.dtype, np.number), f"{path.name}: fps",
                 fps, "one number of samples per second")
@@ -155,7 +163,16 @@ def _usd(path: Path, prim_path: str | None):
     except ImportError as err:
         raise ImportError("reading USD needs Pixar's usd-core: pip install 'ti_cloth[usd]'") \
             from err
-    stage = Usd.Stage.Open(str(path))
+    from pxr import Tf
+    try:
+        stage = Usd.Stage.Open(str(path))
+    except Tf.ErrorException as err:       # a layer that does not parse
+        where = re.search(re.escape(path.name) + r":(\d+):(\d+): (.*?)(?: in </>|'\n|$)",
+                          str(err), re.S)
+        reason = (f"line {where[1]}, column {where[2]}: {' '.join(where[3].split())}" if where
+                  else "usd-core cannot parse it")
+        raise ValueError(f"path must be a USD stage usd-core can open, got {str(path)!r} "
+                         f"({reason})") from None
     require(stage is not None, "path", str(path), "a USD stage usd-core can open")
     meshes = [p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)]
     if prim_path is not None:
