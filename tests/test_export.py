@@ -150,3 +150,64 @@ def test_sheets_carry_uvs_and_normals_through_obj_ply_and_usd(kind, f64, tmp_pat
     for frame, x in enumerate(positions):
         np.testing.assert_allclose(np.array(usd.GetNormalsAttr().Get(frame)),
                                    normals_here(x, triangles), atol=1e-6)
+
+
+def test_the_usd_stage_holds_every_collider_with_its_motion(f64, tmp_path):
+    """Each kind of collider read back through pxr as the shape it is at each frame's time,
+    computed here from its definition: a sphere on a path (its translation per frame), a box
+    (its world bounds), a capsule (its axis ends), a plane (a square: its faces' normal and its
+    middle), a static
+    mesh (its points, once) and an animated mesh (its samples, one per frame)."""
+    from pxr import Usd, UsdGeom
+
+    fps, frames = 30, 5
+    swing = lambda t: (0.2 * t, 0.0, 0.0)                              # noqa: E731
+    box_mesh = tc.sphere_mesh(0.1, subdivisions=1)
+    motion = np.stack([box_mesh.vertices + (0.0, 0.05 * k, 0.0) for k in range(frames)])
+    colliders = [tc.Sphere(centre=(0.0, 0.3, 0.0), radius=0.2, path=swing),
+                 tc.Box(lo=(0.3, 0.0, -0.2), hi=(0.6, 0.3, 0.2)),
+                 tc.Capsule(a=(-0.6, 0.2, -0.3), b=(-0.3, 0.5, 0.3), radius=0.08),
+                 tc.Plane(point=(0.0, -0.1, 0.0), normal=(0.0, 0.6, 0.8)),
+                 tc.MeshCollider(tc.sphere_mesh(0.1, subdivisions=1, centre=(1.0, 0.0, 0.0))),
+                 tc.AnimatedMeshCollider(box_mesh, motion, fps=fps)]
+    cloth = tc.Cloth(tc.grid_mesh(4, 4, size=(0.5, 0.5), plane="xz", origin=(-0.25, 0.8, -0.25)),
+                     tc.Material())
+    sim = tc.Simulation(cloth, integrator="xpbd", dt=1 / 240, colliders=colliders)
+    with tc.Exporter(tmp_path, ["usd"], name="scene", cloth=cloth, fps=fps,
+                     usd_suffix=".usda", colliders=colliders) as export:
+        for frame in range(frames):
+            if frame:
+                sim.step(8)
+            export.write(sim)
+    stage = Usd.Stage.Open(str(tmp_path / "scene.usda"))
+    prims = [stage.GetPrimAtPath(f"/scene/colliders/collider{i}") for i in range(6)]
+    assert [p.GetTypeName() for p in prims] == ["Sphere", "Cube", "Capsule", "Mesh", "Mesh",
+                                                "Mesh"]
+
+    def world(prim, point, frame):
+        m = np.array(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(frame))
+        return np.append(point, 1.0) @ m
+
+    for frame in range(frames):
+        t = frame / fps
+        np.testing.assert_allclose(world(prims[0], (0, 0, 0), frame)[:3],
+                                   np.add((0.0, 0.3, 0.0), swing(t)), atol=1e-9)
+        np.testing.assert_allclose(np.asarray(UsdGeom.Mesh(prims[5]).GetPointsAttr().Get(frame)),
+                                   motion[frame], atol=1e-6)            # float32 points
+    assert UsdGeom.Sphere(prims[0]).GetRadiusAttr().Get() == 0.2
+    bounds = UsdGeom.BBoxCache(0, ["default"]).ComputeWorldBound(prims[1]).ComputeAlignedRange()
+    np.testing.assert_allclose([bounds.GetMin(), bounds.GetMax()],
+                               [(0.3, 0.0, -0.2), (0.6, 0.3, 0.2)], atol=1e-6)
+    half = UsdGeom.Capsule(prims[2]).GetHeightAttr().Get() / 2
+    np.testing.assert_allclose([world(prims[2], (0, -half, 0), 0)[:3],
+                                world(prims[2], (0, half, 0), 0)[:3]],
+                               [(-0.6, 0.2, -0.3), (-0.3, 0.5, 0.3)], atol=1e-6)
+    square = np.asarray(UsdGeom.Mesh(prims[3]).GetPointsAttr().Get(), np.float64)
+    faces = np.asarray(UsdGeom.Mesh(prims[3]).GetFaceVertexIndicesAttr().Get()).reshape(-1, 3)
+    for a, b, c in square[faces]:
+        normal = np.cross(b - a, c - a)
+        np.testing.assert_allclose(normal / np.linalg.norm(normal), (0.0, 0.6, 0.8), atol=1e-6)
+    np.testing.assert_allclose(square.mean(axis=0), (0.0, -0.1, 0.0), atol=1e-6)
+    points = UsdGeom.Mesh(prims[4]).GetPointsAttr()
+    assert points.GetNumTimeSamples() == 0           # a still mesh: its points once
+    np.testing.assert_allclose(np.asarray(points.Get()), colliders[4].mesh.vertices, atol=1e-6)

@@ -200,3 +200,67 @@ def test_a_flat_sheet_on_a_checker_boundary_renders_as_one_just_above_it(f32):
     differing = np.abs(images[0] - images[1]).max(axis=2) > 2
     report("pixels differing", int(differing.sum()), 0)
     assert differing.sum() == 0
+
+
+def _drape(collider, height, steps, thickness=None):
+    """A 20 x 20 sheet of 1 m dropped from `height` onto `collider` (its thickness: given, or
+    the default, the cloth's), stepped `steps` x 1/240 s with xpbd."""
+    mesh = tc.grid_mesh(20, 20, size=(1.0, 1.0), plane="xz", origin=(-0.5, height, -0.5))
+    if thickness is not None:
+        collider = type(collider)(**{**collider.__dict__, "thickness": thickness})
+    sim = tc.Simulation(tc.Cloth(mesh, tc.Material()), integrator=tc.XPBD(iterations=10),
+                        dt=1 / 240, colliders=[collider])
+    sim.step(steps)
+    return sim
+
+
+def _collider_pixels(sim, camera, size, supersample, covered):
+    """Pixels of the cloth's silhouette (its triangles `covered` alone, drawn red with no
+    shading) that show anything but the cloth once the colliders are drawn too."""
+    red = SurfaceStyle(front=(1.0, 0.0, 0.0), back=(1.0, 0.0, 0.0), checker=0.0)
+    triangles = sim.cloth.mesh.triangles
+    with Renderer(size, size, camera, supersample=supersample, light=Light(ambient=1.0),
+                  background=Background(top=(0.0, 0.0, 0.0), bottom=(0.0, 0.0, 0.0))) as r:
+        r.begin()
+        r.draw_mesh(sim.positions(), triangles, hidden=~covered, style=red)
+        alone = r.end()
+        r.begin()
+        r.draw_colliders(sim)
+        r.draw_mesh(sim.positions(), triangles, style=red)
+        both = r.end()
+    inside = (alone == (255, 0, 0)).all(axis=-1)
+    return int((inside & ~(both == (255, 0, 0)).all(axis=-1)).sum()), int(inside.sum())
+
+
+@pytest.mark.parametrize("shape", ["sphere", "plane"])
+def test_a_collider_never_shows_through_the_cloth_resting_on_it(f32, shape, monkeypatch):
+    """A sheet draped on a sphere (seen from straight above: its triangles above the sphere's
+    centre lie over the cap, nothing of the sphere is in front of them) and a sheet lying on
+    the ground (seen from the side): with the default contact thickness and the colliders'
+    depth offset, no collider pixel inside the cloth's silhouette at any size or
+    supersampling; with neither (thickness 0, no offset) the collider fights through."""
+    from ti_cloth.render import renderer
+    if shape == "sphere":
+        collider, height, steps = tc.Sphere(centre=(0.0, 0.0, 0.0), radius=0.3), 0.35, 240
+        camera = Camera(position=(0.0, 4.0, 0.0), target=(0.0, 0.0, 0.0), up=(0.0, 0.0, -1.0),
+                        orthographic=True, height=1.3)
+    else:
+        collider, height, steps = tc.Plane(point=(0.0, 0.0, 0.0)), 0.05, 120
+        camera = Camera(position=(1.0, 0.7, 1.4), target=(0.0, 0.0, 0.0), fov=45.0)
+    sim = _drape(collider, height, steps)
+    assert sim.colliders.colliders[0].thickness == pytest.approx(
+        tc.AUTO_THICKNESS * sim.cloth.mean_edge)
+    x = sim.positions()
+    covered = (x[sim.cloth.mesh.triangles][..., 1] > 0.0).all(axis=1)   # over the cap
+    assert covered.sum() > 50
+    counts = {(size, ss): _collider_pixels(sim, camera, size, ss, covered)
+              for size, ss in ((120, 1), (480, 1), (240, 2))}
+    report(f"{shape}: collider pixels in the cloth's silhouette (of)", counts, "0 each")
+    assert all(shown == 0 and total > 500 for shown, total in counts.values())
+    monkeypatch.setattr(renderer, "COLLIDER_DEPTH_BIAS", 0.0)
+    bare = _drape(collider, height, steps, thickness=0.0)
+    x = bare.positions()
+    covered = (x[bare.cloth.mesh.triangles][..., 1] > -1e-3).all(axis=1)
+    shown, total = _collider_pixels(bare, camera, 480, 1, covered)
+    report(f"{shape}: without either", (shown, total), "> 0")
+    assert shown > 0

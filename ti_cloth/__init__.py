@@ -38,6 +38,7 @@ LAZY = {
     "Collider": (".contact.colliders.shapes", "Collider"),
     "Plane": (".contact.colliders.shapes", "Plane"),
     "Sphere": (".contact.colliders.shapes", "Sphere"),
+    "AUTO_THICKNESS": (".contact.colliders.shapes", "AUTO_THICKNESS"),
     "SelfCollision": (".contact.self_collision", "SelfCollision"),
     "SelfContacts": (".contact.self_collision", "SelfContacts"),
     "OutputError": (".errors", "OutputError"),
@@ -75,7 +76,7 @@ LAZY = {
 }
 
 __all__ = [
-    "init", "AnimatedMeshCollider", "Box", "Capsule", "Collider", "Exporter", "MeshCollider", "Plane", "Sphere", "OutputError", "SimulationDiverged", "StateMismatch",
+    "init", "AnimatedMeshCollider", "Box", "Capsule", "Collider", "Exporter", "MeshCollider", "Plane", "Sphere", "AUTO_THICKNESS", "OutputError", "SimulationDiverged", "StateMismatch",
     "TeamStalled",
     "ForceSettings",
     "INTEGRATORS", "Integrator", "ExplicitEuler", "SymplecticEuler", "Verlet", "PBD", "XPBD",

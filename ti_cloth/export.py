@@ -63,20 +63,25 @@ class Exporter:
         with its points time-sampled per frame (time code = frame) and, for a mesh that tears,
         its faces too; time codes per second = frames per second = fps, start and end time
         codes, up axis Y, metres per unit 1.
+        colliders: each under /<name>/colliders/collider<i>: a mesh (MeshCollider,
+        AnimatedMeshCollider) a UsdGeom.Mesh whose points are time-sampled when it moves;
+        a Sphere, Box (a Cube scaled) or Capsule (along Y, turned) the UsdGeom shape,
+        translated by time samples when it has a path; a Plane a mesh square PLANE_SIZE wide
+        (Blender 4.2 reads no UsdGeom.Plane).
     Bodies are named body0, body1, ... in the order the Cloth joined them.
     first_frame: the frame the first write() is (a resumed run: the files of the frames
         before it stay, and the journal keeps exactly those frames; StateMismatch if it holds
         fewer or another layout)."""
 
     def __init__(self, folder, formats, *, name: str, cloth, fps: float,
-                 usd_suffix: str = ".usdc", first_frame: int = 0):
+                 usd_suffix: str = ".usdc", first_frame: int = 0, colliders=()):
         formats = [formats] if isinstance(formats, str) else list(formats)
         for f in formats:
             require(f in FORMATS, "export format", f, f"one of {FORMATS}")
         require(usd_suffix in (".usdc", ".usda"), "usd_suffix", usd_suffix, '".usdc" or ".usda"')
         self.folder, self.formats, self.name = Path(folder), formats, name
         self.fps = finite_number("fps", fps, 0.0, strict=True, unit="frames/s")
-        self.cloth = cloth
+        self.cloth, self.colliders = cloth, tuple(colliders)
         self.bodies = [_Body(cloth, b) for b in range(cloth.body_count)]
         self._shown = np.concatenate([body.points for body in self.bodies])   # npz order
         ends = np.cumsum([len(body.points) for body in self.bodies])
@@ -175,6 +180,8 @@ class Exporter:
                 for body, points in zip(self.bodies, self._slices):
                     stage.add(body, frame, record["positions"][points],
                               torn[body.triangle_index].astype(bool))
+            for index, collider in enumerate(self.colliders):
+                stage.add_collider(index, collider, records["time"])
             paths.append(stage.save(len(records)))
         return paths
 
@@ -364,6 +371,7 @@ class _UsdStage:
         UsdGeom.SetStageUpAxis(self.stage, UsdGeom.Tokens.y)
         UsdGeom.SetStageMetersPerUnit(self.stage, 1.0)
         root = "/" + (Sdf.Path.IsValidIdentifier(name) and name or "scene")
+        self.root = root
         self.stage.SetDefaultPrim(UsdGeom.Xform.Define(self.stage, root).GetPrim())
         self.prims, self.torn_before = {}, {}
         for body in bodies:
@@ -416,11 +424,92 @@ class _UsdStage:
         prim.GetPointsAttr().Set(Vt.Vec3fArray.FromNumpy(np.array(positions, np.float32)),
                                  frame)
 
+    PLANE_SIZE = 20.0       # m: the side of the square an infinite collider plane is written as
+
+    def add_collider(self, index: int, collider, times: np.ndarray) -> None:
+        """Collider `index` (of contact.colliders) at the frames' times [s], told apart by
+        what it holds: a `mesh`, a plane's normal, a sphere's centre, a box's lo and hi, or a
+        capsule's a and b."""
+        from pxr import Gf, Vt
+
+        UsdGeom = self.UsdGeom
+        path = f"{self.root}/colliders/collider{index}"
+        placed = [collider.placed(float(t)) for t in times]
+        first = placed[0]
+        moving = any(p is not collider for p in placed)
+        if hasattr(first, "mesh") or hasattr(first, "normal"):
+            mesh = UsdGeom.Mesh.Define(self.stage, path)
+            mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+            if hasattr(first, "normal"):          # a square of PLANE_SIZE (Blender reads no Plane)
+                mesh.CreateDoubleSidedAttr(True)
+                self._faces(mesh, np.array([[0, 1, 2], [0, 2, 3]]), None)
+            else:
+                self._faces(mesh, first.mesh.triangles, None)
+            points = mesh.CreatePointsAttr()
+            for frame, shape in enumerate(placed if moving else placed[:1]):
+                vertices = (self._square(shape) if hasattr(shape, "normal")
+                            else shape.mesh.vertices)
+                points.Set(Vt.Vec3fArray.FromNumpy(vertices.astype(np.float32)),
+                           frame if moving else _unvarying())
+            return
+        if hasattr(first, "centre"):
+            prim = UsdGeom.Sphere.Define(self.stage, path)
+            prim.CreateRadiusAttr(first.radius)
+            where = lambda shape: np.asarray(shape.centre)            # noqa: E731
+        elif hasattr(first, "lo"):
+            prim = UsdGeom.Cube.Define(self.stage, path)
+            prim.CreateSizeAttr(1.0)
+            where = lambda shape: 0.5 * (np.asarray(shape.lo) + np.asarray(shape.hi))  # noqa: E731
+        else:
+            prim = UsdGeom.Capsule.Define(self.stage, path)
+            axis = np.subtract(first.b, first.a)
+            prim.CreateAxisAttr(UsdGeom.Tokens.y)
+            prim.CreateHeightAttr(float(np.linalg.norm(axis)))
+            prim.CreateRadiusAttr(first.radius)
+            where = lambda shape: 0.5 * (np.asarray(shape.a) + np.asarray(shape.b))  # noqa: E731
+        translate = prim.AddTranslateOp()
+        if hasattr(first, "lo"):
+            prim.AddScaleOp().Set(Gf.Vec3f(*np.subtract(first.hi, first.lo).tolist()))
+        if hasattr(first, "a"):                                 # +Y turned onto the axis
+            prim.AddOrientOp().Set(_quaternion_from_y(axis))
+        for frame, shape in enumerate(placed if moving else placed[:1]):
+            translate.Set(Gf.Vec3d(*where(shape).tolist()), frame if moving else _unvarying())
+
+    def _square(self, plane) -> np.ndarray:
+        """The corners (4, 3) of a PLANE_SIZE square of `plane` round its point, counter-
+        clockwise seen from the side its normal points to."""
+        n = np.asarray(plane.normal, np.float64)
+        u = np.cross(n, np.eye(3)[np.argmin(np.abs(n))])
+        u /= np.linalg.norm(u)
+        v = np.cross(n, u)
+        half = 0.5 * self.PLANE_SIZE
+        return np.asarray(plane.point) + half * np.array([-u - v, u - v, u + v, -u + v])
+
     def save(self, frames: int) -> Path:
         self.stage.SetEndTimeCode(max(frames - 1, 0))
         with atomic_path(self.path) as tmp:
             self.stage.Export(str(tmp))
         return self.path
+
+
+def _unvarying():
+    """USD's default time code: an attribute's value that does not change over time."""
+    from pxr import Usd
+    return Usd.TimeCode.Default()
+
+
+def _quaternion_from_y(axis: np.ndarray):
+    """The unit quaternion (a Gf.Quatf) turning +Y onto `axis` by the shortest arc."""
+    from pxr import Gf
+
+    axis = np.asarray(axis, np.float64) / np.linalg.norm(axis)
+    y = np.array([0.0, 1.0, 0.0])
+    cross, cosine = np.cross(y, axis), float(y @ axis)
+    if cosine < -1.0 + 1e-12:                   # straight down: half a turn about x
+        return Gf.Quatf(0.0, 1.0, 0.0, 0.0)
+    w = 1.0 + cosine
+    q = np.array([w, *cross]) / np.linalg.norm([w, *cross])
+    return Gf.Quatf(float(q[0]), float(q[1]), float(q[2]), float(q[3]))
 
 
 def read_pc2(path) -> tuple[dict, np.ndarray]:

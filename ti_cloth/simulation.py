@@ -20,6 +20,7 @@ from . import saved_state, stepping
 from .body.topology import Cloth
 from .contact.colliders.attachment import Attachment
 from .contact.colliders.collision import ColliderSet
+from .contact.colliders.shapes import Collider
 from .contact.self_collision import (
     SelfCollision,
     SelfCollisionStage,
@@ -117,7 +118,8 @@ class Simulation:
                 strain_limit, "None or a StrainLimit")
         require(isinstance(colliders, (list, tuple)), "colliders", colliders,
                 "a list of colliders (colliders=[Plane(...)])")
-        colliders = tuple(colliders)
+        colliders = tuple(c.for_cloth(cloth) if isinstance(c, Collider) else c
+                          for c in colliders)     # a default thickness: the cloth's (shapes.py)
         require(sewing is None or isinstance(sewing, Sewing), "sewing", sewing,
                 "None or a Sewing(speed=...)")
         require(sewing is None or len(cloth.seam_indices), "sewing", sewing,

@@ -208,7 +208,7 @@ def run_scene(scene, *, folder=None, frames: int | None = None, progress: bool =
                                      first=first)
             exporter = Exporter(folder, out.export if export is None else export,
                                 name=scene.name, cloth=scene.cloth, fps=scene.fps,
-                                first_frame=first)
+                                first_frame=first, colliders=scene.colliders)
             paint, camera = _frame_painter(scene, sim, out)
             watch = Watch(scene, sim, camera, out.width, out.height)
             bar = tqdm(total=frames, initial=min(first, frames), unit="frame",

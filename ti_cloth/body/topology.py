@@ -453,6 +453,21 @@ class Cloth:
         """The springs' damping model ("axial" for a Fabric's body, which has none)."""
         return self.material.damping if isinstance(self.material, Material) else "axial"
 
+    @property
+    def mean_edge(self) -> float:
+        """The mean rest length [m] of the body's edges: its triangles' (each edge once),
+        else its stretch springs' (strings, hair); 0 for particles alone."""
+        triangles = self.mesh.triangles
+        if len(triangles):
+            pairs = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+            pairs = np.unique(pairs, axis=0)
+        else:
+            pairs = self.spring_indices[self.spring_kind == SpringKind.STRETCH]
+        if len(pairs) == 0:
+            return 0.0
+        r = self.rest_position
+        return float(np.linalg.norm(r[pairs[:, 0]] - r[pairs[:, 1]], axis=1).mean())
+
     def spring_count_by_kind(self) -> dict[str, int]:
         return {k.name.lower(): int(np.sum(self.spring_kind == k)) for k in SpringKind}
 

@@ -156,12 +156,13 @@ def raster_triangles(samples: samples_type, cam: ndarray_f32_1, triangles: ndarr
                      front: ti.math.vec3, back: ti.math.vec3, wire: ti.math.vec3,
                      light: ti.math.vec3, ambient: float, checker_size: float,
                      checker_contrast: float, strain_max: float, wire_width: float,
-                     use_colours: ti.template(), use_checker: ti.template(),
+                     depth_scale: float, use_colours: ti.template(), use_checker: ti.template(),
                      use_strain: ti.template(), use_wire: ti.template()):
     """Shade and depth-test every covered sample of every visible triangle. Counter-clockwise
     on screen is the front face; back faces get `back` and their normal flipped to the viewer.
     The base colour is front/back, or per-vertex colours, or the strain ramp; the checker
-    darkens it; wireframe replaces it near edges. Attributes are interpolated
+    darkens it; wireframe replaces it near edges; depths are taken times `depth_scale` (a
+    collider's: renderer.COLLIDER_DEPTH_BIAS). Attributes are interpolated
     perspective-correctly."""
     for t in range(triangles.shape[0]):
         if visible[t] != 0:
@@ -204,7 +205,7 @@ def raster_triangles(samples: samples_type, cam: ndarray_f32_1, triangles: ndarr
                                           wc / (sb - sa).norm())
                             if dist < wire_width / 2:
                                 colour = wire
-                        ti.atomic_min(samples[x, y], pack(depth, colour))
+                        ti.atomic_min(samples[x, y], pack(depth * depth_scale, colour))
 
 
 @backend.kernel

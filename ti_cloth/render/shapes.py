@@ -104,9 +104,11 @@ def plot_hit(samples: ti.template(), x, y, t, depth_per_t, near, colour):
 def raster_plane(samples: samples_type, cam: ndarray_f32_1, point: ti.math.vec3,
                  normal: ti.math.vec3, axis_u: ti.math.vec3, axis_v: ti.math.vec3,
                  colour: ti.math.vec3, cell: float, contrast: float, fade: float,
-                 light: ti.math.vec3, ambient: float, clear_first: ti.template()):
+                 light: ti.math.vec3, ambient: float, depth_scale: float,
+                 clear_first: ti.template()):
     """The infinite plane through `point` with unit `normal`, lit from either side, with a
-    checker of `cell` metres along axis_u, axis_v (0: plain) fading out by depth `fade` [m].
+    checker of `cell` metres along axis_u, axis_v (0: plain) fading out by depth `fade` [m],
+    its depths times `depth_scale` (> 1: behind what touches it, renderer.COLLIDER_DEPTH_BIAS).
     clear_first: the frame's clear fused into this pass (one sweep over the samples, not two)."""
     for x, y in samples:
         o, d = camera_ray(cam, x, y)
@@ -122,7 +124,8 @@ def raster_plane(samples: samples_type, cam: ndarray_f32_1, point: ti.math.vec3,
                 weight = contrast * ti.max(1.0 - t / fade, 0.0)
                 albedo = colour * (1.0 - weight * (cells & 1))
             facing = -ti.math.sign(denominator)
-            key = hit_key(t, 1.0, cam[16], lambert(albedo, normal * facing, light, ambient))
+            key = hit_key(t, depth_scale, cam[16], lambert(albedo, normal * facing, light,
+                                                           ambient))
         if ti.static(clear_first):
             samples[x, y] = key
         else:
@@ -132,9 +135,10 @@ def raster_plane(samples: samples_type, cam: ndarray_f32_1, point: ti.math.vec3,
 @backend.kernel
 def raster_solid(samples: samples_type, cam: ndarray_f32_1, shape: ti.template(),
                  a: ti.math.vec3, b: ti.math.vec3, radius: float, colour: ti.math.vec3,
-                 light: ti.math.vec3, ambient: float):
+                 light: ti.math.vec3, ambient: float, depth_scale: float):
     """A sphere (centre a, radius), a box (corners a, b) or a capsule (segment a-b, radius);
-    `shape` (colliders.SPHERE, BOX or CAPSULE) picks the ray test at compile time."""
+    `shape` (colliders.SPHERE, BOX or CAPSULE) picks the ray test at compile time; depths
+    times `depth_scale`, as raster_plane's."""
     for x, y in samples:
         o, d, depth_per_t = unit_camera_ray(cam, x, y)
         t, n = MISS, ti.Vector([0.0, 0.0, 0.0])
@@ -144,4 +148,5 @@ def raster_solid(samples: samples_type, cam: ndarray_f32_1, shape: ti.template()
             t, n = hit_box(o, d, a, b)
         else:
             t, n = hit_capsule(o, d, a, b, radius)
-        plot_hit(samples, x, y, t, depth_per_t, cam[16], lambert(colour, n, light, ambient))
+        plot_hit(samples, x, y, t, depth_per_t * depth_scale, cam[16],
+                 lambert(colour, n, light, ambient))

@@ -62,7 +62,7 @@ class MeshCollider(Collider):
             object.__setattr__(self, "solid", closed(mesh))
         self.turn(0.0)
         cell = layout(mesh.vertices, self.resolution, self.margin)[1]
-        if not self.solid and self.thickness < cell:
+        if not self.solid and self.thickness is not None and self.thickness < cell:
             warnings.warn(f"MeshCollider: this shell's thickness ({self.thickness:g} m) is less "
                           f"than its distance grid's cell ({cell:.3g} m), so particles may come "
                           f"nearer than the thickness; raise the thickness or the resolution "
@@ -76,7 +76,8 @@ class MeshCollider(Collider):
     @property
     def margin(self) -> float:
         """How far the distance grid reaches beyond the mesh's bounding box [m]."""
-        return max(MARGIN * float(np.ptp(self.mesh.vertices, axis=0).max()), 2 * self.thickness)
+        return max(MARGIN * float(np.ptp(self.mesh.vertices, axis=0).max()),
+                   2 * (self.thickness or 0.0))
 
     def grid(self) -> DistanceGrid:
         """The mesh's signed distance grid (built once, cached: sdf.distance_grid)."""

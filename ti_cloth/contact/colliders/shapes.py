@@ -25,23 +25,33 @@ from ...inputs.validation import as_array, finite_number, in_range, require
 PLANE, SPHERE, BOX, CAPSULE, MESH, ANIMATED = 0, 1, 2, 3, 4, 5   # mesh_collider.py, animated_mesh.py
 
 
+# A collider's default thickness, as a fraction of the cloth's mean rest edge L: a flat
+# triangle whose corners rest on a sphere of radius R sags L^2 / (8 R) into it between them,
+# so at 0.2 L the cloth's faces stay outside (and are drawn in front of) every sphere, capsule
+# or curved mesh of radius >= 0.625 L; flat colliders need none, and the cloth is not drawn
+# coplanar with them (docs/api.md, Colliders).
+AUTO_THICKNESS = 0.2
+
+
 @dataclass(frozen=True, kw_only=True)
 class Collider:
-    """thickness: particles are kept this far outside the surface [m], >= 0.
+    """thickness: particles are kept this far outside the surface [m], >= 0; None (the
+    default): AUTO_THICKNESS x the mean rest edge of the cloth it meets (for_cloth).
     static_friction, kinetic_friction: Coulomb coefficients, >= 0 (kinetic None: = static).
     path: t [s] -> displacement [m] of the whole shape from where it was defined, or None."""
 
-    thickness: float = 0.0
+    thickness: float | None = None
     static_friction: float = 0.0
     kinetic_friction: float | None = None
     path: Callable[[float], object] | None = None
 
     def __post_init__(self):
         name = type(self).__name__
-        object.__setattr__(self, "thickness", finite_number(f"{name}.thickness", self.thickness,
-                                                            0.0, unit="m"))
-        require(self.thickness <= limits.LENGTH.high, f"{name}.thickness", self.thickness,
-                f"in [0, {limits.LENGTH.high:g}] m")
+        if self.thickness is not None:
+            object.__setattr__(self, "thickness", finite_number(
+                f"{name}.thickness", self.thickness, 0.0, unit="m"))
+            require(self.thickness <= limits.LENGTH.high, f"{name}.thickness", self.thickness,
+                    f"in [0, {limits.LENGTH.high:g}] m")
         static = finite_number(f"{name}.static_friction", self.static_friction, 0.0)
         kinetic = static if self.kinetic_friction is None else finite_number(
             f"{name}.kinetic_friction", self.kinetic_friction, 0.0)
@@ -49,6 +59,13 @@ class Collider:
         object.__setattr__(self, "kinetic_friction", kinetic)
         require(self.path is None or callable(self.path), f"{name}.path", self.path,
                 "None or a callable t -> displacement")
+
+    def for_cloth(self, cloth) -> "Collider":
+        """This collider with a thickness: its own, or AUTO_THICKNESS x `cloth`'s mean rest
+        edge (Cloth.mean_edge) when it has none."""
+        if self.thickness is not None:
+            return self
+        return replace(self, thickness=AUTO_THICKNESS * cloth.mean_edge)
 
     def offset(self, t: float) -> np.ndarray:
         """Displacement [m] of the shape at time t."""
