@@ -175,7 +175,7 @@ def test_the_winding_number_keeps_the_inside_of_a_sphere_with_holes(f64):
     collider = tc.MeshCollider(holed, solid=True, resolution=32)
     with pytest.warns(UserWarning, match=r"shell's thickness \(0 m\) is less than its "
                       r"distance grid's cell"):
-        assert tc.MeshCollider(holed).solid is False            # open: a shell by default
+        assert tc.MeshCollider(holed, thickness=0.0).solid is False    # a shell by default
     sim = tc.Simulation(far_particle(), colliders=[collider])
     points = np.random.default_rng(2).uniform(-0.45, 0.45, (3000, 3))
     exact = np.linalg.norm(points, axis=1) - radius

@@ -14,6 +14,7 @@ from ti_cloth.contact.colliders.collision import resolve
 from ti_cloth.inputs.scene_file import SceneError
 from ti_cloth.physics import wind as wind_module
 from ti_cloth.physics.strain_limit import relax_stretched
+from ti_cloth.render import Camera
 
 DEMOS = Path(__file__).parents[1] / "demos"
 
@@ -376,3 +377,63 @@ def test_frames_beyond_the_step_count_are_refused_before_taichi(tmp_path, capsys
     assert cli.main(["run", str(path), "--frames", str(10 ** 12), "--no-progress",
                      "--out", str(tmp_path / "o")]) == 2
     assert "more than the 2_147_483_646 a simulation can count" in capsys.readouterr().err
+
+
+HANGING = """
+[simulation]
+integrator = "xpbd"
+duration = 1.2
+[[bodies]]
+type = "grid"
+rows = 12
+cols = 12
+size = [1.0, 1.0]
+plane = "xz"
+origin = [0.0, 1.5, 0.0]
+pinned = [0, 11]
+"""
+DROPPED = """
+[simulation]
+integrator = "xpbd"
+duration = 1.2
+[[bodies]]
+type = "grid"
+rows = 12
+cols = 12
+size = [1.0, 1.0]
+plane = "xz"
+origin = [-0.5, 1.0, -0.5]
+[[colliders]]
+type = "sphere"
+centre = [0.0, 0.35, 0.0]
+radius = 0.35
+[[colliders]]
+type = "plane"
+"""
+
+
+@pytest.mark.parametrize("text", [HANGING, DROPPED], ids=["pinned at two corners", "dropped"])
+def test_the_automatic_camera_frames_the_whole_motion(tmp_path, f32, text):
+    """Without [camera], the camera is fitted to where the motion happens (Scene.motion_bounds):
+    every particle of every frame projects inside the image, and the cloth at the end still
+    spans a fair part of it; fitted to the cloth at rest (before), the sheet swinging from
+    its corners leaves the frame."""
+    scene = load_scene(write(tmp_path, text))
+    width, height = scene.output.width, scene.output.height
+    cameras = {"motion": Camera.fit(scene.motion_bounds(), aspect=width / height),
+               "rest": Camera.fit(scene.cloth, aspect=width / height)}
+    sim = scene.build(dt=1 / 240)
+    outside = {name: 0 for name in cameras}
+    for _ in range(36):
+        sim.step(8)
+        x = sim.positions()
+        for name, camera in cameras.items():
+            screen, depth = camera.project(x, width, height)
+            outside[name] += int((~((screen >= 0).all(axis=1) & (screen[:, 0] <= width)
+                                    & (screen[:, 1] <= height) & (depth > camera.near))).sum())
+    span = np.ptp(cameras["motion"].project(x, width, height)[0], axis=0)
+    report("particles outside the image over the run; the last frame's span (px)",
+           (outside, span.tolist()), "motion: 0")
+    assert outside["motion"] == 0 and max(span[0] / width, span[1] / height) > 0.15
+    if "pinned" in text:
+        assert outside["rest"] > 0

@@ -111,7 +111,7 @@ def _frame_painter(scene, sim, out):
         cloth = scene.cloth
         return (lambda: view.render(sim.positions(), cloth.spring_indices, cloth.spring_kind,
                                     sim.pinned(), sim.spring_alive(), cloth.ghost)), None
-    camera = scene.camera or Camera.fit(scene.cloth, aspect=out.width / out.height,
+    camera = scene.camera or Camera.fit(scene.motion_bounds(), aspect=out.width / out.height,
                                         **scene.camera_fit)
     renderer = Renderer(out.width, out.height, camera, supersample=out.supersample)
 

@@ -132,6 +132,51 @@ class Scene:
         x = self.cloth.particle_position
         return float(np.linalg.norm(x.max(axis=0) - x.min(axis=0)))
 
+    def motion_bounds(self) -> np.ndarray:
+        """Where the scene's motion happens, (2, 3) corners [m], for a camera fitted to it:
+        the bodies at rest; the room they move in: a particle of a held body (pins, handles,
+        attachments) swings below and beside the holds no further than its rest distance
+        from each, a free body falls at most its own size; the colliders of finite size (an animated
+        mesh over all its samples); nothing below the ground (the output's, or a level
+        plane under the bodies)."""
+        x = self.cloth.particle_position
+        lo, hi = x.min(axis=0), x.max(axis=0)
+        held = self.cloth.pinned.copy()
+        for handle in self.handles:
+            held[np.asarray(handle.particles)] = True
+        if held.any():
+            # particle i stays within |x_i - h| of every hold h (its rest distance, as far
+            # as the cloth between them can stretch out straight): its box is the overlap of
+            # those spheres' boxes, below the holds (gravity)
+            holds = x[held][:: max(1, int(held.sum()) // 256)]
+            reach = np.linalg.norm(x[:, None, :] - holds[None, :, :], axis=2)[:, :, None]
+            lo = np.minimum(lo, (holds[None] - reach).max(axis=1).min(axis=0))
+            top = (holds[None] + reach).min(axis=1).max(axis=0)
+            hi = np.maximum(hi, (top[0], hi[1], top[2]))
+        else:
+            lo = lo - (0.0, self.size, 0.0)
+        floors = [p.point[1] for p in self.colliders if isinstance(p, Plane)
+                  and np.allclose(np.asarray(p.normal) / np.linalg.norm(p.normal), (0, 1, 0))]
+        floors += [self.output.ground] if self.output.ground is not None else []
+        for c in self.colliders:
+            if isinstance(c, Sphere):
+                box = np.array([c.centre]) + [[-c.radius], [c.radius]]
+            elif isinstance(c, Box):
+                box = np.array([c.lo, c.hi])
+            elif isinstance(c, Capsule):
+                box = np.array([np.minimum(c.a, c.b) - c.radius, np.maximum(c.a, c.b) + c.radius])
+            elif isinstance(c, AnimatedMeshCollider) and c.sampled:
+                box = np.array([c.motion.min(axis=(0, 1)), c.motion.max(axis=(0, 1))])
+            elif isinstance(c, (MeshCollider, AnimatedMeshCollider)):
+                box = np.array([c.mesh.vertices.min(axis=0), c.mesh.vertices.max(axis=0)])
+            else:
+                continue
+            lo, hi = np.minimum(lo, box[0]), np.maximum(hi, box[1])
+        under = [f for f in floors if f <= x[:, 1].min()]
+        if under:
+            lo[1] = max(lo[1], max(under))
+        return np.array([lo, hi])
+
     @property
     def frame_dt(self) -> float:
         return 1.0 / self.fps
@@ -359,7 +404,8 @@ def check_runnable(scene: Scene, root: Table) -> None:
     if scene.camera is None:
         out = scene.output
         try:
-            Camera.fit(scene.cloth, aspect=out.width / out.height, **scene.camera_fit)
+            Camera.fit(scene.motion_bounds(), aspect=out.width / out.height,
+                       **scene.camera_fit)
         except ValueError as err:
             root.fail(f"camera: {err}")
 

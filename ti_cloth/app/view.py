@@ -84,7 +84,7 @@ def viewer_for(subject, *, width: int = 960, height: int = 540, folder=None) -> 
         substeps = subject.resolved_substeps()
         sim = subject.build(dt=subject.frame_dt / substeps)
         name, frame_dt = subject.name, subject.frame_dt
-        camera = subject.camera or Camera.fit(subject.cloth, aspect=width / height,
+        camera = subject.camera or Camera.fit(subject.motion_bounds(), aspect=width / height,
                                               **subject.camera_fit)
         ground, style = subject.output.ground, subject.output.style
         folder = Path(folder or subject.output.folder)

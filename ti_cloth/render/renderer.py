@@ -326,7 +326,8 @@ class Renderer:
     def draw_simulation(self, sim, style: SurfaceStyle = SurfaceStyle()) -> None:
         """The body of a Simulation at its current time: its triangles (torn ones dropped),
         and the stretch springs of particles on no triangle (strings, hair) as lines; plus
-        particles. Ghost particles (cloth.ghost) and their springs are never drawn."""
+        particles. The checker follows the rest shape (a garment's: its flat pattern, as a print
+        on the fabric). Ghost particles (cloth.ghost) and their springs are never drawn."""
         self._require_frame()
         cloth, x = sim.cloth, sim.positions()
         alive = sim.spring_alive()
@@ -334,7 +335,7 @@ class Renderer:
         if len(triangles):
             strain = (vertex_strain(x, cloth.spring_indices, cloth.spring_rest_length, alive)
                       if style.strain else None)
-            self.draw_mesh(x, triangles, rest_positions=cloth.particle_position,
+            self.draw_mesh(x, triangles, rest_positions=cloth.rest_position,
                            hidden=sim.torn_triangles(), strain=strain, style=style)
         on_surface = np.zeros(cloth.particle_count, bool)
         on_surface[triangles.ravel()] = True
