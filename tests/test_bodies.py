@@ -288,7 +288,7 @@ def test_tet_block_dropped_on_the_ground_rests_with_every_volume_within_ten_perc
     body = tc.tet_block(cells=(3, 3, 3), size=(0.3, 0.3, 0.3), origin=(0.0, 0.2, 0.0),
                         density=500.0, stretch=tc.SpringParams(2e4, 5.0))
     rest = body.mesh.tetrahedron_volumes()
-    sim = tc.Simulation(body, dt=5e-4, drag=1.0, colliders=[tc.Plane(static_friction=0.5)])
+    sim = tc.Simulation(body, dt=5e-4, drag=1.0, colliders=[tc.Plane(static_friction=0.5, thickness=0.0)])
     worst = 0.0
     for _ in range(40):
         sim.step(100)

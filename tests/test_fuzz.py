@@ -152,7 +152,7 @@ def names_a_key(message: str, touched, key_names) -> bool:
             or any(re.search(rf"\b{re.escape(k)}\b", message) for k in key_names))
 
 
-@settings(max_examples=150, deadline=FRAME_DEADLINE_MS, derandomize=True, suppress_health_check=[HealthCheck.function_scoped_fixture,
+@settings(max_examples=100, deadline=FRAME_DEADLINE_MS, derandomize=True, suppress_health_check=[HealthCheck.function_scoped_fixture,
                                                                   HealthCheck.too_slow])
 @given(changes=changes)
 def test_a_generated_scene_file_runs_a_frame_or_is_refused_naming_a_key(tmp_path, changes):
@@ -217,7 +217,7 @@ def write_body(folder) -> None:
 garment_changes = change_lists(GARMENT_PATHS)
 
 
-@settings(max_examples=30, deadline=FRAME_DEADLINE_MS, derandomize=True,
+@settings(max_examples=20, deadline=FRAME_DEADLINE_MS, derandomize=True,
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(changes=garment_changes)
 def test_a_generated_garment_scene_runs_a_frame_or_is_refused_naming_a_key(tmp_path, changes):

@@ -277,7 +277,7 @@ def _corrupted(saved: Path, target: Path, kind: str, k: int) -> None:
                              + head.encode() + b"\0" * 16)
 
 
-@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(kind=st.sampled_from(["nan", "far", "missing", "length", "dtype", "steps", "header",
                              "forged"]),
        k=st.integers(0, 1000))

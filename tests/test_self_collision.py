@@ -244,7 +244,8 @@ def test_a_ribbon_folded_onto_itself_stays_two_layers(f64):
     for contact in (tc.SelfCollision(thickness=THICKNESS), None):
         sim = tc.Simulation(cloth, integrator="xpbd", dt=1 / 240, self_collision=contact,
                             handles=[tc.Handle(end, carried)],
-                            colliders=[tc.Plane(point=(0.0, -0.01, 0.0), static_friction=0.5)])
+                            colliders=[tc.Plane(point=(0.0, -0.01, 0.0), static_friction=0.5,
+                                                thickness=0.0)])
         frames = []
         for _ in range(75):
             sim.step(4)
@@ -377,7 +378,7 @@ def test_a_contact_the_passes_cannot_resolve_is_reported_with_its_distance(f64):
     press = tc.Handle(np.arange(36, 72), lambda t: (0.0, -min(t / 0.1, 1.0) * (0.05 - height), 0.0))
     sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240, handles=[press],
                         self_collision=tc.SelfCollision(thickness=thickness),
-                        colliders=[tc.Plane(point=(0.0, 0.0, 0.0))])
+                        colliders=[tc.Plane(point=(0.0, 0.0, 0.0), thickness=0.0)])
     tris = body.mesh.triangles
     v, t = np.nonzero(body.particle_body[:, None] != body.particle_body[tris[:, 0]][None])
     nearest = []
