@@ -379,6 +379,8 @@ def main(argv=None) -> int:
         return refused
     if args.command == "info":
         return info()
+    if args.command == "fit":
+        return fit(args)
     if args.command == "view":
         return view(args.scene, out=args.out, width=args.width, height=args.height,
                     arch=args.arch, record=args.record, mp4=args.mp4)
@@ -418,7 +420,7 @@ def _resolution(text: str) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The `ti-cloth` command's argument parser (its subcommands run, study, advise, view,
-    info); building it imports no Taichi, so --help and --version answer at once."""
+    info, fit); building it imports no Taichi, so --help and --version answer at once."""
     from importlib.metadata import version
 
     parser = argparse.ArgumentParser(prog="ti-cloth", description="Mass-spring cloth, strings, "
@@ -490,7 +492,47 @@ def build_parser() -> argparse.ArgumentParser:
                              help="record an MP4 too (implies --record; needs imageio-ffmpeg)")
     commands.add_parser("info", parents=[common],
                         help="versions, architecture, threads and the extras installed")
+    fit_parser = commands.add_parser(
+        "fit", parents=[common], help="a [bodies.fabric] table from a swatch's lab numbers",
+        description="Prints the [bodies.fabric] table of a swatch's measurements "
+                    "(tc.Fabric.from_measurements: each by its closed form).")
+    fit_parser.add_argument("--weight", type=float, required=True, help="g/m^2")
+    bending = fit_parser.add_mutually_exclusive_group(required=True)
+    bending.add_argument("--bending-length", type=float, nargs="+", metavar="C",
+                         help="ASTM D1388 cantilever bending lengths [m]: warp weft [bias]")
+    bending.add_argument("--rigidity", type=float, nargs="+", metavar="G",
+                         help="flexural rigidities [N m]: warp weft [bias]")
+    stretch = fit_parser.add_mutually_exclusive_group(required=True)
+    stretch.add_argument("--stretch", type=float, nargs="+", metavar="E",
+                         help="2-D moduli [N/m]: one, or warp weft")
+    stretch.add_argument("--strip-test", type=float, nargs=3,
+                         metavar=("TENSION", "WARP_STRAIN", "WEFT_STRAIN"),
+                         help="a strip test's tension per width [N/m] and the strains it gave")
+    fit_parser.add_argument("--shear", type=float, default=50.0, help="N/m (default 50)")
+    fit_parser.add_argument("--poisson", type=float, default=0.0)
+    fit_parser.add_argument("--damping", type=float, default=1e-4, help="s (default 1e-4)")
     return parser
+
+
+def fit(args) -> int:
+    """`ti-cloth fit`: print the Fabric of the measurements as a [bodies.fabric] table; exit 2
+    naming the measurement when one cannot be."""
+    from ..body.fabric import Fabric
+
+    stretch = args.stretch
+    if stretch is not None:
+        stretch = stretch[0] if len(stretch) == 1 else tuple(stretch)
+    try:
+        fabric = Fabric.from_measurements(
+            weight=args.weight, strip_test=args.strip_test, stretch=stretch, shear=args.shear,
+            bending_length=None if args.bending_length is None else tuple(args.bending_length),
+            rigidity=None if args.rigidity is None else tuple(args.rigidity),
+            poisson=args.poisson, damping=args.damping)
+    except ValueError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    print(fabric.table())
+    return 0
 
 
 def demo_main(scene_path, argv=None, description: str | None = None) -> list[Path]:

@@ -390,8 +390,8 @@ def _preset(table: Table, presets, name=None) -> str:
 
 def _fabric(owner: Table) -> Fabric:
     """`fabric = "denim"`, or a [bodies.fabric] table: `preset` plus any of density [kg/m^2],
-    stretch and bending (a number or [warp, weft]; N/m, N m), shear [N/m], poisson, damping
-    [s], hem_mass [kg]."""
+    stretch and bending (a number or [warp, weft]; N/m, N m), shear [N/m], twist [N m],
+    poisson, damping [s], hem_mass [kg]."""
     value = owner.value("fabric")
     if isinstance(value, str):
         if value.lower() not in FABRICS:
@@ -402,11 +402,11 @@ def _fabric(owner: Table) -> Fabric:
         owner.bad("fabric", value, f"a table or one of the fabrics {sorted(FABRICS)}")
     table = Table(value, owner.path("fabric"), owner.source)
     table.allow("preset", "density", "shear", "poisson", "damping", "hem_mass", "stretch",
-                "bending")
+                "bending", "twist")
     preset = _preset(table, FABRICS) if table.has("preset") else None
     changes = {}
     for key, unit in (("density", "kg/m^2"), ("shear", "N/m"), ("poisson", ""),
-                      ("damping", "s"), ("hem_mass", "kg")):
+                      ("damping", "s"), ("hem_mass", "kg"), ("twist", "N m")):
         if table.has(key):
             changes[key] = table.number(key, unit=unit)
     for key, unit in (("stretch", "N/m"), ("bending", "N m")):

@@ -11,6 +11,9 @@ them into forces that converge as the mesh is refined:
   bending   flexural rigidity [N m] (moment per width per curvature; ASTM D1388's
             G = W c^3, W the weight per area [N/m^2] and c the bending length [m]).
             A number, or (warp, weft).
+  twist     D12 [N m], the twisting rigidity (None: sqrt(warp x weft), an isotropic sheet's
+            when they are equal); with it the rigidity along the bias (45 degrees) is
+            (warp + weft + 2 twist) / 4, which a bias cantilever measures.
   poisson   nu_12: the weft's contraction per unit strain when stretched along the warp;
             nu_21 = nu_12 E_weft / E_warp (plane-stress orthotropy). Needs
             nu_12 nu_21 < 1 (a positive definite sheet).
@@ -34,6 +37,7 @@ from ..inputs.validation import finite_number, in_range, keyword_only, require
 STRETCH = limits.Range(1e-3, 1e9, "N/m", "fabric stretch and shear moduli")
 BENDING = limits.Range(0.0, 1e2, "N m", "fabric flexural rigidity (0 allowed: no bending)")
 DAMPING_TIME = limits.Range(0.0, 1.0, "s", "fabric damping time beta")
+STANDARD_GRAVITY = 9.80665      # m/s^2: a swatch's weight per area W = density x this
 
 
 def _pair(name: str, value, allowed: limits.Range) -> tuple[float, float]:
@@ -56,6 +60,7 @@ class Fabric:
     stretch: tuple = (1e3, 1e3)
     shear: float = 50.0
     bending: tuple = (1e-5, 1e-5)
+    twist: float | None = None
     poisson: float = 0.0
     damping: float = 1e-4
     hem_mass: float = 0.0
@@ -66,6 +71,8 @@ class Fabric:
         set_(self, "stretch", _pair("stretch", self.stretch, STRETCH))
         set_(self, "shear", in_range("Fabric.shear", self.shear, STRETCH))
         set_(self, "bending", _pair("bending", self.bending, BENDING))
+        if self.twist is not None:
+            set_(self, "twist", in_range("Fabric.twist", self.twist, BENDING))
         poisson = finite_number("Fabric.poisson", self.poisson, 0.0)
         warp, weft = self.stretch
         require(poisson * poisson * weft / warp < 1.0, "Fabric.poisson", poisson,
@@ -91,10 +98,89 @@ class Fabric:
     def flexural(self) -> tuple[float, float, float]:
         """(D11, D22, D12) [N m] of the bending energy 1/2 (D11 k11^2 + D22 k22^2 + 2 D12 k12^2)
         per area, k the change of curvature in the warp/weft frame: D11, D22 the warp and weft
-        rigidities, D12 = sqrt(D11 D22) for the twist (an isotropic sheet of Poisson ratio 0
-        when they are equal: 1/2 D |k|^2)."""
+        rigidities, D12 the twist: `twist`, or sqrt(D11 D22) (an isotropic sheet of Poisson
+        ratio 0 when they are equal: 1/2 D |k|^2)."""
         warp, weft = self.bending
-        return warp, weft, (warp * weft) ** 0.5
+        return warp, weft, (warp * weft) ** 0.5 if self.twist is None else self.twist
+
+    @property
+    def bias_bending(self) -> float:
+        """The flexural rigidity [N m] along the bias (45 degrees to the warp): a curvature k
+        there bends k11 = k22 = k12 = k / 2, so D = (D11 + D22 + 2 D12) / 4."""
+        d11, d22, d12 = self.flexural
+        return (d11 + d22 + 2.0 * d12) / 4.0
+
+    @classmethod
+    def from_measurements(cls, *, weight: float, bending_length=None, rigidity=None,
+                          stretch=None, strip_test=None, shear: float = 50.0,
+                          poisson: float = 0.0, damping: float = 1e-4,
+                          hem_mass: float = 0.0) -> "Fabric":
+        """The Fabric of a swatch's lab numbers, each by its closed form (exact):
+
+        weight         [g/m^2]: density = weight / 1000 kg/m^2.
+        bending_length (warp, weft) or (warp, weft, bias) [m], ASTM D1388's cantilever c:
+                       the rigidity G = W c^3, W = density x STANDARD_GRAVITY [N/m^2]; a bias
+                       length sets the twist, D12 = 2 G_bias - (G_warp + G_weft) / 2 (the
+                       bias rigidity of bias_bending), which must come out >= 0.
+        rigidity       the same as flexural rigidities (warp, weft[, bias]) [N m] instead.
+        stretch        2-D moduli E h [N/m], a number or (warp, weft); or
+        strip_test     (tension per width [N/m], warp strain, weft strain) of a strip test in
+                       its linear range: stretch = tension / strain.
+        shear, poisson, damping, hem_mass as Fabric's."""
+        density = finite_number("weight", weight, 0.0, strict=True, unit="g/m^2") / 1000.0
+        in_range("weight", density * 1000.0, limits.Range(limits.DENSITY.low * 1000,
+                                                          limits.DENSITY.high * 1000, "g/m^2",
+                                                          "fabric weight"))
+        require((bending_length is None) != (rigidity is None), "bending_length",
+                bending_length, "given, or rigidity instead (one of them)")
+        name = "bending_length" if rigidity is None else "rigidity"
+        values = bending_length if rigidity is None else rigidity
+        require(isinstance(values, (tuple, list)) and len(values) in (2, 3), name, values,
+                "(warp, weft) or (warp, weft, bias)")
+        unit = "m" if rigidity is None else "N m"
+        values = [finite_number(f"{name}[{k}]", v, 0.0, strict=True, unit=unit)
+                  for k, v in enumerate(values)]
+        weight_force = density * STANDARD_GRAVITY
+        rigidities = [weight_force * c ** 3 for c in values] if rigidity is None else values
+        twist = None
+        if len(rigidities) == 3:
+            warp, weft, bias = rigidities
+            twist = 2.0 * bias - (warp + weft) / 2.0
+            require(twist >= 0.0, f"{name}[2] (bias)", values[2],
+                    f"a bias rigidity of at least (warp + weft) / 4 = {(warp + weft) / 4:.4g} N m "
+                    f"(this law's least: no twisting rigidity); it gives {bias:.4g} N m")
+        require((stretch is None) != (strip_test is None), "stretch", stretch,
+                "given, or strip_test instead (one of them)")
+        if strip_test is not None:
+            require(isinstance(strip_test, (tuple, list)) and len(strip_test) == 3, "strip_test",
+                    strip_test, "(tension per width [N/m], warp strain, weft strain)")
+            tension = finite_number("strip_test[0] (tension)", strip_test[0], 0.0, strict=True,
+                                    unit="N/m")
+            stretch = tuple(tension / finite_number(f"strip_test[{k}] (strain)", strip_test[k],
+                                                    0.0, strict=True) for k in (1, 2))
+        return cls(density=density, stretch=stretch, shear=shear,
+                   bending=(rigidities[0], rigidities[1]), twist=twist, poisson=poisson,
+                   damping=damping, hem_mass=hem_mass)
+
+    def table(self) -> str:
+        """This fabric as a scene file's [bodies.fabric] table (every field, to paste)."""
+        def number(value) -> str:
+            return repr(float(value))          # the shortest text that reads back exactly
+
+        def pair(values) -> str:
+            return f"[{number(values[0])}, {number(values[1])}]"
+
+        rows = ["[bodies.fabric]", f"density = {number(self.density)}                # kg/m^2",
+                f"stretch = {pair(self.stretch)}       # N/m, warp and weft",
+                f"shear = {number(self.shear)}                # N/m",
+                f"bending = {pair(self.bending)}       # N m, warp and weft"]
+        if self.twist is not None:
+            rows.append(f"twist = {number(self.twist)}                # N m")
+        rows += [f"poisson = {number(self.poisson)}",
+                 f"damping = {number(self.damping)}                # s"]
+        if self.hem_mass:
+            rows.append(f"hem_mass = {number(self.hem_mass)}                # kg")
+        return "\n".join(rows)
 
     @classmethod
     def preset(cls, name: str, **overrides) -> "Fabric":
