@@ -5,6 +5,7 @@ import warnings
 
 import numpy as np
 import pytest
+from helpers import report
 
 import ti_cloth as tc
 
@@ -463,3 +464,57 @@ def test_a_cloth_crushed_through_itself_is_a_divergence_naming_the_step(f64):
     assert err.value.step == 0 and "stable dt" in str(err.value)
     with pytest.raises(tc.SimulationDiverged):
         sim.step(1)
+
+
+def test_a_full_candidate_list_grows_says_so_and_keeps_every_near_pair(f64):
+    """Two sheets half a metre apart at rest, the upper one set 8 mm over the lower, the
+    thickness 12 mm (most of an edge): each particle is near more triangles than the list's
+    first room (PAIRS_PER_PARTICLE a particle), so the first list grows,
+    self_contacts says when and to what, and the list still holds every vertex-triangle pair
+    of the two sheets nearer than the thickness (brute force here), none dropped."""
+    from ti_cloth.contact.self_collision import PAIRS_PER_PARTICLE
+    sheet = tc.grid_mesh(8, 8, size=(0.1, 0.1), plane="xz")
+    lower, upper = (tc.Cloth(tc.Mesh(sheet.vertices + (0.0, y, 0.0), sheet.triangles),
+                             tc.Material()) for y in (0.0, 0.5))
+    body = tc.Cloth.combine([lower, upper])
+    thickness = 0.012
+    sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240, gravity=(0.0, 0.0, 0.0),
+                        self_collision=tc.SelfCollision(thickness=thickness))
+    x = sim.positions()
+    x[64:, 1] = 0.008
+    sim.set_positions(x)
+    sim.step(1)
+    contacts = sim.self_contacts(active=False)
+    pairs = len(contacts.vertex_triangle) + len(contacts.edge_edge)
+    report("candidate list: room at first, grown (step, room), pairs",
+           (PAIRS_PER_PARTICLE * 128, contacts.grown, pairs), "grown once, at step 0")
+    assert len(contacts.grown) == 1 and contacts.grown[0][0] == 0
+    assert contacts.capacity == contacts.grown[0][1] >= pairs > PAIRS_PER_PARTICLE * 128
+    x, tris = sim.positions(), body.mesh.triangles
+    v, t = np.nonzero((np.arange(128)[:, None] < 64) != (tris[None, :, 0] < 64))  # across
+    near = point_triangle_distances(x[v], x[tris[t]]) < thickness
+    listed = {tuple(row) for row in contacts.vertex_triangle.tolist()}
+    missing = [(a, b) for a, b in zip(v[near].tolist(), t[near].tolist()) if (a, b) not in listed]
+    assert near.sum() > 100 and not missing
+
+
+def test_an_overflowing_animated_candidate_list_falls_back_and_says_so(f64):
+    """A sheet on a finely cut sphere with a thick contact: a particle's reach holds more
+    triangles than its list's room, so the lists overflow (candidate_lists reports how many)
+    and those particles traverse the body every step: none ends nearer than the thickness,
+    and a rerun gives the same bits."""
+    sphere = tc.sphere_mesh(0.2, subdivisions=4)
+    body = tc.AnimatedMeshCollider(sphere, np.stack([sphere.vertices] * 2), fps=30,
+                                   thickness=0.06)
+    sheet = tc.Cloth(tc.grid_mesh(8, 8, size=(0.4, 0.4), plane="xz",
+                                  origin=(-0.2, 0.28, -0.2)), tc.Material())
+    runs = []
+    for _ in range(2):
+        sim = tc.Simulation(sheet, integrator="xpbd", dt=1 / 240, colliders=[body])
+        sim.step(40)
+        runs.append((sim.positions(), sim.candidate_lists()))
+    overflowed, made = runs[0][1]["particles"]
+    report("animated candidate lists overflowed / made", (overflowed, made), "some")
+    assert 0 < overflowed <= made
+    np.testing.assert_array_equal(runs[0][0], runs[1][0])
+    assert (np.linalg.norm(runs[0][0], axis=1) > 0.2 + 0.06 * 0.99).all()

@@ -397,6 +397,22 @@ class Simulation:
                 "a SelfCollision for self_contacts()")
         return self.self_collision.pairs(active)
 
+    def candidate_lists(self) -> dict[str, tuple[int, int]]:
+        """How the animated colliders' candidate lists fare: {"particles": (overflowed,
+        made), "edges": (...)} for the lists of the particles and (edge contact) of the
+        cloth's edges. A list overflows when more than its room of a body's triangles are
+        within reach of its element, which then traverses the body's hierarchy every step
+        until its next list: the same answers at a traversal's cost (contact/colliders/
+        candidate_lists.py). {} without an animated collider. Self-collision's list grows
+        instead: self_contacts().grown."""
+        self._check_runtime()
+        if self.colliders is None or not self.colliders.animated:
+            return {}
+        lists = {"particles": self.colliders.bodies.lists.overflowed()}
+        if self.colliders.edge_contact:
+            lists["edges"] = self.colliders.edges.lists.overflowed()
+        return lists
+
     def velocities(self) -> np.ndarray:
         """Particle velocities [m/s], (N, 3) float64 copy."""
         self._check_runtime()

@@ -99,12 +99,17 @@ class SelfContacts:
     (K, 2) rows (vertex, triangle index into the mesh), edge_edge (M, 2) rows of edge
     indices into `edges` (E, 2) particle pairs. closest_left: (distance [m], step) of the
     nearest contact the passes of a step have left, over the run so far, when one was left
-    nearer than half the thickness; None otherwise."""
+    nearer than half the thickness; None otherwise. capacity: the pairs the candidate list
+    has room for; grown: (step, capacity) each time a step found more pairs than it had room
+    for and the list grew (it never drops a pair: a list past MAX_PAIRS_PER_PARTICLE a
+    particle is a CrushedContact)."""
 
     vertex_triangle: np.ndarray
     edge_edge: np.ndarray
     edges: np.ndarray
     closest_left: tuple[float, int] | None = None
+    capacity: int = 0
+    grown: tuple = ()
 
 
 def warn_if_thick(settings: SelfCollision, cloth) -> None:
@@ -207,6 +212,7 @@ class SelfCollisionStage:
         self.listed = False
         self.pair_total = self.vertex_pairs = 0
         self.closest_left = None
+        self.grown = []
 
     def saved(self) -> dict:
         """The candidate list and where it was made: a list made at another step would order
@@ -368,6 +374,7 @@ class SelfCollisionStage:
                     "thickness")
             self.candidates = PairList(min(2 * total,
                                            MAX_PAIRS_PER_PARTICLE * self.particle_count))
+            self.grown.append((step_index, self.candidates.capacity))
         list_pairs(self, self.candidates, model, state, near, self.settings.thickness, 1)
         index_contacts(self, self.candidates)
         copy_positions(state, self.listed_at)
@@ -384,7 +391,7 @@ class SelfCollisionStage:
         elements = self.candidates.elements.to_numpy()[kept]
         vertex = kept < self.vertex_pairs
         return SelfContacts(elements[vertex], elements[~vertex], self.edge_rows,
-                            self.closest_left)
+                            self.closest_left, self.candidates.capacity, tuple(self.grown))
 
 
 @ti.func

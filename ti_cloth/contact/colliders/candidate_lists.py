@@ -45,6 +45,14 @@ class CandidateLists:
         self.anchor.fill(FAR)
         self.epoch.fill(-1)
 
+    def overflowed(self) -> tuple[int, int]:
+        """(lists that overflowed, lists made): an overflowed list held more than `size`
+        candidates, and its element traverses the hierarchy every step until its next list
+        (the same answers, at a traversal's cost)."""
+        count, epoch = self.count.to_numpy(), self.epoch.to_numpy()
+        made = epoch >= 0
+        return int((count[made] < 0).sum()), int(made.sum())
+
 
 @ti.func
 def _meets(bodies: ti.template(), k, lo, hi):
