@@ -264,3 +264,51 @@ def test_a_collider_never_shows_through_the_cloth_resting_on_it(f32, shape, monk
     shown, total = _collider_pixels(bare, camera, 480, 1, covered)
     report(f"{shape}: without either", (shown, total), "> 0")
     assert shown > 0
+
+
+def test_the_ground_is_shaded_where_the_light_sees_the_cloth_over_it(f32):
+    """A pinned 1 m sheet 0.5 m over the ground, the light from (0.35, 1, 0.55): ground points
+    inside the sheet's outline cast along the light onto the ground (computed here, shrunk by
+    the map's softening) are darker by SHADOW_DARKNESS than the same frame without shadows,
+    points clear of it (grown likewise) unchanged; the cloth's own pixels are left out."""
+    from ti_cloth.render import renderer as renderer_module
+    mesh = tc.grid_mesh(11, 11, size=(1.0, 1.0), plane="xz", origin=(-0.5, 0.5, -0.5))
+    sim = tc.Simulation(tc.Cloth(mesh, tc.Material(), pinned=range(121)), dt=1e-3,
+                        colliders=[tc.Plane(point=(0.0, 0.0, 0.0))])
+    camera = Camera(position=(0.0, 4.0, 2.5), target=(0.0, 0.0, -0.6), fov=50.0)
+    light = Light(ambient=1.0)              # unlit colours: the cloth is exactly red
+    red = SurfaceStyle(front=(1.0, 0.0, 0.0), back=(1.0, 0.0, 0.0), checker=0.0)
+    images = []
+    with Renderer(320, 240, camera, supersample=1, light=light) as r:
+        for shaded in (False, True):
+            r.begin()
+            if shaded:
+                r.cast_shadows(sim)
+            r.draw_colliders(sim)
+            r.draw_simulation(sim, red)
+            images.append(r.end().astype(float))
+    plain, shaded = images
+    cloth = (plain == (255, 0, 0)).all(axis=-1)
+    toward = np.asarray(light.direction)
+    u, v = np.meshgrid(np.linspace(-1.6, 1.6, 161), np.linspace(-2.0, 1.2, 161))
+    ground = np.stack([u.ravel(), np.zeros(u.size), v.ravel()], axis=1)
+    # the sheet's outline cast along the light onto y = 0: a square shifted by -0.5 l / l_y
+    shift = -0.5 * toward[[0, 2]] / toward[1]
+    reach = np.abs(ground[:, [0, 2]] - shift).max(axis=1)       # square "radius" round it
+    # the map spans the bounds' diagonal (2.02 x its half): the softening reaches a texel or
+    # two, and a texel's projection onto the slanted ground is longer by 1 / l_y
+    texel = 2.02 * (np.sqrt(2.0 + 0.5 ** 2) / 2) / renderer_module.SHADOW_SIZE / toward[1]
+    inside, outside = reach < 0.5 - 3 * texel, reach > 0.5 + 3 * texel
+    screen, depth = camera.project(ground, 320, 240)
+    px = np.floor(screen).astype(int)
+    seen = (px[:, 0] >= 0) & (px[:, 0] < 320) & (px[:, 1] >= 0) & (px[:, 1] < 240)
+    rows, cols = 239 - px[seen, 1], px[seen, 0]
+    keep = ~cloth[rows, cols]
+    ratio = shaded[rows, cols].sum(axis=1) / plain[rows, cols].sum(axis=1)
+    dark, clear = ratio[inside[seen] & keep], ratio[outside[seen] & keep]
+    report("ground points in the cast shadow / clear of it; their brightness ratio",
+           (len(dark), len(clear), float(np.median(dark)), float(clear.min())),
+           f"{1 - renderer_module.SHADOW_DARKNESS} and 1")
+    assert len(dark) > 100 and len(clear) > 1000
+    assert np.abs(dark - (1 - renderer_module.SHADOW_DARKNESS)).max() < 0.02
+    assert (clear == 1.0).all()

@@ -24,6 +24,7 @@ import numpy as np
 from ..errors import OutputError, SimulationDiverged, StateMismatch
 from ..export import Exporter
 from ..inputs import limits
+from ..contact.colliders.shapes import Plane
 from ..render import Camera, FrameSequence, Renderer
 from ..render.springs2d import FRONT, SpringView
 from ..runtime import backend
@@ -115,8 +116,12 @@ def _frame_painter(scene, sim, out):
                                         **scene.camera_fit)
     renderer = Renderer(out.width, out.height, camera, supersample=out.supersample)
 
+    shaded = out.ground is not None or any(isinstance(c, Plane) for c in scene.colliders)
+
     def paint():
         renderer.begin()
+        if shaded:
+            renderer.cast_shadows(sim)
         if out.ground is not None:
             renderer.draw_plane(point=(0.0, out.ground, 0.0), checker=0.5)
         renderer.draw_colliders(sim)

@@ -101,7 +101,7 @@ def viewer_for(subject, *, width: int = 960, height: int = 540, folder=None) -> 
         folder = Path(folder or Path("renders") / name)
     style = style or SurfaceStyle()
 
-    def paint(renderer, sim, wireframe):
+    def paint(renderer, sim, wireframe):        # no shadows: the live view keeps its frame rate
         if ground is not None:
             renderer.draw_plane(point=(0.0, ground, 0.0), checker=0.5)
         renderer.draw_colliders(sim)

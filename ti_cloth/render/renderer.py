@@ -44,12 +44,33 @@ COLLIDER_COLOUR = (0.62, 0.66, 0.72)
 # (a polygon offset): cloth resting on them, a contact thickness or less away, is drawn in
 # front instead of fighting them for the pixels (5 mm at 2.5 m from the camera).
 COLLIDER_DEPTH_BIAS = 2e-3
+# The ground's shadow (Renderer.cast_shadows): the light's view of the bodies and their
+# colliders in a SHADOW_SIZE^2 depth map over their bounds, the ground darkened by
+# SHADOW_DARKNESS where it is covered, its edge softened over a texel (bilinear
+# percentage-closer filtering). It costs a frame about 3 ms for the map and 6 ms on the
+# ground at 960 x 540 (the live viewer draws none).
+SHADOW_SIZE = 256
+SHADOW_DARKNESS = 0.35
+SHADOW_BIAS = 1e-3          # m: what lies nearer the light by less does not shade
 
 
 def _colour(field: str, value) -> tuple:
     rgb = as_array(field, value, np.float64, (3,))
     require(bool(((rgb >= 0) & (rgb <= 1)).all()), field, tuple(rgb), "an RGB triple in [0, 1]")
     return tuple(float(c) for c in rgb)
+
+
+def _bounds(collider) -> np.ndarray:
+    """Corners (2, 3) [m] of a finite collider's bounding box."""
+    if isinstance(collider, Sphere):
+        return np.array([collider.centre]) + [[-collider.radius], [collider.radius]]
+    if isinstance(collider, Box):
+        return np.array([collider.lo, collider.hi], np.float64)
+    if isinstance(collider, Capsule):
+        ends = np.array([collider.a, collider.b], np.float64)
+        return np.array([ends.min(axis=0) - collider.radius, ends.max(axis=0) + collider.radius])
+    vertices = collider.mesh.vertices
+    return np.array([vertices.min(axis=0), vertices.max(axis=0)])
 
 
 def _unit(field: str, value) -> tuple:
@@ -178,6 +199,8 @@ class Renderer:
         self.width, self.height, self.supersample = int(width), int(height), int(supersample)
         self.camera, self.light, self.background = camera, light, background
         self._samples = ti.ndarray(ti.i64, (self.width * supersample, self.height * supersample))
+        self._shadow = None              # the light's depth map, made on first cast_shadows
+        self._light_cam = None           # its camera, packed, while this frame has shadows
         self._image = np.empty((self.width, self.height, 3), np.uint8)   # written by resolve
         self._scratch: dict[str, object] = {}
         self._topologies: dict[int, tuple] = {}
@@ -203,6 +226,7 @@ class Renderer:
         self._cam = self._upload("camera", self.camera.packed(self.width * self.supersample,
                                                                self.height * self.supersample))
         self._uncleared = True             # a first draw_plane clears as it goes
+        self._light_cam = None
 
     def _require_frame(self) -> None:
         require(self._cam is not None, "renderer", "not drawing", "inside begin() ... end()")
@@ -234,7 +258,7 @@ class Renderer:
         the buffers belong to the runtime init ends."""
         self._scratch.clear()
         self._topologies.clear()
-        self._samples = self._image = self._cam = None
+        self._samples = self._image = self._cam = self._shadow = self._light_cam = None
         self._open = False
 
     # -- bodies -----------------------------------------------------------------------------
@@ -351,10 +375,44 @@ class Renderer:
 
     # -- ground and colliders ---------------------------------------------------------------
 
+    def cast_shadows(self, sim) -> None:
+        """Let the bodies of `sim` and its colliders (not its planes) shade the ground and the
+        planes drawn after this in the frame: the light's orthographic view of their bounds
+        as a SHADOW_SIZE^2 depth map (drawn with this renderer's own passes)."""
+        self._require_frame()
+        solids = [c for c in sim.collider_shapes() if not isinstance(c, Plane)]
+        x = sim.positions()[~sim.cloth.ghost]
+        corners = [x] + [_bounds(c) for c in solids]
+        lo = np.min([c.min(axis=0) for c in corners if len(c)], axis=0)
+        hi = np.max([c.max(axis=0) for c in corners if len(c)], axis=0)
+        centre, radius = (lo + hi) / 2, max(float(np.linalg.norm(hi - lo)) / 2, 1e-3)
+        towards = np.asarray(self.light.direction)
+        up = np.eye(3)[np.argmin(np.abs(towards))]
+        light = Camera(position=tuple(centre + 2 * radius * towards), target=tuple(centre),
+                       up=tuple(up), orthographic=True, height=2.02 * radius, near=radius / 10)
+        if self._shadow is None:
+            self._shadow = ti.ndarray(ti.i64, (SHADOW_SIZE, SHADOW_SIZE))
+        frame = (self._samples, self._cam, self._uncleared)
+        self._samples, self._uncleared = self._shadow, True
+        self._cam = self._upload("light camera", light.packed(SHADOW_SIZE, SHADOW_SIZE))
+        try:
+            if len(sim.cloth.mesh.triangles):
+                self.draw_mesh(sim.positions(), sim.cloth.mesh.triangles,
+                               hidden=sim.torn_triangles())
+            self._draw_shapes(solids)
+            self._samples_ready()
+        finally:
+            light_cam = self._cam
+            self._samples, self._cam, self._uncleared = frame
+        self._light_cam = light_cam
+
     def draw_colliders(self, sim) -> None:
         """Every collider of a Simulation where its path has it at the simulation's time."""
         self._require_frame()
-        for c in sim.collider_shapes():
+        self._draw_shapes(sim.collider_shapes())
+
+    def _draw_shapes(self, colliders) -> None:
+        for c in colliders:
             if isinstance(c, Plane):
                 self.draw_plane(c.point, c.normal)
             elif isinstance(c, Sphere):
@@ -384,9 +442,13 @@ class Renderer:
         colour = _colour("colour", colour)
         fade = finite_number("fade", fade, 0.0, strict=True, unit="m")
         clear_first, self._uncleared = self._uncleared, False
+        shaded = self._light_cam is not None
+        shadow = self._shadow if shaded else self._samples
         shapes.raster_plane(self._samples, self._cam, point, n, u, np.cross(n, u), colour, checker,
                             contrast, fade, self.light.direction, self.light.ambient,
-                            1.0 + COLLIDER_DEPTH_BIAS, clear_first)
+                            1.0 + COLLIDER_DEPTH_BIAS, shadow,
+                            self._light_cam if shaded else self._cam, SHADOW_DARKNESS,
+                            SHADOW_BIAS, shaded, clear_first)
 
     def draw_sphere(self, centre, radius: float, *, colour=COLLIDER_COLOUR) -> None:
         """A sphere of `radius` [m] at `centre` [m]."""
@@ -490,6 +552,9 @@ class NullRenderer:
         pass
 
     def draw_simulation(self, sim, style: SurfaceStyle = SurfaceStyle()) -> None:
+        pass
+
+    def cast_shadows(self, sim) -> None:
         pass
 
     def draw_colliders(self, sim) -> None:

@@ -7,7 +7,7 @@ import taichi as ti
 
 from ..contact.colliders.shapes import BOX, SPHERE
 from ..runtime import backend
-from .raster import EMPTY, camera_basis, lambert, ndarray_f32_1, pack, samples_type
+from .raster import EMPTY, camera_basis, lambert, ndarray_f32_1, pack, project, samples_type
 
 MISS = -1.0
 
@@ -100,16 +100,40 @@ def plot_hit(samples: ti.template(), x, y, t, depth_per_t, near, colour):
     samples[x, y] = ti.min(samples[x, y], hit_key(t, depth_per_t, near, colour))
 
 
+@ti.func
+def shadowed(shadow: ti.template(), light_cam: ti.template(), p, bias):
+    """How much of point p the light does not see: whether each of the four shadow-map
+    texels round p's projection holds something nearer the light than p (by more than
+    `bias` [m]), weighted bilinearly (percentage-closer filtering: a soft edge a texel
+    wide). 0 outside the map."""
+    s = project(light_cam, p)
+    fx, fy = s[0] - 0.5, s[1] - 0.5
+    x, y = ti.cast(ti.floor(fx), ti.i32), ti.cast(ti.floor(fy), ti.i32)
+    hidden = 0.0
+    if -1 <= x < shadow.shape[0] and -1 <= y < shadow.shape[1]:
+        ax, ay = fx - x, fy - y
+        for dx, dy in ti.static(ti.ndrange(2, 2)):
+            u, v = x + dx, y + dy
+            if 0 <= u < shadow.shape[0] and 0 <= v < shadow.shape[1]:
+                depth = ti.bit_cast(ti.cast(shadow[u, v] >> 32, ti.i32), ti.f32)
+                if depth < s[2] - bias:
+                    hidden += (ax if dx else 1.0 - ax) * (ay if dy else 1.0 - ay)
+    return hidden
+
+
 @backend.kernel
 def raster_plane(samples: samples_type, cam: ndarray_f32_1, point: ti.math.vec3,
                  normal: ti.math.vec3, axis_u: ti.math.vec3, axis_v: ti.math.vec3,
                  colour: ti.math.vec3, cell: float, contrast: float, fade: float,
                  light: ti.math.vec3, ambient: float, depth_scale: float,
-                 clear_first: ti.template()):
+                 shadow: samples_type, light_cam: ndarray_f32_1, darkness: float, bias: float,
+                 shadows: ti.template(), clear_first: ti.template()):
     """The infinite plane through `point` with unit `normal`, lit from either side, with a
     checker of `cell` metres along axis_u, axis_v (0: plain) fading out by depth `fade` [m],
     its depths times `depth_scale` (> 1: behind what touches it, renderer.COLLIDER_DEPTH_BIAS).
-    clear_first: the frame's clear fused into this pass (one sweep over the samples, not two)."""
+    shadows: the light's shadow map (`shadow`, seen by `light_cam`) darkens it by `darkness`
+    where it is covered (shadowed). clear_first: the frame's clear fused into this pass (one
+    sweep over the samples, not two)."""
     for x, y in samples:
         o, d = camera_ray(cam, x, y)
         denominator = d.dot(normal)
@@ -123,6 +147,8 @@ def raster_plane(samples: samples_type, cam: ndarray_f32_1, point: ti.math.vec3,
                     ti.floor(p.dot(axis_v) / cell), ti.i32)
                 weight = contrast * ti.max(1.0 - t / fade, 0.0)
                 albedo = colour * (1.0 - weight * (cells & 1))
+            if ti.static(shadows):
+                albedo *= 1.0 - darkness * shadowed(shadow, light_cam, o + t * d, bias)
             facing = -ti.math.sign(denominator)
             key = hit_key(t, depth_scale, cam[16], lambert(albedo, normal * facing, light,
                                                            ambient))
