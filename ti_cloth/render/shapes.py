@@ -129,7 +129,8 @@ def raster_plane(samples: samples_type, cam: ndarray_f32_1, point: ti.math.vec3,
                  shadow: samples_type, light_cam: ndarray_f32_1, darkness: float, bias: float,
                  shadows: ti.template(), clear_first: ti.template()):
     """The infinite plane through `point` with unit `normal`, lit from either side, with a
-    checker of `cell` metres along axis_u, axis_v (0: plain) fading out by depth `fade` [m],
+    checker of `cell` metres along axis_u, axis_v (0: plain) fading to its mean by depth
+    `fade` [m] and where a sample's footprint on the plane nears a cell (no aliasing),
     its depths times `depth_scale` (> 1: behind what touches it, renderer.COLLIDER_DEPTH_BIAS).
     shadows: the light's shadow map (`shadow`, seen by `light_cam`) darkens it by `darkness`
     where it is covered (shadowed). clear_first: the frame's clear fused into this pass (one
@@ -145,8 +146,13 @@ def raster_plane(samples: samples_type, cam: ndarray_f32_1, point: ti.math.vec3,
                 p = o + t * d - point
                 cells = ti.cast(ti.floor(p.dot(axis_u) / cell), ti.i32) + ti.cast(
                     ti.floor(p.dot(axis_v) / cell), ti.i32)
-                weight = contrast * ti.max(1.0 - t / fade, 0.0)
-                albedo = colour * (1.0 - weight * (cells & 1))
+                # a sample's footprint on the plane [m]: its size at depth t, stretched by the
+                # grazing angle; the checker fades to its mean as the footprint nears a cell
+                # (a box filter's limit: no aliasing)
+                size = ti.select(cam[15] != 0, 1.0, t) / cam[12]
+                footprint = size * d.norm() / ti.abs(denominator)
+                weight = contrast * ti.max(ti.min(1.0 - t / fade, 1.0 - footprint / cell), 0.0)
+                albedo = colour * (1.0 - 0.5 * contrast + weight * (0.5 - (cells & 1)))
             if ti.static(shadows):
                 albedo *= 1.0 - darkness * shadowed(shadow, light_cam, o + t * d, bias)
             facing = -ti.math.sign(denominator)
