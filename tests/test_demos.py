@@ -144,3 +144,22 @@ def test_the_drape_measures_read_a_cone_and_a_fluted_disc():
         flute = 1.0 + (amplitude / (2 * radius)) * np.cos(6 * phi) * (r / radius) ** 4
         fluted = rest * np.stack([flute, np.ones_like(r), flute], 1)
         assert cusick.folds(fluted, rest) == count
+
+
+def test_the_skirt_counts_the_folds_of_a_fluted_hem():
+    """The skirt demo's fold count on hems with closed forms: a ring of radius R fluted as
+    R (1 + e cos k phi), in any order and off the axis, has k folds when its amplitude e R
+    passes FOLD_DEADBAND and none below it; the scene's hem is the panels' two bottom edges
+    (every particle at the pattern's y = 0, a row of both panels)."""
+    skirt = _load(Path(__file__).parents[1] / "demos" / "skirt_walk.py")
+    phi = np.random.default_rng(1).permutation(np.linspace(0, 2 * np.pi, 120, endpoint=False))
+    for k in (3, 6, 9):
+        for amplitude, folds in ((3 * skirt.FOLD_DEADBAND, k), (0.5 * skirt.FOLD_DEADBAND, 0)):
+            radius = 0.3 + amplitude * np.cos(k * phi)
+            ring = np.stack([0.4 + radius * np.cos(phi), np.full_like(phi, 0.2),
+                             -0.1 + radius * np.sin(phi)], axis=1)
+            assert skirt.hem_folds(ring, np.arange(len(phi))) == folds
+    scene = load_scene(Path(__file__).parents[1] / "demos" / "skirt_walk.toml")
+    hem = skirt.hem_of(scene.cloth)
+    placed = scene.cloth.particle_position[hem]
+    assert len(hem) > 40 and np.ptp(placed[:, 1]) < 1e-9          # one level ring round the legs
