@@ -1,0 +1,207 @@
+"""What self-contact keeps, frame by frame, on the scenes of issue 56, and what it costs.
+
+For each scene, with self-collision on (and, for the cost, off: the free step), every
+`--every` steps: the edge-triangle crossings of the cloth (segment through triangle, sharing
+no particle, by float64 orientation tests: Moller-Trumbore with a determinant filter) and the
+closest far vertex-triangle pair (sharing no particle and at least two thicknesses apart at
+rest), both over candidate pairs a k-d tree finds within reach; then the run's totals, the
+closest pair as a fraction of the thickness, and the wall time per step with and without
+self-contact (medians of --repeats alternated runs in this process, after a warm-up).
+
+Scenes (sizes of this default; --scale 2 doubles every side, the issue's sizes are larger):
+  pile     --layers sheets of N x N (0.5 m) dropped 4 cm apart onto a horizontal cylinder
+  twist    an N x N sheet whose two opposite edges turn opposite ways (Newton's cloth_twist)
+  press    a sheet pressed onto another by a handle, 6 mm over the ground, thickness 20 mm
+           (the dense pile the docs report: no pass can make room)
+
+    python benchmarks/contact_guarantees.py [--scenes pile twist press] [--scale 1]
+                                            [--every 4] [--repeats 3]
+"""
+
+import argparse
+import statistics
+import time
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+import ti_cloth as tc
+
+THICKNESS = 0.005
+
+
+def sheet(n: int, size: float, origin, plane: str = "xz") -> tc.Cloth:
+    return tc.Cloth(tc.grid_mesh(n, n, size=(size, size), plane=plane, origin=origin),
+                    tc.Material.preset("cotton_springs"))
+
+
+def pile(scale: int, layers: int):
+    n = 16 * scale
+    body = tc.Cloth.combine([sheet(n, 0.5, (-0.25, 0.5 + 0.04 * k, -0.25))
+                             for k in range(layers)])
+    colliders = [tc.Capsule(a=(-0.5, 0.3, 0.0), b=(0.5, 0.3, 0.0), radius=0.1,
+                            static_friction=0.3), tc.Plane(static_friction=0.5)]
+    return body, dict(colliders=colliders), 1.5
+
+
+def twist(scale: int, layers: int):
+    n = 24 * scale
+    body = sheet(n, 0.6, (0.0, 0.5, -0.3))
+    x = body.particle_position
+    handles = []
+    for edge, sense in ((np.isclose(x[:, 0], 0.0), 1.0), (np.isclose(x[:, 0], 0.6), -1.0)):
+        for i in np.flatnonzero(edge):
+            y, z = x[i, 1] - 0.5, x[i, 2]
+
+            def turned(t, y=y, z=z, sense=sense):
+                a = sense * np.pi * min(t, 2.0)          # a turn each way in 2 s
+                return (0.0, y * np.cos(a) - z * np.sin(a) - y, y * np.sin(a) + z * np.cos(a) - z)
+            handles.append(tc.Handle([i], turned))
+    return body, dict(handles=handles, gravity=(0.0, 0.0, 0.0)), 2.5
+
+
+def press(scale: int, layers: int):
+    n = 6 * scale
+    lower = sheet(n, 0.3, (0.0, 0.0, 0.0))
+    mesh = tc.grid_mesh(n, n, size=(0.2, 0.2), plane="xz")
+    upper = tc.Cloth(tc.Mesh(mesh.vertices + [0.05, 0.05, 0.05], mesh.triangles),
+                     tc.Material.preset("cotton_springs"))
+    body = tc.Cloth.combine([lower, upper])
+    count = n * n
+    handle = tc.Handle(np.arange(count, 2 * count),
+                       lambda t: (0.0, -min(t / 0.1, 1.0) * (0.05 - 0.006), 0.0))
+    return body, dict(handles=[handle], colliders=[tc.Plane(thickness=0.0)]), 0.5
+
+
+SCENES = {"pile": (pile, THICKNESS), "twist": (twist, THICKNESS), "press": (press, 0.02)}
+
+
+def crossings(x: np.ndarray, triangles: np.ndarray, edges: np.ndarray, reach: float) -> int:
+    """Edges through triangles they share no particle with (candidates: edge midpoints
+    within `reach` of a triangle's centroid)."""
+    tree = cKDTree(x[triangles].mean(axis=1))
+    mids = x[edges].mean(axis=1)
+    pairs = [(e, t) for e, near in enumerate(tree.query_ball_point(mids, reach)) for t in near]
+    if not pairs:
+        return 0
+    e, t = np.array(pairs).T
+    keep = ~(edges[e][:, :, None] == triangles[t][:, None, :]).any(axis=(1, 2))
+    e, t = e[keep], t[keep]
+    p, q = x[edges[e, 0]], x[edges[e, 1]]
+    a, b, c = (x[triangles[t, k]] for k in range(3))
+    e1, e2, d = b - a, c - a, q - p
+    h = np.cross(d, e2)
+    det = np.einsum("kd,kd->k", h, e1)
+    ok = np.abs(det) > 1e-14
+    det = np.where(ok, det, 1.0)
+    s = p - a
+    u = np.einsum("kd,kd->k", s, h) / det
+    qv = np.cross(s, e1)
+    v = np.einsum("kd,kd->k", qv, d) / det
+    w = np.einsum("kd,kd->k", qv, e2) / det
+    return int((ok & (u > 0) & (v > 0) & (u + v < 1) & (w > 0) & (w < 1)).sum())
+
+
+def closest_far(x: np.ndarray, rest: np.ndarray, triangles: np.ndarray, reach: float,
+                far: float) -> float:
+    """The nearest vertex-triangle distance over pairs sharing no particle whose rest
+    distance (vertex to centroid) is at least `far`; inf when none is within `reach`."""
+    tree = cKDTree(x[triangles].mean(axis=1))
+    pairs = [(v, t) for v, near in enumerate(tree.query_ball_point(x, reach)) for t in near]
+    if not pairs:
+        return np.inf
+    v, t = np.array(pairs).T
+    keep = ~(triangles[t] == v[:, None]).any(axis=1)
+    keep &= np.linalg.norm(rest[v] - rest[triangles[t]].mean(axis=1), axis=1) >= far
+    v, t = v[keep], t[keep]
+    if not len(v):
+        return np.inf
+    a, b, c = (x[triangles[t, k]] for k in range(3))
+    return float(point_triangle(x[v], a, b, c).min())
+
+
+def point_triangle(p, a, b, c) -> np.ndarray:
+    """Distances from points p to triangles (a, b, c) (Ericson, Real-Time Collision Detection
+    5.1.5: the closest point by Voronoi regions, vectorised)."""
+    ab, ac, ap = b - a, c - a, p - a
+    d1, d2 = (ab * ap).sum(1), (ac * ap).sum(1)
+    bp, cp = p - b, p - c
+    d3, d4 = (ab * bp).sum(1), (ac * bp).sum(1)
+    d5, d6 = (ab * cp).sum(1), (ac * cp).sum(1)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    denom = np.where(va + vb + vc == 0, 1.0, va + vb + vc)
+    v, w = vb / denom, vc / denom
+    closest = a + ab * v[:, None] + ac * w[:, None]                  # inside the face
+    edge = [(d1 <= 0) & (d2 <= 0), (d3 >= 0) & (d4 <= d3), (d6 >= 0) & (d5 <= d6)]
+    for region, point in zip(edge, (a, b, c)):
+        closest = np.where(region[:, None], point, closest)
+    for cond, start, direction, num, den in (
+            ((vc <= 0) & (d1 >= 0) & (d3 <= 0), a, ab, d1, d1 - d3),
+            ((vb <= 0) & (d2 >= 0) & (d6 <= 0), a, ac, d2, d2 - d6),
+            ((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0), b, c - b, d4 - d3,
+             (d4 - d3) + (d5 - d6))):
+        s = np.clip(num / np.where(den == 0, 1.0, den), 0.0, 1.0)
+        closest = np.where((cond & ~np.any(edge, axis=0))[:, None],
+                           start + direction * s[:, None], closest)
+    return np.linalg.norm(p - closest, axis=1)
+
+
+def measure(name: str, scale: int, layers: int, every: int, repeats: int) -> dict:
+    build, thickness = SCENES[name]
+    body, options, seconds = build(scale, layers)
+    dt = 1 / 240
+    steps = int(round(seconds / dt))
+    triangles = body.mesh.triangles
+    edges = np.unique(np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
+    longest = float(np.linalg.norm(body.particle_position[edges[:, 0]]
+                                   - body.particle_position[edges[:, 1]], axis=1).max())
+    reach = longest + 2 * thickness
+    sims = {contact: tc.Simulation(body, integrator=tc.XPBD(iterations=10), dt=dt,
+                                   self_collision=tc.SelfCollision(thickness=thickness)
+                                   if contact else None, **options)
+            for contact in (True, False)}
+    crossed, nearest, watched = 0, np.inf, 0
+    sim = sims[True]
+    for _ in range(steps // every):
+        sim.step(every)
+        x = sim.positions()
+        crossed += crossings(x, triangles, edges, reach)
+        nearest = min(nearest, closest_far(x, body.particle_position, triangles, reach,
+                                           2 * thickness))
+        watched += 1
+    cost = {True: [], False: []}
+    for _ in range(repeats):
+        for contact, timed in sims.items():
+            timed.restart()
+            timed.step(every)                        # warm: the list made, kernels compiled
+            start = time.perf_counter()
+            timed.step(4 * every)
+            cost[contact].append((time.perf_counter() - start) / (4 * every))
+    return dict(scene=name, particles=body.particle_count, thickness=thickness,
+                frames=watched, crossings=crossed, closest=nearest / thickness,
+                contact_ms=1e3 * statistics.median(cost[True]),
+                free_ms=1e3 * statistics.median(cost[False]))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--scenes", nargs="+", choices=sorted(SCENES), default=sorted(SCENES))
+    parser.add_argument("--scale", type=int, default=1)
+    parser.add_argument("--layers", type=int, default=4)
+    parser.add_argument("--every", type=int, default=4)
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+    tc.init(arch="cpu", precision="f32")
+    print("| scene | particles | thickness | frames checked | crossings | closest far pair / "
+          "thickness | step with contact | free step | ratio |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for name in args.scenes:
+        r = measure(name, args.scale, args.layers, args.every, args.repeats)
+        print(f"| {r['scene']} | {r['particles']:,} | {r['thickness'] * 1e3:g} mm | "
+              f"{r['frames']} | {r['crossings']} | {r['closest']:.3f} | "
+              f"{r['contact_ms']:.2f} ms | {r['free_ms']:.2f} ms | "
+              f"{r['contact_ms'] / r['free_ms']:.1f}x |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
