@@ -205,10 +205,10 @@ def test_pbd_is_left_out_of_a_fabric_study_and_the_advice_says_so(tmp_path, f64)
 
 
 # one demo scene for each way a reference can end early (a garment sewn onto an animated
-# body, self-collision's crushed contact, tearing, tetrahedra, a stiff Fabric): the study of
-# the others meets these stages again (the suite's time)
+# body, self-collision's crushed contact, tearing): the study of the others meets these
+# stages again (the suite's time)
 DEMOS = [Path(__file__).parent.parent / "demos" / f"{name}.toml" for name in (
-    "skirt_walk", "cloth_pile", "tearing", "soft_block", "study_fabric")]
+    "skirt_walk", "cloth_pile", "tearing")]
 
 
 @pytest.mark.parametrize("path", DEMOS, ids=[p.stem for p in DEMOS])

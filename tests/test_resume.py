@@ -316,7 +316,7 @@ CONTACT_CORRUPTIONS = {
 }
 
 
-@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(kind=st.sampled_from(sorted(CONTACT_CORRUPTIONS)), k=st.integers(0, 1000))
 def test_a_corrupted_self_contact_list_is_refused_before_anything_is_loaded(
         f64, tmp_path_factory, kind, k):
