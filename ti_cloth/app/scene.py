@@ -148,10 +148,12 @@ class Scene:
             # particle i stays within |x_i - h| of every hold h (its rest distance, as far
             # as the cloth between them can stretch out straight): its box is the overlap of
             # those spheres' boxes, below the holds (gravity)
-            holds = x[held][:: max(1, int(held.sum()) // 256)]
-            reach = np.linalg.norm(x[:, None, :] - holds[None, :, :], axis=2)[:, :, None]
-            lo = np.minimum(lo, (holds[None] - reach).max(axis=1).min(axis=0))
-            top = (holds[None] + reach).min(axis=1).max(axis=0)
+            holds = x[held][:: max(1, int(held.sum()) // 64)]
+            top = np.full(3, -np.inf)
+            for start in range(0, len(x), 4096):          # (4096, 64, 3) at a time
+                reach = np.linalg.norm(x[start:start + 4096, None] - holds[None], axis=2)
+                lo = np.minimum(lo, (holds[None] - reach[:, :, None]).max(axis=1).min(axis=0))
+                top = np.maximum(top, (holds[None] + reach[:, :, None]).min(axis=1).max(axis=0))
             hi = np.maximum(hi, (top[0], hi[1], top[2]))
         else:
             lo = lo - (0.0, self.size, 0.0)
@@ -159,19 +161,9 @@ class Scene:
                   and np.allclose(np.asarray(p.normal) / np.linalg.norm(p.normal), (0, 1, 0))]
         floors += [self.output.ground] if self.output.ground is not None else []
         for c in self.colliders:
-            if isinstance(c, Sphere):
-                box = np.array([c.centre]) + [[-c.radius], [c.radius]]
-            elif isinstance(c, Box):
-                box = np.array([c.lo, c.hi])
-            elif isinstance(c, Capsule):
-                box = np.array([np.minimum(c.a, c.b) - c.radius, np.maximum(c.a, c.b) + c.radius])
-            elif isinstance(c, AnimatedMeshCollider) and c.sampled:
-                box = np.array([c.motion.min(axis=(0, 1)), c.motion.max(axis=(0, 1))])
-            elif isinstance(c, (MeshCollider, AnimatedMeshCollider)):
-                box = np.array([c.mesh.vertices.min(axis=0), c.mesh.vertices.max(axis=0)])
-            else:
-                continue
-            lo, hi = np.minimum(lo, box[0]), np.maximum(hi, box[1])
+            box = c.bounds()
+            if box is not None:
+                lo, hi = np.minimum(lo, box[0]), np.maximum(hi, box[1])
         under = [f for f in floors if f <= x[:, 1].min()]
         if under:
             lo[1] = max(lo[1], max(under))

@@ -60,19 +60,6 @@ def _colour(field: str, value) -> tuple:
     return tuple(float(c) for c in rgb)
 
 
-def _bounds(collider) -> np.ndarray:
-    """Corners (2, 3) [m] of a finite collider's bounding box."""
-    if isinstance(collider, Sphere):
-        return np.array([collider.centre]) + [[-collider.radius], [collider.radius]]
-    if isinstance(collider, Box):
-        return np.array([collider.lo, collider.hi], np.float64)
-    if isinstance(collider, Capsule):
-        ends = np.array([collider.a, collider.b], np.float64)
-        return np.array([ends.min(axis=0) - collider.radius, ends.max(axis=0) + collider.radius])
-    vertices = collider.mesh.vertices
-    return np.array([vertices.min(axis=0), vertices.max(axis=0)])
-
-
 def _unit(field: str, value) -> tuple:
     v = as_array(field, value, np.float64, (3,))
     require(np.linalg.norm(v) > 0, field, tuple(v), "a non-zero vector")
@@ -382,7 +369,7 @@ class Renderer:
         self._require_frame()
         solids = [c for c in sim.collider_shapes() if not isinstance(c, Plane)]
         x = sim.positions()[~sim.cloth.ghost]
-        corners = [x] + [_bounds(c) for c in solids]
+        corners = [x] + [c.bounds() for c in solids]
         lo = np.min([c.min(axis=0) for c in corners if len(c)], axis=0)
         hi = np.max([c.max(axis=0) for c in corners if len(c)], axis=0)
         centre, radius = (lo + hi) / 2, max(float(np.linalg.norm(hi - lo)) / 2, 1e-3)

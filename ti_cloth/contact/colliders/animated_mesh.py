@@ -173,6 +173,11 @@ class AnimatedMeshCollider(Collider):
         return replace(self, mesh=Mesh(self.vertices_at(0.0) + offset, self.mesh.triangles),
                        motion=None, fps=None)
 
+    def bounds(self):
+        """Over every sample of a sampled motion (a callable's: its mesh at t = 0)."""
+        vertices = self.motion if self.sampled else self.mesh.vertices[None]
+        return np.array([vertices.min(axis=(0, 1)), vertices.max(axis=(0, 1))])
+
     def packed(self):
         return ANIMATED, np.zeros(3), np.zeros(3), 0.0
 

@@ -105,6 +105,9 @@ class MeshCollider(Collider):
     def moved(self, offset):
         return replace(self, mesh=Mesh(self.mesh.vertices + offset, self.mesh.triangles), path=None)
 
+    def bounds(self):
+        return np.array([self.mesh.vertices.min(axis=0), self.mesh.vertices.max(axis=0)])
+
     def packed(self):
         return MESH, self.centre, np.zeros(3), 0.0
 

@@ -89,6 +89,11 @@ class Collider:
         """A copy translated by `offset` [m], without a path."""
         raise NotImplementedError
 
+    def bounds(self) -> np.ndarray | None:
+        """Corners (2, 3) [m] of the shape's bounding box where it is defined (placed(t)
+        moves it); None for an unbounded one (a plane)."""
+        return None
+
     def packed(self) -> tuple[int, np.ndarray, np.ndarray, float]:
         """(kind, a, b, radius) as the collision kernel reads them."""
         raise NotImplementedError
@@ -140,6 +145,9 @@ class Sphere(Collider):
     def moved(self, offset):
         return replace(self, centre=tuple(np.add(self.centre, offset)), path=None)
 
+    def bounds(self):
+        return np.array([self.centre]) + [[-self.radius], [self.radius]]
+
     def packed(self):
         return SPHERE, np.asarray(self.centre), np.zeros(3), self.radius
 
@@ -161,6 +169,9 @@ class Box(Collider):
     def moved(self, offset):
         return replace(self, lo=tuple(np.add(self.lo, offset)), hi=tuple(np.add(self.hi, offset)),
                        path=None)
+
+    def bounds(self):
+        return np.array([self.lo, self.hi], np.float64)
 
     def packed(self):
         return BOX, np.asarray(self.lo), np.asarray(self.hi), 0.0
@@ -184,6 +195,10 @@ class Capsule(Collider):
     def moved(self, offset):
         return replace(self, a=tuple(np.add(self.a, offset)), b=tuple(np.add(self.b, offset)),
                        path=None)
+
+    def bounds(self):
+        ends = np.array([self.a, self.b], np.float64)
+        return np.array([ends.min(axis=0) - self.radius, ends.max(axis=0) + self.radius])
 
     def packed(self):
         return CAPSULE, np.asarray(self.a), np.asarray(self.b), self.radius
