@@ -354,12 +354,13 @@ def _material(owner: Table) -> Material | Fabric:
     if value is None:
         return Material()
     if isinstance(value, str):
-        if preset_name(value) not in PRESETS:
+        name = preset_name(value)            # a former name warns once, here
+        if name not in PRESETS:
             fabric = (f" ({value!r} is a measured fabric: fabric = {value!r})"
                       if value.lower() in FABRICS else "")
             owner.bad("material", value, f"a table or one of the presets {sorted(PRESETS)}"
                       f"{fabric}", PRESETS)
-        return Material.preset(value)
+        return Material.preset(name)
     table = Table(value, owner.path("material"), owner.source)
     table.allow("preset", "density", "hem_mass", "stretch", "shear", "bend", "damping")
     preset = (_preset(table, PRESETS, preset_name(table.value("preset")))

@@ -242,23 +242,18 @@ class SelfCollisionStage:
         values = {}
         for name, high in (("capacity", MAX_PAIRS_PER_PARTICLE * self.particle_count),
                            ("pair_total", None), ("vertex_pairs", None), ("listed", 1)):
+            if high is None:            # the pairs within the room, the vertex pairs within them
+                high = values["capacity" if name == "pair_total" else "pair_total"]
             value = arrays[name]
-            high = {"pair_total": values.get("capacity"),
-                    "vertex_pairs": values.get("pair_total")}.get(name, high)
             if not (value.shape == () and (np.issubdtype(value.dtype, np.integer)
                                            or value.dtype == bool) and 0 <= value <= high):
                 raise StateMismatch(f"{path}: self_contact {name} is {value!r}, not a count "
                                     f"in [0, {high}]")
             values[name] = int(value)
         total = values["pair_total"]
-        pairs = self.candidates
-        expected = {name: np.empty((rows * total,) + field.shape[1:] if field.ndim > 1
-                                   else (rows * total,), field.dtype)
-                    for name, rows, field in (
-                        ("elements", 1, pairs.elements.to_numpy()[:1]),
-                        ("particles", 1, pairs.particles.to_numpy()[:1]),
-                        ("active", 1, pairs.active.to_numpy()[:1]),
-                        ("contact", 4, pairs.contact.to_numpy()[:1]))}
+        expected = {"elements": np.empty((total, 2), np.int32),       # PairList's fields
+                    "particles": np.empty((total, 4), np.int32),
+                    "active": np.empty(total, np.int32), "contact": np.empty(4 * total, np.int32)}
         expected |= {name: getattr(self, name).to_numpy()
                      for name in ("listed_at", "pair_start", "contact_start")}
         saved_state.check_arrays(path, {f"self_contact.{k}": arrays[k] for k in expected
