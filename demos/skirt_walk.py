@@ -1,5 +1,5 @@
 """A skirt sewn from two panels on a walking figure: runs demos/skirt_walk.toml and prints the
-hem's folds in every frame.
+hem's folds and the particles inside the figure in every frame.
 
     python demos/skirt_walk.py            # renders/skirt_walk/frame_00000.png ... + skirt_walk.gif
     python demos/skirt_walk.py --test     # tiny and fast
@@ -47,10 +47,15 @@ def main(argv=None):
     record = frames[-1].parent / "skirt_walk.npz"        # the positions of every frame
     if record.is_file():
         scene = load_scene(SCENE)
+        figure = scene.colliders[0]
         with np.load(record) as data:
             hem = np.searchsorted(data["particle"], hem_of(scene.cloth))
             counts = [hem_folds(x, hem) for x in data["positions"]]
+            inside = [int(figure.inside(x, t).sum())
+                      for x, t in zip(data["positions"], data["time"])]
         print(f"skirt_walk: hem folds per frame: {counts} (most {max(counts)})")
+        print(f"skirt_walk: particles inside the figure per frame: {inside} "
+              f"(most {max(inside)})")
     return frames
 
 

@@ -3,6 +3,7 @@ costs that do not depend on luck, and candidates that cannot run a scene left ou
 
 import math
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -212,11 +213,19 @@ DEMOS = [Path(__file__).parent.parent / "demos" / f"{name}.toml" for name in (
 
 
 @pytest.mark.parametrize("path", DEMOS, ids=[p.stem for p in DEMOS])
-def test_the_study_never_raises_on_a_demo_scene(path, f64):
+def test_the_study_never_raises_on_a_demo_scene(path, f64, tmp_path):
     """A demo scene's study at a tiny size (one frame, a reference budget of 3e5
     particle-steps, rk4 at the frame step: stiff scenes diverge there, torn ones tear)
-    returns a result whose report says what its reference reached."""
+    returns a result whose report says what its reference reached. The skirt's panels cut
+    at 3 cm, not 1.5, and without its self-collision (the suite's time)."""
+    if path.stem == "skirt_walk":
+        text = (path.read_text().replace("edge_length = 0.015", "edge_length = 0.03")
+                .replace('path = "assets/', f'path = "{path.parent}/assets/'))
+        path = tmp_path / path.name
+        path.write_text(text)
     scene = tc.load_scene(path)
+    if path.stem == "skirt_walk":
+        scene = replace(scene, self_collision=None)
     result = study.run_study(scene, integrators=["rk4"], precisions=["f64"],
                              duration=1 / scene.fps, dts=[scene.frame_dt], progress=False,
                              reference=study.reference_trajectory(scene, 1 / scene.fps,

@@ -10,8 +10,13 @@ import taichi as ti
 from .body.material import SpringKind
 from .body.mesh import triangle_edges, unique_rows
 from .body.topology import Cloth, color_springs
-from .energies.bending import bending_stencils, tangents
-from .energies.isometric import is_flat, isometric_faces, isometric_matrix, isometric_parts
+from .energies.bending import bending_stencils, tangents, weld_groups
+from .energies.isometric import (
+    is_flat,
+    isometric_faces,
+    isometric_matrix,
+    isometric_parts,
+)
 from .inputs.validation import require
 from .runtime import backend
 from .runtime.transfer import upload
@@ -51,6 +56,11 @@ class Model:
                           corner i) [m], for tearing
     hinge_indices, hinge_faces, hinge_rest_tangent (tan of half the rest angle, continued as
                           energies/bending.tangents): its hinges
+    particle_weld         each particle's representative among those its seams sew together
+                          (Cloth.particle_weld), read where `sewn`: a hinge across a seam
+    weld_start, weld_member: the groups of particles sewn together (two or more), a CSR,
+                          the representative first: the implicit solve moves each group as
+                          one particle (integrators/conjugate_gradients.py)
     particle_face_start, adjacency_face: particle i is corner adjacency_face[a] % 3 of
                           triangle adjacency_face[a] // 3 (CSR, as for altitude springs);
     particle_hinge_start, adjacency_hinge: the same for hinges (4 corners)
@@ -63,7 +73,8 @@ class Model:
 
     Python attributes read at compile time (fixed for the model's life):
     particle_count, spring_count, altitude_count, face_count, hinge_count, relative_damping,
-    isometric.
+    isometric, sewn (the cloth has seams), weld_count (its groups of particles sewn
+    together).
     """
 
     def __init__(self, cloth: Cloth, pinned: np.ndarray | None = None, isometric: bool = False):
@@ -77,6 +88,9 @@ class Model:
         require(not isometric or is_flat(cloth), "isometric", isometric,
                 "False for a body whose rest sheet is not flat (energies/isometric.is_flat)")
         self.isometric = bool(isometric)
+        self.sewn = bool(len(cloth.seam_indices))
+        weld_start, weld_member = weld_groups(cloth.particle_weld)
+        self.weld_count = len(weld_start) - 1
         bends = len(self._isometric_bending(cloth)[0][1]) if self.isometric else 0
         fields = backend.FieldGroup()
         s1 = max(s, 1)
@@ -110,6 +124,9 @@ class Model:
         self.hinge_indices = fields.vector(4, ti.i32, h1)
         self.hinge_faces = fields.vector(2, ti.i32, h1)
         self.hinge_rest_tangent = fields.scalar(real, h1)
+        self.particle_weld = fields.scalar(ti.i32, n)
+        self.weld_start = fields.scalar(ti.i32, self.weld_count + 1)
+        self.weld_member = fields.scalar(ti.i32, max(len(weld_member), 1))
         self.particle_face_start = fields.scalar(ti.i32, n + 1)
         self.adjacency_face = fields.scalar(ti.i32, 3 * f1)
         self.particle_hinge_start = fields.scalar(ti.i32, n + 1)
@@ -142,7 +159,8 @@ class Model:
         digest.update(np.ascontiguousarray(cloth.hinge_indices).tobytes())
         return ("Model", cloth.particle_count, cloth.spring_count, cloth.altitude_count,
                 cloth.face_count, cloth.hinge_count, cloth.damping == "relative",
-                bool(isometric), digest.hexdigest())
+                bool(isometric), bool(len(cloth.seam_indices)),
+                *(len(a) for a in weld_groups(cloth.particle_weld)), digest.hexdigest())
 
     def load(self, cloth: Cloth, pinned: np.ndarray | None = None,
              isometric: bool = False) -> None:
@@ -205,6 +223,8 @@ class Model:
                 (self.hinge_indices, cloth.hinge_indices),
                 (self.hinge_faces, cloth.hinge_faces),
                 (self.hinge_rest_tangent, tangents(cloth.hinge_rest_angle)),
+                (self.particle_weld, cloth.particle_weld),
+                *zip((self.weld_start, self.weld_member), weld_groups(cloth.particle_weld)),
                 (self.particle_face_start, face_start),
                 (self.adjacency_face, face_order),
                 (self.particle_hinge_start, hinge_start),

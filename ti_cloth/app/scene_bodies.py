@@ -286,7 +286,8 @@ def read_body(table: Table, folder: Path, colliders=()) -> tuple[Body, tuple]:
 
 
 def _garment(table: Table) -> Garment:
-    """A garment body's [[bodies.panels]] (outline, edge_length, wrap, rotate, translate) and
+    """A garment body's [[bodies.panels]] (outline, edge_length, wrap, flare, gather, rotate,
+    translate) and
     `seams` ([panel_a, edge_a, panel_b, edge_b] each)."""
     pieces = []
     for p in table.tables("panels"):
@@ -294,7 +295,8 @@ def _garment(table: Table) -> Garment:
                                                             within=limits.LENGTH))
         if p.has("wrap"):
             piece = p.build(piece.wrapped, p.number("wrap", unit="m", within=limits.LENGTH),
-                            p.number("flare", 0.0, minimum=0.0))
+                            p.number("flare", 0.0, minimum=0.0),
+                            p.number("gather", 1.0, within=limits.GATHER))
         piece = p.build(piece.moved, p.vector("translate", (0.0, 0.0, 0.0), unit="m",
                                               within=limits.COORDINATE),
                         p.vector("rotate", (0.0, 0.0, 0.0), unit="rad"))

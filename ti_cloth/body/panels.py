@@ -30,6 +30,8 @@ from .mesh import Mesh
 MAX_PANEL_POINTS = 1_000_000
 MAX_LATTICE = 4_000_000   # lattice points over the outline's box, before those outside go
 SMOOTHING_PASSES = 3      # Laplacian passes on the lattice points next to the outline
+PLEAT_EDGES = 4           # a gathered panel's pleats, in edge lengths (the shortest wave drawn well)
+PLEAT_NEWTON = 8          # Newton iterations placing a point along its pleats
 
 
 @dataclass(frozen=True)
@@ -50,31 +52,48 @@ class Panel:
     wrapped_radius: float | None = None
     placed: bool = False
 
-    def wrapped(self, radius: float, flare: float = 0.0) -> Panel:
+    def wrapped(self, radius: float, flare: float = 0.0, gather: float = 1.0) -> Panel:
         """The flat panel bent round the vertical (y) axis, its pattern x running round it
         (x = 0 on the +z side, x > 0 towards +x), as a skirt panel wraps round hips: onto a
         cylinder of `radius` [m], or with `flare` > 0 onto a cone widening downwards from
         `radius` at the panel's top by `flare` m of radius per m of height (an A-line
         skirt). The pattern's vertical lines keep their length; each horizontal line keeps
-        its length round its circle (on a cylinder the wrap is exact: every length is kept).
+        its length round its circle (on a cylinder the wrap is exact: every length is kept),
+        times `gather` at the top: with gather < 1 the top edge is placed gathered to that
+        fraction of its length, easing linearly to its full length at the bottom (a cape
+        gathered at the neck, a skirt into its waistband), each line laid in radial pleats of
+        PLEAT_EDGES edge lengths whose depth keeps its length (pleat_slope), so the placed
+        cloth starts buckled, not squeezed (its rest state is still the flat pattern).
         Call before moved()."""
         require(not self.placed and self.wrapped_radius is None, "Panel.wrapped", radius,
                 "called once, on a panel not yet moved (wrap, then move)")
         radius = in_range("Panel.wrapped radius", radius, limits.LENGTH)
         flare = finite_number("Panel.wrapped flare", flare, 0.0)
+        gather = in_range("Panel.wrapped gather", gather, limits.GATHER)
         x, y = self.flat[:, 0], self.flat[:, 1]
         below = y.max() - y
         slope = np.arctan(flare)
         circle = radius + below * np.sin(slope)
-        angle = x / circle
+        share = gather + (1.0 - gather) * below / np.ptp(y)    # placed / pattern length
+        wave = 2 * np.pi / (PLEAT_EDGES * self.edge_length)
+        steep = pleat_slope(1.0 / share)
+        arc = pleated(x, share, steep, wave)
+        angle = arc / circle
         least = (np.abs(x) / np.pi - below * np.sin(slope)).max()
         require(np.abs(angle).max() <= np.pi, "Panel.wrapped radius", radius,
                 f"at least {least:.3g} m for this panel: wrapped further than half round each "
                 "way, it would pass through itself")
+        circle = circle + steep / wave * np.sin(wave * arc)
         vertices = np.column_stack([circle * np.sin(angle), y.max() - below * np.cos(slope),
                                     circle * np.cos(angle)])
         return replace(self, mesh=Mesh(vertices, self.mesh.triangles, uvs=self.flat),
                        wrapped_radius=radius)
+
+    @property
+    def edge_length(self) -> float:
+        """The median edge of its triangles on the flat pattern [m] (about panel()'s)."""
+        corners = self.flat[self.mesh.triangles]
+        return float(np.median(np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2)))
 
     def moved(self, translate=(0.0, 0.0, 0.0), rotate=(0.0, 0.0, 0.0)) -> Panel:
         """The panel turned by the rotation vector `rotate` (axis x angle [rad]) about the
@@ -87,6 +106,33 @@ class Panel:
         vertices = self.mesh.vertices @ matrix.T + shift
         return replace(self, mesh=Mesh(vertices, self.mesh.triangles, uvs=self.flat),
                        placed=True)
+
+
+def pleat_slope(ratio) -> np.ndarray:
+    """The slope a = A k of radial pleats A sin(k s) whose length is `ratio` (>= 1) times the
+    line they are laid along: the mean of sqrt(1 + a^2 cos^2) over a period (a complete
+    elliptic integral, tabulated and inverted)."""
+    slopes = np.linspace(0.0, 40.0, 4001)
+    phase = np.linspace(0.0, 2 * np.pi, 256, endpoint=False)
+    lengths = np.sqrt(1.0 + np.outer(slopes ** 2, np.cos(phase) ** 2)).mean(axis=1)
+    return np.interp(ratio, lengths, slopes)
+
+
+def pleated(x: np.ndarray, share: np.ndarray, slope: np.ndarray, wave: float) -> np.ndarray:
+    """Where along its line a point x of the pattern lies once the line is laid in pleats
+    (slope / wave) sin(wave s) [m]: the s whose length along the pleats from 0 is x, so that
+    every piece keeps its length, by Newton's method on the length's closed form
+    sqrt(1 + a^2) E(wave s | a^2 / (1 + a^2)) / wave (E: the incomplete elliptic integral of
+    the second kind), from s = x share."""
+    from scipy.special import ellipeinc
+
+    grow = np.sqrt(1.0 + slope ** 2)
+    m = slope ** 2 / grow ** 2
+    s = x * share
+    for _ in range(PLEAT_NEWTON):
+        length = grow * ellipeinc(wave * s, m) / wave
+        s = s - (length - x) / np.sqrt(1.0 + (slope * np.cos(wave * s)) ** 2)
+    return s
 
 
 def panel(outline, edge_length: float) -> Panel:

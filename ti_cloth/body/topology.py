@@ -26,7 +26,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from ..energies.altitude import altitude_springs
-from ..energies.bending import bending_matrices, dihedral_angles, hinges
+from ..energies.bending import bending_matrices, dihedral_angles, hinges, second_edge, welded
 from ..energies.membrane import material_frames
 from ..inputs.validation import as_array, finite_number, require
 from .fabric import Fabric
@@ -182,7 +182,10 @@ class Cloth:
     and its interior edges, the hinges
       hinge_indices      (H, 4) int [a, b, c, d]: edge a-b, c and d opposite it
       hinge_faces        (H, 2): 3 f + i of its two triangles
-      hinge_rest_angle   (H,) dihedral angles of the rest mesh [rad]
+      hinge_rest_angle   (H,) dihedral angles of the rest mesh [rad], 0 across a seam
+    A garment's seams (seams=) join its panels' bending: an edge sewn to another is a hinge
+    across the seam (energies/bending.hinges with particle_weld), flat at rest as a tailor
+    sews two panels edge to edge, so the seam bends as the cloth does (no fin).
     (all empty for a body of springs).
 
     pinned: particle indices, an (N,) bool mask, or names of mesh.named_vertices() ("top",
@@ -308,10 +311,11 @@ class Cloth:
         self.face_moduli = np.tile(moduli, (count, 1))
         self.face_damping = np.full(count, damping)
         (self.hinge_indices, self.hinge_faces, self.face_hinge,
-         face_sign) = hinges(triangles)
+         face_sign) = hinges(triangles, self.particle_weld)
         self.face_bending = bending_matrices(self.face_gradient, self.face_area,
                                                       face_sign, np.tile(flexural, (count, 1)))
-        self.hinge_rest_angle = dihedral_angles(x, self.hinge_indices)
+        across = np.any(second_edge(self) != self.hinge_indices[:, :2], axis=1)
+        self.hinge_rest_angle = np.where(across, 0.0, dihedral_angles(x, self.hinge_indices))
 
     ELEMENT_ARRAYS = ("face_indices", "face_gradient", "face_area", "face_moduli", "face_damping",
                       "face_bending", "face_hinge", "hinge_indices", "hinge_faces",
@@ -452,6 +456,12 @@ class Cloth:
     def damping(self) -> str:
         """The springs' damping model ("axial" for a Fabric's body, which has none)."""
         return self.material.damping if isinstance(self.material, Material) else "axial"
+
+    @property
+    def particle_weld(self) -> np.ndarray:
+        """(N,) each particle's representative among those its seams sew together (the least
+        index; itself off the seams): a hinge crosses a seam where its edges' ends match."""
+        return welded(self.seam_indices, self.particle_count)
 
     @property
     def mean_edge(self) -> float:

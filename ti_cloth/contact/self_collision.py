@@ -1,6 +1,7 @@
 """Self-collision and cloth-on-cloth contact (issue 18): after every step, no particle stays
 closer than `thickness` to a triangle it is not a corner of, nor an edge closer than `thickness`
-to an edge it shares no particle with, across every body of the simulation.
+to an edge it shares no particle with, across every body of the simulation. Particles a
+garment's seams sew together count as one (Model.particle_weld): a seam is not a contact.
 
 Candidates: contact_pairs.py (a Verlet list of the pairs that may touch before it is made
 again, from a grid of swept boxes; nothing tunnels between list and contact).

@@ -56,9 +56,12 @@ from .faces import face_intact, motion_in_step, multiplier_step
 HALF_ANGLE_LIMIT = 0.45 * np.pi
 
 
-def hinges(triangles: np.ndarray) -> tuple:
+def hinges(triangles: np.ndarray, weld: np.ndarray | None = None) -> tuple:
     """The interior edges of a triangle mesh as hinges (edges on exactly two triangles; a
-    boundary edge, or one on three or more triangles, has none).
+    boundary edge, or one on three or more triangles, has none). With `weld` ((N,) each
+    particle's representative, welded: particles a garment's seams sew together share one),
+    edges are matched by their ends' representatives, so an edge sewn to another is a hinge
+    across the seam: its a, b and c are the first triangle's particles, d the second's.
 
     Returns (indices (H, 4) [a, b, c, d]: the edge a -> b as its first triangle winds it, c
     opposite in that triangle, d in the other; faces (H, 2): 3 f + i of the two triangles,
@@ -69,23 +72,64 @@ def hinges(triangles: np.ndarray) -> tuple:
     local = np.arange(3)
     start = triangles[:, (local + 1) % 3].ravel()
     end = triangles[:, (local + 2) % 3].ravel()
-    key = np.stack([np.minimum(start, end), np.maximum(start, end)], 1)
+    same = (lambda p: p) if weld is None else (lambda p: weld[p])
+    key = np.stack([np.minimum(same(start), same(end)), np.maximum(same(start), same(end))], 1)
     order = np.lexsort((np.arange(3 * t), key[:, 1], key[:, 0]))
     sorted_key = key[order]
     boundary = np.concatenate([[True], np.any(sorted_key[1:] != sorted_key[:-1], axis=1), [True]])
     group_start = np.flatnonzero(boundary[:-1])
     group_size = np.diff(np.flatnonzero(boundary))
     pair = group_start[group_size == 2]
+    pair = pair[sorted_key[pair, 0] != sorted_key[pair, 1]]     # no edge sewn to a point
     first, second = order[pair], order[pair + 1]                  # codes 3 f + i, f in order
     face_hinge = np.full(3 * t, -1, np.int64)
     face_hinge[first] = face_hinge[second] = np.arange(len(pair))
     face_sign = np.ones(3 * t, np.int64)
-    face_sign[second] = np.where(start[second] == start[first], -1, 1)
+    face_sign[second] = np.where(same(start[second]) == same(start[first]), -1, 1)
     f1, i1 = np.divmod(first, 3)
     f2, i2 = np.divmod(second, 3)
     indices = np.stack([start[first], end[first], triangles[f1, i1], triangles[f2, i2]], 1)
     return (indices.astype(np.int64), np.stack([first, second], 1).astype(np.int64),
             face_hinge.reshape(t, 3), face_sign.reshape(t, 3))
+
+
+def welded(seams: np.ndarray, n: int) -> np.ndarray:
+    """(N,) each particle's representative: the least index of the particles the seam pairs
+    (P, 2) join to it, directly or through others (a corner where three panels meet); itself
+    for a particle on no seam."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    if not len(seams):
+        return np.arange(n)
+    graph = coo_matrix((np.ones(len(seams)), (seams[:, 0], seams[:, 1])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    least = np.full(label.max() + 1, n)
+    np.minimum.at(least, label, np.arange(n))
+    return least[label]
+
+
+def weld_groups(weld: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(start (G + 1,), member (M,)): the groups of two or more particles that share a
+    representative (welded), as a CSR in increasing order, so the representative (the
+    least) comes first in each."""
+    order = np.argsort(weld, kind="stable")
+    size = np.bincount(weld, minlength=len(weld))
+    grouped = order[size[weld[order]] >= 2]
+    start = np.concatenate([[0], np.cumsum(size[size >= 2])])
+    return start.astype(np.int64), grouped.astype(np.int64)
+
+
+def second_edge(cloth) -> np.ndarray:
+    """(H, 2): the particles of each hinge's second triangle at its ends a and b: a and b
+    themselves, but across a seam (hinges' weld) the other panel's particles sewn to them."""
+    if not cloth.hinge_count:
+        return np.zeros((0, 2), np.int64)
+    weld = cloth.particle_weld
+    f2, i2 = np.divmod(cloth.hinge_faces[:, 1], 3)
+    ends = cloth.face_indices[f2[:, None], (i2[:, None] + [1, 2]) % 3]           # (H, 2)
+    turned = weld[ends[:, 0]] != weld[cloth.hinge_indices[:, 0]]
+    return np.where(turned[:, None], ends[:, ::-1], ends)
 
 
 def bending_stencils(cloth) -> np.ndarray:
@@ -205,7 +249,12 @@ def hinge_gradient(model: ti.template(), positions: ti.template(), e):
     theta's sine and cosine are (m1 x m2) . e / |e| and m1 . m2 over |m1| |m2| (three square
     roots and four divisions a hinge, no trigonometric call). A hinge with an edge or face of
     zero length or area has no angle: t and its gradient 0."""
-    corner = model.hinge_indices[e]
+    return corner_gradient(positions, model.hinge_indices[e])
+
+
+@ti.func
+def corner_gradient(positions: ti.template(), corner):
+    """hinge_gradient of the hinge on the particles corner = [a, b, c, d]."""
     xa = positions[corner[0]]
     edge = positions[corner[1]] - xa
     to_c = positions[corner[2]] - xa
@@ -384,10 +433,17 @@ def hinge_product(model: ti.template(), ws: ti.template(), e, dt, rhs: ti.templa
 @ti.func
 def hinge_on_face(model: ti.template(), positions: ti.template(), f, e):
     """Hinge e of triangle f: (t, grad t on f's corners 0, 1, 2, grad t on the hinge's other
-    corner, that corner's particle)."""
+    corner, that corner's particle). Across a seam the hinge's corners sewn to f's (the same
+    particle_weld) are measured at f's own, so that f reads no particle outside its stencil
+    (bending_stencils: what XPBD's colouring keeps apart)."""
     face = model.face_indices[f]
     corner = model.hinge_indices[e]
-    t, ga, gb, gc, gd = hinge_gradient(model, positions, e)
+    if ti.static(model.sewn):
+        for k in ti.static(range(4)):
+            for j in ti.static(range(3)):
+                if model.particle_weld[corner[k]] == model.particle_weld[face[j]]:
+                    corner[k] = face[j]
+    t, ga, gb, gc, gd = corner_gradient(positions, corner)
     grads = [ga, gb, gc, gd]
     zero = ti.Vector([0.0, 0.0, 0.0])
     g0, g1, g2, other_grad = zero, zero, zero, zero

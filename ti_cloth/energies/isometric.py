@@ -23,7 +23,7 @@ import numpy as np
 import taichi as ti
 
 from ..runtime.plan import DT, ITEM, STATE, Loop, Sweep
-from .bending import bending_stencils, hinges, intact_hinges
+from .bending import bending_stencils, hinges, intact_hinges, second_edge
 from .faces import motion_in_step, multiplier_step
 
 # A flat rest sheet's bending needs no angle: the isometric model (module doc). Rest angles
@@ -31,7 +31,8 @@ from .faces import motion_in_step, multiplier_step
 FLAT_REST_ANGLE = 1e-6
 
 
-def cotangent_weights(positions: np.ndarray, indices: np.ndarray) -> np.ndarray:
+def cotangent_weights(positions: np.ndarray, indices: np.ndarray,
+                      second: np.ndarray | None = None) -> np.ndarray:
     """K (H, 4) of hinges [a, b, c, d] at rest (Bergou, Wardetzky, Harmon, Zorin & Grinspun,
     "A quadratic bending model for inextensible surfaces", SGP 2006, sec. 4.1):
     w = sum_k K_k x_k = (cot b1 + cot b2) a + (cot a1 + cot a2) b - (cot a1 + cot b1) c
@@ -39,15 +40,17 @@ def cotangent_weights(positions: np.ndarray, indices: np.ndarray) -> np.ndarray:
     a2, b2 in (a, b, d). In each triangle (cot b1 a + cot a1 b) / (cot a1 + cot b1) is the
     foot of c's altitude, so w is |e| (u1 + u2), u the unit vectors from c and d to the edge
     in their triangles: 0 on the flat rest sheet and |w| = 2 |e| sin(theta / 2) in any
-    isometric deformation of it."""
+    isometric deformation of it. second (H, 2): the second triangle's particles at a and b
+    where they are others (across a seam: bending.second_edge), its angles measured there."""
     a, b, c, d = (positions[indices[:, k]] for k in range(4))
+    a_2, b_2 = (a, b) if second is None else (positions[second[:, 0]], positions[second[:, 1]])
 
     def cot(apex, p, q):
         u, v = p - apex, q - apex
         return np.sum(u * v, 1) / np.linalg.norm(np.cross(u, v), axis=1)
 
     a1, b1 = cot(a, b, c), cot(b, a, c)
-    a2, b2 = cot(a, b, d), cot(b, a, d)
+    a2, b2 = cot(a_2, b_2, d), cot(b_2, a_2, d)
     return np.stack([b1 + b2, a1 + a2, -(a1 + b1), -(a2 + b2)], 1)
 
 
@@ -61,10 +64,10 @@ def is_flat(cloth) -> bool:
 def isometric_parts(cloth) -> tuple:
     """(K (H, 4) the hinges' cotangent weights, B' (F, 3, 3) = s_i s_j B_ij / (4 |e_i| |e_j|),
     0 across a boundary edge): the isometric model's constants (isometric_matrix)."""
-    weights = cotangent_weights(cloth.rest_position, cloth.hinge_indices)
+    weights = cotangent_weights(cloth.rest_position, cloth.hinge_indices, second_edge(cloth))
     ends = cloth.rest_position[cloth.hinge_indices[:, :2]]
     lengths = np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1)
-    _, _, face_hinge, face_sign = hinges(cloth.face_indices)
+    _, _, face_hinge, face_sign = hinges(cloth.face_indices, cloth.particle_weld)
     present = face_hinge >= 0
     scale = np.where(present, face_sign / (2.0 * lengths[np.where(present, face_hinge, 0)]), 0.0)
     return weights, cloth.face_bending * scale[:, :, None] * scale[:, None, :]
@@ -114,12 +117,15 @@ def isometric_faces(cloth) -> tuple:
     weights = np.zeros((cloth.face_count, 3, 6))
     present = cloth.face_hinge >= 0
     hinge = np.where(present, cloth.face_hinge, 0)
-    cot = cotangent_weights(cloth.rest_position, cloth.hinge_indices)[hinge]   # (F, 3, 4)
-    corners = cloth.hinge_indices[hinge]                                          # (F, 3, 4)
+    cot = cotangent_weights(cloth.rest_position, cloth.hinge_indices,
+                            second_edge(cloth))[hinge]                           # (F, 3, 4)
+    weld = cloth.particle_weld            # across a seam a corner is the one sewn to it
+    corners = weld[cloth.hinge_indices[hinge]]                                    # (F, 3, 4)
     for k in range(4):
         for s in range(6):
-            weights[:, :, s] += np.where(present & (corners[:, :, k] == stencil[:, None, s])
-                                         & _first_slot(stencil, s)[:, None], cot[:, :, k], 0.0)
+            weights[:, :, s] += np.where(present & (corners[:, :, k] == weld[stencil[:, None, s]])
+                                         & _first_slot(weld[stencil], s)[:, None], cot[:, :, k],
+                                         0.0)
     return stencil, weights
 
 

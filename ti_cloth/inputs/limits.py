@@ -42,6 +42,8 @@ ACCELERATION = Range(-1e4, 1e4, "m/s^2", "each gravity component")
 SPEED_COMPONENT = Range(-1e3, 1e3, "m/s", "each wind velocity component")
 GUARD = Range(1e-6, 1e12, "m", "position_limit: the divergence guard's box")
 SEWING_SPEED = Range(1e-4, 1e3, "m/s", "how fast a seam closes (Sewing.speed)")
+GATHER = Range(0.05, 1.0, "", "a panel's top edge placed gathered: its placed length over the "
+               "pattern's (Panel.wrapped gather)")
 DRAG = Range(0.0, 1e4, "1/s", "air drag")
 DT = Range(1e-7, 1.0, "s", "time step dt")
 FPS = Range(1.0, 1000.0, "frames/s", "frame rate")

@@ -12,6 +12,15 @@ Pins: dv is filtered to zero on particles of inverse mass 0 (Baraff & Witkin's m
 with S = 0 there). Three synchronisation points per iteration: after A p, the update, the new
 direction; every worker sums the same partial sums in block order, so all take the same
 decisions (runtime/plan.py's Until).
+
+Seams (a garment's particles sewn together, Model.weld_*): each group is one particle of the
+solve, dv = P y with P copying a group's y to its members, so CG runs on P^T A P y = P^T b
+(symmetric positive definite as A is): b, A p and the diagonal are summed over the group on
+its representative (the members' rows 0), z and p read the representative's. A step then
+keeps sewn particles moving together (the sewing stage closes their gap), where separate
+solves for the two sides of a seam, the seam's bending coupling them, would be joined only
+after the step and a large step could tear the seam's fold apart or fling it. A group with
+a pinned particle is pinned.
 """
 
 import math
@@ -161,11 +170,69 @@ def update_block(model: ti.template(), ws: ti.template(), block, now: ti.templat
 
 @ti.func
 def turn_block(model: ti.template(), ws: ti.template(), block, now: ti.template()):
-    """p = z + beta p on the particles of `block`."""
+    """p = z + beta p on the particles of `block` (z of the representative of a sewn
+    particle: the module doc's P)."""
     beta = ws.scalar[now.row * ROW + BETA]
     begin, end = block_range(block, model.particle_count)
     for i in range(begin, end):
-        ws.p[i] = ws.z[i] + beta * ws.p[i]
+        z = ws.z[i]
+        if ti.static(model.sewn):
+            z = ws.z[model.particle_weld[i]]
+        ws.p[i] = z + beta * ws.p[i]
+
+
+@ti.func
+def _group_free(model: ti.template(), g):
+    """1.0 if no particle of sewn group g is pinned, else 0.0."""
+    free = 1.0
+    for k in range(model.weld_start[g], model.weld_start[g + 1]):
+        if model.particle_inv_mass[model.weld_member[k]] <= 0:
+            free = 0.0
+    return free
+
+
+@ti.func
+def weld_start(model: ti.template(), ws: ti.template(), g):
+    """Sewn group g's start as one particle: r = b and the diagonal summed on its
+    representative (0 and the sum on its other members), z = p = r / diagonal on all."""
+    first = model.weld_start[g]
+    b = ti.Vector([0.0, 0.0, 0.0])
+    diagonal = ti.Vector([0.0, 0.0, 0.0])
+    for k in range(first, model.weld_start[g + 1]):
+        b += ws.r[model.weld_member[k]]
+        diagonal += ws.diagonal[model.weld_member[k]]
+    b *= _group_free(model, g)
+    z = b / diagonal
+    for k in range(first, model.weld_start[g + 1]):
+        i = model.weld_member[k]
+        ws.r[i] = b if k == first else 0.0 * b
+        ws.diagonal[i] = diagonal
+        ws.z[i] = z
+        ws.p[i] = z
+
+
+@ti.func
+def start_sums(model: ti.template(), ws: ti.template(), block):
+    """The partial sums r . z and r . r of `block` (after the groups' start)."""
+    begin, end = block_range(block, model.particle_count)
+    rz, rr = 0.0, 0.0
+    for i in range(begin, end):
+        rz += ws.r[i].dot(ws.z[i])
+        rr += ws.r[i].dot(ws.r[i])
+    ws.partial[block] = ti.Vector([rz, rr])
+
+
+@ti.func
+def weld_product(model: ti.template(), ws: ti.template(), g):
+    """Sewn group g's row of P^T A P p: A p summed on its representative, 0 on the others
+    (0 on all in a pinned group). p . Ap's partial sums stand: p is the same on a group."""
+    first = model.weld_start[g]
+    total = ti.Vector([0.0, 0.0, 0.0])
+    for k in range(first, model.weld_start[g + 1]):
+        total += ws.ap[model.weld_member[k]]
+    total *= _group_free(model, g)
+    for k in range(first, model.weld_start[g + 1]):
+        ws.ap[model.weld_member[k]] = total if k == first else 0.0 * total
 
 
 @ti.func
@@ -235,6 +302,9 @@ def linearisation(model, forces, ws, start: Loop) -> tuple:
                  Phase(start))
     else:
         begin = (Phase(gather, start),)
+    if model.sewn:
+        begin += (Phase(Loop(model.weld_count, weld_start, model, ws, ITEM)),
+                  Phase(Loop(ws.block_count, start_sums, model, ws, ITEM)))
     bending = bending_phases(model, *implicit_elements.bending_loops(model, ws))
     return (wind.phases(model, forces) + ((Phase(*linear),) if linear else ()) + bending
             + begin + (Once(begin_solve, ws, NOW),))
@@ -245,8 +315,10 @@ def system_product(model, forces, ws) -> tuple:
     project = ()
     if model.altitude_count:
         project = (Loop(model.altitude_count, project_altitude, model, ws, ws.p, ITEM),)
+    weld = ((Phase(Loop(model.weld_count, weld_product, model, ws, ITEM)),) if model.sewn
+            else ())
     return (implicit_elements.product_phases(model, ws, project)
-            + (Phase(Loop(ws.block_count, apply_block, model, forces, ws, ITEM, NOW)),))
+            + (Phase(Loop(ws.block_count, apply_block, model, forces, ws, ITEM, NOW)),) + weld)
 
 
 def solve(model, forces, ws, tolerance: float, most: int) -> Until:

@@ -10,8 +10,9 @@ masses: a pinned or held particle stays, its partner comes all the way), average
 partners when it has several (a corner where three panels meet). Velocities follow the
 correction (v += correction / dt, as after strain limiting), so a seam approaches at about
 `speed` and does not overshoot. Once the length is 0 the pair is held together every step,
-as if welded; a seam bends freely (it is a hinge: no spring or element crosses it). The
-length depends on the time alone, so a resumed run sews on with the same bits.
+as if welded; a Fabric's bending crosses it (energies/bending.hinges: a hinge across each
+sewn edge, flat at rest), so it bends as the cloth does. The length depends on the time
+alone, so a resumed run sews on with the same bits.
 
 Each seam particle reads the positions kept before the stage and writes only its own, in a
 fixed order of partners: deterministic, no atomics (Jacobi, one pass per step).

@@ -147,6 +147,16 @@ def _box_gap(lo, hi, other_lo, other_hi):
 
 
 @ti.func
+def _joined(model: ti.template(), p, q):
+    """Whether particles p and q are one: the same, or sewn together by a seam (their
+    Model.particle_weld is the same), which never keep apart."""
+    same = p == q
+    if ti.static(model.sewn):
+        same = model.particle_weld[p] == model.particle_weld[q]
+    return same
+
+
+@ti.func
 def _at(model: ti.template(), state: ti.template(), i, rest_shape):
     """Particle i's position now (rest_shape 0) or in the rest shape (1). The distance tests
     run in a loop over the two, so each is compiled once."""
@@ -202,7 +212,8 @@ def _triangle_pairs(stage: ti.template(), pairs: ti.template(), model: ti.templa
         begin, end = cell_range(stage.grid, 0, cell)
         for a in range(begin, end):
             v = stage.grid.cell_item[a]
-            if v != tri[0] and v != tri[1] and v != tri[2]:
+            if not (_joined(model, v, tri[0]) or _joined(model, v, tri[1])
+                    or _joined(model, v, tri[2])):
                 if not found_here(stage.grid, v, cell, first, lo, hi):
                     continue
                 moved = ti.max(_moved(stage, state, v, tri[0]), _moved(stage, state, v, tri[1]),
@@ -248,8 +259,11 @@ def _edge_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template()
             item = stage.grid.cell_item[a]
             f = item - stage.particle_count
             other = stage.edges[f]
-            if f > e and other[0] != ends[0] and other[0] != ends[1] and other[1] != ends[0] \
-                    and other[1] != ends[1] and not torn_edge(stage, state, f):
+            if f > e and not (_joined(model, other[0], ends[0])
+                              or _joined(model, other[0], ends[1])
+                              or _joined(model, other[1], ends[0])
+                              or _joined(model, other[1], ends[1])) \
+                    and not torn_edge(stage, state, f):
                 if not found_here(stage.grid, item, cell, first, lo, hi):
                     continue
                 moved = ti.max(_moved(stage, state, ends[0], other[0]),

@@ -21,6 +21,7 @@ from ...inputs import limits
 from ...inputs.validation import as_array, in_range, require
 from .animation_files import read_animation
 from .mesh_collider import closed
+from .sdf import INSIDE
 from .shapes import ANIMATED, Collider
 
 
@@ -157,6 +158,19 @@ class AnimatedMeshCollider(Collider):
                 vertices[tuple(bad[0])] if len(bad) else None,
                 f"a coordinate {limits.COORDINATE.text()}")
         return vertices
+
+    def inside(self, points, t: float) -> np.ndarray:
+        """(P,) bool: which of the points (P, 3) [m] are inside the closed mesh as it is at
+        time t [s] (libigl's fast winding number above 1/2): a check of a run's frames (a
+        garment demo's "particles inside the figure")."""
+        import igl
+
+        require(self.closed, "AnimatedMeshCollider.inside", "an open mesh",
+                "a closed mesh (every edge on two triangles): an open one has no inside")
+        points = as_array("points", points, np.float64, (None, 3))
+        winding = igl.fast_winding_number(self.vertices_at(t).astype(np.float64),
+                                          self.mesh.triangles.astype(np.int64), points)
+        return np.abs(winding) > INSIDE
 
     def placed(self, t: float) -> AnimatedMeshCollider:
         """The mesh as it is at time t [s], standing still."""
