@@ -56,6 +56,7 @@ from .broad_phase.contact_pairs import (
     torn_edge,
     torn_triangle,
 )
+from . import never_through
 from .colliders.collision import project_particle_out
 
 PAIRS_PER_PARTICLE = 32     # candidate list room at first, per particle
@@ -76,11 +77,16 @@ class SelfCollision:
     iterations: contact passes per step at most, >= 1; they stop once no contact is deeper
     than 1 % of the thickness. A contact the passes leave nearer than half the thickness (a
     layer pressed between a pin or a collider and another layer, or a pile too dense for the
-    passes) is reported: a warning, once a run, and SelfContacts.closest_left."""
+    passes) is reported: a warning, once a run, and SelfContacts.closest_left.
+    never_through: after the passes, the fail-safe of contact/never_through.py moves back to
+    the step's start every free particle of a pair that may have passed through the other in
+    the step, so that no listed pair ever does (a theorem, with its assumptions, in that
+    module and docs/api.md); False: the passes alone, which a fast twist or fold can beat."""
 
     thickness: float = 0.005
     friction: float = 0.0
     iterations: int = 16
+    never_through: bool = True
 
     def __post_init__(self):
         thickness = finite_number("SelfCollision.thickness", self.thickness, 0.0, strict=True,
@@ -92,6 +98,8 @@ class SelfCollision:
                                                            self.friction, 0.0))
         object.__setattr__(self, "iterations", count("SelfCollision.iterations", self.iterations,
                                                      limits.ITERATIONS))
+        require(isinstance(self.never_through, bool), "SelfCollision.never_through",
+                self.never_through, "True or False")
 
 
 @dataclass(frozen=True)
@@ -103,7 +111,10 @@ class SelfContacts:
     nearer than half the thickness; None otherwise. capacity: the pairs the candidate list
     has room for; grown: (step, capacity) each time a step found more pairs than it had room
     for and the list grew (it never drops a pair: a list past MAX_PAIRS_PER_PARTICLE a
-    particle is a CrushedContact)."""
+    particle is a CrushedContact). moved_back: the particles the never-through fail-safe
+    moved back to their step's start, over the run so far; unresolved: (pairs, step) when a
+    step left pairs that may have met and that only held particles moved (the fail-safe's
+    assumption broken), the last such step; None otherwise."""
 
     vertex_triangle: np.ndarray
     edge_edge: np.ndarray
@@ -111,6 +122,8 @@ class SelfContacts:
     closest_left: tuple[float, int] | None = None
     capacity: int = 0
     grown: tuple = ()
+    moved_back: int = 0
+    unresolved: tuple[int, int] | None = None
 
 
 def warn_if_thick(settings: SelfCollision, cloth) -> None:
@@ -177,6 +190,12 @@ class SelfCollisionStage:
         self.left_deep = fields.scalar(ti.i32, ())    # 1: the passes ran out, contacts deep
         self.contact_start = fields.scalar(ti.i32, n + 1)
         self.contact_fill = fields.scalar(ti.i32, n)
+        self.back = fields.scalar(ti.i32, n)          # never_through.py: moved back this step
+        self.marked = fields.scalar(ti.i32, n)        # to move back in this round
+        self.moved_back = fields.scalar(ti.i32, ())   # in this round
+        self.moved_total = fields.scalar(ti.i32, ())  # in this step
+        self.rounds = fields.scalar(ti.i32, ())
+        self.unresolved = fields.scalar(ti.i32, ())
         fields.finalize(self)
         self.grid = BoxGrid(n, len(edges))         # particles, then edges
         self.candidates = PairList(PAIRS_PER_PARTICLE * max(n, 1))
@@ -186,7 +205,7 @@ class SelfCollisionStage:
     @staticmethod
     def structure(settings: SelfCollision, cloth) -> tuple:
         triangles = np.ascontiguousarray(cloth.mesh.triangles).tobytes()
-        return ("SelfCollisionStage", cloth.particle_count,
+        return ("SelfCollisionStage", cloth.particle_count, settings.never_through,
                 hashlib.blake2b(triangles, digest_size=16).hexdigest())
 
     def load(self, settings: SelfCollision, cloth) -> None:
@@ -214,6 +233,8 @@ class SelfCollisionStage:
         self.pair_total = self.vertex_pairs = 0
         self.closest_left = None
         self.grown = []
+        self.moved_total_run = 0
+        self.unresolved_left = None
 
     def saved(self) -> dict:
         """The candidate list and where it was made: a list made at another step would order
@@ -305,6 +326,10 @@ class SelfCollisionStage:
         plan.run(self, model, state, None, self.candidates, dt, step_index, False)
         if self.left_deep[None]:
             self._report(thickness + float(self.deepest[None]), step_index)
+        if self.settings.never_through:
+            self.moved_total_run += int(self.moved_total[None])
+            if self.unresolved[None]:
+                self._unresolved(int(self.unresolved[None]), step_index)
 
     def phases(self, model, forces, pairs) -> tuple:
         """The contact passes as phases (runtime/plan.py; `pairs` the PairList, the
@@ -329,7 +354,21 @@ class SelfCollisionStage:
                       *out_of_colliders,
                       Once(end_pass, self),
                       args=(self,)),
-                Phase(Loop(n, follow_correction, self, STATE, ITEM, DT)))
+                Phase(Loop(n, follow_correction, self, STATE, ITEM, DT)),
+                *(never_through.phases(self, model, pairs) if self.settings.never_through
+                  else ()))
+
+    def _unresolved(self, count: int, step_index: int) -> None:
+        """Keep the last step whose held particles carried a pair through (never_through.py's
+        assumption); warn the first time."""
+        if self.unresolved_left is None:
+            warnings.warn(
+                f"self-collision: in step {step_index}, {count} pair(s) may have passed "
+                "through each other by the motion of held particles alone (pins, handles, "
+                "attachments), which the never-through fail-safe does not move back: a "
+                "scripted motion carries the cloth through itself there "
+                "(Simulation.self_contacts().unresolved follows the last)", stacklevel=2)
+        self.unresolved_left = (count, step_index)
 
     def _report(self, distance: float, step_index: int) -> None:
         """Keep the nearest contact the passes left (closest_left); warn the first time one is
@@ -387,7 +426,8 @@ class SelfCollisionStage:
         elements = self.candidates.elements.to_numpy()[kept]
         vertex = kept < self.vertex_pairs
         return SelfContacts(elements[vertex], elements[~vertex], self.edge_rows,
-                            self.closest_left, self.candidates.capacity, tuple(self.grown))
+                            self.closest_left, self.candidates.capacity, tuple(self.grown),
+                            self.moved_total_run, self.unresolved_left)
 
 
 @ti.func

@@ -1,0 +1,207 @@
+"""The self-contact fail-safe (issue 56): after the contact passes of a step, no listed pair
+has passed through itself during the step, by construction.
+
+The theorem. Over a step every particle moves on the straight line from x0 (the step's
+start) to x1 (where the step leaves it). For a vertex p and a triangle abc, and for two edges
+ab and cd, call R the largest relative displacement of two of the pair's particles, one from
+each element (|(x1 - x0)_p - (x1 - x0)_q|): the displacement of any point of one element
+relative to any point of the other is a convex combination of these, so the pair's distance
+d(t) is at least d(0) - t R and at least d(1) - (1 - t) R, hence at least (d(0) + d(1) - R) / 2.
+So a pair with
+
+    d(0) + d(1) > R                                                          (1)
+
+never touched in the step. Nor did a pair whose four points are never coplanar: the signed
+volume V(t) = det(b - a, c - a, p - a) (for edges det(b - a, c - a, d - a)) is a cubic in t,
+and a cubic whose four Bernstein coefficients on [0, 1] share a strict sign has no root there
+(Farin, "Curves and Surfaces for CAGD", the convex hull property):
+
+    b_k = (1 / C(3, k)) sum over the 8 choices of (x0 or x1) for each of the three edge
+          vectors with k of them at x1, of their determinant                   (2)
+
+A pair that meets neither over the step is checked again over each of PIECES equal parts of
+the step (the positions on the way are the straight lines' at those times, so the theorem
+holds for each part: a pair safe in every part is safe; it tells a pair that passed fast
+beside another from one that met). One that fails a part may have met: the fail-safe moves
+its free particles back to x0 (their velocity 0: they did not move in the step), then checks
+every pair again, until a round moves nobody. It ends (each round moves at least one particle back, and one
+moved back stays), and where it ends every listed pair meets (1) or (2), or has all its
+particles back at x0 or held (a pin, a handle: scripted, never moved back). By induction over
+the steps: a cloth that starts with no pair passing through another never has one, with these
+assumptions, stated in docs/api.md:
+- the pairs are the candidate list's: those farther apart than the thickness in the rest
+  shape (neighbours nearer than that are not contacts), made from the boxes swept in the
+  step, so that no pair can meet unlisted (contact_pairs.py);
+- held particles do not carry an element through another by themselves (such a pair is
+  counted and reported: SelfContacts.unresolved);
+- colliders: a particle moved back is where it was at the step's start, outside the colliders
+  as they were then.
+(1) and (2) are evaluated in floating point with margins (MARGIN) in the safe direction, so
+rounding can only move a particle back that did not need it.
+
+Cost: one evaluation of the listed pairs a round, one round in a step where nothing is moved
+back (benchmarks/contact_guarantees.py measures it).
+"""
+
+import taichi as ti
+
+from ..geometry import segment_distance, triangle_distance
+from .broad_phase.contact_pairs import torn_edge, torn_triangle
+from ..runtime.plan import ITEM, STATE, Loop, Once, Phase, Until
+
+MARGIN = 1e-6       # relative: (1) needs d0 + d1 > R (1 + MARGIN), (2) |b_k| > MARGIN max |b_k|
+PIECES = 8          # a step's parts, each checked by (1) or (2), for a pair the whole step fails
+
+
+@ti.func
+def _determinant(u, v, w):
+    return u.dot(v.cross(w))
+
+
+@ti.func
+def _never_coplanar(e0, e1, f0, f1, g0, g1):
+    """Whether det(e(t), f(t), g(t)) keeps one strict sign on [0, 1], e, f and g moving
+    linearly from e0, f0, g0 to e1, f1, g1 (module doc, (2))."""
+    b0 = _determinant(e0, f0, g0)
+    b3 = _determinant(e1, f1, g1)
+    b1 = (_determinant(e1, f0, g0) + _determinant(e0, f1, g0) + _determinant(e0, f0, g1)) / 3.0
+    b2 = (_determinant(e1, f1, g0) + _determinant(e1, f0, g1) + _determinant(e0, f1, g1)) / 3.0
+    floor = MARGIN * ti.max(ti.abs(b0), ti.abs(b1), ti.abs(b2), ti.abs(b3))
+    positive = b0 > floor and b1 > floor and b2 > floor and b3 > floor
+    negative = b0 < -floor and b1 < -floor and b2 < -floor and b3 < -floor
+    return positive or negative
+
+
+@ti.func
+def _distance(p, q, r, s, vertex_triangle):
+    """The pair's distance: vertex p to triangle q r s, or segment p q to segment r s."""
+    d = 0.0
+    if vertex_triangle:
+        d = triangle_distance(p, q, r, s)
+    else:
+        d = segment_distance(p, q, r, s)
+    return d
+
+
+@ti.func
+def _safe_between(p0, q0, r0, s0, p1, q1, r1, s1, vertex_triangle):
+    """Whether the pair, moving linearly from (p0, q0, r0, s0) to (p1, q1, r1, s1), certainly
+    did not meet on the way (module doc, (1) or (2))."""
+    reach = 0.0                                   # the largest relative displacement: R
+    if vertex_triangle:
+        move = p1 - p0
+        reach = ti.max((move - (q1 - q0)).norm(), (move - (r1 - r0)).norm(),
+                       (move - (s1 - s0)).norm())
+    else:
+        reach = ti.max(((p1 - p0) - (r1 - r0)).norm(), ((p1 - p0) - (s1 - s0)).norm(),
+                       ((q1 - q0) - (r1 - r0)).norm(), ((q1 - q0) - (s1 - s0)).norm())
+    safe = reach == 0.0 or (_distance(p0, q0, r0, s0, vertex_triangle)
+                            + _distance(p1, q1, r1, s1, vertex_triangle)
+                            > reach * (1.0 + MARGIN))
+    if not safe:
+        if vertex_triangle:     # det(r - q, s - q, p - q): the triangle is q, r, s here
+            safe = _never_coplanar(r0 - q0, r1 - q1, s0 - q0, s1 - q1, p0 - q0, p1 - q1)
+        else:
+            safe = _never_coplanar(q0 - p0, q1 - p1, r0 - p0, r1 - p1, s0 - p0, s1 - p1)
+    return safe
+
+
+@ti.func
+def _safe(start: ti.template(), now: ti.template(), corners, vertex_triangle):
+    """Whether the pair on `corners` (a vertex and a triangle, or two edges) certainly did not
+    meet in the step from `start` to `now`: (1) or (2) over the whole step, or else over each
+    of its PIECES equal parts (a pair that passed near but beside the other is then told
+    apart from one that met, for a pair in fast motion)."""
+    a, b, c, d = corners[0], corners[1], corners[2], corners[3]
+    p0, q0, r0, s0 = start[a], start[b], start[c], start[d]
+    p1, q1, r1, s1 = now[a], now[b], now[c], now[d]
+    safe = _safe_between(p0, q0, r0, s0, p1, q1, r1, s1, vertex_triangle)
+    if not safe:
+        safe = True
+        for k in range(PIECES):
+            u, w = k / PIECES, (k + 1) / PIECES
+            if safe:
+                safe = _safe_between(p0 + u * (p1 - p0), q0 + u * (q1 - q0),
+                                     r0 + u * (r1 - r0), s0 + u * (s1 - s0),
+                                     p0 + w * (p1 - p0), q0 + w * (q1 - q0),
+                                     r0 + w * (r1 - r0), s0 + w * (s1 - s0), vertex_triangle)
+    return safe
+
+
+@ti.func
+def begin_rounds(stage: ti.template()):
+    stage.moved_back[None] = 1
+    stage.moved_total[None] = 0
+    stage.rounds[None] = 0
+
+
+@ti.func
+def going(stage: ti.template()):
+    """Another round while the last moved a particle back (at most one a particle)."""
+    return stage.moved_back[None] > 0 and stage.rounds[None] <= stage.particle_count
+
+
+@ti.func
+def clear_round(stage: ti.template()):
+    stage.moved_back[None] = 0
+    stage.unresolved[None] = 0
+    stage.rounds[None] += 1
+
+
+@ti.func
+def clear_back(stage: ti.template(), i):
+    stage.back[i] = 0
+    stage.marked[i] = 0
+
+
+@ti.func
+def check_pair(stage: ti.template(), pairs: ti.template(), model: ti.template(),
+               state: ti.template(), p):
+    """Listed pair p (not beside a tear: torn pieces pass through the opening): if it may have
+    met in the step, mark its free particles not yet moved back (marked: written 1 by any
+    pair, the same value in any order); count it if it has none left to move (unresolved)."""
+    if p < stage.pair_start[stage.triangle_count + stage.edge_count]:
+        corners = pairs.particles[p]
+        elements = pairs.elements[p]
+        vertex_triangle = p < stage.pair_start[stage.triangle_count]
+        torn = False                   # a torn sheet's pieces pass where its triangles were
+        if vertex_triangle:
+            torn = torn_triangle(stage, state, elements[1])
+        else:
+            torn = torn_edge(stage, state, elements[0]) or torn_edge(stage, state, elements[1])
+        if not torn and not _safe(stage.step_start, state.particle_position, corners,
+                                  vertex_triangle):
+            left = 0
+            for k in ti.static(range(4)):
+                i = corners[k]
+                if model.particle_inv_mass[i] > 0 and stage.back[i] == 0:
+                    stage.marked[i] = 1
+                    left += 1
+            if left == 0:
+                ti.atomic_add(stage.unresolved[None], 1)
+
+
+@ti.func
+def move_back(stage: ti.template(), state: ti.template(), i):
+    """A marked particle goes back to the step's start, at rest (it did not move)."""
+    if stage.marked[i]:
+        stage.marked[i] = 0
+        stage.back[i] = 1
+        state.particle_position[i] = stage.step_start[i]
+        state.particle_velocity[i] = 0.0 * state.particle_velocity[i]
+        ti.atomic_add(stage.moved_back[None], 1)
+        ti.atomic_add(stage.moved_total[None], 1)
+
+
+def phases(stage, model, pairs) -> tuple:
+    """The fail-safe's rounds (module doc), after the contact passes and their velocities:
+    stage.moved_total[None] the particles moved back in the step, stage.unresolved[None] the
+    pairs left that held particles carried (their last round's)."""
+    n = model.particle_count
+    return (Phase(Loop(n, clear_back, stage, ITEM)),
+            Once(begin_rounds, stage),
+            Until(going,
+                  Once(clear_round, stage),
+                  Phase(Loop(pairs.capacity, check_pair, stage, pairs, model, STATE, ITEM)),
+                  Phase(Loop(n, move_back, stage, STATE, ITEM)),
+                  args=(stage,)))
