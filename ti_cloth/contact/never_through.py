@@ -46,8 +46,8 @@ back (benchmarks/contact_guarantees.py measures it).
 import taichi as ti
 
 from ..geometry import segment_distance, triangle_distance
-from .broad_phase.contact_pairs import torn_edge, torn_triangle
 from ..runtime.plan import ITEM, STATE, Loop, Once, Phase, Until
+from .broad_phase.contact_pairs import torn_edge, torn_triangle
 
 MARGIN = 1e-6       # relative: (1) needs d0 + d1 > R (1 + MARGIN), (2) |b_k| > MARGIN max |b_k|
 PIECES = 8          # a step's parts, each checked by (1) or (2), for a pair the whole step fails

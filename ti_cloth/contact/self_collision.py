@@ -43,6 +43,7 @@ from ..runtime import backend, plan
 from ..runtime.plan import DT, ITEM, STATE, Loop, Once, Phase, Until
 from ..runtime.transfer import upload
 from ..state import copy_positions
+from . import never_through
 from .broad_phase.box_grid import BLOCK, BoxGrid
 from .broad_phase.contact_pairs import (
     PairList,
@@ -56,7 +57,6 @@ from .broad_phase.contact_pairs import (
     torn_edge,
     torn_triangle,
 )
-from . import never_through
 from .colliders.collision import project_particle_out
 
 PAIRS_PER_PARTICLE = 32     # candidate list room at first, per particle
