@@ -50,7 +50,7 @@ def test_demo_writes_frames(script, tmp_path):
 
 
 def cape_stays_on_the_shoulders_and_out_of_the_figure():
-    """demos/cape.toml for 0.8 s (the figure turns one way and part of the way back): in every
+    """demos/cape.toml for 0.6 s (the figure turns one way, to its widest): in every
     frame no particle is inside the skinned figure as it is at the frame's time (libigl's
     fast winding number: not our code) and the attached top edge rides its triangles.
     Without the figure as a collider the cape swings into it (within 0.5 s). Both without
@@ -64,7 +64,7 @@ def cape_stays_on_the_shoulders_and_out_of_the_figure():
     free = np.setdiff1d(np.arange(scene.cloth.particle_count), attachment.particles)
     carried = attachment.handle(scene.cloth.particle_position).path
     runs = {}
-    for name, colliders, frames in (("with", scene.colliders, 24),
+    for name, colliders, frames in (("with", scene.colliders, 18),
                                     ("without", scene.colliders[1:], 15)):
         sim = replace(scene, colliders=colliders).build(dt=1 / 240)   # the demo's step
         inside, riding = [], 0.0
@@ -84,7 +84,7 @@ def cape_stays_on_the_shoulders_and_out_of_the_figure():
 
 
 def skirt_sews_shut_and_stays_out_of_the_figure():
-    """demos/skirt_walk.toml for 0.8 s: the side seams shut to within the collider's
+    """demos/skirt_walk.toml for 0.6 s (a step): the side seams shut to within the collider's
     thickness by 0.3 s and stay so, no particle is ever inside the walking figure (libigl's
     winding number: not our code), and the waistband rides the hips. Without the demo's
     self-collision (cape_stays_on_the_shoulders_and_out_of_the_figure says why)."""
@@ -97,7 +97,7 @@ def skirt_sews_shut_and_stays_out_of_the_figure():
     held = np.concatenate([a.particles for a in scene.handles])
     free = np.setdiff1d(np.arange(scene.cloth.particle_count), held)
     inside, open_after = [], 0.0
-    for frame in range(24):
+    for frame in range(18):
         sim.step(8)
         x = sim.positions()
         w = igl.fast_winding_number(figure.vertices_at(sim.time),

@@ -202,7 +202,7 @@ def test_one_thread_and_all_cores_and_a_rerun_give_the_same_bits():
     re-initialisation fewer: each drops every kernel this worker compiled)."""
     from ti_cloth.runtime import backend
     body = two_sheets(8, height=0.05)
-    twisted, handles, _ = twisted_sheet()
+    twisted, handles, _ = twisted_sheet(turns=2.0)
     ball = tc.MeshCollider(tc.sphere_mesh(0.15, (0.5, -0.12, 0.5), subdivisions=1),
                            thickness=THICKNESS, static_friction=0.5, resolution=16,
                            rotation=lambda t: (0.0, 2.0 * t, 0.0))
@@ -220,7 +220,7 @@ def test_one_thread_and_all_cores_and_a_rerun_give_the_same_bits():
                               self_collision=tc.SelfCollision(thickness=THICKNESS))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            twist.step(200)
+            twist.step(120)
         assert twist.self_contacts().moved_back > 0, "the fail-safe moved particles back"
         return (sim.positions(), grid.cell_start.to_numpy(), grid.cell_item.to_numpy(),
                 listed.vertex_triangle, listed.edge_edge, twist.positions(),
@@ -564,14 +564,14 @@ def free_crossings(body, held, x):
 
 
 def test_never_through_keeps_a_twisted_sheet_from_passing_through_itself(f64):
-    """Two edges of a 12 x 12 sheet turned a half turn each way in a second wind it into a
+    """Two edges of a 12 x 12 sheet turned a full turn each way in a second wind it into a
     tight twist that the contact passes alone let through itself (Moller-Trumbore in this
     test, over every pair of a free edge and a free triangle, every 4th step). With the
     never-through fail-safe no free edge ever passes through a free triangle: every pair that
     may have met in a step has its free particles moved back to the step's start
     (contact/never_through.py's theorem). What it costs: the twisted part stops where the
     passes could not keep it apart (moved_back counts the particles)."""
-    body, handles, held = twisted_sheet()
+    body, handles, held = twisted_sheet(turns=2.0)
     results = {}
     for never_through in (False, True):
         sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240, handles=handles,
@@ -581,7 +581,7 @@ def test_never_through_keeps_a_twisted_sheet_from_passing_through_itself(f64):
         counts = []
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            for _ in range(72):
+            for _ in range(30):
                 sim.step(4)
                 counts.append(free_crossings(body, held, sim.positions()))
         results[never_through] = (sum(counts), sim.self_contacts().moved_back)

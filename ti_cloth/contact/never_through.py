@@ -111,21 +111,25 @@ def _safe(start: ti.template(), now: ti.template(), corners, vertex_triangle):
     """Whether the pair on `corners` (a vertex and a triangle, or two edges) certainly did not
     meet in the step from `start` to `now`: (1) or (2) over the whole step, or else over each
     of its PIECES equal parts (a pair that passed near but beside the other is then told
-    apart from one that met, for a pair in fast motion)."""
+    apart from one that met, for a pair in fast motion). One loop, so that the tests are
+    compiled once: part 0 is the whole step, parts 1 to PIECES its pieces."""
     a, b, c, d = corners[0], corners[1], corners[2], corners[3]
     p0, q0, r0, s0 = start[a], start[b], start[c], start[d]
     p1, q1, r1, s1 = now[a], now[b], now[c], now[d]
-    safe = _safe_between(p0, q0, r0, s0, p1, q1, r1, s1, vertex_triangle)
-    if not safe:
-        safe = True
-        for k in range(PIECES):
-            u, w = k / PIECES, (k + 1) / PIECES
-            if safe:
-                safe = _safe_between(p0 + u * (p1 - p0), q0 + u * (q1 - q0),
-                                     r0 + u * (r1 - r0), s0 + u * (s1 - s0),
-                                     p0 + w * (p1 - p0), q0 + w * (q1 - q0),
-                                     r0 + w * (r1 - r0), s0 + w * (s1 - s0), vertex_triangle)
-    return safe
+    whole, pieces = False, True
+    for part in range(PIECES + 1):
+        if not whole and pieces:
+            u, w = 0.0, 1.0
+            if part > 0:
+                u, w = (part - 1) / PIECES, part / PIECES
+            safe = _safe_between(p0 + u * (p1 - p0), q0 + u * (q1 - q0), r0 + u * (r1 - r0),
+                                 s0 + u * (s1 - s0), p0 + w * (p1 - p0), q0 + w * (q1 - q0),
+                                 r0 + w * (r1 - r0), s0 + w * (s1 - s0), vertex_triangle)
+            if part == 0:
+                whole = safe
+            else:
+                pieces = safe
+    return whole or pieces
 
 
 @ti.func
