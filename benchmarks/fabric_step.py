@@ -2,11 +2,13 @@
 
 The scene: grid_mesh(N, N), two corners pinned, gravity, at rest, stepped by symplectic Euler
 with one dt for all bodies (half the smallest of their stable steps): the default Material
-(stretch, shear and bend springs: about 6 per particle), Fabric.preset("denim") on the flat
-grid (a membrane per triangle, 2 per particle, and the isometric bending of a flat sheet: a
-row of its constant Q per particle) and the same fabric on the grid bowed to a 10 m radius
-(curved at rest: bending by the mid-edge tangents, a hinge per interior edge, about 3 per
-particle). All run the full simulator (Simulation.step, many steps per launch, divergence
+(stretch, shear and bend springs: about 6 per particle), Fabric.preset("denim",
+bending_curve=None) on the flat grid (a membrane per triangle, 2 per particle, and the
+isometric bending of a flat sheet: a row of its constant Q per particle), the same fabric on
+the grid bowed to a 10 m radius (curved at rest: bending by the mid-edge tangents, a hinge per
+interior edge, about 3 per particle), and the preset with its measured BendingCurve on the
+flat grid (the mid-edge tangents too, each triangle's rigidity looked up in the table:
+energies/bending_law.py). All run the full simulator (Simulation.step, many steps per launch, divergence
 guard included). Rates are medians of --repeats rounds, each timing every variant in turn for
 about --seconds, in the same process; a cost is the median over the rounds of the ratio of
 the spring step's rate to the variant's in that round.
@@ -38,9 +40,11 @@ def bodies(n: int) -> dict[str, tc.Cloth]:
     x = mesh.vertices
     bowed = tc.Mesh(x + np.outer(10.0 - np.sqrt(100.0 - (x[:, 0] - 0.5) ** 2), [0, 0, 1]),
                     mesh.triangles)
+    constant = tc.Fabric.preset("denim", bending_curve=None)
     return {"springs": tc.Cloth(mesh, tc.Material(), pinned=pinned),
-            "fabric": tc.Cloth(mesh, tc.Fabric.preset("denim"), pinned=pinned),
-            "curved": tc.Cloth(bowed, tc.Fabric.preset("denim"), pinned=pinned)}
+            "fabric": tc.Cloth(mesh, constant, pinned=pinned),
+            "curved": tc.Cloth(bowed, constant, pinned=pinned),
+            "table": tc.Cloth(mesh, tc.Fabric.preset("denim"), pinned=pinned)}
 
 
 class NewtonFabric(NewtonCloth):
@@ -84,6 +88,7 @@ def main() -> None:
     print(f"symplectic Euler, {args.precision}, {args.arch}, medians of {args.repeats} runs")
     print(f"{'N':>5} {'particles':>9} {'springs steps/s':>16} {'fabric steps/s':>15} "
           f"{'fabric cost / springs':>22} {'curved steps/s':>15} {'curved cost / springs':>22}"
+          f" {'table steps/s':>14} {'table cost / springs':>21}"
           + (f" {'Newton steps/s':>15} {'fabric / Newton':>16}" if args.newton else ""))
     for n in args.sizes:
         cloths = bodies(n)
@@ -94,11 +99,12 @@ def main() -> None:
                                    args.seconds, args.repeats)
         rates = {name: statistics.median(r) for name, r in rounds.items()}
         cost = {name: statistics.median(np.divide(rounds["springs"], rounds[name]))
-                for name in ("fabric", "curved")}
+                for name in ("fabric", "curved", "table")}
         line = (f"{n:>5} {n * n:>9} {rates['springs']:>16.1f} {rates['fabric']:>15.1f} "
-                f"{cost['fabric']:>22.2f} {rates['curved']:>15.1f} {cost['curved']:>22.2f}")
+                f"{cost['fabric']:>22.2f} {rates['curved']:>15.1f} {cost['curved']:>22.2f}"
+                f" {rates['table']:>14.1f} {cost['table']:>21.2f}")
         if args.newton:
-            peer = NewtonFabric(cloths["fabric"], tc.Fabric.preset("denim"), dt)
+            peer = NewtonFabric(cloths["fabric"], tc.Fabric.preset("denim", bending_curve=None), dt)
             rate = median_rate(peer.step, peer.sync, args.seconds, args.repeats)
             finite = "" if np.isfinite(peer.velocities()).all() else " (diverged)"
             line += f" {rate:>15.1f} {rates['fabric'] / rate:>16.2f}{finite}"

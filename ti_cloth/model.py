@@ -7,6 +7,7 @@ import hashlib
 import numpy as np
 import taichi as ti
 
+from .body.bending_curve import curve_tables
 from .body.material import SpringKind
 from .body.mesh import triangle_edges, unique_rows
 from .body.topology import Cloth, color_springs
@@ -64,6 +65,11 @@ class Model:
     particle_face_start, adjacency_face: particle i is corner adjacency_face[a] % 3 of
                           triangle adjacency_face[a] // 3 (CSR, as for altitude springs);
     particle_hinge_start, adjacency_hinge: the same for hinges (4 corners)
+    face_components, face_curve: with `curved`, each triangle's b (00..22 as 3 d + i) and its
+                          BendingCurve (-1: none), whose law (energies/bending_law.py) reads
+                          curve_samples [1/m], curve_rigidity, curve_slope, curve_integral
+                          (body/bending_curve.curve_tables), curve_length samples each,
+                          curve c's sample j at c curve_length + j
     particle_bend_start, bend_other, bend_stiffness, bend_damping: with `isometric` (a flat
                           rest sheet), the bending of energies/isometric.isometric_matrix, a CSR
                           of each particle's neighbours, gathered in increasing order; the
@@ -74,7 +80,7 @@ class Model:
     Python attributes read at compile time (fixed for the model's life):
     particle_count, spring_count, altitude_count, face_count, hinge_count, relative_damping,
     isometric, sewn (the cloth has seams), weld_count (its groups of particles sewn
-    together).
+    together), curved (Cloth.curved), curve_count, curve_length.
     """
 
     def __init__(self, cloth: Cloth, pinned: np.ndarray | None = None, isometric: bool = False):
@@ -91,6 +97,11 @@ class Model:
         self.sewn = bool(len(cloth.seam_indices))
         weld_start, weld_member = weld_groups(cloth.particle_weld)
         self.weld_count = len(weld_start) - 1
+        self.curved = cloth.curved
+        self.curve_count = len(cloth.bending_curves) if self.curved else 0
+        self.curve_length = _curve_length(cloth) if self.curved else 1
+        require(not (self.curved and isometric), "isometric", isometric,
+                "False for a body whose bending depends on curvature (a BendingCurve)")
         bends = len(self._isometric_bending(cloth)[0][1]) if self.isometric else 0
         fields = backend.FieldGroup()
         s1 = max(s, 1)
@@ -135,6 +146,14 @@ class Model:
         self.bend_other = fields.scalar(ti.i32, max(bends, 1))
         self.bend_stiffness = fields.scalar(real, max(bends, 1))
         self.bend_damping = fields.scalar(real, max(bends, 1))
+        curved_faces = f1 if self.curved else 1
+        self.face_components = fields.vector(9, real, curved_faces)
+        self.face_curve = fields.scalar(ti.i32, curved_faces)
+        curves = max(self.curve_count, 1) * self.curve_length      # curve c's sample j at c N + j
+        self.curve_samples = fields.scalar(real, curves)
+        self.curve_rigidity = fields.vector(3, real, curves)
+        self.curve_slope = fields.vector(3, real, curves)
+        self.curve_integral = fields.vector(3, real, curves)
         iso_faces = f1 if self.isometric else 1
         self.face_stencil = fields.vector(6, ti.i32, iso_faces)
         self.face_stencil_weight = fields.vector(18, real, iso_faces)
@@ -159,7 +178,9 @@ class Model:
         digest.update(np.ascontiguousarray(cloth.hinge_indices).tobytes())
         return ("Model", cloth.particle_count, cloth.spring_count, cloth.altitude_count,
                 cloth.face_count, cloth.hinge_count, cloth.damping == "relative",
-                bool(isometric), bool(len(cloth.seam_indices)),
+                bool(isometric), bool(len(cloth.seam_indices)), cloth.curved,
+                len(cloth.bending_curves) if cloth.curved else 0,
+                _curve_length(cloth) if cloth.curved else 1,
                 *(len(a) for a in weld_groups(cloth.particle_weld)), digest.hexdigest())
 
     def load(self, cloth: Cloth, pinned: np.ndarray | None = None,
@@ -194,6 +215,13 @@ class Model:
                     *zip((self.bend_other, self.bend_stiffness, self.bend_damping), bends),
                     (self.face_stencil, stencil), (self.face_stencil_weight, weights.reshape(-1, 18)),
                     (self.face_isometric, reduced)))
+        if self.curved:
+            upload(((self.face_components, cloth.face_components.reshape(-1, 9)),
+                    (self.face_curve, cloth.face_curve),
+                    *zip((self.curve_samples, self.curve_rigidity, self.curve_slope,
+                          self.curve_integral),
+                         (t.reshape(len(t) * self.curve_length, *t.shape[2:])
+                          for t in curve_tables(cloth.bending_curves, self.curve_length)))))
         upload(((self.particle_mass, cloth.particle_mass),
                 (self.particle_inv_mass, inv_mass),
                 (self.particle_rest_position, cloth.particle_position),
@@ -372,3 +400,8 @@ class SpringColouring:
                 (self.stiffness, cloth.spring_stiffness[order]),
                 (self.damping, cloth.spring_damping[order]),
                 (self.kind, cloth.spring_kind[order])))
+
+
+def _curve_length(cloth: Cloth) -> int:
+    """The most samples of the cloth's bending curves (each is padded to it)."""
+    return max(len(c.curvature) for c in cloth.bending_curves)

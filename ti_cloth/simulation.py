@@ -130,8 +130,9 @@ class Simulation:
         self._inputs = (cloth, tuple(gravity), drag, wind, tearing, handles, colliders,
                         strain_limit, position_limit, self_collision, sewing)
         # a flat sheet bends by the isometric model, its Q merged over the triangles, unless
-        # triangles can tear out of it (then by the mid-edge tangents, whose hinges can go)
-        isometric = is_flat(cloth) and tearing is None
+        # triangles can tear out of it (then by the mid-edge tangents, whose hinges can go) or
+        # its rigidity depends on curvature (a quadratic energy cannot carry a BendingCurve)
+        isometric = is_flat(cloth) and tearing is None and not cloth.curved
         parts = {"model": (Model, (cloth, pinned, isometric)),
                  "state": (State, (cloth.particle_count, cloth.spring_count, position_limit,
                                    cloth.altitude_count, cloth.face_count, cloth.hinge_count))}

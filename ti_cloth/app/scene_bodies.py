@@ -394,7 +394,8 @@ def _preset(table: Table, presets, name=None) -> str:
 def _fabric(owner: Table) -> Fabric:
     """`fabric = "denim"`, or a [bodies.fabric] table: `preset` plus any of density [kg/m^2],
     stretch and bending (a number or [warp, weft]; N/m, N m), shear [N/m], twist [N m],
-    poisson, damping [s], hem_mass [kg]."""
+    bending_curve (an inline table of BendingCurve's fields: rigidities sampled at
+    curvatures), poisson, damping [s], hem_mass [kg]."""
     value = owner.value("fabric")
     if isinstance(value, str):
         if value.lower() not in FABRICS:
@@ -405,7 +406,7 @@ def _fabric(owner: Table) -> Fabric:
         owner.bad("fabric", value, f"a table or one of the fabrics {sorted(FABRICS)}")
     table = Table(value, owner.path("fabric"), owner.source)
     table.allow("preset", "density", "shear", "poisson", "damping", "hem_mass", "stretch",
-                "bending", "twist")
+                "bending", "twist", "bending_curve")
     preset = _preset(table, FABRICS) if table.has("preset") else None
     changes = {}
     for key, unit in (("density", "kg/m^2"), ("shear", "N/m"), ("poisson", ""),
@@ -417,6 +418,12 @@ def _fabric(owner: Table) -> Fabric:
             pair = isinstance(table.value(key), list)
             changes[key] = (tuple(table.vector(key, length=2, unit=unit)) if pair
                             else table.number(key, unit=unit))
+    if table.has("bending_curve"):
+        curve = table.value("bending_curve")
+        if not isinstance(curve, dict):
+            table.bad("bending_curve", curve, "a table { curvature = [...] (1/m, from 0), "
+                      "warp = [...], weft = [...], bias = [...] (optional) } of rigidities [N m]")
+        changes["bending_curve"] = curve
     table.finish()
     if preset:
         return table.build(Fabric.preset, preset, **changes)

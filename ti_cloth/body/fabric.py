@@ -11,6 +11,9 @@ them into forces that converge as the mesh is refined:
   bending   flexural rigidity [N m] (moment per width per curvature; ASTM D1388's
             G = W c^3, W the weight per area [N/m^2] and c the bending length [m]).
             A number, or (warp, weft).
+  bending_curve  a BendingCurve (or its fields as a mapping): rigidities sampled at
+            curvatures, the way measured cloth bends (body/bending_curve.py); `bending` and
+            `twist` are then its values at zero curvature. None: the rigidities are constant.
   twist     D12 [N m], the twisting rigidity (None: sqrt(warp x weft), an isotropic sheet's
             when they are equal); with it the rigidity along the bias (45 degrees) is
             (warp + weft + 2 twist) / 4, which a bias cantilever measures.
@@ -32,11 +35,13 @@ from dataclasses import dataclass, fields
 
 from ..inputs import limits
 from . import material
+from .bending_curve import BendingCurve
 from ..inputs.validation import finite_number, in_range, keyword_only, require
 
 STRETCH = limits.Range(1e-3, 1e9, "N/m", "fabric stretch and shear moduli")
 BENDING = limits.Range(0.0, 1e2, "N m", "fabric flexural rigidity (0 allowed: no bending)")
 DAMPING_TIME = limits.Range(0.0, 1.0, "s", "fabric damping time beta")
+_DEFAULT_BENDING = (1e-5, 1e-5)
 STANDARD_GRAVITY = 9.80665      # m/s^2: a swatch's weight per area W = density x this
 
 
@@ -59,8 +64,9 @@ class Fabric:
     density: float = 0.2
     stretch: tuple = (1e3, 1e3)
     shear: float = 50.0
-    bending: tuple = (1e-5, 1e-5)
+    bending: tuple = _DEFAULT_BENDING
     twist: float | None = None
+    bending_curve: BendingCurve | None = None
     poisson: float = 0.0
     damping: float = 1e-4
     hem_mass: float = 0.0
@@ -73,6 +79,8 @@ class Fabric:
         set_(self, "bending", _pair("bending", self.bending, BENDING))
         if self.twist is not None:
             set_(self, "twist", in_range("Fabric.twist", self.twist, BENDING))
+        if self.bending_curve is not None:
+            self._take_curve()
         poisson = finite_number("Fabric.poisson", self.poisson, 0.0)
         warp, weft = self.stretch
         require(poisson * poisson * weft / warp < 1.0, "Fabric.poisson", poisson,
@@ -82,6 +90,27 @@ class Fabric:
         set_(self, "damping", in_range("Fabric.damping", self.damping, DAMPING_TIME))
         hem_mass = finite_number("Fabric.hem_mass", self.hem_mass, 0.0, unit="kg")
         set_(self, "hem_mass", hem_mass and in_range("Fabric.hem_mass", hem_mass, limits.MASS))
+
+    def _take_curve(self) -> None:
+        """bending and twist from bending_curve (a BendingCurve, or a mapping of its fields)."""
+        curve = self.bending_curve
+        if isinstance(curve, dict):
+            known = ("curvature", "warp", "weft", "bias")
+            require(set(curve) <= set(known), "Fabric.bending_curve keys", sorted(curve),
+                    f"some of {list(known)}")
+            curve = BendingCurve(**curve)
+        require(isinstance(curve, BendingCurve), "Fabric.bending_curve", curve,
+                "None, a BendingCurve or a mapping of its fields (curvature, warp, weft, bias)")
+        flat = (curve.warp[0], curve.weft[0])
+        given = self.bending
+        require(given in (flat, _DEFAULT_BENDING), "Fabric.bending", given,
+                f"left out with a bending_curve (its values at zero curvature {flat} are taken)")
+        twist = curve.twist[0] if curve.bias is not None else None
+        require(self.twist is None or self.twist == twist, "Fabric.twist", self.twist,
+                "left out with a bending_curve (its bias row sets the twist)")
+        object.__setattr__(self, "bending_curve", curve)
+        object.__setattr__(self, "bending", flat)
+        object.__setattr__(self, "twist", twist)
 
     @property
     def membrane(self) -> tuple[float, float, float, float]:
@@ -174,7 +203,9 @@ class Fabric:
                 f"stretch = {pair(self.stretch)}       # N/m, warp and weft",
                 f"shear = {number(self.shear)}                # N/m",
                 f"bending = {pair(self.bending)}       # N m, warp and weft"]
-        if self.twist is not None:
+        if self.bending_curve is not None:
+            rows[-1] = f"bending_curve = {self.bending_curve.table()}   # 1/m, N m"
+        elif self.twist is not None:
             rows.append(f"twist = {number(self.twist)}                # N m")
         rows += [f"poisson = {number(self.poisson)}",
                  f"damping = {number(self.damping)}                # s"]
@@ -185,7 +216,8 @@ class Fabric:
     @classmethod
     def preset(cls, name: str, **overrides) -> "Fabric":
         """A measured fabric (PRESETS, any letter case); keyword arguments replace single
-        fields."""
+        fields (`bending` or `twist` replaces its bending_curve: constant rigidities;
+        bending_curve=None keeps its rigidities at zero curvature)."""
         name = name.lower() if isinstance(name, str) else name
         springs = isinstance(name, str) and (name in material.PRESETS
                                              or name in material.FORMER_NAMES)
@@ -195,7 +227,14 @@ class Fabric:
         known = {f.name for f in fields(cls)}
         for key in overrides:
             require(key in known, "Fabric field", key, f"one of {sorted(known)}")
-        return cls(**{**PRESETS[name], **overrides})
+        base = dict(PRESETS[name])
+        if {"bending", "twist"} & set(overrides) and "bending_curve" not in overrides:
+            base.pop("bending_curve")                        # constant rigidities instead
+        elif "bending_curve" in overrides and overrides["bending_curve"] is None:
+            curve = base.pop("bending_curve")                # its values at zero curvature
+            base["bending"] = (curve.warp[0], curve.weft[0])
+            base["twist"] = curve.twist[0] if curve.bias is not None else None
+        return cls(**{**base, **overrides})
 
 
 # Measured fabrics. Source: H. Wang, J. F. O'Brien, R. Ramamoorthi, "Data-driven elastic models
@@ -204,42 +243,72 @@ class Fabric:
 # use and fibres, quoted below). From each sample: its density [kg/m^2]; the lowest-strain row
 # (c11, c12, c22, c33) of its piecewise-linear stretching table [N/m] read as this law's
 # (C11, C12, C22, C33) (Fabric.membrane): stretch = (c11 - c12^2 / c22, c22 - c12^2 / c11),
-# poisson = c12 / c22 (0 where the fit gave c12 < 0), shear = c33; bending = the
-# lowest-curvature samples of its 0 and 90 degree rows [N m] (warp = the sample's first axis).
-# The tables are piecewise linear: these are the small-strain, small-curvature moduli, which is
-# what a drape and a cantilever test probe. ArcSim itself doubles the stretching rows and bends
+# poisson = c12 / c22 (0 where the fit gave c12 < 0), shear = c33: the small-strain moduli,
+# which is what a drape and a cantilever test probe. Bending: the whole table, its 0, 45 and 90
+# degree rows (warp = the sample's first axis, bias, weft) at half-curvatures 0, 5, 10, 15 and
+# 20 1/m, as BendingCurve.wang reads them (bending_curve.py). ArcSim itself doubles the stretching rows and bends
 # with k l^2 theta^2 / (8 (A1 + A2)) per edge (a flexural rigidity of k / 4): the paper's own
 # units could not be checked here, and these presets read the tables as the moduli
 # (docs/fabrics.md).
 PRESETS: dict[str, dict] = {
     # "11oz-black-denim": jeans, 99% cotton 1% spandex, 324 g/m^2
     "denim": dict(density=0.324, stretch=(205.25, 1013.38), shear=53.39, poisson=0.01009,
-                  bending=(64.20e-6, 96.95e-6)),
+                  bending_curve=BendingCurve.wang((
+            (64.196457e-6, 60.286175e-6, 60.943428e-6, 62.433697e-6, 19.824701e-6),
+            (73.384567e-6, 59.671982e-6, 61.080757e-6, 68.242569e-6, 36.033474e-6),
+            (96.951576e-6, 107.848228e-6, 113.060738e-6, 120.56974e-6, 79.781021e-6)))),
     # "royal-target": pants, 65% cotton 35% polyester, 220 g/m^2
     "royal_target": dict(density=0.220, stretch=(2016.51, 2034.93), shear=104.76,
-                         poisson=0.004506, bending=(125.41e-6, 125.41e-6)),
+                         poisson=0.004506, bending_curve=BendingCurve.wang((
+            (125.409805e-6, 167.284561e-6, 215.41275e-6, 215.09079e-6, 223.861038e-6),
+            (107.997696e-6, 120.583267e-6, 144.141678e-6, 140.606689e-6, 153.048309e-6),
+            (125.409805e-6, 167.284561e-6, 215.41275e-6, 215.09079e-6, 227.861038e-6)))),
     # "white-dots-on-blk": tablecloth, 100% polyester, 128 g/m^2
     "dots": dict(density=0.128, stretch=(2002.09, 2027.49), shear=19.19, poisson=0.0001705,
-                 bending=(51.71e-6, 31.28e-6)),
+                 bending_curve=BendingCurve.wang((
+            (51.713814e-6, 36.506981e-6, 66.360748e-6, 52.729267e-6, 15.221714e-6),
+            (40.65947e-6, 10.401686e-6, 20.84782e-6, 30.993469e-6, 12.726685e-6),
+            (31.282822e-6, 22.910311e-6, 26.350384e-6, 30.637762e-6, 16.726685e-6)))),
     # "pink-ribbon-brown": blanket, 100% polyester, 228 g/m^2
     "ribbon": dict(density=0.228, stretch=(105.59, 170.63), shear=30.25, poisson=0.4331,
-                   bending=(117.07e-6, 59.77e-6)),
+                   bending_curve=BendingCurve.wang((
+            (117.070122e-6, 202.682922e-6, 298.615936e-6, 244.588867e-6, 238.43782e-6),
+            (87.509773e-6, 36.396919e-6, 103.628098e-6, 91.630119e-6, 97.175949e-6),
+            (59.774277e-6, 59.260632e-6, 64.199661e-6, 55.017326e-6, 59.221714e-6)))),
     # "tango-red-jet-set": jacket, 100% polyester, 113 g/m^2
     "jet_set": dict(density=0.113, stretch=(25.82, 102.78), shear=14.31, poisson=0.3172,
-                    bending=(14.29e-6, 20.35e-6)),
+                    bending_curve=BendingCurve.wang((
+            (14.293814e-6, 8.949391e-6, 30.011126e-6, 36.08149e-6, 18.363136e-6),
+            (21.9517e-6, 22.446325e-6, 18.408735e-6, 19.598495e-6, 12.071854e-6),
+            (20.345654e-6, 22.69688e-6, 15.698071e-6, 13.466827e-6, 7.556618e-6)))),
     # "gray-interlock": t-shirt, an interlock knit, 60% cotton 40% polyester, 187 g/m^2
     "interlock": dict(density=0.187, stretch=(16.59, 34.48), shear=36.86, poisson=0.0,
-                      bending=(23.19e-6, 14.27e-6)),
+                      bending_curve=BendingCurve.wang((
+            (23.191698e-6, 32.932217e-6, 34.406498e-6, 39.01442e-6, 23.382786e-6),
+            (24.749964e-6, 18.651314e-6, 16.370552e-6, 25.095791e-6, 8.860165e-6),
+            (14.267624e-6, 7.052906e-6, 14.515154e-6, 24.665127e-6, 19.383726e-6)))),
     # "ivory-rib-knit": underwear, 95% cotton 5% spandex, 276 g/m^2
     "rib_knit": dict(density=0.276, stretch=(42.87, 65.17), shear=83.18, poisson=0.0,
-                     bending=(46.24e-6, 32.24e-6)),
+                     bending_curve=BendingCurve.wang((
+            (46.237591e-6, 63.086697e-6, 83.192772e-6, 97.574425e-6, 80.726685e-6),
+            (30.01593e-6, 30.097424e-6, 30.172081e-6, 30.6483e-6, 24.726685e-6),
+            (32.243889e-6, 37.341282e-6, 38.817448e-6, 39.812527e-6, 30.43782e-6)))),
     # "navy-sparkle-sweat": sweater, 96% polyester 4% spandex, 224 g/m^2
     "sweat": dict(density=0.224, stretch=(12.49, 3.27), shear=17.62, poisson=0.0,
-                  bending=(59.47e-6, 45.63e-6)),
+                  bending_curve=BendingCurve.wang((
+            (59.469658e-6, 37.500004e-6, 35.787308e-6, 35.737106e-6, 21.033506e-6),
+            (40.072277e-6, 37.446949e-6, 35.206612e-6, 24.871773e-6, 9.033506e-6),
+            (45.625023e-6, 39.520981e-6, 30.734119e-6, 23.301662e-6, 13.033506e-6)))),
     # "camel-ponte-roma": jacket, 60% polyester 40% rayon, 284 g/m^2
     "ponte_roma": dict(density=0.284, stretch=(31.15, 44.03), shear=31.90, poisson=0.0,
-                       bending=(36.35e-6, 37.16e-6)),
+                       bending_curve=BendingCurve.wang((
+            (36.348366e-6, 49.585537e-6, 45.74408e-6, 47.413387e-6, 20.726685e-6),
+            (33.013252e-6, 29.744385e-6, 35.103642e-6, 34.041019e-6, 14.439938e-6),
+            (37.157593e-6, 34.107452e-6, 33.229435e-6, 34.685535e-6, 10.439938e-6)))),
     # "white-swim-solid": swimsuit, 87% nylon 13% spandex, 204 g/m^2
     "swim": dict(density=0.204, stretch=(47.52, 103.64), shear=60.77, poisson=0.06533,
-                 bending=(60.24e-6, 51.02e-6)),
+                 bending_curve=BendingCurve.wang((
+            (60.237942e-6, 56.357208e-6, 69.698593e-6, 55.305969e-6, 34.705532e-6),
+            (58.803211e-6, 63.121964e-6, 61.379181e-6, 47.971302e-6, 19.383726e-6),
+            (51.018833e-6, 50.741455e-6, 50.570576e-6, 50.006001e-6, 24.556618e-6)))),
 }

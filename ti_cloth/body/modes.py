@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..energies.altitude import altitude_frames
-from ..energies.bending import HALF_ANGLE_LIMIT, dihedral_angles
+from ..energies.bending import HALF_ANGLE_LIMIT, bending_matrices, dihedral_angles
 from ..energies.isometric import is_flat, isometric_parts
 from ..energies.membrane import deformation_gradients
 
@@ -164,6 +164,16 @@ def tridiagonal(alpha: list, beta: list) -> np.ndarray:
     return np.diag(alpha) + np.diag(beta[:len(alpha) - 1], 1) + np.diag(beta[:len(alpha) - 1], -1)
 
 
+def stiffest_bending(cloth) -> np.ndarray:
+    """(F, 3, 3): face_bending, where a triangle has a BendingCurve with the rigidities of its
+    stiffest tangents (BendingCurve.stiffest): the largest its Hessian can be."""
+    if not cloth.curved:
+        return cloth.face_bending
+    stiffest = np.array([c.stiffest for c in cloth.bending_curves] + [np.zeros(3)])
+    peak = bending_matrices(cloth.face_components, cloth.face_area, stiffest[cloth.face_curve])
+    return np.where((cloth.face_curve >= 0)[:, None, None], peak, cloth.face_bending)
+
+
 def rest_rank_one(cloth) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """The elements' stiffness linearised about rest as sums of rank-one terms g g^T, for the
     stability analyses (modes.py): [(indices (R, k), stiffness vectors g (R, k, 3), damping
@@ -176,8 +186,9 @@ def rest_rank_one(cloth) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     hinge i); on a flat rest sheet (is_flat) the isometric model's constant Q = sum_ij B'_ij
     K_i K_j^T (x) I (isometric_matrix), nine terms a triangle (g = sqrt(lambda_m) sum_i V_im
     K_i along each axis; it holds the mid-edge Hessian's normal part and adds the in-plane one,
-    an upper bound for either model). Rayleigh damping is beta times the same: its vectors are
-    sqrt(beta) g."""
+    an upper bound for either model). A triangle whose rigidity depends on curvature enters
+    with B at each direction's stiffest tangent (stiffest_bending). Rayleigh damping is beta
+    times the same: its vectors are sqrt(beta) g."""
     if not cloth.face_count:
         return []
     x = cloth.rest_position
@@ -196,7 +207,7 @@ def rest_rank_one(cloth) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     beta = np.sqrt(cloth.face_damping)
     groups = [(np.repeat(cloth.face_indices, 3, axis=0), membrane.reshape(-1, 3, 3),
                np.repeat(beta, 3)[:, None, None] * membrane.reshape(-1, 3, 3))]
-    if cloth.hinge_count and is_flat(cloth):
+    if cloth.hinge_count and is_flat(cloth) and not cloth.curved:
         weights, reduced = isometric_parts(cloth)
         values, vectors = np.linalg.eigh(reduced)
         modes = vectors * np.sqrt(np.maximum(values, 0.0))[:, None, :]       # V sqrt(lambda)
@@ -215,7 +226,7 @@ def rest_rank_one(cloth) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
         hinge_vectors = np.concatenate([slope[:, None, None] * grad, np.zeros((1, 4, 3))])
         hinge_corners = np.concatenate([cloth.hinge_indices, np.zeros((1, 4), np.int64)])
         per_face = hinge_vectors[cloth.face_hinge]                      # (T, 3 hinges, 4, 3)
-        values, vectors = np.linalg.eigh(cloth.face_bending)
+        values, vectors = np.linalg.eigh(stiffest_bending(cloth))
         weights = vectors * np.sqrt(np.maximum(values, 0.0))[:, None, :]   # V sqrt(lambda)
         bending = np.einsum("tim,tikx->tmikx", weights, per_face).reshape(-1, 3, 12, 3)
         corners = np.repeat(hinge_corners[cloth.face_hinge].reshape(-1, 12), 3, axis=0)

@@ -26,7 +26,8 @@ from collections.abc import Mapping
 import numpy as np
 
 from ..energies.altitude import altitude_springs
-from ..energies.bending import bending_matrices, dihedral_angles, hinges, second_edge, welded
+from ..energies.bending import (bending_matrices, curvature_components, dihedral_angles, hinges,
+                                second_edge, welded)
 from ..energies.membrane import material_frames
 from ..inputs.validation import as_array, finite_number, require
 from .fabric import Fabric
@@ -177,7 +178,12 @@ class Cloth:
       face_area          (F,) rest areas [m^2]
       face_moduli        (F, 4): (C11, C12, C22, C33) [N/m] (Fabric.membrane)
       face_damping       (F,) Rayleigh damping time [s] (Fabric.damping)
-      face_bending       (F, 3, 3): B of the bending energy 1/2 dt^T B dt [N m]
+      face_bending       (F, 3, 3): B of the bending energy 1/2 dt^T B dt [N m] (at zero
+                         curvature, for a Fabric with a bending_curve)
+      face_components    (F, 3, 3): b[f, d, i], each hinge tangent's share of the change of
+                         curvature k_d (energies/bending.curvature_components)
+      face_curve         (F,) int: each triangle's curve in bending_curves, or -1
+      bending_curves     the Fabrics' BendingCurves (body/bending_curve.py), a tuple
       face_hinge         (F, 3): the hinge across each edge (edge i opposite corner i), or -1
     and its interior edges, the hinges
       hinge_indices      (H, 4) int [a, b, c, d]: edge a-b, c and d opposite it
@@ -312,13 +318,17 @@ class Cloth:
         self.face_damping = np.full(count, damping)
         (self.hinge_indices, self.hinge_faces, self.face_hinge,
          face_sign) = hinges(triangles, self.particle_weld)
-        self.face_bending = bending_matrices(self.face_gradient, self.face_area,
-                                                      face_sign, np.tile(flexural, (count, 1)))
+        self.face_components = curvature_components(self.face_gradient, face_sign)
+        self.face_bending = bending_matrices(self.face_components, self.face_area,
+                                             np.tile(flexural, (count, 1)))
+        curve = fabric.bending_curve if fabric is not None else None
+        self.bending_curves = () if curve is None else (curve,)
+        self.face_curve = np.full(count, -1 if curve is None else 0)
         across = np.any(second_edge(self) != self.hinge_indices[:, :2], axis=1)
         self.hinge_rest_angle = np.where(across, 0.0, dihedral_angles(x, self.hinge_indices))
 
     ELEMENT_ARRAYS = ("face_indices", "face_gradient", "face_area", "face_moduli", "face_damping",
-                      "face_bending", "face_hinge", "hinge_indices", "hinge_faces",
+                      "face_bending", "face_components", "face_curve", "face_hinge", "hinge_indices", "hinge_faces",
                       "hinge_rest_angle")
 
     def _freeze(self) -> None:
@@ -372,8 +382,11 @@ class Cloth:
         body.seam_indices = joined("seam_indices", particle_offsets)
         for name in ("altitude_rest_length", "altitude_stiffness", "altitude_damping",
                      "face_gradient", "face_area", "face_moduli", "face_damping", "face_bending",
-                     "hinge_rest_angle"):
+                     "face_components", "hinge_rest_angle"):
             setattr(body, name, joined(name))
+        body.bending_curves = tuple(c for b in bodies for c in b.bending_curves)
+        body.face_curve = joined("face_curve", np.cumsum([0] + [len(b.bending_curves)
+                                                                for b in bodies]))
         face_offsets = np.cumsum([0] + [b.face_count for b in bodies])
         hinge_offsets = np.cumsum([0] + [b.hinge_count for b in bodies])
         body.face_indices = joined("face_indices", particle_offsets)
@@ -451,6 +464,11 @@ class Cloth:
     def fabric(self) -> bool:
         """Whether the body has elements (a Fabric's) rather than springs only."""
         return self.face_count > 0
+
+    @property
+    def curved(self) -> bool:
+        """Whether some hinge bends by a BendingCurve (its rigidity depends on curvature)."""
+        return bool(self.hinge_count and (self.face_curve >= 0).any())
 
     @property
     def damping(self) -> str:

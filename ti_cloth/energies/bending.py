@@ -49,6 +49,7 @@ import numpy as np
 import taichi as ti
 
 from ..runtime.plan import DT, ITEM, STATE, Loop, Phase, Sweep
+from .bending_law import face_matrix
 from .faces import face_intact, motion_in_step, multiplier_step
 
 # |theta / 2| past which t = tan(theta / 2) continues along its tangent line (a crease folded
@@ -172,16 +173,19 @@ def curvature_bases(gradients: np.ndarray) -> np.ndarray:
     return -2.0 * np.einsum("tci,tcj->tcij", gradients, gradients) / length[:, :, None, None]
 
 
-def bending_matrices(gradients: np.ndarray, areas: np.ndarray, face_sign: np.ndarray,
-                     flexural: np.ndarray) -> np.ndarray:
-    """B (T, 3, 3) = A s_i s_j <K_i, K_j>_D, D = (D11, D22, D12) per triangle (T, 3)."""
+def curvature_components(gradients: np.ndarray, face_sign: np.ndarray) -> np.ndarray:
+    """b (T, 3, 3): b[t, d, i] = s_i (K_i)_d, d = 11, 22, 12, so that a triangle's change of
+    curvature is k_d = sum_i b[t, d, i] dt_i (body/bending_curve.py's law reads it)."""
     k = curvature_bases(gradients)
-    d11, d22, d12 = flexural.T
-    inner = (d11[:, None, None] * k[:, :, None, 0, 0] * k[:, None, :, 0, 0]
-             + d22[:, None, None] * k[:, :, None, 1, 1] * k[:, None, :, 1, 1]
-             + 2 * d12[:, None, None] * k[:, :, None, 0, 1] * k[:, None, :, 0, 1])
-    sign = face_sign[:, :, None] * face_sign[:, None, :]
-    return areas[:, None, None] * sign * inner
+    return face_sign[:, None, :] * np.stack([k[:, :, 0, 0], k[:, :, 1, 1], k[:, :, 0, 1]], 1)
+
+
+def bending_matrices(components: np.ndarray, areas: np.ndarray,
+                     flexural: np.ndarray) -> np.ndarray:
+    """B (T, 3, 3) = A s_i s_j <K_i, K_j>_D = A sum_d c_d D_d b_di b_dj, D = (D11, D22, D12)
+    per triangle (T, 3), b the curvature_components, c = (1, 1, 2)."""
+    weights = flexural * np.array([1.0, 1.0, 2.0])
+    return areas[:, None, None] * np.einsum("td,tdi,tdj->tij", weights, components, components)
 
 
 def tangents(theta: np.ndarray) -> np.ndarray:
@@ -213,12 +217,18 @@ def intact_hinges(cloth, alive: np.ndarray | None) -> np.ndarray:
 
 
 def bending_energy(cloth, positions: np.ndarray, alive: np.ndarray | None = None) -> float:
-    """sum over triangles of 1/2 dt^T B dt [J] (module doc); with `alive` ((F,) bool: not
-    torn), a torn triangle holds none and a hinge beside one is gone."""
+    """sum over triangles of 1/2 dt^T B dt [J] (module doc), A psi(k) where the rigidity
+    depends on curvature (body/bending_curve.py); with `alive` ((F,) bool: not torn), a torn
+    triangle holds none and a hinge beside one is gone."""
     if not cloth.hinge_count:
         return 0.0
     dt = face_tangents(cloth, hinge_tangents(cloth, positions) * intact_hinges(cloth, alive))
-    return float(0.5 * np.einsum("ti,tij,tj->", dt, cloth.face_bending, dt))
+    per_face = 0.5 * np.einsum("ti,tij,tj->t", dt, cloth.face_bending, dt)
+    k = np.einsum("tdi,ti->td", cloth.face_components, dt)
+    for c, curve in enumerate(cloth.bending_curves):       # psi(k) A where a curve bends it
+        faces = cloth.face_curve == c
+        per_face[faces] = cloth.face_area[faces] * curve.density(k[faces])
+    return float(per_face.sum())
 
 
 @ti.func
@@ -315,17 +325,27 @@ def hinge_angles(model: ti.template(), state: ti.template(), forces: ti.template
 
 
 @ti.func
+def face_hinge_tangents(model: ti.template(), state: ti.template(), f):
+    """(dt, its rate) of triangle f's three hinges (0 across a boundary edge)."""
+    hinge = model.face_hinge[f]
+    dt = ti.Vector([0.0, 0.0, 0.0])
+    rate = ti.Vector([0.0, 0.0, 0.0])
+    for i in ti.static(range(3)):
+        if hinge[i] >= 0:
+            dt[i] = state.hinge_tangent[hinge[i]]
+            rate[i] = state.hinge_rate[hinge[i]]
+    return dt, rate
+
+
+@ti.func
 def face_moments(model: ti.template(), state: ti.template(), f):
     """face_moment[3 f + i] = dE_f/dt_i = sum_j B_ij (dt_j + beta rate_j), the moment of
     triangle f's bending energy 1/2 dt^T B dt on the hinge across its edge i (0 across a
-    boundary edge, which has no hinge)."""
-    hinge = model.face_hinge[f]
-    beta = model.face_damping[f]
-    q = ti.Vector([0.0, 0.0, 0.0])
-    for i in ti.static(range(3)):
-        if hinge[i] >= 0:
-            q[i] = state.hinge_tangent[hinge[i]] + beta * state.hinge_rate[hinge[i]]
-    b = model.face_bending[f]                  # symmetric: 00, 11, 22, 01, 02, 12
+    boundary edge, which has no hinge); B the secant matrix B(k) where the fabric's rigidity
+    depends on curvature (bending_law.py: then sum_j B_ij dt_j is still dE_f/dt_i)."""
+    dt, rate = face_hinge_tangents(model, state, f)
+    q = dt + model.face_damping[f] * rate
+    b = face_matrix(model, f, dt, False)       # symmetric: 00, 11, 22, 01, 02, 12
     state.face_moment[3 * f] = b[0] * q[0] + b[3] * q[1] + b[4] * q[2]
     state.face_moment[3 * f + 1] = b[3] * q[0] + b[1] * q[1] + b[5] * q[2]
     state.face_moment[3 * f + 2] = b[4] * q[0] + b[5] * q[1] + b[2] * q[2]
@@ -381,9 +401,10 @@ def bending_row(b, i):
 
 
 @ti.func
-def hinge_weight(model: ti.template(), f, i, dt, rhs: ti.template()):
-    """(h^2 + h beta) B_ii of hinge i of triangle f, or B_ii for the right-hand side."""
-    b = model.face_bending[f]
+def hinge_weight(model: ti.template(), state: ti.template(), f, i, dt, rhs: ti.template()):
+    """(h^2 + h beta) B_ii of hinge i of triangle f, or B_ii for the right-hand side (B the
+    positive secant matrix at the step's start where the rigidity depends on curvature)."""
+    b = face_matrix(model, f, face_hinge_tangents(model, state, f)[0], True)
     weight = b[2]
     if i == 0:
         weight = b[0]
@@ -400,13 +421,20 @@ def linearise_hinge(model: ti.template(), state: ti.template(), ws: ti.template(
     """Hinge e at x_n (after hinge_angles left grad t in hinge_force, before hinge_forces):
     its gradient, grad t . v_n and the hinge-diagonal part of its blocks of A."""
     faces = model.hinge_faces[e]
-    weight = (hinge_weight(model, faces[0] // 3, faces[0] % 3, now.dt, False)
-              + hinge_weight(model, faces[1] // 3, faces[1] % 3, now.dt, False))
+    weight = (hinge_weight(model, state, faces[0] // 3, faces[0] % 3, now.dt, False)
+              + hinge_weight(model, state, faces[1] // 3, faces[1] % 3, now.dt, False))
     for k in ti.static(range(4)):
         gradient = state.hinge_force[4 * e + k]
         ws.hinge_gradient[4 * e + k] = gradient
         ws.hinge_diagonal[4 * e + k] = weight * gradient * gradient
     project_hinge(model, ws, e, state.particle_velocity)
+
+
+@ti.func
+def store_secant(model: ti.template(), state: ti.template(), ws: ti.template(), f):
+    """face_secant[f] = triangle f's positive secant matrix at the step's start (read by
+    hinge_product where the rigidity depends on curvature)."""
+    ws.face_secant[f] = face_matrix(model, f, face_hinge_tangents(model, state, f)[0], True)
 
 
 @ti.func
@@ -417,7 +445,10 @@ def hinge_product(model: ti.template(), ws: ti.template(), e, dt, rhs: ti.templa
     moment = 0.0
     for side in ti.static(range(2)):
         f, i = faces[side] // 3, faces[side] % 3
-        row = bending_row(model.face_bending[f], i)
+        b = model.face_bending[f]
+        if ti.static(model.curved):
+            b = ws.face_secant[f]
+        row = bending_row(b, i)
         hinge = model.face_hinge[f]
         total = 0.0
         for j in ti.static(range(3)):
@@ -516,7 +547,7 @@ def bending_constraint(model: ti.template(), state: ti.template(), f, multiplier
                 shared = model.particle_inv_mass[others[i]] * other_grads[i].dot(other_grads[j])
             coupling[i, j] = (w0 * g0s[i].dot(g0s[j]) + w1 * g1s[i].dot(g1s[j])
                               + w2 * g2s[i].dot(g2s[j]) + shared)
-    b = model.face_bending[f]                  # symmetric: 00, 11, 22, 01, 02, 12
+    b = face_matrix(model, f, ti.Vector([t0, t1, t2]), True)     # 00, 11, 22, 01, 02, 12
     bending = ti.Matrix([[b[0], b[3], b[4]], [b[3], b[1], b[5]], [b[4], b[5], b[2]]])
     gamma = model.face_damping[f] / dt
     residual = ti.Vector([t0, t1, t2]) + gamma * ti.Vector([m0, m1, m2])

@@ -9,7 +9,12 @@ per-corner products and 3x3 diagonals every particle gathers in the Model's fixe
 
 import taichi as ti
 
-from ..energies.bending import hinge_product, linearise_hinge, project_hinge
+from ..energies.bending import (
+    hinge_product,
+    linearise_hinge,
+    project_hinge,
+    store_secant,
+)
 from ..energies.membrane import face_product, linearise_face
 from ..runtime import backend
 from ..runtime.plan import DT, ITEM, NOW, STATE, Loop, Phase
@@ -29,6 +34,7 @@ def add_fields(ws, fields, face_count: int, hinge_count: int) -> None:
     ws.hinge_projection = fields.scalar(real, hinges)
     ws.hinge_product = fields.vector(3, real, 4 * hinges)
     ws.hinge_diagonal = fields.vector(3, real, 4 * hinges)
+    ws.face_secant = fields.vector(6, real, faces)      # B(k) at x_n (energies/bending_law.py)
 
 
 @ti.func
@@ -50,7 +56,9 @@ def bending_loops(model, ws) -> tuple:
     loops that linearise every hinge, and apply its stiffness to v_n (hinge_product)."""
     if not model.hinge_count or model.isometric:
         return (), ()
-    return ((Loop(model.hinge_count, linearise_hinge, model, STATE, ws, ITEM, NOW),),
+    secants = ((Loop(model.face_count, store_secant, model, STATE, ws, ITEM),) if model.curved
+               else ())
+    return ((Loop(model.hinge_count, linearise_hinge, model, STATE, ws, ITEM, NOW),) + secants,
             (Loop(model.hinge_count, hinge_product, model, ws, ITEM, DT, True),))
 
 
