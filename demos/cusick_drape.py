@@ -1,6 +1,7 @@
 """The Cusick drape test (BS 5058): runs demos/cusick_drape.toml and prints the drape
 coefficient and the number of folds of the settled disc; --presets settles a disc of every
-fabric preset (no frames) and prints the table docs/fabrics.md quotes.
+fabric preset (no frames), bent by its measured table and by its zero-curvature rigidity
+alone, and prints the table docs/fabrics.md quotes.
 
     python demos/cusick_drape.py             # renders/cusick_drape/frame_00000.png ... + measures
     python demos/cusick_drape.py --test      # tiny and fast
@@ -95,12 +96,16 @@ def settled(scene, fabric: tc.Fabric, seconds: float) -> np.ndarray:
 def table(seconds: float) -> None:
     tc.init(arch="cpu")
     scene = load_scene(SCENE)
-    print(f"{'preset':14} {'G warp/weft [uN m]':>20} {'density [g/m2]':>15} {'DC':>6} {'folds':>6}")
+    print(f"{'preset':14} {'G warp/weft [uN m]':>20} {'density [g/m2]':>15} {'DC':>6} {'folds':>6}"
+          f" {'DC flat':>8} {'folds flat':>10}")
     for name in tc.FABRICS:
-        fabric = tc.Fabric.preset(name)
+        fabric = tc.Fabric.preset(name)            # bent by its measured table
         dc, n = measure(scene, settled(scene, fabric, seconds))
+        flat = tc.Fabric.preset(name, bending_curve=None)   # its rigidity at zero curvature
+        dc_flat, n_flat = measure(scene, settled(scene, flat, seconds))
         g = "/".join(f"{1e6 * b:.0f}" for b in fabric.bending)
-        print(f"{name:14} {g:>20} {1000 * fabric.density:15.0f} {dc:6.2f} {n:6d}", flush=True)
+        print(f"{name:14} {g:>20} {1000 * fabric.density:15.0f} {dc:6.2f} {n:6d} {dc_flat:8.2f} "
+              f"{n_flat:10d}", flush=True)
 
 
 def main(argv=None):
