@@ -9,9 +9,10 @@ alone, and prints the table docs/fabrics.md quotes.
 
 Drape coefficient (BS 5058): DC = (A_shadow - A_support) / (A_specimen - A_support), the
 shadow the draped specimen casts straight down (its triangles projected onto the horizontal
-plane, rasterised at 0.5 mm); 1 for a fabric that stays flat, lower the more it drapes. Folds
-(nodes): the maxima of the hem's projected radius around the disc standing at least 3 mm
-above the troughs on both sides.
+plane, rasterised at 0.5 mm: ti_cloth.app.drape); 1 for a fabric that stays flat, lower the
+more it drapes. Folds (nodes): the maxima of the hem's projected radius around the disc
+standing at least 3 mm above the troughs on both sides. A scanned drape is measured, and a
+Fabric fitted to it, by `ti-cloth fit SCAN --cusick` (docs/fabrics.md).
 """
 
 import argparse
@@ -23,65 +24,32 @@ import numpy as np
 
 import ti_cloth as tc
 from ti_cloth.app.cli import demo_main
+from ti_cloth.app.drape import FOLD_DEPTH, circular_folds, shadow_area
 from ti_cloth.app.runner import state_path
 from ti_cloth.app.scene import load_scene
 
 SCENE = Path(__file__).with_suffix(".toml")
 SUPPORT_RADIUS = 0.09     # the stand's disc [m]
-PIXEL = 5e-4              # the shadow's raster [m]
-FOLD_DEPTH = 3e-3         # a fold stands this far above its troughs [m]
-
-
-def shadow_area(positions: np.ndarray, triangles: np.ndarray) -> float:
-    """The area [m^2] the triangles cover seen from above (x, z), on a PIXEL raster."""
-    flat = positions[:, [0, 2]]
-    low = flat.min(axis=0)
-    shape = np.ceil((flat.max(axis=0) - low) / PIXEL).astype(int) + 1
-    covered = np.zeros(shape, bool)
-    for a, b, c in flat[triangles]:
-        lo = np.floor((np.minimum(np.minimum(a, b), c) - low) / PIXEL).astype(int)
-        hi = np.ceil((np.maximum(np.maximum(a, b), c) - low) / PIXEL).astype(int)
-        gx, gy = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1),
-                             indexing="ij")
-        p = np.stack([gx, gy], -1) * PIXEL + low
-        d = (b[1] - c[1]) * (a[0] - c[0]) + (c[0] - b[0]) * (a[1] - c[1])
-        if d == 0:
-            continue
-        u = ((b[1] - c[1]) * (p[..., 0] - c[0]) + (c[0] - b[0]) * (p[..., 1] - c[1])) / d
-        v = ((c[1] - a[1]) * (p[..., 0] - c[0]) + (a[0] - c[0]) * (p[..., 1] - c[1])) / d
-        inside = (u >= 0) & (v >= 0) & (u + v <= 1)
-        covered[gx[inside], gy[inside]] = True
-    return float(covered.sum()) * PIXEL ** 2
 
 
 def folds(positions: np.ndarray, rest: np.ndarray) -> int:
     """The hem's maxima of projected radius, around the disc, that stand FOLD_DEPTH above the
-    lowest point between them and each neighbouring maximum."""
+    lowest point between them and each neighbouring maximum (drape.circular_folds)."""
     centre = rest.mean(axis=0)
     radius = np.hypot(*(rest[:, [0, 2]] - centre[[0, 2]]).T)
     hem = np.flatnonzero(radius > radius.max() - 1e-9)
     hem = hem[np.argsort(np.arctan2(rest[hem, 2] - centre[2], rest[hem, 0] - centre[0]))]
-    r = np.hypot(*(positions[hem][:, [0, 2]] - centre[[0, 2]]).T)
-    r = (np.roll(r, 1) + r + np.roll(r, -1)) / 3      # smoothed along the hem
-    peaks = np.flatnonzero((r >= np.roll(r, 1)) & (r > np.roll(r, -1)))
-    if len(peaks) < 2:
-        return len(peaks)
-    count = 0
-    for k, p in enumerate(peaks):
-        before, after = peaks[k - 1], peaks[(k + 1) % len(peaks)]
-        left = r[np.arange(before, before + (p - before) % len(r) + 1) % len(r)].min()
-        right = r[np.arange(p, p + (after - p) % len(r) + 1) % len(r)].min()
-        count += r[p] - max(left, right) >= FOLD_DEPTH
-    return int(count)
+    return circular_folds(np.hypot(*(positions[hem][:, [0, 2]] - centre[[0, 2]]).T), FOLD_DEPTH)
 
 
 def measure(scene, positions: np.ndarray) -> tuple[float, int]:
     """(drape coefficient, folds) of the body of `scene` at `positions`."""
     rest = scene.cloth.particle_position
     triangles = scene.cloth.mesh.triangles
-    specimen = shadow_area(rest, triangles)
+    specimen = shadow_area(rest[:, [0, 2]], triangles)
     support = np.pi * SUPPORT_RADIUS ** 2
-    return (shadow_area(positions, triangles) - support) / (specimen - support), folds(positions, rest)
+    return ((shadow_area(positions[:, [0, 2]], triangles) - support) / (specimen - support),
+            folds(positions, rest))
 
 
 def settled(scene, fabric: tc.Fabric, seconds: float) -> np.ndarray:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import math
 import os
 import platform
 import sys
@@ -493,16 +494,30 @@ def build_parser() -> argparse.ArgumentParser:
     commands.add_parser("info", parents=[common],
                         help="versions, architecture, threads and the extras installed")
     fit_parser = commands.add_parser(
-        "fit", parents=[common], help="a [bodies.fabric] table from a swatch's lab numbers",
+        "fit", parents=[common], help="a [bodies.fabric] table from a swatch's lab numbers "
+        "or a scanned Cusick drape",
         description="Prints the [bodies.fabric] table of a swatch's measurements "
-                    "(tc.Fabric.from_measurements: each by its closed form).")
+                    "(tc.Fabric.from_measurements: each by its closed form), or with a scan "
+                    "and --cusick the Fabric whose simulated drape matches the scanned one "
+                    "(ti_cloth.app.drape).")
+    fit_parser.add_argument("scan", type=Path, nargs="?",
+                            help="a Cusick drape scan (OBJ, PLY, ... in metres), with --cusick")
+    fit_parser.add_argument("--cusick", action="store_true",
+                            help="fit the scan's drape (bending warp and weft)")
+    fit_parser.add_argument("--disc", type=float, default=0.30,
+                            help="the specimen's diameter [m] (default 0.30)")
+    fit_parser.add_argument("--support", type=float, default=0.18,
+                            help="the clamping discs' diameter [m] (default 0.18)")
+    fit_parser.add_argument("--rings", type=_positive, default=16,
+                            help="rings of the simulated disc (default 16: 9.4 mm edges)")
+    fit_parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     fit_parser.add_argument("--weight", type=float, required=True, help="g/m^2")
-    bending = fit_parser.add_mutually_exclusive_group(required=True)
+    bending = fit_parser.add_mutually_exclusive_group()
     bending.add_argument("--bending-length", type=float, nargs="+", metavar="C",
                          help="ASTM D1388 cantilever bending lengths [m]: warp weft [bias]")
     bending.add_argument("--rigidity", type=float, nargs="+", metavar="G",
                          help="flexural rigidities [N m]: warp weft [bias]")
-    stretch = fit_parser.add_mutually_exclusive_group(required=True)
+    stretch = fit_parser.add_mutually_exclusive_group()
     stretch.add_argument("--stretch", type=float, nargs="+", metavar="E",
                          help="2-D moduli [N/m]: one, or warp weft")
     stretch.add_argument("--strip-test", type=float, nargs=3,
@@ -519,6 +534,16 @@ def fit(args) -> int:
     naming the measurement when one cannot be."""
     from ..body.fabric import Fabric
 
+    if args.scan is not None or args.cusick:
+        return fit_drape(args)
+    missing = [name for name, given in (("--bending-length or --rigidity",
+                                         args.bending_length or args.rigidity),
+                                        ("--stretch or --strip-test",
+                                         args.stretch or args.strip_test)) if not given]
+    if missing:
+        print(f"error: ti-cloth fit needs {' and '.join(missing)} (or a scan with --cusick)",
+              file=sys.stderr)
+        return 2
     stretch = args.stretch
     if stretch is not None:
         stretch = stretch[0] if len(stretch) == 1 else tuple(stretch)
@@ -532,6 +557,45 @@ def fit(args) -> int:
         print(f"error: {err}", file=sys.stderr)
         return 2
     print(fabric.table())
+    return 0
+
+
+def fit_drape(args) -> int:
+    """`ti-cloth fit SCAN --cusick`: the Fabric whose drape matches the scan's (app/drape.py),
+    its table and the fit's figures as comments; exit 2 naming what is wrong with the input."""
+    from tqdm import tqdm
+
+    from ..runtime import backend
+    from . import drape
+
+    if args.scan is None or not args.cusick:
+        print("error: a drape fit needs a scan and --cusick (ti-cloth fit SCAN --cusick "
+              "--weight G)", file=sys.stderr)
+        return 2
+    stretch = args.stretch[0] if args.stretch and len(args.stretch) == 1 else 1e3
+    try:
+        vertices, triangles = drape.read_scan(args.scan, args.disc, args.support)
+        scan = drape.measure(vertices, triangles, args.disc, args.support)
+        backend.init(arch="cpu", precision="f64")
+        with tqdm(total=drape.ITERATIONS + 3, unit="drape", disable=args.no_progress,
+                  file=sys.stderr) as bar:
+            result = drape.fit_cusick(scan, args.weight, args.disc, args.support,
+                                      stretch=stretch, shear=args.shear, rings=args.rings,
+                                      progress=lambda _: bar.update())
+    except (ValueError, FileNotFoundError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    fitted = result.fitted
+    print(result.fabric.table())
+    print(f"# Cusick fit of {args.scan.name}, scan / fit: drape coefficient "
+          f"{scan.coefficient:.3f} / {fitted.coefficient:.3f}, folds {scan.folds} / "
+          f"{fitted.folds}, drop {1e3 * scan.drop:.2f} / {1e3 * fitted.drop:.2f} mm, drop "
+          f"anisotropy {scan.drop_anisotropy:.4f} / {fitted.drop_anisotropy:.4f}")
+    print(f"# residual (log drop, anisotropy) {result.residual[0]:.2g}, "
+          f"{result.residual[1]:.2g}; bending uncertain by {100 * result.uncertainty[0]:.2g} %; "
+          f"the warp along the scan's stiffer direction, "
+          f"{math.degrees(result.warp_angle):.1f} deg from its first axis; "
+          f"{result.evaluations} drapes simulated")
     return 0
 
 
