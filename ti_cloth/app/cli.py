@@ -501,7 +501,10 @@ def build_parser() -> argparse.ArgumentParser:
                     "and --cusick the Fabric whose simulated drape matches the scanned one "
                     "(ti_cloth.app.drape).")
     fit_parser.add_argument("scan", type=Path, nargs="?",
-                            help="a Cusick drape scan (OBJ, PLY, ... in metres), with --cusick")
+                            help="a Cusick drape scan (OBJ, PLY, ... in metres) or a top-view "
+                                 "silhouette image (PNG, JPEG, ...: with --pixel), with --cusick")
+    fit_parser.add_argument("--pixel", type=float,
+                            help="a silhouette image's pixel side [m]")
     fit_parser.add_argument("--cusick", action="store_true",
                             help="fit the scan's drape (bending warp and weft)")
     fit_parser.add_argument("--disc", type=float, default=0.30,
@@ -560,6 +563,9 @@ def fit(args) -> int:
     return 0
 
 
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".gif")
+
+
 def fit_drape(args) -> int:
     """`ti-cloth fit SCAN --cusick`: the Fabric whose drape matches the scan's (app/drape.py),
     its table and the fit's figures as comments; exit 2 naming what is wrong with the input."""
@@ -573,9 +579,17 @@ def fit_drape(args) -> int:
               "--weight G)", file=sys.stderr)
         return 2
     stretch = args.stretch[0] if args.stretch and len(args.stretch) == 1 else 1e3
+    image = args.scan.suffix.lower() in IMAGE_SUFFIXES
+    if image and args.pixel is None:
+        print(f"error: a silhouette image ({args.scan.name}) needs --pixel, its pixels' side "
+              "in metres", file=sys.stderr)
+        return 2
     try:
-        vertices, triangles = drape.read_scan(args.scan, args.disc, args.support)
-        scan = drape.measure(vertices, triangles, args.disc, args.support)
+        if image:
+            scan = drape.read_silhouette(args.scan, args.pixel, args.disc, args.support)
+        else:
+            vertices, triangles = drape.read_scan(args.scan, args.disc, args.support)
+            scan = drape.measure(vertices, triangles, args.disc, args.support)
         backend.init(arch="cpu", precision="f64")
         with tqdm(total=drape.ITERATIONS + 3, unit="drape", disable=args.no_progress,
                   file=sys.stderr) as bar:
@@ -587,11 +601,14 @@ def fit_drape(args) -> int:
         return 2
     fitted = result.fitted
     print(result.fabric.table())
+    measures = (f"silhouette anisotropy {scan.anisotropy:.4f} / {fitted.anisotropy:.4f}"
+                if image else f"drop {1e3 * scan.drop:.2f} / {1e3 * fitted.drop:.2f} mm, drop "
+                f"anisotropy {scan.drop_anisotropy:.4f} / {fitted.drop_anisotropy:.4f}")
     print(f"# Cusick fit of {args.scan.name}, scan / fit: drape coefficient "
           f"{scan.coefficient:.3f} / {fitted.coefficient:.3f}, folds {scan.folds} / "
-          f"{fitted.folds}, drop {1e3 * scan.drop:.2f} / {1e3 * fitted.drop:.2f} mm, drop "
-          f"anisotropy {scan.drop_anisotropy:.4f} / {fitted.drop_anisotropy:.4f}")
-    print(f"# residual (log drop, anisotropy) {result.residual[0]:.2g}, "
+          f"{fitted.folds}, {measures}")
+    fitted_pair = "drape coefficient, anisotropy" if image else "log drop, anisotropy"
+    print(f"# residual ({fitted_pair}) {result.residual[0]:.2g}, "
           f"{result.residual[1]:.2g}; bending uncertain by {100 * result.uncertainty[0]:.2g} %; "
           f"the warp along the scan's stiffer direction, "
           f"{math.degrees(result.warp_angle):.1f} deg from its first axis; "

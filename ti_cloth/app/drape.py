@@ -16,20 +16,24 @@ simulated drape):
   (r = R + b cos 2 (phi - a) has c2 = b e^(-2 i a) / 2):
   a fabric stiffer along the warp than the weft reaches further along the warp.
 
-The fit (fit_cusick): the Fabric of a given weight whose simulated drape has the scan's DC and
-anisotropy, its bending (warp, weft) = G (e^s, e^-s) with s >= 0 (a scan has no grain mark:
-the warp is taken along the scan's longer axis), by Gauss-Newton on (log G, s), its Jacobian
-by forward differences at the start and Broyden's secant updates after each step: a settle per
-iteration (simulate: the disc of `rings` rings clamped within the support's radius, settled by
-implicit Euler under drag), three at the start. Derivative-free in the solver's sense: the fold pattern of
-a drape is a bifurcation of its equilibrium, whose gradient through the implicit solver's
+A top-view silhouette image (read_silhouette: the shadow darker than its background, its
+pixel side given) has the coefficient, folds and silhouette, about the shadow's centroid, and
+no drop: its fit matches the coefficient and the silhouette's anisotropy instead.
+
+The fit (fit_cusick): the Fabric of a given weight whose simulated drape has the scan's drop
+and drop anisotropy (a silhouette's coefficient and anisotropy), its bending (warp, weft) =
+G (e^s, e^-s) with s >= 0 (a scan has no grain mark: the warp is taken along the scan's stiffer
+direction), by Gauss-Newton on (log G, s), its Jacobian by forward differences at the start and
+Broyden's secant updates after each step: a settle per iteration (simulate: the disc of `rings`
+rings clamped within the support's radius, settled by implicit Euler under drag), three at the
+start. Derivative-free in the solver's sense: the fold pattern of a drape is a bifurcation of its equilibrium, whose gradient through the implicit solver's
 Hessian says nothing about which folds appear; the measures fitted, the mean drop of the
 surface outside the support and its second harmonic (the fabric drops less along its stiffer
-direction), are area-weighted means of the points, continuous in them (the shadow's DC moves in
-raster steps, and a fit on it and the silhouette's harmonic stopped 5 % from a synthetic
-drape's bending). The uncertainty reported is the change of the parameters
-that moves the measures by the fit's residual or the raster's resolution, whichever is larger,
-through the Jacobian at the optimum.
+direction), are area-weighted means of the points, continuous in them, and change smoothly with
+the parameters between bifurcations (a silhouette's coefficient moves in raster steps of 0.5 mm
+cells; its fit still recovers a synthetic drape's bending, measured 0.1 %). The uncertainty
+reported is the change of the parameters that moves the measures by the fit's residual or by
+1e-3, whichever is larger, through the Jacobian at the best point found.
 """
 
 from __future__ import annotations
@@ -155,15 +159,8 @@ def measure(vertices: np.ndarray, triangles: np.ndarray, disc: float = DISC,
     second = np.cross(up, first)
     offset = vertices - centre
     flat = np.stack([offset @ first, offset @ second], 1)
-    cells, count = shadow_cover(flat, triangles)
-    outer, inner = np.pi * (disc / 2) ** 2, np.pi * (support / 2) ** 2
-    coefficient = (count * PIXEL ** 2 - inner) / (outer - inner)
-    angle = np.arctan2(cells[:, 1], cells[:, 0])
-    which = np.minimum(((angle + np.pi) / (2 * np.pi) * BINS).astype(int), BINS - 1)
-    radii = np.zeros(BINS)
-    np.maximum.at(radii, which, np.hypot(cells[:, 0], cells[:, 1]))
-    phi = (np.arange(BINS) + 0.5) / BINS * 2 * np.pi - np.pi
-    c2 = np.mean(radii * np.exp(-2j * phi))
+    cells, _ = shadow_cover(flat, triangles)
+    coefficient, folds, radii, anisotropy, long_axis = silhouette(cells, PIXEL, disc, support)
     height = offset @ up
     across = np.hypot(flat[:, 0], flat[:, 1])
     top = height[across < 0.5 * support].mean() if (across < 0.5 * support).any() else height.max()
@@ -174,9 +171,47 @@ def measure(vertices: np.ndarray, triangles: np.ndarray, disc: float = DISC,
     outside = area * (np.hypot(corners[:, 0], corners[:, 1]) > 0.5 * support)
     drop = float((outside * depth).sum() / outside.sum())
     d2 = (outside * depth * np.exp(-2j * np.arctan2(corners[:, 1], corners[:, 0]))).sum() / outside.sum()
-    return Drape(float(coefficient), circular_folds(radii), radii,
-                 float(2 * abs(c2) / radii.mean()), float(-np.angle(c2) / 2), drop,
+    return Drape(coefficient, folds, radii, anisotropy, long_axis, drop,
                  float(2 * abs(d2) / drop), float(-np.angle(-d2) / 2))
+
+
+def silhouette(cells: np.ndarray, pixel: float, disc: float = DISC, support: float = SUPPORT):
+    """(coefficient, folds, radii, anisotropy, long_axis) of a shadow given as the centres
+    (P, 2) [m] of its covered cells of side `pixel` about the drape's axis (module doc)."""
+    outer, inner = np.pi * (disc / 2) ** 2, np.pi * (support / 2) ** 2
+    coefficient = (len(cells) * pixel ** 2 - inner) / (outer - inner)
+    angle = np.arctan2(cells[:, 1], cells[:, 0])
+    which = np.minimum(((angle + np.pi) / (2 * np.pi) * BINS).astype(int), BINS - 1)
+    radii = np.zeros(BINS)
+    np.maximum.at(radii, which, np.hypot(cells[:, 0], cells[:, 1]))
+    phi = (np.arange(BINS) + 0.5) / BINS * 2 * np.pi - np.pi
+    c2 = np.mean(radii * np.exp(-2j * phi))
+    return (float(coefficient), circular_folds(radii), radii, float(2 * abs(c2) / radii.mean()),
+            float(-np.angle(c2) / 2))
+
+
+def read_silhouette(path, pixel: float, disc: float = DISC, support: float = SUPPORT) -> Drape:
+    """The measures of a top-view silhouette image (PNG, JPEG, ...: the shadow darker than its
+    background, `pixel` [m] a side), about the shadow's centroid; it has no drop (None)."""
+    import imageio.v3 as iio
+
+    pixel = finite_number("pixel", pixel, 0.0, strict=True, unit="m")
+    try:
+        image = np.asarray(iio.imread(path), np.float64)
+    except (OSError, ValueError) as err:
+        raise ValueError(f"{path}: not an image imageio can read ({err})") from None
+    grey = image[..., :3].mean(axis=-1) if image.ndim == 3 else image
+    low, high = grey.min(), grey.max()
+    require(high > low, f"{path}: pixels", f"all {low}", "a dark shadow on a lighter background")
+    rows, cols = np.nonzero(grey < 0.5 * (low + high))
+    cells = np.stack([cols, -rows], 1) * pixel         # x right, y up
+    cells = cells - cells.mean(axis=0)
+    coefficient, folds, radii, anisotropy, long_axis = silhouette(cells, pixel, disc, support)
+    require(0.0 < coefficient <= 1.05, "pixel", pixel,
+            f"the side of the image's pixels in metres: its shadow of {len(cells)} pixels "
+            f"gives a drape coefficient of {coefficient:.3g} for a {disc} m disc on a "
+            f"{support} m support, not one in (0, 1]")
+    return Drape(coefficient, folds, radii, anisotropy, long_axis, None, None, long_axis)
 
 
 def read_scan(path, disc: float = DISC, support: float = SUPPORT):
@@ -257,9 +292,15 @@ def fit_cusick(scan: Drape, weight: float, disc: float = DISC, support: float = 
         if progress is not None:
             progress(evaluations[0])
         measured = measure(x, t, disc, support, SIMULATED_FRAME)
-        return fabric, measured, np.array([math.log(measured.drop), measured.drop_anisotropy])
+        return fabric, measured, features(measured)
 
-    target = np.array([math.log(scan.drop), scan.drop_anisotropy])
+    def features(d: Drape) -> np.ndarray:
+        if shadow_only:
+            return np.array([d.coefficient, d.anisotropy])
+        return np.array([math.log(d.drop), d.drop_anisotropy])
+
+    shadow_only = scan.drop is None
+    target = features(scan)
     # G from the bending length whose cantilever droops past the support's edge as the disc
     # does: c^3 = G / W with the overhang (disc - support) / 2 standing at c ~ overhang / 2
     overhang = (disc - support) / 2
