@@ -18,6 +18,7 @@ from ti_cloth.app import cli, drape
 pytestmark = pytest.mark.usefixtures("f64")
 KNOWN = tc.Fabric(density=0.192, stretch=1e3, shear=50.0, bending=(9e-5, 5e-5), damping=1e-3)
 RINGS = 10
+SECONDS = 1.0          # each drape settled this long, the synthetic one as the fit's
 
 
 def turned(points, seed):
@@ -32,7 +33,7 @@ def turned(points, seed):
 def synthetic(tmp_path_factory):
     """KNOWN's drape, simulated as the fit does, turned and moved, written as an OBJ scan."""
     tc.init(arch="cpu", precision="f64")
-    x, triangles = drape.simulate(KNOWN, rings=RINGS)
+    x, triangles = drape.simulate(KNOWN, rings=RINGS, seconds=SECONDS)
     scan, rotation = turned(x, 3)
     path = tmp_path_factory.mktemp("scan") / "drape.obj"
     tc.save_mesh(path, tc.Mesh(scan, triangles))
@@ -99,7 +100,7 @@ def test_a_synthetic_drape_is_fitted_back(synthetic, capsys):
     read back as a Fabric of the weight given."""
     _, _, path, rotation = synthetic
     assert cli.main(["fit", str(path), "--cusick", "--weight", "192", "--rings", str(RINGS),
-                     "--no-progress"]) == 0
+                     "--seconds", str(SECONDS), "--no-progress"]) == 0
     out = capsys.readouterr().out
     print(out)
     warp, weft = (float(v) for v in re.search(r"bending = \[(\S+), (\S+)\]", out).groups())
@@ -160,7 +161,7 @@ def test_a_silhouette_image_of_the_drape_is_fitted_back(synthetic, tmp_path, cap
     assert seen.coefficient == pytest.approx(own.coefficient, abs=1e-9)
     assert seen.anisotropy == pytest.approx(own.anisotropy, abs=2e-3)
     assert cli.main(["fit", str(path), "--cusick", "--pixel", "0.0005", "--weight", "192",
-                     "--rings", str(RINGS), "--no-progress"]) == 0
+                     "--rings", str(RINGS), "--seconds", str(SECONDS), "--no-progress"]) == 0
     out = capsys.readouterr().out
     warp, weft = (float(v) for v in re.search(r"bending = \[(\S+), (\S+)\]", out).groups())
     assert warp == pytest.approx(9e-5, rel=0.02) and weft == pytest.approx(5e-5, rel=0.02)

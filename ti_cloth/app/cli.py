@@ -503,6 +503,8 @@ def build_parser() -> argparse.ArgumentParser:
     fit_parser.add_argument("scan", type=Path, nargs="?",
                             help="a Cusick drape scan (OBJ, PLY, ... in metres) or a top-view "
                                  "silhouette image (PNG, JPEG, ...: with --pixel), with --cusick")
+    fit_parser.add_argument("--seconds", type=float, default=2.0,
+                            help="each simulated drape's settling time [s] (default 2)")
     fit_parser.add_argument("--pixel", type=float,
                             help="a silhouette image's pixel side [m]")
     fit_parser.add_argument("--cusick", action="store_true",
@@ -595,7 +597,7 @@ def fit_drape(args) -> int:
                   file=sys.stderr) as bar:
             result = drape.fit_cusick(scan, args.weight, args.disc, args.support,
                                       stretch=stretch, shear=args.shear, rings=args.rings,
-                                      progress=lambda _: bar.update())
+                                      seconds=args.seconds, progress=lambda _: bar.update())
     except (ValueError, FileNotFoundError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
