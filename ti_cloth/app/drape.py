@@ -260,9 +260,10 @@ SIMULATED_FRAME = ((0.0, 0.0, 0.0), (0.0, 1.0, 0.0), (1.0, 0.0, 0.0))   # centre
 
 @dataclass(frozen=True)
 class DrapeFit:
-    """fit_cusick's answer: the Fabric, the scan's and the fit's measures, the residual
-    (DC, anisotropy), the parameters' uncertainty (relative, of G_warp and G_weft), the warp's
-    angle in the scan's frame [rad] and the drapes simulated."""
+    """fit_cusick's answer: the Fabric, the scan's and the fit's measures, the residual of the
+    measures fitted (log drop and drop anisotropy; a silhouette's coefficient and anisotropy),
+    the parameters' uncertainty (relative, of G_warp and G_weft), the warp's angle in the
+    scan's frame [rad] and the drapes simulated."""
 
     fabric: object
     scan: Drape
@@ -276,8 +277,9 @@ class DrapeFit:
 def fit_cusick(scan: Drape, weight: float, disc: float = DISC, support: float = SUPPORT,
                stretch: float = 1e3, shear: float = 50.0, rings: int = 12,
                seconds: float = 2.0, iterations: int = ITERATIONS, progress=None) -> DrapeFit:
-    """The Fabric of `weight` [g/m^2] whose simulated drape has the scan's drape coefficient
-    and anisotropy (module doc); `progress(step)` is called after each simulated drape."""
+    """The Fabric of `weight` [g/m^2] whose simulated drape has the scan's drop and drop
+    anisotropy (a silhouette's: its coefficient and anisotropy; module doc); `progress(step)`
+    is called after each simulated drape."""
     from ..body.fabric import Fabric
 
     density = finite_number("weight", weight, 0.0, strict=True, unit="g/m^2") / 1000.0
