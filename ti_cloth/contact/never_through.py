@@ -47,7 +47,7 @@ import taichi as ti
 
 from ..geometry import segment_distance, triangle_distance
 from ..runtime.plan import ITEM, STATE, Loop, Once, Phase, Until
-from .broad_phase.contact_pairs import torn_edge, torn_triangle
+from .broad_phase.contact_pairs import torn_pair
 
 MARGIN = 1e-6       # relative: (1) needs d0 + d1 > R (1 + MARGIN), (2) |b_k| > MARGIN max |b_k|
 PIECES = 8          # a step's parts, each checked by (1) or (2), for a pair the whole step fails
@@ -168,12 +168,7 @@ def check_pair(stage: ti.template(), pairs: ti.template(), model: ti.template(),
         corners = pairs.particles[p]
         elements = pairs.elements[p]
         vertex_triangle = p < stage.pair_start[stage.triangle_count]
-        torn = False                   # a torn sheet's pieces pass where its triangles were
-        if vertex_triangle:
-            torn = torn_triangle(stage, state, elements[1])
-        else:
-            torn = torn_edge(stage, state, elements[0]) or torn_edge(stage, state, elements[1])
-        if not torn and not _safe(stage.step_start, state.particle_position, corners,
+        if not torn_pair(stage, state, elements, vertex_triangle) and not _safe(stage.step_start, state.particle_position, corners,
                                   vertex_triangle):
             left = 0
             for k in ti.static(range(4)):

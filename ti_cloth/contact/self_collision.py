@@ -54,8 +54,7 @@ from .broad_phase.contact_pairs import (
     mean_edge,
     prefix_pairs,
     sweep_boxes,
-    torn_edge,
-    torn_triangle,
+    torn_pair,
 )
 from .colliders.collision import project_particle_out
 
@@ -525,13 +524,12 @@ def evaluate_pair(stage: ti.template(), pairs: ti.template(), model: ti.template
             touching, n, gap, w = _vertex_triangle(state.particle_position, stage.step_start,
                                                    corners, thickness)
             weights = ti.Vector([1.0, -w[0], -w[1], -w[2]])
-            touching = touching and not torn_triangle(stage, state, elements[1])
         else:
             touching, n, gap, s, t = _edge_edge(state.particle_position, stage.step_start,
                                                 corners, thickness)
             weights = ti.Vector([1.0 - s, s, t - 1.0, -t])
-            touching = (touching and not torn_edge(stage, state, elements[0])
-                        and not torn_edge(stage, state, elements[1]))
+        touching = touching and not torn_pair(stage, state, elements,
+                                              p < stage.pair_start[stage.triangle_count])
         pairs.active[p] = ti.select(touching, 1, 0)
         if touching:
             _contact_move(stage, pairs, model, state, p, corners, weights, n, gap,

@@ -189,6 +189,18 @@ def torn_edge(stage: ti.template(), state: ti.template(), e):
 
 
 @ti.func
+def torn_pair(stage: ti.template(), state: ti.template(), elements, vertex_triangle):
+    """Whether listed pair `elements` ((vertex, triangle) or (edge, edge)) lies beside a tear:
+    its triangle, or either edge, no longer collides (torn pieces pass where it was)."""
+    torn = False
+    if vertex_triangle:
+        torn = torn_triangle(stage, state, elements[1])
+    else:
+        torn = torn_edge(stage, state, elements[0]) or torn_edge(stage, state, elements[1])
+    return torn
+
+
+@ti.func
 def _triangle_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template(),
                     state: ti.template(), t, near, thickness, write):
     """Vertices v whose box over the step meets triangle t's grown by `near`, nearer to t now
