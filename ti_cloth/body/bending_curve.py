@@ -42,6 +42,7 @@ limited by it).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from itertools import pairwise
 
 import numpy as np
@@ -96,7 +97,7 @@ class BendingCurve:
         return cls(curvature=tuple(2.0 * h for h in WANG_HALF_CURVATURES), warp=tuple(warp),
                    weft=tuple(weft), bias=tuple(bias))
 
-    @property
+    @cached_property
     def twist(self) -> tuple:
         """D12 at each sample [N m] (module doc)."""
         warp, weft = np.array(self.warp), np.array(self.weft)
@@ -104,25 +105,25 @@ class BendingCurve:
             return tuple(np.sqrt(warp * weft).tolist())
         return tuple(np.maximum(2.0 * np.array(self.bias) - 0.5 * (warp + weft), 0.0).tolist())
 
-    @property
+    @cached_property
     def rigidities(self) -> np.ndarray:
         """(N, 3): D11, D22, D12 at each sample."""
         return np.stack([self.warp, self.weft, self.twist], axis=1)
 
-    @property
+    @cached_property
     def slopes(self) -> np.ndarray:
         """(N, 3): dD/dkappa on the segment starting at each sample, 0 past the last."""
         d, s = self.rigidities, np.array(self.curvature)
         return np.concatenate([np.diff(d, axis=0) / np.diff(s)[:, None], np.zeros((1, 3))])
 
-    @property
+    @cached_property
     def integrals(self) -> np.ndarray:
         """(N, 3): F_d at each sample [J/m^2] (module doc; segment_integral)."""
         d, m, s = self.rigidities, self.slopes, np.array(self.curvature)
         pieces = segment_integral(d[:-1], m[:-1], s[:-1, None], s[1:, None])
         return np.concatenate([np.zeros((1, 3)), np.cumsum(pieces, axis=0)])
 
-    @property
+    @cached_property
     def stiffest(self) -> np.ndarray:
         """(3,): each direction's largest tangent d(D kappa)/dkappa over the table [N m]."""
         d, m, s = self.rigidities, self.slopes, np.array(self.curvature)[:, None]
