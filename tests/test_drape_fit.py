@@ -140,6 +140,9 @@ def test_a_corrupted_scan_is_refused_naming_what_is_wrong(synthetic, tmp_path, c
     assert cli.main(["fit", str(path), "--cusick", "--weight", "192", "--disc", "0.2",
                      "--support", "0.25"]) == 2
     assert "support must be less than the disc's diameter 0.2 m" in capsys.readouterr().err
+    assert cli.main(["fit", str(path), "--cusick", "--weight", "192", "--rigidity", "1e-4",
+                     "1e-4"]) == 2
+    assert "--rigidity cannot be given with a drape fit" in capsys.readouterr().err
     assert cli.main(["fit", "--weight", "192"]) == 2
     assert "needs --bending-length or --rigidity and --stretch" in capsys.readouterr().err
 

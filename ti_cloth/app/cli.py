@@ -580,7 +580,15 @@ def fit_drape(args) -> int:
         print("error: a drape fit needs a scan and --cusick (ti-cloth fit SCAN --cusick "
               "--weight G)", file=sys.stderr)
         return 2
-    stretch = args.stretch[0] if args.stretch and len(args.stretch) == 1 else 1e3
+    unused = [flag for flag, value in (("--bending-length", args.bending_length),
+                                       ("--rigidity", args.rigidity),
+                                       ("--strip-test", args.strip_test)) if value]
+    if unused:
+        print(f"error: {', '.join(unused)} cannot be given with a drape fit (it fits the "
+              "bending; --stretch sets the moduli it keeps)", file=sys.stderr)
+        return 2
+    stretch = 1e3 if not args.stretch else (args.stretch[0] if len(args.stretch) == 1
+                                            else tuple(args.stretch))
     image = args.scan.suffix.lower() in IMAGE_SUFFIXES
     if image and args.pixel is None:
         print(f"error: a silhouette image ({args.scan.name}) needs --pixel, its pixels' side "
