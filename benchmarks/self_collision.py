@@ -10,15 +10,25 @@ Medians of several runs; the ratio is measured in the same run. With --profile, 
 each self-collision kernel and of the contact passes (the stage's phases, run by plan.run;
 launches timed one by one, so the total is a little higher).
 
+--scenes: scene files (the skirt and the cape demos), each stepped to --from seconds, then
+frames timed alternately without self-collision, with it (each step's integrator and the
+stages before self-collision in one team launch: Simulation's default), and with it launch by
+launch per stage (plan="per stage", how such a step ran before): ms per frame, medians, and
+the ratios within the run.
+
     python benchmarks/self_collision.py [--sizes 32 64 128] [--thickness 0.005] [--profile]
+    python benchmarks/self_collision.py --sizes --scenes demos/skirt_walk.toml demos/cape.toml
 """
 
 import argparse
+import dataclasses
 import statistics
 import time
 import types
+import warnings
 
 import ti_cloth as tc
+from ti_cloth.app.scene import load_scene
 from ti_cloth.contact import self_collision
 from ti_cloth.contact.broad_phase import box_grid
 
@@ -91,18 +101,58 @@ def profile(sim, steps):
     return {name: t / steps * 1e3 for name, t in sorted(spent.items(), key=lambda kv: -kv[1])}
 
 
+def scene_frames(path, start: float, frames: int, repeats: int) -> None:
+    """Print ms per frame of the scene at `path` without self-collision, with it, and with it
+    launch by launch per stage (module doc)."""
+    scene = load_scene(path)
+    steps = scene.resolved_substeps()
+    runs = {"free": (dataclasses.replace(scene, self_collision=None).build(), None),
+            "self-collision": (scene.build(), None),
+            "per stage": (scene.build(), "per stage")}
+    times = {name: [] for name in runs}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")       # the passes' reports: not what is timed
+        for sim, plan in runs.values():
+            sim.step(round(start / scene.frame_dt) * steps, plan=plan)
+        for _ in range(repeats):
+            for name, (sim, plan) in runs.items():
+                began = time.perf_counter()
+                sim.step(frames * steps, plan=plan)
+                sim.positions()
+                times[name].append((time.perf_counter() - began) / frames * 1e3)
+    ms = {name: statistics.median(values) for name, values in times.items()}
+    print(f"{scene.name:>12} {scene.cloth.particle_count:>9} {steps:>6} {ms['free']:>9.1f} "
+          f"{ms['self-collision']:>15.1f} {ms['per stage']:>10.1f} "
+          f"{ms['self-collision'] / ms['free']:>11.2f} "
+          f"{ms['per stage'] / ms['self-collision']:>17.2f} "
+          f"{scene.frame_dt * 1e3 / ms['self-collision']:>10.2f}")
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sizes", type=int, nargs="+", default=[32, 64, 128])
+    parser.add_argument("--sizes", type=int, nargs="*", default=[32, 64, 128])
     parser.add_argument("--arch", default="cpu", choices=["cpu", "cuda", "vulkan", "gpu"])
     parser.add_argument("--precision", default="f32", choices=["f32", "f64"])
     parser.add_argument("--thickness", type=float, default=0.005)
     parser.add_argument("--steps", type=int, default=40)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--profile", action="store_true")
+    parser.add_argument("--scenes", nargs="*", default=[], help="scene files (module doc)")
+    parser.add_argument("--from", dest="start", type=float, default=1.0,
+                        help="seconds each scene runs before its frames are timed")
+    parser.add_argument("--frames", type=int, default=5, help="frames per timed scene run")
     args = parser.parse_args(argv)
     tc.init(arch=args.arch, precision=args.precision)
+    if args.scenes:
+        print(f"scenes from t = {args.start:g} s, ms per frame, median of {args.repeats} runs "
+              f"x {args.frames} frames, alternated")
+        print(f"{'scene':>12} {'particles':>9} {'steps':>6} {'free':>9} {'self-collision':>15} "
+              f"{'per stage':>10} {'/ free':>11} {'per stage / it':>17} {'real time':>10}")
+        for path in args.scenes:
+            scene_frames(path, args.start, args.frames, args.repeats)
     contact = tc.SelfCollision(thickness=args.thickness)
+    if not args.sizes:
+        return
     print(f"arch={args.arch} precision={args.precision} thickness={args.thickness} m, median of "
           f"{args.repeats} runs x {args.steps} steps")
     print(f"{'N':>5} {'scene':>6} {'integrator':>17} {'free ms/step':>13} "

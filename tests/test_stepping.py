@@ -310,8 +310,11 @@ def test_every_stage_but_self_collision_runs_in_team_launches(f64):
                    dict(wind=tc.Wind(velocity=(1.0, 0.0, 0.0))),
                    dict(handles=[tc.Handle([0], lambda t: (0.0, 0.0, 0.0))])):
         assert tc.Simulation(cloth, dt=1e-4, **kwargs).many_steps is not None, kwargs
-    assert tc.Simulation(cloth, dt=1e-4, self_collision=tc.SelfCollision(
-        thickness=0.01)).many_steps is None
+    with_contact = tc.Simulation(cloth, dt=1e-4, self_collision=tc.SelfCollision(
+        thickness=0.01))
+    assert with_contact.many_steps is not None      # its steps' heads (next test)
+    with pytest.raises(ValueError, match="per stage"):
+        with_contact.step(1, plan="many steps")
     wind = tc.Wind(velocity=(1.0, 0.0, 0.0))    # rk4's phases evaluate it at each RK stage
     assert tc.Simulation(cloth, integrator="rk4", dt=1e-4, wind=wind).many_steps is not None
 
@@ -448,3 +451,45 @@ def test_benchmark_runs_and_writes_its_table(tmp_path):
     text = out.read_text().splitlines()
     assert text[0].startswith("arch,precision,N,")
     assert [line.split(",")[5] for line in text[1:]] == ["ti_cloth symplectic_euler", "ti_cloth pbd", "numpy"]
+
+
+def folding_scene(monkeypatch, plan):
+    """Two sheets 15 mm apart falling onto a ball, a corner of the lower one led by a
+    handle, with colliders, strain limiting, tearing and self-collision; its calls recorded by
+    stage; `plan` "team" forces a team of two on every launch of a step's head."""
+    mesh = tc.grid_mesh(10, 10, size=(0.6, 0.6), plane="xz")
+    cloth = tc.Cloth.combine([tc.Cloth(tc.Mesh(mesh.vertices + [0.0, dy, 0.0], mesh.triangles),
+                                       tc.Material()) for dy in (0.0, 0.015)])
+    sim = tc.Simulation(
+        cloth, integrator="xpbd", dt=1 / 240,
+        colliders=[tc.Sphere(centre=(0.3, -0.15, 0.3), radius=0.12), tc.Plane(point=(0, -0.3, 0))],
+        handles=[tc.Handle([0], lambda t: (0.4 * t, 0.3 * t, 0.0))],
+        strain_limit=tc.StrainLimit(max_strain=0.1), tearing=3.0,
+        self_collision=tc.SelfCollision(thickness=0.01, friction=0.2))
+    if plan == "team":
+        monkeypatch.setattr(sim.many_steps, "adaptive", False)
+        monkeypatch.setattr(sim.many_steps, "workers", 2)
+        monkeypatch.setattr(stepping, "TEAM_MIN_SPRING_STEPS", 0)
+        monkeypatch.setattr(stepping, "TEAM_MIN_SPRINGS", 0)
+    return sim, record_stages(monkeypatch)
+
+
+@pytest.mark.parametrize("plan", ["default", "team"])
+def test_with_self_collision_a_steps_head_is_one_team_launch_with_the_same_bits(
+        threads, monkeypatch, plan):
+    """With self-collision, whose list is made on the host between steps, each step runs the
+    integrator and the stages before self-collision (handles, strain limiting, colliders) in
+    one team launch, then self-collision and tearing launch by launch: the order of
+    STEP_ORDER, and the bits of a launch per stage, on one worker or a team of two."""
+    steps = 60
+    sim, calls = folding_scene(monkeypatch, plan)
+    sim.step(steps)
+    assert calls == ["tearing"] * steps, "the head ran in the launch, tearing after it"
+    assert len(sim.self_contacts().vertex_triangle) > 0, "the sheets touch"
+    staged, staged_calls = folding_scene(monkeypatch, "default")
+    for _ in range(steps):
+        staged.step(1, plan="per stage")
+    assert staged_calls == ["integrator", "handles", "strain_limit", "colliders",
+                            "tearing"] * steps
+    np.testing.assert_array_equal(sim.positions(), staged.positions())
+    np.testing.assert_array_equal(sim.velocities(), staged.velocities())

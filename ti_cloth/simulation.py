@@ -184,10 +184,18 @@ class Simulation:
         self.step_count = 0
         self._diverged: SimulationDiverged | None = None
         self._place_handles_at_start()
-        # Many steps per launch on the CPU when every stage runs in a team launch; made on
-        # first use (kept with the lent objects).
-        self._many_per_launch = (backend.config().arch == "cpu" and all(
-            stage.launched is not None for stage in self._stages.values()))
+        # Many steps per launch on the CPU when every stage runs in a team launch; with
+        # self-collision (whose list is made on the host), each step's integrator and the
+        # stages before self-collision in one team launch, the rest launch by launch (made
+        # on first use, kept with the lent objects).
+        head = {name: stage for name, stage in self._stages.items()
+                if self.self_collision is None
+                or STEP_ORDER.index(name) < STEP_ORDER.index("self_collision")}
+        teamed = backend.config().arch == "cpu" and all(
+            stage.launched is not None for stage in head.values())
+        self._many_per_launch = teamed and len(head) == len(self._stages)
+        self._team_head = head if teamed else None
+        self._tail = [stage for name, stage in self._stages.items() if name not in head]
 
     def _lend(self, parts: dict) -> dict:
         """The objects this simulation passes to kernels, {name: cls(*args)}, lent by the pool
@@ -285,8 +293,9 @@ class Simulation:
         plan: how the steps are launched (PLANS). None takes the default, decided by the
         arch and the simulation alone: on the CPU many steps per launch when every stage runs
         there (many_steps), a single step too (one kernel serves a simulation stepped one
-        and many at a time: each plan compiles the whole step, docs/performance.md); else a
-        launch per stage. "per stage" or "many steps" forces one (ValueError if this
+        and many at a time: each plan compiles the whole step, docs/performance.md); with
+        self-collision a launch per step of the integrator and the stages before it, then a
+        launch per stage for the rest; on GPUs a launch per stage. "per stage" or "many steps" forces one (ValueError if this
         simulation has no many-steps plan). Every plan gives the same bits, on every rerun
         and thread count (exact IEEE arithmetic: runtime/backend.py)."""
         self._check_runtime()
@@ -305,6 +314,8 @@ class Simulation:
         try:
             if many:
                 self._step_many(n)
+            elif plan is None and self._team_head is not None:
+                self._step_teamed(n)
             else:
                 for _ in range(n):
                     self._step_once()
@@ -357,6 +368,24 @@ class Simulation:
             self._step_once()
             n -= 1
 
+    def _step_teamed(self, n: int) -> None:
+        """n steps, each the integrator and the stages before self-collision in one team
+        launch (stepping.py), then self-collision and the stages after it launch by launch:
+        the order of STEP_ORDER, the same bits as _step_once. A step in which a handle lets
+        go runs stage by stage."""
+        for _ in range(n):
+            for stage in self._tail:
+                if stage in self._before:
+                    stage.before_step(self.state, self.time)
+            if self.many_steps.run(self._stepper, self.model, self.state, self.forces, self.dt,
+                                   self.step_count, 1, self.handles, run_length=n) == 0:
+                self._step_once()
+                continue
+            self.step_count += 1
+            for stage in self._tail:
+                stage.after_step(self.model, self.state, self.time, self.dt,
+                                 self.step_count - 1)
+
     def _step_once(self) -> None:
         """One step, launch by launch: the stages of STEP_ORDER this simulation has."""
         for stage in self._before:
@@ -369,13 +398,16 @@ class Simulation:
     @property
     def many_steps(self) -> stepping.ManySteps | None:
         """The plan that runs steps in few launches (step(n > 1), and every step of an
-        integrator that is not fused), or None when steps go launch by launch."""
-        if not self._many_per_launch:
+        integrator that is not fused); with self-collision, the one that runs each step's
+        integrator and the stages before self-collision in one launch; None when steps go
+        launch by launch."""
+        if self._team_head is None:
             return None
-        key = ("many_steps", self._tearing, self.integrator.fused)
+        key = ("many_steps", self._tearing if self._many_per_launch else None,
+               self.integrator.fused, tuple(self._team_head))
         if key not in self._lent:
             self._lent[key] = stepping.ManySteps(stepping.TeamStages(
-                {name: stage.launched for name, stage in self._stages.items()},
+                {name: stage.launched for name, stage in self._team_head.items()},
                 self.integrator.fused))
         return self._lent[key]
 

@@ -15,8 +15,9 @@ Stage. Its work is written once, as phases (runtime/plan.py), which its after_st
 and which many-steps launches (stepping.py) run inside the launch on the stage's `launched`
 object. Self-collision's contact passes are phases too, but it has no `launched` object: its
 candidate list is made again on the host whenever the cloth has moved more than the list's
-skin (it may grow, and the growth is a new kernel), so it runs launch by launch, and a
-simulation that has it steps launch by launch.
+skin (it may grow, and the growth is a new kernel), so it runs launch by launch: a
+simulation that has it runs each step's integrator and earlier stages in one team launch on
+the CPU, then self-collision and tearing launch by launch.
 """
 
 from __future__ import annotations

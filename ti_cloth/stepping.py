@@ -27,8 +27,10 @@ start time (plan.py's NOW.time: the wind's gusts, sampled animations), except wh
 can compute, a user's callable (a handle's or a collider's path, a callable animation): that
 is tabled for the launch's steps; a launch ends at the step after which a
 handle lets go (its particles are free from that step's handle stage on: that step runs stage
-by stage). Self-collision steps one launch per stage, as GPUs always do (its passes are
-phases, but its candidate list is made on the host between them).
+by stage). With self-collision (its passes are phases, but its candidate list is made on
+the host between steps) each step is a launch of the integrator and the stages before
+self-collision, then self-collision and tearing a launch each (Simulation._step_teamed); GPUs
+launch per stage.
 
 Every worker evaluates each spring and particle with the same formula and in the same order
 as a launch per phase (the same phases: runtime/plan.py), and sums in fixed blocks,
@@ -249,11 +251,16 @@ class ManySteps:
         self._cost.setdefault(workers, deque(maxlen=RECENT_LAUNCHES)).append(seconds / work)
 
     def run(self, integrator, model, state, forces, dt: float, first: int, count: int,
-            handles=None) -> int:
+            handles=None, run_length: int | None = None) -> int:
         """Up to `count` steps; stops after the launch in which a step diverged, and before
         a step in which a handle lets go (the caller runs that one stage by stage). Returns
         how many steps ran. handles: the HandleSet (whose table is this plan's stages').
-        Raises TeamStalled if a barrier gave up on a worker (the state is then unusable)."""
+        run_length: the steps the caller runs back to back, a launch each (a simulation with
+        self-collision, whose list is made on the host between steps), `count` unless given:
+        the team is chosen for that run's work (workers_for), as it would be for one launch
+        of it (a barrier's cost is per step, the pool's wake-up a small part of a big
+        step). Raises TeamStalled if a barrier gave up on a worker (the state is then
+        unusable)."""
         work = integrator.workspace(model, state)
         plan.note_launch(plan.nodes_of(integrator, "phases", model, forces, work), "team")
         for name in STEP_ORDER[1:]:
@@ -273,14 +280,16 @@ class ManySteps:
             if moving:
                 colliders.schedule(step, chunk, dt)
             serial = self.serial(model)
-            workers = 1 if serial else self.workers_for(integrator, model, chunk)
+            workers = 1 if serial else self.workers_for(integrator, model,
+                                                        max(chunk, run_length or 0))
             team = self.team
             team.set_size(workers)
             began = time.perf_counter()
             advance_many(integrator, model, state, forces, work, self.stages, team, dt, step,
                          chunk, not state.prev_valid, int(moving), serial)
             spring_steps = chunk * integrator.step_work(model)
-            if not serial and spring_steps >= TEAM_MIN_SPRING_STEPS:
+            if not serial and max(chunk, run_length or 0) * integrator.step_work(model) \
+                    >= TEAM_MIN_SPRING_STEPS:
                 self.timed(workers, spring_steps, time.perf_counter() - began)
             if team.stalled():
                 raise TeamStalled(

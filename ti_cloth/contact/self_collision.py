@@ -322,7 +322,8 @@ class SelfCollisionStage:
             self._make_list(model, state, step_index)
         if self.pair_total == 0:
             return
-        plan.run(self, model, state, None, self.candidates, dt, step_index, False)
+        plan.run(self, model, state, None, self.candidates, dt, step_index, False,
+                 serial=True)
         if self.left_deep[None]:
             self._report(thickness + float(self.deepest[None]), step_index)
         if self.settings.never_through:

@@ -340,15 +340,15 @@ def launch_serial(owner: ti.template(), part: ti.template(), model: ti.template(
 
 
 def run(owner, model, state, forces, work, dt: float, step: int, start: bool,
-        part: str = "phases", time: float | None = None) -> None:
+        part: str = "phases", time: float | None = None, serial: bool | None = None) -> None:
     """owner's nodes (its method `part`) for step `step` of dt [s], which starts at `time`
-    [s] (step x dt unless given): one serial launch when serial_is_faster, else a launch per
-    run of leaves (module doc)."""
+    [s] (step x dt unless given): one serial launch when `serial` (None: when
+    serial_is_faster), else a launch per run of leaves (module doc)."""
     nodes = nodes_of(owner, part, model, forces, work)
     note_launch(nodes, ("run", part))
     args = (owner, part, model, state, forces, work, dt, step, int(start),
             step * dt if time is None else time)
-    if serial_is_faster(model):
+    if serial_is_faster(model) if serial is None else serial:
         launch_serial(*args)
         return
     _run_nodes(args, nodes, ())
