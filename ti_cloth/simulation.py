@@ -295,8 +295,9 @@ class Simulation:
         there (many_steps), a single step too (one kernel serves a simulation stepped one
         and many at a time: each plan compiles the whole step, docs/performance.md); with
         self-collision a launch per step of the integrator and the stages before it, then a
-        launch per stage for the rest; on GPUs a launch per stage. "per stage" or "many steps" forces one (ValueError if this
-        simulation has no many-steps plan). Every plan gives the same bits, on every rerun
+        launch per stage for the rest; on GPUs a launch per stage. "per stage" or "many
+        steps" forces one (ValueError if this simulation has no many-steps plan: one with
+        self-collision, or on a GPU). Every plan gives the same bits, on every rerun
         and thread count (exact IEEE arithmetic: runtime/backend.py)."""
         self._check_runtime()
         integer("n", n, 0, limits.STEPS.high - self.step_count)
