@@ -6,6 +6,7 @@ runs (strain limiting, colliders standing and scripted, tearing, wind, handles),
 divergence guard must name the same step whichever plan ran."""
 
 import importlib.util
+import warnings
 import sys
 from pathlib import Path
 from types import SimpleNamespace
@@ -454,17 +455,18 @@ def test_benchmark_runs_and_writes_its_table(tmp_path):
 
 
 def folding_scene(monkeypatch, plan):
-    """Two sheets 15 mm apart falling onto a ball, a corner of the lower one led by a
-    handle, with colliders, strain limiting, tearing and self-collision; its calls recorded by
-    stage; `plan` "team" forces a team of two on every launch of a step's head."""
-    mesh = tc.grid_mesh(10, 10, size=(0.6, 0.6), plane="xz")
-    cloth = tc.Cloth.combine([tc.Cloth(tc.Mesh(mesh.vertices + [0.0, dy, 0.0], mesh.triangles),
-                                       tc.Material()) for dy in (0.0, 0.015)])
+    """Two sheets 8 mm apart (under the 10 mm thickness: in contact from the first step),
+    without gravity, a corner of the lower one drawn sideways by a handle, with a collider,
+    tearing and self-collision; its calls recorded by stage; `plan` "team" forces a team of
+    two on every launch of a step's head."""
+    mesh = tc.grid_mesh(8, 8, size=(0.5, 0.5), plane="xz")
+    cloth = tc.Cloth.combine([tc.Cloth(tc.Mesh(mesh.vertices + shift, mesh.triangles),
+                                       tc.Material())
+                              for shift in ([0.0, 0.0, 0.0], [0.023, 0.008, 0.017])])
     sim = tc.Simulation(
-        cloth, integrator="xpbd", dt=1 / 240,
-        colliders=[tc.Sphere(centre=(0.3, -0.15, 0.3), radius=0.12), tc.Plane(point=(0, -0.3, 0))],
-        handles=[tc.Handle([0], lambda t: (0.4 * t, 0.3 * t, 0.0))],
-        strain_limit=tc.StrainLimit(max_strain=0.1), tearing=3.0,
+        cloth, integrator="symplectic_euler", dt=2e-4, gravity=(0.0, 0.0, 0.0),
+        colliders=[tc.Plane(point=(0, -0.3, 0))],
+        handles=[tc.Handle([0], lambda t: (0.5 * t, 0.0, 0.0))], tearing=3.0,
         self_collision=tc.SelfCollision(thickness=0.01, friction=0.2))
     if plan == "team":
         monkeypatch.setattr(sim.many_steps, "adaptive", False)
@@ -474,22 +476,25 @@ def folding_scene(monkeypatch, plan):
     return sim, record_stages(monkeypatch)
 
 
-@pytest.mark.parametrize("plan", ["default", "team"])
 def test_with_self_collision_a_steps_head_is_one_team_launch_with_the_same_bits(
-        threads, monkeypatch, plan):
+        threads, monkeypatch):
     """With self-collision, whose list is made on the host between steps, each step runs the
-    integrator and the stages before self-collision (handles, strain limiting, colliders) in
+    integrator and the stages before self-collision (handles, colliders) in
     one team launch, then self-collision and tearing launch by launch: the order of
-    STEP_ORDER, and the bits of a launch per stage, on one worker or a team of two."""
-    steps = 60
-    sim, calls = folding_scene(monkeypatch, plan)
-    sim.step(steps)
-    assert calls == ["tearing"] * steps, "the head ran in the launch, tearing after it"
-    assert len(sim.self_contacts().vertex_triangle) > 0, "the sheets touch"
-    staged, staged_calls = folding_scene(monkeypatch, "default")
-    for _ in range(steps):
-        staged.step(1, plan="per stage")
-    assert staged_calls == ["integrator", "handles", "strain_limit", "colliders",
-                            "tearing"] * steps
+    STEP_ORDER, and the bits of a launch per stage (a team of two here; one worker runs
+    the same kernel: team.py)."""
+    steps = 40
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")    # started within the thickness: what is left, told
+        sim, calls = folding_scene(monkeypatch, "team")
+        sim.step(steps)
+        assert calls == ["tearing"] * steps, "the head ran in the launch, tearing after it"
+        staged, staged_calls = folding_scene(monkeypatch, "default")
+        for _ in range(steps):
+            staged.step(1, plan="per stage")
+    height = sim.positions()[:, 1]
+    apart = np.median(height[64:]) - np.median(height[:64])
+    assert apart > 0.009, f"the passes pushed the sheets from 8 mm to the thickness: {apart}"
+    assert staged_calls == ["integrator", "handles", "colliders", "tearing"] * steps
     np.testing.assert_array_equal(sim.positions(), staged.positions())
     np.testing.assert_array_equal(sim.velocities(), staged.velocities())
