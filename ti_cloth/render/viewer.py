@@ -8,7 +8,10 @@ particle is pinned (inverse mass 0: the integrator leaves it, its neighbours fol
 their springs or elements, as Verlet's pins in the lecture) and put, before each frame's steps,
 where the ray through the cursor meets the plane through its grab point that faces the camera,
 with the velocity of that move. Releasing the button gives its mass back (a particle the scene
-pins keeps its pin where it was dragged) and it goes on with that velocity. A right-button
+pins keeps its pin where it was dragged) and it goes on with that velocity. A drag is never
+lost to a slow frame: a release that comes before any frame has shown the particle's last
+target (a press, moves and release all in one batch of a busy window) runs that frame first,
+so a slow machine drops frames, not input. A right-button
 drag orbits the camera about its target, the wheel or +/- zooms.
 
 A step that diverges pauses the viewer with the error on screen until "r".
@@ -75,6 +78,7 @@ class Viewer:
         self.width, self.height = renderer.width, renderer.height
         self.paused = self.wireframe = self.quit = False
         self.held = None                       # (particle, depth, scene pinned it, target)
+        self.unshown = False                   # the held particle's target not yet stepped to
         self.velocity = np.zeros(3)
         self.orbiting = None                   # the cursor where a right drag is now
         self.saved = self.unsaved = None       # the last state saved; why the last "s" failed
@@ -100,6 +104,8 @@ class Viewer:
         if event.kind == "press" and event.button == "left":
             self.grab(event.x, event.y)
         elif event.kind == "release" and event.button == "left":
+            if self.held is not None and self.unshown:
+                self.advance()                 # the drag's last target shows (module doc)
             self.let_go()
         elif event.kind == "press" and event.button == "right":
             self.orbiting = (event.x, event.y)
@@ -112,6 +118,7 @@ class Viewer:
             if self.held is not None:
                 particle, depth, pinned, _ = self.held
                 self.held = (particle, depth, pinned, self.unproject(event.x, event.y, depth))
+                self.unshown = True
         elif event.kind == "wheel":
             notches = max(-ZOOM_NOTCHES, min(ZOOM_NOTCHES, float(event.delta)))
             self.zoom(ZOOM ** -notches)
@@ -166,6 +173,7 @@ class Viewer:
         _, depth = self.camera.project(position, self.width, self.height)
         pinned = self.sim.pinned()
         self.held = (particle, float(depth[0]), bool(pinned[particle]), position)
+        self.unshown = True
         pinned[particle] = True
         self.sim.model.set_pinned(pinned)
         self.velocity = np.zeros(3)
@@ -241,6 +249,7 @@ class Viewer:
             return
         if self.held is not None:
             self._hold()
+            self.unshown = False
         try:
             self.sim.step(self.substeps)
         except SimulationDiverged as err:
