@@ -6,8 +6,8 @@ runs (strain limiting, colliders standing and scripted, tearing, wind, handles),
 divergence guard must name the same step whichever plan ran."""
 
 import importlib.util
-import warnings
 import sys
+import warnings
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -465,7 +465,7 @@ def folding_scene(monkeypatch, plan):
                               for shift in ([0.0, 0.0, 0.0], [0.023, 0.008, 0.017])])
     sim = tc.Simulation(
         cloth, integrator="symplectic_euler", dt=2e-4, gravity=(0.0, 0.0, 0.0),
-        colliders=[tc.Plane(point=(0, -0.3, 0))],
+        colliders=[tc.Plane(point=(0.0, -0.3, 0.0))],
         handles=[tc.Handle([0], lambda t: (0.5 * t, 0.0, 0.0))], tearing=3.0,
         self_collision=tc.SelfCollision(thickness=0.01, friction=0.2))
     if plan == "team":
