@@ -384,8 +384,8 @@ class SelfCollisionStage:
                 f"self-collision left a contact {distance / thickness:.2f} of the thickness "
                 f"apart ({distance:.3g} m of {thickness:.3g} m) after "
                 f"{self.settings.iterations} passes in step {step_index}: a layer may be held "
-                "against another by a pin, a handle or a collider, or the pile is too dense "
-                "for the passes; raise SelfCollision.iterations, add substeps or use a smaller "
+                "against another by a pin, a handle, a collider or a seam being sewn shut, or "
+                "the pile is too dense for the passes; raise SelfCollision.iterations, add substeps or use a smaller "
                 "thickness (Simulation.self_contacts().closest_left follows the nearest)",
                 stacklevel=2)
 
