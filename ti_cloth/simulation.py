@@ -404,8 +404,8 @@ class Simulation:
         launch by launch."""
         if self._team_head is None:
             return None
-        key = ("many_steps", self._tearing if self._many_per_launch else None,
-               self.integrator.fused, tuple(self._team_head))
+        key = ("many_steps", self._team_head.get("tearing"), self.integrator.fused,
+               tuple(self._team_head))
         if key not in self._lent:
             self._lent[key] = stepping.ManySteps(stepping.TeamStages(
                 {name: stage.launched for name, stage in self._team_head.items()},

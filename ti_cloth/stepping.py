@@ -280,16 +280,15 @@ class ManySteps:
             if moving:
                 colliders.schedule(step, chunk, dt)
             serial = self.serial(model)
-            workers = 1 if serial else self.workers_for(integrator, model,
-                                                        max(chunk, run_length or 0))
+            judged = max(chunk, run_length or 0)       # the steps the team is chosen for
+            workers = 1 if serial else self.workers_for(integrator, model, judged)
             team = self.team
             team.set_size(workers)
             began = time.perf_counter()
             advance_many(integrator, model, state, forces, work, self.stages, team, dt, step,
                          chunk, not state.prev_valid, int(moving), serial)
             spring_steps = chunk * integrator.step_work(model)
-            if not serial and max(chunk, run_length or 0) * integrator.step_work(model) \
-                    >= TEAM_MIN_SPRING_STEPS:
+            if not serial and judged * integrator.step_work(model) >= TEAM_MIN_SPRING_STEPS:
                 self.timed(workers, spring_steps, time.perf_counter() - began)
             if team.stalled():
                 raise TeamStalled(
