@@ -177,33 +177,52 @@ def point_segment_distance(p, a, b):
 
 
 @ti.func
-def triangle_distance(p, a, b, c):
-    """The distance from point p to triangle abc (5.1.5: the Voronoi region of p's closest
-    feature, a corner, an edge or the face)."""
+def triangle_closest(p, a, b, c):
+    """(the point of triangle abc nearest to p, its barycentric coordinates (w_a, w_b, w_c),
+    whether the triangle has an area) (Ericson, "Real-time collision detection", 2005, 5.1.5:
+    the Voronoi region of p's closest feature, a corner, an edge or the face). A triangle of no
+    area may give a, (1, 0, 0)."""
     ab, ac = b - a, c - a
     d1, d2 = ab.dot(p - a), ac.dot(p - a)
     d3, d4 = ab.dot(p - b), ac.dot(p - b)
     d5, d6 = ab.dot(p - c), ac.dot(p - c)
     va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
     closest = a
+    w = ti.Vector([1.0, 0.0, 0.0])
     if d1 <= 0.0 and d2 <= 0.0:
         closest = a
     elif d3 >= 0.0 and d4 <= d3:
         closest = b
+        w = ti.Vector([0.0, 1.0, 0.0])
     elif vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
-        closest = a + d1 / (d1 - d3) * ab
+        s = d1 / (d1 - d3)
+        closest = a + s * ab
+        w = ti.Vector([1.0 - s, s, 0.0])
     elif d6 >= 0.0 and d5 <= d6:
         closest = c
+        w = ti.Vector([0.0, 0.0, 1.0])
     elif vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
-        closest = a + d2 / (d2 - d6) * ac
+        s = d2 / (d2 - d6)
+        closest = a + s * ac
+        w = ti.Vector([1.0 - s, 0.0, s])
     elif va <= 0.0 and d4 - d3 >= 0.0 and d5 - d6 >= 0.0:
-        closest = b + (d4 - d3) / ((d4 - d3) + (d5 - d6)) * (c - b)
-    else:
+        s = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        closest = b + s * (c - b)
+        w = ti.Vector([0.0, 1.0 - s, s])
+    elif va + vb + vc > 0.0:
         area = va + vb + vc
-        if area > 0.0:
-            closest = a + (vb / area) * ab + (vc / area) * ac
+        closest = a + (vb / area) * ab + (vc / area) * ac
+        w = ti.Vector([1.0 - (vb + vc) / area, vb / area, vc / area])
+    return closest, w, va + vb + vc > 0.0
+
+
+@ti.func
+def triangle_distance(p, a, b, c):
+    """The distance from point p to triangle abc (triangle_closest; a triangle of no area: the
+    nearest of its three edges)."""
+    closest, _, has_area = triangle_closest(p, a, b, c)
     distance = (p - closest).norm()
-    if not va + vb + vc > 0.0:          # no area: the nearest of its three edges
+    if not has_area:
         distance = ti.min(point_segment_distance(p, a, b), point_segment_distance(p, b, c),
-                          point_segment_distance(p, c, a))
+                          point_segment_distance(p, c, a))       # no area: its nearest edge
     return distance

@@ -48,7 +48,8 @@ def cloth_edges(cloth) -> tuple[np.ndarray, np.ndarray]:
 @backend.kernel_argument
 class PairList:
     """Room for `capacity` listed pairs: each pair's elements ((vertex, triangle) or (edge,
-    edge)), its four particles, whether it is in contact and its four particles' moves; and
+    edge)), its four particles, whether it is in contact, its four particles' moves and their
+    shares of them (self_collision.py: the weight of a move in its particle's mean); and
     per particle, the slots 4 p + k that move it (contact, indexed by the stage's
     contact_start). A bigger list replaces a full one (its kernels compile again, once)."""
 
@@ -60,6 +61,7 @@ class PairList:
         self.particles = fields.vector(4, ti.i32, capacity)
         self.active = fields.scalar(ti.i32, capacity)
         self.move = fields.vector(3, real, 4 * capacity)
+        self.share = fields.scalar(real, 4 * capacity)
         self.contact = fields.scalar(ti.i32, 4 * capacity)
         fields.finalize(self)
 
