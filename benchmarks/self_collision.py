@@ -33,7 +33,7 @@ from ti_cloth.contact import self_collision
 from ti_cloth.contact.broad_phase import box_grid
 
 KERNELS = {self_collision: ("displacement_box", "sweep_boxes", "mean_edge", "list_pairs",
-                            "prefix_pairs", "index_contacts"),
+                            "prefix_pairs"),
            box_grid.BoxGrid: ("build",)}   # where the stage looks them up
 PASSES = "contact passes"   # self_collision's plan.run: the stage's phases
 

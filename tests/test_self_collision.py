@@ -598,7 +598,8 @@ def offset_stack(layers: int, n: int, size: float, thickness: float) -> tc.Cloth
     edge = size / (n - 1)
     return tc.Cloth.combine([
         tc.Cloth(tc.grid_mesh(n, n, size=(size, size), plane="xz",
-                              origin=(0.37 * edge * k, 0.001 + 1.2 * thickness * k, 0.23 * edge * k)),
+                              origin=(0.37 * edge * k, 0.001 + 1.2 * thickness * k,
+                                      0.23 * edge * k)),
                  tc.Material())
         for k in range(layers)])
 

@@ -18,8 +18,9 @@ mass-weighted as a position-based constraint: particle k moves by -w_k g_k (C n 
 W = sum_j w_j g_j^2, where f is the Coulomb friction correction: the tangential relative motion
 of the two contact points over the step, removed entirely when it is at most
 friction x penetration depth, shortened by that much otherwise (as the colliders do). Each
-particle gathers its contacts' moves in list order and takes their mean (Jacobi with averaging:
-many contacts on one particle do not add up to an overshoot).
+particle sums its contacts' moves in list order (the passes are one serial launch: no atomics)
+and takes their mean (Jacobi with averaging: many contacts on one particle do not add up to an
+overshoot).
 
 Stacking (SelfCollision.stacking): a resting contact moves its upper side. Under gravity every
 layer of a pile falls g h^2 in a step and the ground stops only the lowest, so each step the
@@ -37,10 +38,20 @@ over the step by at most RESTING |g| h^2 (a resting layer approaches the one und
 most that (it is held up: by the ground, by the layers under it), r falling to 0 at twice
 either. A contact facing sideways, an impact, a contact in free fall and a simulation without
 gravity stay mass-weighted (they keep their momentum); the lower side keeps a share (STACK), so
-that a contact pressed by a held upper side still moves it. A particle takes the sum of its contacts' moves over the sum
-of their weights s, or over 1 where that is less: with every s = 1 the mean; a scaled move is
-not diluted by the full ones (a layer lifted from below and pressed from above rises), and a
-particle on the lower side only is not moved more than its scaled moves.
+that a contact pressed by a held upper side still moves it. A particle takes the sum of its
+contacts' moves over the sum of their weights s, or over 1 where that is less: with every
+s = 1 the mean; a scaled move is not diluted by the full ones (a layer lifted from below and
+pressed from above rises), and a particle on the lower side only is not moved more than its
+scaled moves.
+
+Near pairs: the first pass of a step evaluates every listed pair and marks those whose gap
+(height over the plane, or distance, minus the thickness; negative for a pair that crossed)
+is below NEAR thicknesses; later passes evaluate only those, until some particle has moved
+NEAR / 2 thicknesses since that evaluation, when the next pass evaluates every pair again.
+Two particles that each moved less than NEAR / 2 came nearer by less than NEAR, so a pair
+left out is not in contact where it is skipped (a vertex that turns from beside a triangle to
+under it moves at least a thickness): the passes are the same as if they evaluated every
+pair, at a fraction of the cost (a pile's 24,000 listed pairs against its 2,000 near).
 
 No float atomics except exact max/min, so reruns and thread counts give the same bits.
 Velocities follow the positions' correction (v += dx / h), as after strain limiting.
@@ -71,7 +82,6 @@ from .broad_phase.contact_pairs import (
     PairList,
     cloth_edges,
     displacement_box,
-    index_contacts,
     list_pairs,
     mean_edge,
     prefix_pairs,
@@ -88,6 +98,7 @@ RESOLVED = 0.01             # a contact shallower than this (in thicknesses) end
 CROWDED = 0.5               # a contact left nearer than this (in thicknesses) is reported
 STACK = 0.01                # the lower side's weight in a resting contact facing up (stacking)
 RESTING = 4.0               # a contact approaching by at most this x |g| h^2 in a step rests
+NEAR = 0.5                  # a pair within this (in thicknesses) of contact is evaluated every pass
 INSIDE = 1e-6               # a foot this far outside a triangle (in barycentric terms) is inside
 
 
@@ -223,8 +234,11 @@ class SelfCollisionStage:
         self.go = fields.scalar(ti.i32, ())       # 1: another pass (or the last evaluation)
         self.applying = fields.scalar(ti.i32, ())     # 1: this pass moves the particles
         self.left_deep = fields.scalar(ti.i32, ())    # 1: the passes ran out, contacts deep
-        self.contact_start = fields.scalar(ti.i32, n + 1)
-        self.contact_fill = fields.scalar(ti.i32, n)
+        self.full = fields.scalar(ti.i32, ())         # 1: this pass evaluates every pair
+        self.near_at = fields.vector(3, real, n)      # the positions of the last full one
+        self.drift = fields.scalar(real, ())          # the most a particle moved since
+        self.move_sum = fields.vector(3, real, n)     # a pass's contacts' moves, per particle
+        self.share_sum = fields.scalar(real, n)       # and their shares
         self.back = fields.scalar(ti.i32, n)          # never_through.py: moved back this step
         self.marked = fields.scalar(ti.i32, n)        # to move back in this round
         self.moved_back = fields.scalar(ti.i32, ())   # in this round
@@ -285,11 +299,9 @@ class SelfCollisionStage:
                 "vertex_pairs": np.array(self.vertex_pairs),
                 "capacity": np.array(self.candidates.capacity),
                 "listed_at": self.listed_at.to_numpy(), "pair_start": self.pair_start.to_numpy(),
-                "contact_start": self.contact_start.to_numpy(),
                 "elements": self.candidates.elements.to_numpy()[:total],
                 "particles": self.candidates.particles.to_numpy()[:total],
-                "active": self.candidates.active.to_numpy()[:total],
-                "contact": self.candidates.contact.to_numpy()[:4 * total]}
+                "active": self.candidates.active.to_numpy()[:total]}
 
     def check_saved(self, path, arrays: dict, limit: float) -> None:
         """errors.StateMismatch naming the array unless `arrays` is what saved() of this body
@@ -316,16 +328,14 @@ class SelfCollisionStage:
         total = values["pair_total"]
         expected = {"elements": np.empty((total, 2), np.int32),       # PairList's fields
                     "particles": np.empty((total, 4), np.int32),
-                    "active": np.empty(total, np.int32), "contact": np.empty(4 * total, np.int32)}
-        expected |= {name: getattr(self, name).to_numpy()
-                     for name in ("listed_at", "pair_start", "contact_start")}
+                    "active": np.empty(total, np.int32)}
+        expected |= {name: getattr(self, name).to_numpy() for name in ("listed_at", "pair_start")}
         saved_state.check_arrays(path, {f"self_contact.{k}": arrays[k] for k in expected
                                         if k in arrays},
                                  {f"self_contact.{k}": v for k, v in expected.items()}, limit)
-        for name, high in (("pair_start", total), ("contact_start", 4 * total),
+        for name, high in (("pair_start", total),
                            ("elements", max(self.triangle_count, self.edge_count, 1) - 1),
-                           ("particles", self.particle_count - 1), ("active", 1),
-                           ("contact", 4 * total - 1)):
+                           ("particles", self.particle_count - 1), ("active", 1)):
             array = arrays[name]
             rising = "start" not in name or bool((np.diff(array) >= 0).all())
             if array.size and not (rising and array.min() >= 0 and array.max() <= high):
@@ -340,9 +350,8 @@ class SelfCollisionStage:
             self.candidates = PairList(capacity)
         self.listed_at.from_numpy(arrays["listed_at"])
         self.pair_start.from_numpy(arrays["pair_start"])
-        self.contact_start.from_numpy(arrays["contact_start"])
         total = int(arrays["pair_total"])
-        for name, width in (("elements", 1), ("particles", 1), ("active", 1), ("contact", 4)):
+        for name, width in (("elements", 1), ("particles", 1), ("active", 1)):
             field = getattr(self.candidates, name)
             full = field.to_numpy()
             full[:width * total] = arrays[name]
@@ -376,10 +385,12 @@ class SelfCollisionStage:
     def phases(self, model, forces, pairs) -> tuple:
         """The contact passes as phases (runtime/plan.py; `pairs` the PairList, the
         workspace: a bigger list is another kernel). At most `iterations` passes, each
-        evaluating every listed pair, moving the particles by their contacts and out of the
-        colliders again; they stop once no contact is left, or none deeper than RESOLVED
-        thicknesses. Passes run out with contacts still deep: one more evaluation measures
-        what is left (left_deep, deepest). Then the velocities follow the corrections."""
+        evaluating the listed pairs near contact (all of them in the first, and again once a
+        particle has moved NEAR / 2 thicknesses since: module doc), moving the particles by
+        their contacts and out of the colliders again; they stop once no contact is left, or
+        none deeper than RESOLVED thicknesses. Passes run out with contacts still deep: one
+        more evaluation measures what is left (left_deep, deepest). Then the velocities
+        follow the corrections."""
         n = model.particle_count
         colliders = self.colliders
         out_of_colliders = (() if colliders is None else
@@ -389,11 +400,13 @@ class SelfCollisionStage:
                 Once(begin_passes, self),
                 Until(passing,
                       Once(clear_counts, self),
+                      Phase(Loop(n, keep_near_at, self, STATE, ITEM)),
                       Phase(Loop(pairs.capacity, evaluate_pair, self, pairs, model, STATE,
                                  ITEM, DT)),
                       Once(decide, self),
-                      Phase(Loop(n, apply_contacts, self, pairs, model, STATE, ITEM)),
+                      Phase(Loop(n, apply_contacts, self, model, STATE, ITEM)),
                       *out_of_colliders,
+                      Phase(Loop(n, measure_drift, self, STATE, ITEM)),
                       Once(end_pass, self),
                       args=(self,)),
                 Phase(Loop(n, follow_correction, self, STATE, ITEM, DT)),
@@ -427,8 +440,9 @@ class SelfCollisionStage:
                 f"apart ({distance:.3g} m of {thickness:.3g} m) after "
                 f"{self.settings.iterations} passes in step {step_index}: a layer may be held "
                 "against another by a pin, a handle, a collider or a seam being sewn shut, or "
-                "the pile is too dense for the passes; raise SelfCollision.iterations, add substeps or use a smaller "
-                "thickness (Simulation.self_contacts().closest_left follows the nearest)",
+                "the pile is too dense for the passes; raise SelfCollision.iterations, add "
+                "substeps or use a smaller thickness (Simulation.self_contacts().closest_left "
+                "follows the nearest)",
                 stacklevel=2)
 
     def _make_list(self, model, state, step_index: int) -> None:
@@ -453,7 +467,6 @@ class SelfCollisionStage:
                                            MAX_PAIRS_PER_PARTICLE * self.particle_count))
             self.grown.append((step_index, self.candidates.capacity))
         list_pairs(self, self.candidates, model, state, near, self.settings.thickness, 1)
-        index_contacts(self, self.candidates)
         copy_positions(state, self.listed_at)
         self.listed, self.pair_total = True, total
         self.vertex_pairs = int(self.pair_start[self.triangle_count])
@@ -481,13 +494,15 @@ def _vertex_triangle(positions: ti.template(), start: ti.template(), corners, th
     (the vertex beside an edge or a corner, on no side of the triangle): n from the nearest
     point of the triangle to the vertex, gap = their distance minus thickness, w the nearest
     point's coordinates (geometry.triangle_closest; the point's slide along the border moves
-    the distance to first order by nothing, so the gradient is as inside)."""
+    the distance to first order by nothing, so the gradient is as inside); where its height
+    alone is NEAR thicknesses past the thickness, gap = |height| - thickness (no contact: the
+    distance is at least the height; a pair with gap >= NEAR thicknesses is not near)."""
     v, a, b, c = corners[0], corners[1], corners[2], corners[3]
     p = positions[v]
     n, h, w = point_over_triangle(p, positions[a], positions[b], positions[c])
     inside = w.min() >= -INSIDE
     touching = False
-    gap = 0.0
+    gap = ti.abs(h) - thickness
     if n.norm() > 0 and inside:
         n0, h0, _ = point_over_triangle(start[v], start[a], start[b], start[c])
         side = ti.select(h0 >= 0.0, 1.0, -1.0)
@@ -496,12 +511,12 @@ def _vertex_triangle(positions: ti.template(), start: ti.template(), corners, th
         n *= side
         gap = side * h - thickness
         touching = gap < 0.0
-    elif n.norm() > 0 and ti.abs(h) < thickness:    # else farther than the plane: no contact
+    elif n.norm() > 0 and gap < NEAR * thickness:
         nearest, w, _ = triangle_closest(p, positions[a], positions[b], positions[c])
         between = p - nearest
         distance = between.norm()
         gap = distance - thickness
-        touching = gap < 0.0 and distance > 0.0
+        touching = gap < 0.0 and distance > 0.0 and ti.abs(h) < thickness  # (>= |h|: rounding)
         n = between / ti.max(distance, TINY)
     return touching, n, gap, w
 
@@ -518,9 +533,11 @@ def _edge_edge(positions: ti.template(), start: ti.template(), corners, thicknes
 @ti.func
 def _contact_move(stage: ti.template(), pairs: ti.template(), model: ti.template(),
                   state: ti.template(), p, corners, weights, n, gap, friction, dt):
-    """Write the position-based projection of contact p with its friction: particle k of
-    `corners` moves by -w_k s_k g_k (gap n + f) / sum_j w_j s_j g_j^2 (move[4 p + k]), s_k
-    its share (stack_shares; share[4 p + k])."""
+    """Add the position-based projection of contact p with its friction to its particles'
+    sums: particle k of `corners` moves by -w_k s_k g_k (gap n + f) / sum_j w_j s_j g_j^2
+    (move_sum), s_k its share (stack_shares; share_sum). The passes are one serial launch
+    (SelfCollisionStage.after_step), so each particle's sums add its contacts in pair order:
+    the same bits in every run, with no atomics."""
     motion = ti.Vector([0.0, 0.0, 0.0])
     for k in ti.static(range(4)):
         i = corners[k]
@@ -538,9 +555,10 @@ def _contact_move(stage: ti.template(), pairs: ti.template(), model: ti.template
     if norm > 0:
         scale = -1.0 / norm
     for k in ti.static(range(4)):
-        pairs.share[4 * p + k] = shares[k]
-        pairs.move[4 * p + k] = (scale * model.particle_inv_mass[corners[k]] * shares[k]
-                                 * weights[k] * (gap * n + slip * tangential))
+        i = corners[k]
+        stage.share_sum[i] = stage.share_sum[i] + shares[k]
+        stage.move_sum[i] = stage.move_sum[i] + (scale * model.particle_inv_mass[i] * shares[k]
+                                                 * weights[k] * (gap * n + slip * tangential))
 
 
 @ti.func
@@ -579,10 +597,11 @@ def keep_position(state: ti.template(), kept: ti.template(), i):
 
 @ti.func
 def begin_passes(stage: ti.template()):
-    """Before the first pass: passing, none made, nothing left deep."""
+    """Before the first pass: passing, none made, nothing left deep, every pair evaluated."""
     stage.passes[None] = 0
     stage.go[None] = 1
     stage.left_deep[None] = 0
+    stage.full[None] = 1
 
 
 @ti.func
@@ -595,15 +614,33 @@ def passing(stage: ti.template()):
 def clear_counts(stage: ti.template()):
     stage.touching[None] = ti.Vector([0, 0])
     stage.deepest[None] = 0.0
+    stage.drift[None] = 0.0
+
+
+@ti.func
+def keep_near_at(stage: ti.template(), state: ti.template(), i):
+    """Before a pass that evaluates every pair: where particle i is (near_at)."""
+    if stage.full[None]:
+        stage.near_at[i] = state.particle_position[i]
+
+
+@ti.func
+def measure_drift(stage: ti.template(), state: ti.template(), i):
+    """drift = the most any particle moved since the last pass that evaluated every pair (a
+    max: exact, in any order)."""
+    ti.atomic_max(stage.drift[None], (state.particle_position[i] - stage.near_at[i]).norm())
 
 
 @ti.func
 def evaluate_pair(stage: ti.template(), pairs: ti.template(), model: ti.template(),
                   state: ti.template(), p, dt):
-    """Listed pair p at the current positions (if p is listed): active[p] and, in contact,
-    its moves; counts the contacts and those deeper than RESOLVED thicknesses in touching
-    (integer counts: exact), the smallest gap in deepest (a min: exact, in any order)."""
-    if p < stage.pair_start[stage.triangle_count + stage.edge_count]:
+    """Listed pair p at the current positions (if p is listed, and near or in a pass that
+    evaluates every pair, which marks it near when its gap is below NEAR thicknesses):
+    active[p] and, in contact, its moves; counts the contacts and those deeper than RESOLVED
+    thicknesses in touching (integer counts: exact), the smallest gap in deepest (a min:
+    exact, in any order)."""
+    if (p < stage.pair_start[stage.triangle_count + stage.edge_count]
+            and (stage.full[None] or pairs.near[p])):
         thickness = stage.thickness[None]
         corners = pairs.particles[p]
         touching = False
@@ -619,6 +656,8 @@ def evaluate_pair(stage: ti.template(), pairs: ti.template(), model: ti.template
             touching, n, gap, s, t = _edge_edge(state.particle_position, stage.step_start,
                                                 corners, thickness)
             weights = ti.Vector([1.0 - s, s, t - 1.0, -t])
+        if stage.full[None]:
+            pairs.near[p] = ti.select(gap < NEAR * thickness, 1, 0)
         touching = touching and not torn_pair(stage, state, elements,
                                               p < stage.pair_start[stage.triangle_count])
         pairs.active[p] = ti.select(touching, 1, 0)
@@ -646,29 +685,26 @@ def decide(stage: ti.template()):
 
 
 @ti.func
-def apply_contacts(stage: ti.template(), pairs: ti.template(), model: ti.template(),
-                   state: ti.template(), i):
+def apply_contacts(stage: ti.template(), model: ti.template(), state: ti.template(), i):
     """Particle i moves by the sum of its contacts' moves over the sum of their shares, or
-    over 1 if less (module doc), gathered in pair order (in a pass that applies)."""
-    if stage.applying[None] and model.particle_inv_mass[i] > 0:
-        move = ti.Vector([0.0, 0.0, 0.0])
-        shares = 0.0
-        for a in range(stage.contact_start[i], stage.contact_start[i + 1]):
-            slot = pairs.contact[a]
-            if pairs.active[slot // 4]:
-                move += pairs.move[slot]
-                shares += pairs.share[slot]
-        if shares > 0:
-            state.particle_position[i] += move / ti.max(shares, 1.0)
+    over 1 if less (module doc; in a pass that applies); the sums start again at 0."""
+    shares = stage.share_sum[i]
+    if stage.applying[None] and model.particle_inv_mass[i] > 0 and shares > 0:
+        state.particle_position[i] += stage.move_sum[i] / ti.max(shares, 1.0)
+    stage.move_sum[i] = ti.Vector([0.0, 0.0, 0.0])
+    stage.share_sum[i] = 0.0
 
 
 @ti.func
 def end_pass(stage: ti.template()):
-    """A pass that applied counts; none deeper than RESOLVED thicknesses ends the passes."""
+    """A pass that applied counts; none deeper than RESOLVED thicknesses ends the passes. The
+    next evaluates every pair once a particle has moved NEAR / 2 thicknesses since the last
+    that did."""
     if stage.applying[None]:
         stage.passes[None] += 1
         if stage.touching[None][1] == 0:
             stage.go[None] = 0
+    stage.full[None] = ti.select(stage.drift[None] > 0.5 * NEAR * stage.thickness[None], 1, 0)
 
 
 @ti.func

@@ -48,21 +48,17 @@ def cloth_edges(cloth) -> tuple[np.ndarray, np.ndarray]:
 @backend.kernel_argument
 class PairList:
     """Room for `capacity` listed pairs: each pair's elements ((vertex, triangle) or (edge,
-    edge)), its four particles, whether it is in contact, its four particles' moves and their
-    shares of them (self_collision.py: the weight of a move in its particle's mean); and
-    per particle, the slots 4 p + k that move it (contact, indexed by the stage's
-    contact_start). A bigger list replaces a full one (its kernels compile again, once)."""
+    edge)), its four particles, whether it is in contact and whether it is near
+    (self_collision.py: evaluated in every pass). A bigger list replaces a full one (its
+    kernels compile again, once)."""
 
     def __init__(self, capacity: int):
         self.capacity = capacity
-        real = backend.real()
         fields = backend.FieldGroup()
         self.elements = fields.vector(2, ti.i32, capacity)
         self.particles = fields.vector(4, ti.i32, capacity)
         self.active = fields.scalar(ti.i32, capacity)
-        self.move = fields.vector(3, real, 4 * capacity)
-        self.share = fields.scalar(real, 4 * capacity)
-        self.contact = fields.scalar(ti.i32, 4 * capacity)
+        self.near = fields.scalar(ti.i32, capacity)
         fields.finalize(self)
 
 
@@ -330,24 +326,3 @@ def prefix_pairs(stage: ti.template()) -> ti.i32:
         for k in range(stage.triangle_count + stage.edge_count):
             stage.pair_start[k + 1] += stage.pair_start[k]
     return stage.pair_start[stage.triangle_count + stage.edge_count]
-
-
-@backend.kernel
-def index_contacts(stage: ti.template(), pairs: ti.template()):
-    """contact[contact_start[i]:contact_start[i + 1]] = the slots 4 p + k at which pair p
-    moves particle i, in pair order (counts, prefix sum and fill all serial)."""
-    total = stage.pair_start[stage.triangle_count + stage.edge_count]
-    for _ in range(1):
-        for i in range(stage.particle_count + 1):
-            stage.contact_start[i] = 0
-        for p in range(total):
-            for k in ti.static(range(4)):
-                stage.contact_start[pairs.particles[p][k] + 1] += 1
-        for i in range(stage.particle_count):
-            stage.contact_start[i + 1] += stage.contact_start[i]
-            stage.contact_fill[i] = stage.contact_start[i]
-        for p in range(total):
-            for k in ti.static(range(4)):
-                i = pairs.particles[p][k]
-                pairs.contact[stage.contact_fill[i]] = 4 * p + k
-                stage.contact_fill[i] += 1
