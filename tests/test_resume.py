@@ -297,13 +297,18 @@ def test_a_corrupted_saved_state_is_refused_naming_what_is_wrong(f64, tmp_path_f
     np.testing.assert_array_equal(sim.positions(), before)
 
 
+def _nth(names: list, k: int) -> str:
+    """The k-th of `names` in sorted order, k taken modulo their count."""
+    return sorted(names)[k % len(names)]
+
+
 CONTACT_CORRUPTIONS = {
     "capacity": lambda a, k: a.__setitem__("self_contact.capacity", np.array(2**40)),
     "total": lambda a, k: a.__setitem__("self_contact.pair_total",
                                         a["self_contact.capacity"] + 1 + k),
     "vertex pairs": lambda a, k: a.__setitem__("self_contact.vertex_pairs", np.array(-1 - k)),
     "listed": lambda a, k: a.__setitem__("self_contact.listed", np.array(1.5)),
-    "missing": lambda a, k: a.pop(sorted(n for n in a if n.startswith("self_contact."))[k % 11]),
+    "missing": lambda a, k: a.pop(_nth([n for n in a if n.startswith("self_contact.")], k)),
     "index": lambda a, k: a["self_contact.particles"].__setitem__(
         (k % len(a["self_contact.particles"]), k % 4), 10**6),
     "falling": lambda a, k: a["self_contact.pair_start"].__setitem__(

@@ -607,8 +607,8 @@ def offset_stack(layers: int, n: int, size: float, thickness: float) -> tc.Cloth
 def test_a_resting_pile_is_settled_a_layer_a_pass_and_keeps_its_thickness(f64):
     """Six 6 x 6 sheets lying on the ground under gravity, xpbd at 1/240 s, a 5 mm thickness:
     every step gravity drops each layer g h^2 = 3 % of the thickness into the one under it, and
-    the passes lift them back. With stacking (the default: a resting contact moves its upper
-    side) each pass settles about a layer: every step's passes end before the 16 allowed, and
+    the passes lift them back. With stacking (the default: a resting contact moves the side
+    farther from the ground, through the contacts) each pass settles about a layer: every step's passes end before the 16 allowed, and
     from 0.1 s on no particle is nearer than 0.99 thickness to a triangle of another sheet (the
     passes stop at 1 % deep; a brute-force distance here). Mass-weighted (stacking=False) the
     lift spreads up the pile as a diffusion: the passes run out in every step and layers sink
@@ -640,11 +640,11 @@ def test_a_resting_pile_is_settled_a_layer_a_pass_and_keeps_its_thickness(f64):
 
 
 def test_a_contact_in_free_fall_keeps_the_momentum(f64):
-    """A triangle falling at 0.5 m/s relative onto another, both in free fall (no ground: no
-    layer is held up), xpbd at 1/240 s with stacking on: the contact is mass-weighted, so in
-    every step the total momentum is what gravity alone gives, M g t, to rounding (1e-12 of
-    it): stacking acts only on a lower side held up (a contact that shifted the correction to
-    the upper side would change it by ~3 %, as measured before the held-up test)."""
+    """A triangle falling at 0.5 m/s relative onto another, both in free fall (no collider,
+    no pin: nothing holds either up), xpbd at 1/240 s with stacking on: the contact is
+    mass-weighted, so in every step the total momentum is what gravity alone gives, M g t, to
+    rounding (1e-12 of it). A correction shifted to one side would change it (3 % of it in a
+    version that chose the side by gravity alone)."""
     lower = tc.Cloth(tc.Mesh(np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.0, 0.1]]),
                              np.array([[0, 2, 1]])), tc.Material())
     upper = tc.Cloth(tc.Mesh(np.array([[0.03, 0.02, 0.03], [0.06, 0.1, 0.0], [0.0, 0.1, 0.06]]),

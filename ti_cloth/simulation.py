@@ -162,7 +162,7 @@ class Simulation:
         if self.handles is not None:
             self.handles.table = self._lent["handle_table"]
         if self.self_collision is not None:
-            self.self_collision.attach(self.colliders, gravity)
+            self.self_collision.attach(self.colliders)
         # Kernels get the pool's equal copies, whose compiled kernels outlive this simulation;
         # the user's integrator gets the reports of the steps (Simulation.step).
         self.forces = POOL.keep(ForceSettings(gravity=tuple(gravity), drag=drag,

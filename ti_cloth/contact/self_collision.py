@@ -22,26 +22,28 @@ particle sums its contacts' moves in list order (the passes are one serial launc
 and takes their mean (Jacobi with averaging: many contacts on one particle do not add up to an
 overshoot).
 
-Stacking (SelfCollision.stacking): a resting contact moves its upper side. Under gravity every
-layer of a pile falls g h^2 in a step and the ground stops only the lowest, so each step the
-passes must lift every layer back; mass-weighted, each pass moves the two sides of a contact
-half-way, and the lift spreads up an L-layer pile as a diffusion, in about L^2 passes (the
-cloth pile of the demos ran out of its 16 passes every step with 200 contacts left deeper than
-1 %). Shock propagation (Guendelman, Bridson & Fedkiw, "Nonconvex rigid bodies with stacking",
-ACM TOG 22(3), 2003; as mass scaling with height in Macklin et al., "Unified particle physics
-for real-time applications", ACM TOG 33(4), 2014) treats the lower side of a resting contact
-as heavier, so each pass settles a layer on the one below: about L passes. Here the lower
-side's weights w_k (its inverse masses in W and in its moves) are scaled by
-s = 1 - (1 - STACK) |n . up| r, with up against gravity and r = 1 while the pair approached
-over the step by at most RESTING |g| h^2 (a resting layer approaches the one under it by the
-|g| h^2 gravity adds in a step from rest, and by what it wobbles) and the lower side fell by at
-most that (it is held up: by the ground, by the layers under it), r falling to 0 at twice
-either. A contact facing sideways, an impact, a contact in free fall and a simulation without
-gravity stay mass-weighted (they keep their momentum); the lower side keeps a share (STACK), so
-that a contact pressed by a held upper side still moves it. A particle takes the sum of its
-contacts' moves over the sum of their weights s, or over 1 where that is less: with every
+Stacking (SelfCollision.stacking): a resting contact moves the side farther from what holds
+it up. Under gravity every layer of a pile falls g h^2 in a step and the ground stops only the
+lowest, so each step the passes must lift every layer back; mass-weighted, each pass moves the
+two sides of a contact half-way, and the lift spreads up an L-layer pile as a diffusion, in
+about L^2 passes (the cloth pile of the demos ran out of its 16 passes every step with 200
+contacts left deeper than 1 %). Shock propagation (Guendelman, Bridson & Fedkiw, "Nonconvex
+rigid bodies with stacking", ACM TOG 22(3), 2003: bodies ordered by the contact graph from the
+fixed ones, each level's contacts solved with the levels under it held fixed) settles a layer
+a pass instead. Here each step's passes give every particle a level: 0 where it is held (a
+pin, a handle) or lies within half a thickness of a collider's surface (animated bodies are
+not asked), then, as contacts are evaluated, one more than the level of the other side of a
+contact where that is less (a side's level is the highest of its corners', so that a side
+counts as held only where all of it is: a side near the ground at one corner only is not).
+Where the two sides' levels differ, the weights w_k of the side with the lower level (its
+inverse masses in W and in its moves) are scaled by s = 1 - (1 - STACK) r, r = 1 while the
+pair approached over the step by at most RESTING thicknesses, falling to 0 at twice that. A
+contact between unheld sides (in free fall, in the air), an impact and a contact between sides
+of one level stay mass-weighted and keep their momentum; the held side keeps a share (STACK),
+so that a contact pressed by a held upper side still moves it. A particle takes the sum of
+its contacts' moves over the sum of their weights s, or over 1 where that is less: with every
 s = 1 the mean; a scaled move is not diluted by the full ones (a layer lifted from below and
-pressed from above rises), and a particle on the lower side only is not moved more than its
+pressed from above rises), and a particle on the held side only is not moved more than its
 scaled moves.
 
 Near pairs: the first pass of a step evaluates every listed pair and marks those whose gap
@@ -88,7 +90,7 @@ from .broad_phase.contact_pairs import (
     sweep_boxes,
     torn_pair,
 )
-from .colliders.collision import project_particle_out
+from .colliders.collision import project_particle_out, rests_on
 
 PAIRS_PER_PARTICLE = 32     # candidate list room at first, per particle
 MAX_PAIRS_PER_PARTICLE = 256
@@ -96,8 +98,9 @@ SKIN = 1.0                  # the list's slack (skin), in thicknesses
 THICK = 0.5                 # a thickness above this (in mean rest edges) is warned about
 RESOLVED = 0.01             # a contact shallower than this (in thicknesses) ends the passes
 CROWDED = 0.5               # a contact left nearer than this (in thicknesses) is reported
-STACK = 0.01                # the lower side's weight in a resting contact facing up (stacking)
-RESTING = 4.0               # a contact approaching by at most this x |g| h^2 in a step rests
+STACK = 0.01                # the weight of a resting contact's held side (stacking)
+RESTING = 0.25              # a contact approaching by at most this (in thicknesses) a step rests
+UNHELD = 1 << 20            # the level of a particle nothing is known to hold up
 NEAR = 0.5                  # a pair within this (in thicknesses) of contact is evaluated every pass
 INSIDE = 1e-6               # a foot this far outside a triangle (in barycentric terms) is inside
 
@@ -116,10 +119,11 @@ class SelfCollision:
     the step's start every free particle of a pair that may have passed through the other in
     the step, so that no listed pair ever does (a theorem, with its assumptions, in that
     module and docs/api.md); False: the passes alone, which a fast twist or fold can beat.
-    stacking: a contact resting under gravity moves its upper side (module doc: shock
-    propagation), so the passes settle a pile about a layer a pass; False: every contact
-    mass-weighted (piles take many more passes and sink deeper into each other). Impacts and
-    contacts facing sideways are mass-weighted either way."""
+    stacking: a resting contact moves the side farther (in contacts) from what holds it up:
+    a collider, a pin, a handle (module doc: shock propagation), so the passes settle a pile
+    about a layer a pass; False: every contact mass-weighted (piles take many more passes and
+    sink deeper into each other). Impacts and contacts in the air are mass-weighted either
+    way."""
 
     thickness: float = 0.005
     friction: float = 0.0
@@ -227,8 +231,7 @@ class SelfCollisionStage:
         self.thickness = fields.scalar(real, ())  # the settings' (loaded: kernels outlive them)
         self.friction = fields.scalar(real, ())
         self.stack = fields.scalar(real, ())      # the lower side's weight (STACK, or 1: off)
-        self.up = fields.vector(3, real, ())      # against gravity, unit (0 without gravity)
-        self.gravity = fields.scalar(real, ())    # |g|
+        self.level = fields.scalar(ti.i32, n)     # contacts from what holds it up (stacking)
         self.iterations = fields.scalar(ti.i32, ())
         self.passes = fields.scalar(ti.i32, ())   # passes made in this step
         self.go = fields.scalar(ti.i32, ())       # 1: another pass (or the last evaluation)
@@ -272,15 +275,11 @@ class SelfCollisionStage:
             upload(((self.triangle_spring, springs), (self.triangle_face, cloth.triangle_face),
                     (self.edge_spring, cloth_edges(cloth)[1])))
 
-    def attach(self, colliders, gravity) -> None:
+    def attach(self, colliders) -> None:
         """The simulation's ColliderSet (or None): each contact pass ends by projecting the
         particles out of the colliders again, so a pile on the ground is not pushed into it;
-        and its gravity [m/s^2] (3,), which tells a resting contact's lower side (stacking)."""
+        what rests on them holds up the layers above (stacking)."""
         self.colliders = colliders
-        g = np.asarray(gravity, np.float64)
-        magnitude = float(np.linalg.norm(g))
-        self.gravity[None] = magnitude
-        self.up[None] = -g / magnitude if magnitude > 0 else np.zeros(3)
 
     def forget(self) -> None:
         """Drop the candidate list: the next step makes a new one (after a restart)."""
@@ -396,13 +395,16 @@ class SelfCollisionStage:
         out_of_colliders = (() if colliders is None else
                             (Phase(Loop(n, project_particle_out, model, STATE, colliders, ITEM,
                                         self.applying)),))
+        seed = (Loop(n, seed_level, self, model, STATE, ITEM) if colliders is None else
+                Loop(n, seed_level_on, self, model, STATE, colliders, ITEM))
         return (Phase(Loop(n, keep_position, STATE, self.before, ITEM)),
+                Phase(seed),
                 Once(begin_passes, self),
                 Until(passing,
                       Once(clear_counts, self),
                       Phase(Loop(n, keep_near_at, self, STATE, ITEM)),
                       Phase(Loop(pairs.capacity, evaluate_pair, self, pairs, model, STATE,
-                                 ITEM, DT)),
+                                 ITEM)),
                       Once(decide, self),
                       Phase(Loop(n, apply_contacts, self, model, STATE, ITEM)),
                       *out_of_colliders,
@@ -532,7 +534,7 @@ def _edge_edge(positions: ti.template(), start: ti.template(), corners, thicknes
 
 @ti.func
 def _contact_move(stage: ti.template(), pairs: ti.template(), model: ti.template(),
-                  state: ti.template(), p, corners, weights, n, gap, friction, dt):
+                  state: ti.template(), p, corners, weights, n, gap, friction):
     """Add the position-based projection of contact p with its friction to its particles'
     sums: particle k of `corners` moves by -w_k s_k g_k (gap n + f) / sum_j w_j s_j g_j^2
     (move_sum), s_k its share (stack_shares; share_sum). The passes are one serial launch
@@ -542,7 +544,7 @@ def _contact_move(stage: ti.template(), pairs: ti.template(), model: ti.template
     for k in ti.static(range(4)):
         i = corners[k]
         motion += weights[k] * (state.particle_position[i] - stage.step_start[i])
-    shares = stack_shares(stage, state, corners, weights, n, motion, dt)
+    shares = stack_shares(stage, corners, weights, motion, n)
     norm = 0.0
     for k in ti.static(range(4)):
         norm += model.particle_inv_mass[corners[k]] * shares[k] * weights[k] * weights[k]
@@ -562,32 +564,49 @@ def _contact_move(stage: ti.template(), pairs: ti.template(), model: ti.template
 
 
 @ti.func
-def stack_shares(stage: ti.template(), state: ti.template(), corners, weights, n, motion, dt):
+def stack_shares(stage: ti.template(), corners, weights, motion, n):
     """Each corner's share of a contact's correction (module doc, stacking): 1, but on the
-    lower side of a resting contact facing up, 1 - (1 - stack) |n . up| r with
-    r = rest(approach) rest(fall), rest(d) = 1 for d <= RESTING |g| h^2 falling to 0 at twice
-    that: approach the pair's over the step (along n: -motion . n), fall the lower side's
-    (the mean of its corners' moves along gravity, weighted by |w_k|). The vertex side
-    (weights > 0) is the side n points to."""
+    side of a resting contact whose level is the lower, 1 - (1 - stack) r, r = 1 while the
+    pair approached over the step (along n: -motion . n) by at most RESTING thicknesses, 0
+    from twice that. A side's level is the highest of its corners' (weights != 0; the vertex
+    side has weights > 0). Then each side's corners take the other side's level + 1 where
+    that is less (the support spreads through the contacts)."""
+    near, far = 0, 0                      # the vertex (first edge) side's, the other side's
+    for k in ti.static(range(4)):
+        if weights[k] > 0:
+            near = ti.max(near, stage.level[corners[k]])
+        elif weights[k] < 0:
+            far = ti.max(far, stage.level[corners[k]])
     shares = ti.Vector([1.0, 1.0, 1.0, 1.0])
-    facing = n.dot(stage.up[None])
-    limit = RESTING * stage.gravity[None] * dt * dt
-    if limit > 0 and facing != 0:
-        fall = 0.0
-        total = 0.0
+    if near != far:
+        limit = RESTING * stage.thickness[None]
+        resting = ti.min(ti.max(2.0 + motion.dot(n) / limit, 0.0), 1.0)
+        held = 1.0 - (1.0 - stage.stack[None]) * resting
         for k in ti.static(range(4)):
-            if weights[k] * facing < 0:
-                i = corners[k]
-                fall -= ti.abs(weights[k]) * (state.particle_position[i]
-                                              - stage.step_start[i]).dot(stage.up[None])
-                total += ti.abs(weights[k])
-        resting = (ti.min(ti.max(2.0 + motion.dot(n) / limit, 0.0), 1.0)
-                   * ti.min(ti.max(2.0 - fall / (total * limit), 0.0), 1.0))
-        lower = 1.0 - (1.0 - stage.stack[None]) * ti.abs(facing) * resting
-        for k in ti.static(range(4)):
-            if weights[k] * facing < 0:
-                shares[k] = lower
+            if (weights[k] > 0 and near < far) or (weights[k] < 0 and far < near):
+                shares[k] = held
+    for k in ti.static(range(4)):
+        i = corners[k]
+        if weights[k] > 0:
+            stage.level[i] = ti.min(stage.level[i], far + 1)
+        elif weights[k] < 0:
+            stage.level[i] = ti.min(stage.level[i], near + 1)
     return shares
+
+
+@ti.func
+def seed_level(stage: ti.template(), model: ti.template(), state: ti.template(), i):
+    """Before a step's passes: level 0 for a held particle (a pin, a handle), else UNHELD."""
+    stage.level[i] = ti.select(model.particle_inv_mass[i] > 0, UNHELD, 0)
+
+
+@ti.func
+def seed_level_on(stage: ti.template(), model: ti.template(), state: ti.template(),
+                  colliders: ti.template(), i):
+    """seed_level, and level 0 for a particle within a thickness of a collider's surface."""
+    seed_level(stage, model, state, i)
+    if rests_on(colliders, i, state.particle_position[i], 0.5 * stage.thickness[None]):
+        stage.level[i] = 0
 
 
 @ti.func
@@ -633,7 +652,7 @@ def measure_drift(stage: ti.template(), state: ti.template(), i):
 
 @ti.func
 def evaluate_pair(stage: ti.template(), pairs: ti.template(), model: ti.template(),
-                  state: ti.template(), p, dt):
+                  state: ti.template(), p):
     """Listed pair p at the current positions (if p is listed, and near or in a pass that
     evaluates every pair, which marks it near when its gap is below NEAR thicknesses):
     active[p] and, in contact, its moves; counts the contacts and those deeper than RESOLVED
@@ -663,7 +682,7 @@ def evaluate_pair(stage: ti.template(), pairs: ti.template(), model: ti.template
         pairs.active[p] = ti.select(touching, 1, 0)
         if touching:
             _contact_move(stage, pairs, model, state, p, corners, weights, n, gap,
-                          stage.friction[None], dt)
+                          stage.friction[None])
             ti.atomic_add(stage.touching[None][0], 1)
             ti.atomic_min(stage.deepest[None], gap)
             if gap < -RESOLVED * thickness:

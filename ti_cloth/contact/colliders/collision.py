@@ -426,6 +426,20 @@ def resolve(model: ti.template(), state: ti.template(), colliders: ti.template()
 
 
 @ti.func
+def rests_on(colliders: ti.template(), i, x, reach):
+    """Whether x (particle i) is within `reach` [m] of a collider's contact surface (its
+    thickness out from its shape; animated bodies, whose contacts are found per triangle,
+    are not asked): what holds a layer up (self_collision.py, stacking)."""
+    resting = False
+    for c in range(colliders.count):
+        if colliders.kind[c] != ANIMATED:
+            d, _ = collider_distance(colliders, c, x, colliders.step_start[i])
+            if d - colliders.thickness[c] < reach:
+                resting = True
+    return resting
+
+
+@ti.func
 def project_particle_out(model: ti.template(), state: ti.template(), colliders: ti.template(),
                          i, applying: ti.template()):
     """Project particle i (if free, and while applying[None]) out of every collider,
