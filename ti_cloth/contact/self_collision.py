@@ -230,7 +230,7 @@ class SelfCollisionStage:
         self.deepest = fields.scalar(real, ())    # the smallest gap of a contact evaluated
         self.thickness = fields.scalar(real, ())  # the settings' (loaded: kernels outlive them)
         self.friction = fields.scalar(real, ())
-        self.stack = fields.scalar(real, ())      # the lower side's weight (STACK, or 1: off)
+        self.stack = fields.scalar(real, ())      # the held side's weight (STACK, or 1: off)
         self.level = fields.scalar(ti.i32, n)     # contacts from what holds it up (stacking)
         self.iterations = fields.scalar(ti.i32, ())
         self.passes = fields.scalar(ti.i32, ())   # passes made in this step
