@@ -194,10 +194,11 @@ def test_a_thickness_above_half_the_mean_edge_is_warned_about(f64):
 
 @pytest.mark.reinitialises
 def test_one_thread_and_all_cores_and_a_rerun_give_the_same_bits():
-    """Grid cells are filled in index order, contacts listed in index order and gathered per
+    """Grid cells are filled in index order, contacts listed in index order and summed per
     particle in list order: the grid, the lists and the positions repeat bit for bit on one
     thread and on every core (two on CI), and on a rerun; with them a turning mesh collider
-    (a ball under the lower sheet lifting the upper one), and the never-through fail-safe
+    (a ball under the lower sheet lifting the upper one, which holds up the layers: stacking's
+    levels, integer writes in list order), and the never-through fail-safe
     moving particles back in a twisted sheet (its marks and rounds: integer writes and counts).
     The default runtime comes back after the one-thread run and serves the other two (one
     re-initialisation fewer: each drops every kernel this worker compiled)."""
