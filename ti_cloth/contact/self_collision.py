@@ -603,7 +603,8 @@ def seed_level(stage: ti.template(), model: ti.template(), state: ti.template(),
 @ti.func
 def seed_level_on(stage: ti.template(), model: ti.template(), state: ti.template(),
                   colliders: ti.template(), i):
-    """seed_level, and level 0 for a particle within a thickness of a collider's surface."""
+    """seed_level, and level 0 for a particle within half a thickness of a collider's surface
+    (collision.rests_on)."""
     seed_level(stage, model, state, i)
     if rests_on(colliders, i, state.particle_position[i], 0.5 * stage.thickness[None]):
         stage.level[i] = 0
