@@ -24,11 +24,11 @@ the step (the positions on the way are the straight lines' at those times, so th
 holds for each part: a pair safe in every part is safe; it tells a pair that passed fast
 beside another from one that met). One that fails a part may have met: the fail-safe moves
 its free particles back to x0 (their velocity 0: they did not move in the step), then checks
-every pair again, until a round moves nobody. It ends (each round moves at least one particle back, and one
-moved back stays), and where it ends every listed pair meets (1) or (2), or has all its
-particles back at x0 or held (a pin, a handle: scripted, never moved back). By induction over
-the steps: a cloth that starts with no pair passing through another never has one, with these
-assumptions, stated in docs/api.md:
+every pair again, until a round moves nobody. It ends (each round moves at least one particle
+back, and one moved back stays), and where it ends every listed pair meets (1) or (2), or has
+all its particles back at x0 or held (a pin, a handle: scripted, never moved back). By
+induction over the steps: a cloth that starts with no pair passing through another never has
+one, with these assumptions, stated in docs/api.md:
 - the pairs are the candidate list's: those farther apart than the thickness in the rest
   shape (neighbours nearer than that are not contacts), made from the boxes swept in the
   step, so that no pair can meet unlisted (contact_pairs.py);
@@ -168,8 +168,8 @@ def check_pair(stage: ti.template(), pairs: ti.template(), model: ti.template(),
         corners = pairs.particles[p]
         elements = pairs.elements[p]
         vertex_triangle = p < stage.pair_start[stage.triangle_count]
-        if not torn_pair(stage, state, elements, vertex_triangle) and not _safe(stage.step_start, state.particle_position, corners,
-                                  vertex_triangle):
+        if not torn_pair(stage, state, elements, vertex_triangle) and not _safe(
+                stage.step_start, state.particle_position, corners, vertex_triangle):
             left = 0
             for k in ti.static(range(4)):
                 i = corners[k]

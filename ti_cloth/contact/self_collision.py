@@ -289,6 +289,7 @@ class SelfCollisionStage:
         self.grown = []
         self.moved_total_run = 0
         self.unresolved_left = None
+        self.passed = False             # the last step ran the passes (else it made none)
 
     def saved(self) -> dict:
         """The candidate list and where it was made: a list made at another step would order
@@ -365,6 +366,7 @@ class SelfCollisionStage:
         """The self-collision stage of a step ending at time t (stages.STEP_ORDER): the list
         made again when the cloth has moved more than the skin since it was made (on the
         host: it may grow), then the contact passes (phases)."""
+        self.passed = False
         if self.triangle_count == 0:
             return
         thickness = self.settings.thickness
@@ -374,6 +376,7 @@ class SelfCollisionStage:
             return
         plan.run(self, model, state, None, self.candidates, dt, step_index, False,
                  serial=True)
+        self.passed = True
         if self.left_deep[None]:
             self._report(thickness + float(self.deepest[None]), step_index)
         if self.settings.never_through:
@@ -484,7 +487,8 @@ class SelfCollisionStage:
         vertex = kept < self.vertex_pairs
         return SelfContacts(elements[vertex], elements[~vertex], self.edge_rows,
                             self.closest_left, self.candidates.capacity, tuple(self.grown),
-                            self.moved_total_run, self.unresolved_left, int(self.passes[None]))
+                            self.moved_total_run, self.unresolved_left,
+                            int(self.passes[None]) if self.passed else 0)
 
 
 @ti.func
