@@ -308,6 +308,7 @@ CONTACT_CORRUPTIONS = {
                                         a["self_contact.capacity"] + 1 + k),
     "vertex pairs": lambda a, k: a.__setitem__("self_contact.vertex_pairs", np.array(-1 - k)),
     "listed": lambda a, k: a.__setitem__("self_contact.listed", np.array(1.5)),
+    "skin": lambda a, k: a.__setitem__("self_contact.skin", np.array(0.5 + k)),
     "missing": lambda a, k: a.pop(_nth([n for n in a if n.startswith("self_contact.")], k)),
     "index": lambda a, k: a["self_contact.particles"].__setitem__(
         (k % len(a["self_contact.particles"]), k % 4), 10**6),

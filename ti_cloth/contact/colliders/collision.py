@@ -28,7 +28,8 @@ PLACEMENT = 30       # numbers per collider in a placement row (ColliderSet._pla
 @backend.kernel_argument
 class ColliderSet:
     """The colliders of one simulation as Taichi fields (one row per collider), and the
-    particle positions at the start of the current step (`step_start`) the response needs.
+    particle positions at the start of the current step (`step_start`) the response needs, and
+    which particles the step's response pushed out of a collider (`touched`: rests_on).
     Mesh colliders add their distance grids, one after another in `samples`, and their pose:
     `a` the mesh centre's position and `rotation` (a 3x3 matrix, row-major) now, `a_prev` and
     `rotation_prev` at the start of the step. Animated meshes are in `bodies` (an
@@ -57,6 +58,7 @@ class ColliderSet:
         self.kinetic_friction = fields.scalar(real, count)
         self.velocity = fields.vector(3, real, count)
         self.step_start = fields.vector(3, real, particle_count)
+        self.touched = fields.scalar(ti.i32, particle_count)    # 1: pushed out this step
         self.scheduled = fields.vector(PLACEMENT, real, limits.SCHEDULED_STEPS * count)
         if self.meshes:
             self.samples = fields.vector(4, real, self.nodes)
@@ -409,6 +411,7 @@ def resolve_particle(model: ti.template(), state: ti.template(), colliders: ti.t
         for c in range(colliders.count):
             x, v, hit = _collide_with(colliders, c, i, x0, x, v, dt, True)
             touched = touched or hit
+        colliders.touched[i] = ti.cast(touched, ti.i32)
         if touched:
             state.particle_position[i] = x
             state.particle_velocity[i] = v
@@ -427,10 +430,12 @@ def resolve(model: ti.template(), state: ti.template(), colliders: ti.template()
 
 @ti.func
 def rests_on(colliders: ti.template(), i, x, reach):
-    """Whether x (particle i) is within `reach` [m] of a collider's contact surface (its
-    thickness out from its shape; animated bodies, whose contacts are found per triangle,
-    are not asked): what holds a layer up (self_collision.py, stacking)."""
-    resting = False
+    """Whether particle i, at x, rests on a collider: the step's response pushed it out of one
+    (resolve_particle: an animated body's contact, found per triangle, included), or it is
+    within `reach` [m] of a collider's contact surface (its thickness out from its shape;
+    animated bodies are not asked, their distance being a search): what holds a layer up
+    (self_collision.py, stacking)."""
+    resting = colliders.touched[i] != 0
     for c in range(colliders.count):
         if colliders.kind[c] != ANIMATED:
             d, _ = collider_distance(colliders, c, x, colliders.step_start[i])
