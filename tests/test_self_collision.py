@@ -228,7 +228,8 @@ def test_one_thread_and_all_cores_and_a_rerun_give_the_same_bits():
     particle in list order: the grid, the lists and the positions repeat bit for bit on one
     thread and on every core (two on CI), and on a rerun; with them a turning mesh collider
     (a ball under the lower sheet lifting the upper one, which holds up the layers: stacking's
-    levels, integer writes in list order), and the never-through fail-safe
+    levels, integer writes in list order), a pile settling on an animated plate (levels
+    seeded by its contacts), and the never-through fail-safe
     moving particles back in a twisted sheet (its marks and rounds: integer writes and counts).
     The default runtime comes back after the one-thread run and serves the other two (one
     re-initialisation fewer: each drops every kernel this worker compiled)."""
@@ -256,7 +257,7 @@ def test_one_thread_and_all_cores_and_a_rerun_give_the_same_bits():
         assert twist.self_contacts().moved_back > 0, "the fail-safe moved particles back"
         return (sim.positions(), grid.cell_start.to_numpy(), grid.cell_item.to_numpy(),
                 listed.vertex_triangle, listed.edge_edge, twist.positions(),
-                twist.velocities())
+                twist.velocities(), settle_pile(still_plate(), True, steps=30)[2])
 
     try:
         tc.init(arch="cpu", precision="f64", threads=1)
@@ -646,11 +647,11 @@ def rotation(axis, angle: float) -> np.ndarray:
 TURN = rotation((1.0, 0.0, 1.0), np.pi / 3)
 
 
-def settle_pile(collider, stacking: bool) -> tuple[int, float]:
+def settle_pile(collider, stacking: bool, steps: int = 60) -> tuple[int, float, np.ndarray]:
     """Six 6 x 6 sheets 5 mm thick (offset_stack, turned by TURN) pressed by gravity onto
-    `collider` (lying in the turned plane y = 0), xpbd at 1/240 s for 0.25 s: (the most
+    `collider` (lying in the turned plane y = 0), xpbd at 1/240 s for `steps` steps: (the most
     passes a step made from 0.1 s on, the closest far vertex-triangle pair / thickness then,
-    brute force)."""
+    brute force; the positions at the end)."""
     thickness = 0.005
     body = offset_stack(6, 6, 0.1, thickness, TURN)
     tris = body.mesh.triangles
@@ -661,13 +662,21 @@ def settle_pile(collider, stacking: bool) -> tuple[int, float]:
     passes, closest = [], []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")       # mass-weighted, the pile may be reported
-        for step in range(60):
+        for step in range(steps):
             sim.step(1)
             passes.append(sim.self_contacts().passes)
             if step >= 24:
                 x = sim.positions()
                 closest.append(point_triangle_distances(x[v], x[tris[t]]).min())
-    return max(passes[24:]), min(closest) / thickness
+    return max(passes[24:]), min(closest) / thickness, sim.positions()
+
+
+def still_plate() -> tc.AnimatedMeshCollider:
+    """A 1 m square of two triangles in the plane y = 0 turned by TURN, as a still animated
+    mesh 1 mm thick."""
+    square = np.array([[-0.5, 0.0, -0.5], [0.5, 0.0, -0.5], [0.5, 0.0, 0.5], [-0.5, 0.0, 0.5]])
+    plate = tc.Mesh(square @ TURN.T, np.array([[0, 2, 1], [0, 3, 2]]))
+    return tc.AnimatedMeshCollider(plate, thickness=0.001)
 
 
 def test_a_resting_pile_is_settled_a_layer_a_pass_and_keeps_its_thickness(f64):
@@ -683,7 +692,7 @@ def test_a_resting_pile_is_settled_a_layer_a_pass_and_keeps_its_thickness(f64):
     as a diffusion: the passes run out in every step and layers sink into each other
     (measured: 0.72 of the thickness)."""
     plane = tc.Plane(normal=TURN @ [0.0, 1.0, 0.0], thickness=0.0)
-    results = {stacking: settle_pile(plane, stacking) for stacking in (True, False)}
+    results = {stacking: settle_pile(plane, stacking)[:2] for stacking in (True, False)}
     report("most passes a step, closest far pair / thickness (stacking, mass-weighted)",
            results, "< 16 and >= 0.99; 16 and < 0.9")
     assert results[True][0] < 16 and results[True][1] >= 0.99
@@ -697,9 +706,7 @@ def test_an_animated_body_holds_up_the_layers_resting_on_it(f64):
     (passes under 16, 0.99 of the thickness kept). An animated body's contacts are found per
     triangle, not by a distance; before its contacts seeded the levels nothing held the pile,
     and it settled as mass-weighted contacts do (measured: 16 passes, 0.72)."""
-    square = np.array([[-0.5, 0.0, -0.5], [0.5, 0.0, -0.5], [0.5, 0.0, 0.5], [-0.5, 0.0, 0.5]])
-    plate = tc.Mesh(square @ TURN.T, np.array([[0, 2, 1], [0, 3, 2]]))
-    passes, closest = settle_pile(tc.AnimatedMeshCollider(plate, thickness=0.001), True)
+    passes, closest, _ = settle_pile(still_plate(), True)
     report("most passes a step, closest far pair / thickness", (passes, closest),
            "< 16 and >= 0.99")
     assert passes < 16 and closest >= 0.99
