@@ -424,7 +424,7 @@ class Simulation:
         return self.state.read(State.POSITION).astype(np.float64, copy=False)   # a fresh array
 
     def self_contacts(self, active: bool = True) -> SelfContacts:
-        """Self-collision's pairs after the last step: those in contact in its last pass, or
+        """Self-collision's pairs after the last step: those in contact in any of its passes, or
         (active=False) every candidate pair it watches. ValueError without self-collision."""
         self._check_runtime()
         require(self.self_collision is not None, "self_collision", None,
