@@ -401,8 +401,9 @@ class SelfCollisionStage:
 
     def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
         """The self-collision stage of a step ending at time t (stages.STEP_ORDER): the list
-        made again when the cloth has moved more than the skin since it was made (on the
-        host: it may grow), then the contact passes (phases)."""
+        made again when the cloth has moved more than its skin less the margin since it was
+        made (a pair it left out was a thickness and the skin apart: it stays out of a
+        contact's reach; on the host: it may grow), then the contact passes (phases)."""
         self.passed = False
         if self.triangle_count == 0:
             return
