@@ -6,6 +6,7 @@ import warnings
 import numpy as np
 import pytest
 from helpers import report
+from scipy.spatial.transform import Rotation
 
 import ti_cloth as tc
 
@@ -640,14 +641,8 @@ def offset_stack(layers: int, n: int, size: float, thickness: float, turn) -> tc
     return tc.Cloth.combine(sheets)
 
 
-def rotation(axis, angle: float) -> np.ndarray:
-    """The rotation by `angle` [rad] about `axis` (Rodrigues)."""
-    x, y, z = np.asarray(axis, float) / np.linalg.norm(axis)
-    cross = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-    return np.eye(3) + np.sin(angle) * cross + (1 - np.cos(angle)) * cross @ cross
-
-
-TURN = rotation((1.0, 0.0, 1.0), np.pi / 3)
+TURN = Rotation.from_rotvec(np.pi / 3 * np.array([1.0, 0.0, 1.0]) / np.sqrt(2.0)).as_matrix()
+"""60 degrees about (1, 0, 1)."""
 
 
 def settle_pile(collider, stacking: bool, steps: int = 60) -> tuple[int, float, np.ndarray]:

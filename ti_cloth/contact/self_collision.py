@@ -430,9 +430,9 @@ class SelfCollisionStage:
         evaluating the listed pairs near contact (all of them in the first, and again once a
         particle has moved NEAR / 2 thicknesses since: module doc), moving the particles by
         their contacts and out of the colliders again; they stop at an evaluation that finds
-        none unresolved (decide), which moves nothing. Passes run out with
-        contacts still deep: one more evaluation measures what is left (left_deep, deepest).
-        Then the velocities follow the corrections."""
+        none unresolved (decide), which moves nothing. Passes run out with contacts still
+        deep: one more evaluation measures what is left (left_deep, deepest). Then the
+        velocities follow the corrections."""
         n = model.particle_count
         colliders = self.colliders
         out_of_colliders = (() if colliders is None else

@@ -436,7 +436,7 @@ def rests_on(colliders: ti.template(), i, x, reach):
     animated bodies are not asked, their distance being a search): what holds a layer up
     (self_collision.py, stacking)."""
     resting = colliders.touched[i] != 0
-    for c in range(colliders.count):
+    for c in range(colliders.count if not resting else 0):     # touched: no distance needed
         if colliders.kind[c] != ANIMATED:
             d, _ = collider_distance(colliders, c, x, colliders.step_start[i])
             if d - colliders.thickness[c] < reach:
