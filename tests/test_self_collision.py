@@ -11,6 +11,7 @@ from scipy.spatial.transform import Rotation
 import ti_cloth as tc
 
 THICKNESS = 0.01
+ON_REACH = 1 + 1e-6          # a pair the passes left on the reach, up to a rounding, is within it
 
 
 def point_triangle_distances(points, corners):
@@ -125,14 +126,15 @@ def two_sheets(n=12, height=0.2):
 
 
 def watch(sim, body):
-    """Check one step's lists: the brute-force pairs nearer than the reach of a contact
-    ((1 + MARGIN) thicknesses: the passes push contacts there) are all in the candidate list
+    """Check one step's lists: the brute-force pairs within the reach of a contact
+    ((1 + MARGIN) thicknesses, the reach included: the passes push contacts onto it, up to a
+    rounding, ON_REACH) are all in the candidate list
     (Simulation.self_contacts(active=False)), and every vertex-triangle pair reported in
     contact in the step (self_contacts()) lies within twice the thickness after the
     correction. Returns (pairs within the reach, pairs in contact)."""
     from ti_cloth.contact.self_collision import MARGIN
     x = sim.positions()
-    vt, ee, edges = close_pairs(body, x, (1 + MARGIN) * THICKNESS)
+    vt, ee, edges = close_pairs(body, x, (1 + MARGIN) * THICKNESS * ON_REACH)
     listed = sim.self_contacts(active=False)
     np.testing.assert_array_equal(listed.edges, edges)
     assert vt <= {tuple(p) for p in listed.vertex_triangle.tolist()}
@@ -238,7 +240,7 @@ def test_one_thread_and_all_cores_and_a_rerun_give_the_same_bits():
     re-initialisation fewer: each drops every kernel this worker compiled)."""
     from ti_cloth.runtime import backend
     body = two_sheets(8, height=0.05)
-    twisted, handles, _ = twisted_sheet(turns=2.0)
+    twisted, handles, _ = twisted_sheet(turns=3.0)     # the fail-safe acts within 90 steps
     ball = tc.MeshCollider(tc.sphere_mesh(0.15, (0.5, -0.12, 0.5), subdivisions=1),
                            thickness=THICKNESS, static_friction=0.5, resolution=16,
                            rotation=lambda t: (0.0, 2.0 * t, 0.0))
@@ -306,7 +308,8 @@ def test_a_ribbon_folded_onto_itself_stays_two_layers(f64):
 def test_friction_between_layers_is_coulomb_on_a_slope(f64):
     """A small sheet resting on a pinned sheet tilted 20 degrees slides 0.4 s down it by
     a t^2 / 2 with a = g (sin 20 - mu cos 20) (within 3 %: the first-order start of a step-wise
-    slide lags by one step in 96) at mu = 0.2, and sticks (< 1 mm) at mu = 0.6 > tan 20.
+    slide lags by one step in 96) at mu = 0.2, and sticks (< 0.5 mm; 0.2 measured) at
+    mu = 0.6 > tan 20.
     Without friction it would slide 0.27 m in both cases."""
     angle = np.radians(20.0)
     turn = np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0],
@@ -330,7 +333,7 @@ def test_friction_between_layers_is_coulomb_on_a_slope(f64):
         if expected > 0:
             assert abs(slid - expected) < 0.03 * expected
         else:
-            assert abs(slid) < 1e-3
+            assert abs(slid) < 5e-4
         del sim          # its fields and kernels go to the next friction's simulation
 
 
@@ -413,10 +416,10 @@ def test_a_contact_the_passes_cannot_resolve_is_reported_with_its_distance(f64):
     """A sheet on the ground and a sheet over it pressed down by a handle to 6 mm above the
     ground, the thickness 20 mm: no pass can make room (issue 40, a dense pile: the ground and
     the handle hold the layers 0.3 thickness apart). The run warns once, in the first step
-    whose passes leave the layers nearer than half the thickness (measured here by brute force
-    over every vertex and triangle of the other sheet), naming the distance, the passes and
+    whose passes leave the layers nearer than half the thickness, naming the distance, the passes and
     the step; self_contacts().closest_left is the nearest distance and its first step. The
-    folded four-layer pile above, whose passes do resolve, reports nothing."""
+    distances are brute force over every vertex and triangle, and every edge and edge, of the
+    two sheets. The folded four-layer pile above, whose passes do resolve, reports nothing."""
     thickness, height = 0.02, 0.006
     lower = tc.Cloth(tc.grid_mesh(6, 6, size=(0.3, 0.3), plane="xz"), tc.Material())
     mesh = tc.grid_mesh(6, 6, size=(0.2, 0.2), plane="xz")
@@ -428,6 +431,9 @@ def test_a_contact_the_passes_cannot_resolve_is_reported_with_its_distance(f64):
                         colliders=[tc.Plane(point=(0.0, 0.0, 0.0), thickness=0.0)])
     tris = body.mesh.triangles
     v, t = np.nonzero(body.particle_body[:, None] != body.particle_body[tris[:, 0]][None])
+    edges = np.unique(np.sort(tris[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
+    e, f = np.nonzero(body.particle_body[edges[:, 0]][:, None]
+                      < body.particle_body[edges[:, 0]][None])
     nearest = []
     with pytest.warns(UserWarning, match=r"self-collision left a contact 0\.\d\d of the "
                                          r"thickness apart \(0\.\d+ m of 0\.02 m\) after 16 "
@@ -435,7 +441,9 @@ def test_a_contact_the_passes_cannot_resolve_is_reported_with_its_distance(f64):
         for _ in range(40):
             sim.step(1)
             x = sim.positions()
-            nearest.append(point_triangle_distances(x[v], x[tris[t]]).min())
+            nearest.append(min(point_triangle_distances(x[v], x[tris[t]]).min(),
+                               segment_distances(x[edges[e, 0]], x[edges[e, 1]],
+                                                 x[edges[f, 0]], x[edges[f, 1]]).min()))
     reports = [str(w.message) for w in caught if "self-collision left" in str(w.message)]
     assert len(reports) == 1
     crowded = np.flatnonzero(np.array(nearest) < 0.5 * thickness)
@@ -517,8 +525,8 @@ def test_a_full_candidate_list_grows_says_so_and_keeps_every_near_pair(f64):
     thickness 12 mm (most of an edge): each particle is near more triangles than the list's
     first room (PAIRS_PER_PARTICLE a particle), so the first list grows,
     self_contacts says when and to what, and the list still holds every vertex-triangle pair
-    of the two sheets nearer than a contact's reach ((1 + MARGIN) thicknesses: brute force
-    here), none dropped."""
+    of the two sheets within a contact's reach ((1 + MARGIN) thicknesses, on it included:
+    brute force here) where it was made, none dropped."""
     from ti_cloth.contact.self_collision import MARGIN, PAIRS_PER_PARTICLE
     sheet = tc.grid_mesh(8, 8, size=(0.1, 0.1), plane="xz")
     lower, upper = (tc.Cloth(tc.Mesh(sheet.vertices + (0.0, y, 0.0), sheet.triangles),
@@ -530,16 +538,16 @@ def test_a_full_candidate_list_grows_says_so_and_keeps_every_near_pair(f64):
     x = sim.positions()
     x[64:, 1] = 0.008
     sim.set_positions(x)
-    sim.step(1)
+    sim.step(1)                 # no gravity, at rest: the list is made where x has the sheets
     contacts = sim.self_contacts(active=False)
     pairs = len(contacts.vertex_triangle) + len(contacts.edge_edge)
     report("candidate list: room at first, grown (step, room), pairs",
            (PAIRS_PER_PARTICLE * 128, contacts.grown, pairs), "grown once, at step 0")
     assert len(contacts.grown) == 1 and contacts.grown[0][0] == 0
     assert contacts.capacity == contacts.grown[0][1] >= pairs > PAIRS_PER_PARTICLE * 128
-    x, tris = sim.positions(), body.mesh.triangles
+    tris = body.mesh.triangles
     v, t = np.nonzero((np.arange(128)[:, None] < 64) != (tris[None, :, 0] < 64))  # across
-    near = point_triangle_distances(x[v], x[tris[t]]) < (1 + MARGIN) * thickness   # the reach
+    near = point_triangle_distances(x[v], x[tris[t]]) < (1 + MARGIN) * thickness * ON_REACH
     listed = {tuple(row) for row in contacts.vertex_triangle.tolist()}
     missing = [(a, b) for a, b in zip(v[near].tolist(), t[near].tolist()) if (a, b) not in listed]
     assert near.sum() > 100 and not missing
@@ -601,14 +609,15 @@ def free_crossings(body, held, x):
 
 
 def test_never_through_keeps_a_twisted_sheet_from_passing_through_itself(f64):
-    """Two edges of a 12 x 12 sheet turned a full turn each way in a second wind it into a
-    tight twist that the contact passes alone let through itself (Moller-Trumbore in this
+    """Two edges of a 12 x 12 sheet turned one and a half turns each way in a second wind it
+    into a tight twist that the contact passes alone let through itself (Moller-Trumbore in this
     test, over every pair of a free edge and a free triangle, every 4th step). With the
     never-through fail-safe no free edge ever passes through a free triangle: every pair that
     may have met in a step has its free particles moved back to the step's start
     (contact/never_through.py's theorem). What it costs: the twisted part stops where the
-    passes could not keep it apart (moved_back counts the particles)."""
-    body, handles, held = twisted_sheet(turns=2.0)
+    passes could not keep it apart (moved_back counts the particles). (A full turn each way
+    no longer beats the passes since they move the particles contact by contact.)"""
+    body, handles, held = twisted_sheet(turns=3.0)
     results = {}
     for never_through in (False, True):
         sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240, handles=handles,
@@ -683,31 +692,33 @@ def test_a_resting_pile_is_settled_a_layer_a_pass_and_keeps_its_thickness(f64):
     an axis (stacking knows no "up": the plane holds the first layer, and the contacts hold
     the next). Every step gravity drops each layer g h^2 = 3 % of the thickness into the one
     under it, and the passes lift them back. With stacking (the default: a resting contact
-    moves the side farther from the plane, through the contacts) each pass settles about a
-    layer: every step's passes end before the 16 allowed (7 measured), and from 0.1 s on no
-    particle is nearer than 0.999 thickness to a triangle of another sheet (the passes end at
-    an evaluation that finds none nearer; a brute-force distance here). Mass-weighted (stacking=False) the lift spreads up the pile
-    as a diffusion: the passes run out in every step and layers sink into each other
-    (measured: 0.72 of the thickness)."""
+    moves the side farther from the plane, through the contacts) and the passes moving the
+    particles contact by contact (Gauss-Seidel), a pass settles the pile: every step's passes
+    end within 3 (2 measured: the pass that lifts it and the one that finds nothing to move;
+    7 when each particle took the mean of its contacts' moves), and from 0.1 s on no particle
+    is nearer than 0.999 thickness to a triangle of another sheet (the passes end at an
+    evaluation that finds none nearer; a brute-force distance here). Mass-weighted
+    (stacking=False) the lift spreads up the pile as a diffusion: the passes run out in every
+    step and the layers sink into each other (measured: 0.91 of the thickness)."""
     plane = tc.Plane(normal=TURN @ [0.0, 1.0, 0.0], thickness=0.0)
     results = {stacking: settle_pile(plane, stacking)[:2] for stacking in (True, False)}
     report("most passes a step, closest far pair / thickness (stacking, mass-weighted)",
-           results, "< 16 and >= 0.999; 16 and < 0.9")
-    assert results[True][0] < 16 and results[True][1] >= 0.999
-    assert results[False][0] == 16 and results[False][1] < 0.9
+           results, "<= 3 and >= 0.999; 16 and < 0.99")
+    assert results[True][0] <= 3 and results[True][1] >= 0.999
+    assert results[False][0] == 16 and results[False][1] < 0.99
 
 
 def test_an_animated_body_holds_up_the_layers_resting_on_it(f64):
     """The pile of the test above on a still animated mesh (a 1 m plate of two triangles, 1 mm
     thick) instead of the plane: a particle the collision stage pushed out of the body in the
-    step is held (level 0), so the contacts above it settle a layer a pass as on the plane
-    (passes under 16, 0.999 of the thickness kept). An animated body's contacts are found per
-    triangle, not by a distance; before its contacts seeded the levels nothing held the pile,
-    and it settled as mass-weighted contacts do (measured: 16 passes, 0.72)."""
+    step is held (level 0), so the contacts above it settle the pile as on the plane (passes
+    within 3, 0.999 of the thickness kept). An animated body's contacts are found per
+    triangle, not by a distance; without its contacts seeding the levels nothing holds the
+    pile, and it settles as mass-weighted contacts do (measured: 16 passes, 0.91)."""
     passes, closest, _ = settle_pile(still_plate(), True)
     report("most passes a step, closest far pair / thickness", (passes, closest),
-           "< 16 and >= 0.999")
-    assert passes < 16 and closest >= 0.999
+           "<= 3 and >= 0.999")
+    assert passes <= 3 and closest >= 0.999
 
 
 def test_a_contact_in_free_fall_keeps_the_momentum(f64):

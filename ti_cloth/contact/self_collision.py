@@ -10,7 +10,12 @@ step in which two particles moved apart by more than FAST x SKIN thicknesses: a 
 turning figure moves its hem centimetres a step against a 4 mm thickness, its list is made
 every step whatever the skin, and a lean skin lists fewer pairs (the cape's 12,300 against
 4,900, its list made in 7 ms against 11). Any skin is exact: the list is made again before
-the passes of a step that moved two particles apart by more than its own.
+the passes of a step that moved two particles apart by more than its own (less the margin).
+It is made again after the passes too where they moved two particles apart by more than a
+thickness and its skin since it was made: a pair that met in the step was then nearer than
+that where the list was made, so the list holds it, as the never-through fail-safe assumes
+(never_through.py; before this check a 24² twist kept 228 crossings through the fail-safe,
+the passes having carried particles past a lean list's reach).
 
 Each contact pass evaluates every listed pair:
 - vertex v and triangle t: v's foot on t's plane inside t, and v's height over t, measured on
@@ -23,10 +28,18 @@ its four particles (vertex 1, corners -w; edges (1 - s, s, -(1 - t), -t)), proje
 mass-weighted as a position-based constraint: particle k moves by -w_k g_k (C n + f) / W,
 W = sum_j w_j g_j^2, where f is the Coulomb friction correction: the tangential relative motion
 of the two contact points over the step, removed entirely when it is at most
-friction x penetration depth, shortened by that much otherwise (as the colliders do). Each
-particle sums its contacts' moves in list order (the passes are one serial launch: no atomics)
-and takes their mean (Jacobi with averaging: many contacts on one particle do not add up to an
-overshoot).
+friction x penetration depth, shortened by that much otherwise (as the colliders do). A pair
+that started the step within the reach (an overlap the scene began with, or one the passes
+left) is pushed apart by at most SEPARATING x h past where it started: a correction becomes
+velocity (v += dx / h), and an overlap removed in one 0.2 ms step flung two sheets apart at
+10 m/s. The contacts move the particles one after the other in list order (Gauss-Seidel: the
+passes are one serial launch, so no atomics and the same bits in every run), each seeing the
+moves before it; a pass settles what the mean of each particle's moves (Jacobi with
+averaging, before) took several for (the demos' resting piles: 2 passes against 7). Only a
+contact between two held sides (level 0 both, stacking below: a layer pressed between a
+handle and the ground) still goes into each particle's mean of its pass, applied after it:
+there no move can make room, and one contact after another pushed the layer sideways through
+itself.
 
 The margin: contacts are found, and pushed, MARGIN thicknesses beyond the thickness (C above
 is distance - (1 + MARGIN) thickness), and after a first pass the passes go on until an
@@ -36,13 +49,14 @@ it (unless the passes run out: SelfCollision.iterations; reported below half a t
 Without the margin the passes must settle every contact to the thickness exactly, and a
 pile's ran into a tail of hair-breadth contacts that a neighbour's move brought back by a
 rounding (the cloth pile demo took 14.8 passes a step to leave none deeper than 0.1 %, and
-8.2 to leave none deeper than 1 %, which is what it settled for before; 7.0 with the margin).
+8.2 to leave none deeper than 1 %, which is what it settled for before; 7.0 with the margin,
+with the Jacobi means of then).
 A layer resting on another sits in the margin: its contact, and its friction, hold in every
 step. Pushed past the margin instead (found at the thickness, pushed to 1.02 of it), the
 layers were in the air every other step and a block on a slope slid twice as far as
-Coulomb's law has it. The friction test: a sticking contact's tangential correction is
-shared in the means of several particles, so one pass leaves some of it (a block that
-sticks on a slope crept 1 mm in 0.4 s when the passes stopped at the first).
+Coulomb's law has it. The friction test: the contacts after a sticking one in the pass may
+move its particles again, so one pass can leave some of its correction (a block that sticks
+on a slope crept 1 mm in 0.4 s when the passes stopped at the first).
 
 Stacking (SelfCollision.stacking): a resting contact moves the side farther from what holds
 it up. Under gravity every layer of a pile falls g h^2 in a step and the ground stops only the
@@ -64,20 +78,21 @@ inverse masses in W and in its moves) are scaled by s = 1 - (1 - STACK) r, r = 1
 pair approached over the step by at most RESTING thicknesses, falling to 0 at twice that. A
 contact between unheld sides (in free fall, in the air), an impact and a contact between sides
 of one level stay mass-weighted and keep their momentum; the held side keeps a share (STACK),
-so that a contact pressed by a held upper side still moves it. A particle takes the sum of
-its contacts' moves over the sum of their weights s, or over 1 where that is less: with every
-s = 1 the mean; a scaled move is not diluted by the full ones (a layer lifted from below and
-pressed from above rises), and a particle on the held side only is not moved more than its
-scaled moves.
+so that a contact pressed by a held upper side still moves it. In the means of the contacts
+between two held sides a particle takes the sum of their moves over the sum of their weights
+s, or over 1 where that is less.
 
 Near pairs: the first pass of a step evaluates every listed pair and marks those whose gap
 (height over the plane, or distance, minus the thickness; negative for a pair that crossed)
-is below NEAR thicknesses; later passes evaluate only those, until some particle has moved
-NEAR / 2 thicknesses since that evaluation, when the next pass evaluates every pair again.
-Two particles that each moved less than NEAR / 2 came nearer by less than NEAR, so a pair
-left out is not in contact where it is skipped (a vertex that turns from beside a triangle to
-under it moves at least a thickness): the passes are the same as if they evaluated every
-pair, at a fraction of the cost (a pile's 24,000 listed pairs against its 2,000 near).
+is below NEAR thicknesses; later passes evaluate only those, until some particle has been
+NEAR / 4 thicknesses from where it was at the start of that pass (drift: the contact moves
+keep it as they move the particles, so it bounds every position on the way), when the next
+pass evaluates every pair again. A pair was marked at positions within NEAR / 4 of those and
+is skipped at others within NEAR / 4 of them: its two sides came nearer by less than NEAR,
+so a pair left out is not in contact where it is skipped (a vertex that turns from beside a
+triangle to under it moves at least a thickness): the passes are the same as if they
+evaluated every pair, at a fraction of the cost (a pile's 24,000 listed pairs against its
+2,000 near).
 
 No float atomics except exact max/min, so reruns and thread counts give the same bits.
 Velocities follow the positions' correction (v += dx / h), as after strain limiting.
@@ -124,6 +139,7 @@ FAST = 0.5                  # a step moving particles apart by this x SKIN thick
 THICK = 0.5                 # a thickness above this (in mean rest edges) is warned about
 RESOLVED = 0.001            # contacts within this (in thicknesses) of resolved end the passes
 MARGIN = 0.02               # a contact is pushed this far (in thicknesses) past the thickness
+SEPARATING = 0.5            # m/s: a pair that started a step in contact is pushed apart this fast
 CROWDED = 0.5               # a contact left nearer than this (in thicknesses) is reported
 STACK = 0.01                # the weight of a resting contact's held side (stacking)
 RESTING = 0.25              # a contact approaching by at most this (in thicknesses) a step rests
@@ -270,8 +286,9 @@ class SelfCollisionStage:
         self.full = fields.scalar(ti.i32, ())         # 1: this pass evaluates every pair
         self.near_at = fields.vector(3, real, n)      # the positions of the last full one
         self.drift = fields.scalar(real, ())          # the most a particle moved since
-        self.move_sum = fields.vector(3, real, n)     # a pass's contacts' moves, per particle
-        self.share_sum = fields.scalar(real, n)       # and their shares
+        self.moved = fields.scalar(ti.i32, ())        # 1: this pass moved a particle
+        self.move_sum = fields.vector(3, real, n)     # a pass's held contacts' moves
+        self.share_sum = fields.scalar(real, n)       # and their shares, per particle
         self.back = fields.scalar(ti.i32, n)          # never_through.py: moved back this step
         self.marked = fields.scalar(ti.i32, n)        # to move back in this round
         self.moved_back = fields.scalar(ti.i32, ())   # in this round
@@ -403,14 +420,16 @@ class SelfCollisionStage:
         """The self-collision stage of a step ending at time t (stages.STEP_ORDER): the list
         made again when the cloth has moved more than its skin less the margin since it was
         made (a pair it left out was a thickness and the skin apart: it stays out of a
-        contact's reach; on the host: it may grow), then the contact passes (phases)."""
+        contact's reach; on the host: it may grow), then the contact passes (phases). If the
+        passes moved the cloth more than a thickness and the skin (less the margin) since the
+        list was made, it is made again, so that it holds every pair that met in the step
+        (never_through.py's assumption: a pair that met is nearer than that wherever the list
+        was made); then the fail-safe."""
         self.passed = False
         if self.triangle_count == 0:
             return
         thickness = self.settings.thickness
-        if (not self.listed
-                or displacement_box(self, state, self.listed_at)
-                > (self.skin - MARGIN) * thickness):
+        if not self.listed or self._moved_past(state, self.skin - MARGIN):
             self._make_list(model, state, step_index)
         if self.pair_total == 0:
             return
@@ -420,24 +439,35 @@ class SelfCollisionStage:
         if self.left_deep[None]:
             self._report((1.0 + MARGIN) * thickness + float(self.deepest[None]), step_index)
         if self.settings.never_through:
+            if self._moved_past(state, 1.0 + self.skin - MARGIN):
+                self._make_list(model, state, step_index)
+            plan.run(self, model, state, None, self.candidates, dt, step_index, False,
+                     part="fail_safe", serial=True)
             self.moved_total_run += int(self.moved_total[None])
             if self.unresolved[None]:
                 self._unresolved(int(self.unresolved[None]), step_index)
 
+    def _moved_past(self, state, thicknesses: float) -> bool:
+        """Whether two particles moved apart by more than `thicknesses` since the list was
+        made."""
+        return (displacement_box(self, state, self.listed_at)
+                > thicknesses * self.settings.thickness)
+
     def phases(self, model, forces, pairs) -> tuple:
         """The contact passes as phases (runtime/plan.py; `pairs` the PairList, the
-        workspace: a bigger list is another kernel). At most `iterations` passes, each
-        evaluating the listed pairs near contact (all of them in the first, and again once a
-        particle has moved NEAR / 2 thicknesses since: module doc), moving the particles by
-        their contacts and out of the colliders again; they stop at an evaluation that finds
-        none unresolved (decide), which moves nothing. Passes run out with contacts still
-        deep: one more evaluation measures what is left (left_deep, deepest). Then the
+        workspace: a bigger list is another kernel), one serial launch (after_step: each
+        pass moves the particles contact by contact, in pair order). At most `iterations`
+        passes, each evaluating the listed pairs near contact (marked in the first, and again
+        once a particle has moved NEAR / 2 thicknesses since: module doc), moving the
+        particles by their contacts and out of the colliders again; they stop at a pass that
+        finds none unresolved, which moves nothing (end_pass). Passes run out with contacts
+        still deep: one more evaluation measures what is left (left_deep, deepest). Then the
         velocities follow the corrections."""
         n = model.particle_count
         colliders = self.colliders
         out_of_colliders = (() if colliders is None else
                             (Phase(Loop(n, project_particle_out, model, STATE, colliders, ITEM,
-                                        self.applying)),))
+                                        self.moved)),))
         seed = (Loop(n, seed_level, self, model, STATE, ITEM) if colliders is None else
                 Loop(n, seed_level_on, self, model, STATE, colliders, ITEM))
         return (Phase(Loop(n, keep_position, STATE, self.before, ITEM)),
@@ -447,16 +477,18 @@ class SelfCollisionStage:
                       Once(clear_counts, self),
                       Phase(Loop(n, keep_near_at, self, STATE, ITEM)),
                       Phase(Loop(pairs.capacity, evaluate_pair, self, pairs, model, STATE,
-                                 ITEM)),
-                      Once(decide, self),
-                      Phase(Loop(n, apply_contacts, self, model, STATE, ITEM)),
+                                 ITEM, DT)),
+                      Phase(Loop(n, apply_means, self, model, STATE, ITEM)),
                       *out_of_colliders,
                       Phase(Loop(n, measure_drift, self, STATE, ITEM)),
                       Once(end_pass, self),
                       args=(self,)),
-                Phase(Loop(n, follow_correction, self, STATE, ITEM, DT)),
-                *(never_through.phases(self, model, pairs) if self.settings.never_through
-                  else ()))
+                Phase(Loop(n, follow_correction, self, STATE, ITEM, DT)))
+
+    def fail_safe(self, model, forces, pairs) -> tuple:
+        """never_through.py's rounds, after the passes (a part of its own: the passes may
+        make the list again before it)."""
+        return never_through.phases(self, model, pairs)
 
     def _unresolved(self, count: int, step_index: int) -> None:
         """Keep the last step whose held particles carried a pair through (never_through.py's
@@ -583,36 +615,49 @@ def _edge_edge(positions: ti.template(), start: ti.template(), corners, thicknes
 
 
 @ti.func
-def _contact_move(stage: ti.template(), pairs: ti.template(), model: ti.template(),
-                  state: ti.template(), p, corners, weights, n, gap, friction):
-    """Add the position-based projection of contact p with its friction to its particles'
-    sums: particle k of `corners` moves by -w_k s_k g_k (gap n + f) / sum_j w_j s_j g_j^2
-    (move_sum), s_k its share (stack_shares; share_sum). The passes are one serial launch
-    (SelfCollisionStage.after_step), so each particle's sums add its contacts in pair order:
-    the same bits in every run, with no atomics. Returns how far friction moves the contact
-    points relative to each other [m]."""
+def _contact_move(stage: ti.template(), model: ti.template(), state: ti.template(), corners,
+                  weights, n, gap, friction, first, dt):
+    """The position-based projection of a contact with its friction: particle k of
+    `corners` moves by -w_k s_k g_k (d n + f) / sum_j w_j s_j g_j^2, s_k its share
+    (stack_shares), d the depth to push (gap, or less for a pair that started the step within
+    the reach: pushed apart by SEPARATING x dt past where it started), at once (Gauss-Seidel:
+    the passes are one serial launch, so the contacts move the particles in pair order, the
+    same bits in every run), or into the pass's means between two holders (pressed). It
+    moves them in a pass that applies, if the contact is unresolved or the pass is the
+    step's first. Returns whether it is unresolved: deeper than RESOLVED thicknesses past
+    the margin (or its separation), or its friction moving the contact points relative to
+    each other by more than that."""
     motion = ti.Vector([0.0, 0.0, 0.0])
     for k in ti.static(range(4)):
         i = corners[k]
         motion += weights[k] * (state.particle_position[i] - stage.step_start[i])
-    shares = stack_shares(stage, corners, weights, motion, n)
+    shares, pressed = stack_shares(stage, corners, weights, motion, n)
     norm = 0.0
     for k in ti.static(range(4)):
         norm += model.particle_inv_mass[corners[k]] * shares[k] * weights[k] * weights[k]
+    started = gap - motion.dot(n)              # the gap at the step's start, along n
+    depth = ti.min(gap - ti.min(started + SEPARATING * dt, 0.0), 0.0)
     tangential = motion - motion.dot(n) * n
     length = tangential.norm()
     slip = 0.0
     if length > 0:
-        slip = ti.min(friction * -gap / length, 1.0)
-    scale = 0.0
-    if norm > 0:
-        scale = -1.0 / norm
-    for k in ti.static(range(4)):
-        i = corners[k]
-        stage.share_sum[i] = stage.share_sum[i] + shares[k]
-        stage.move_sum[i] = stage.move_sum[i] + (scale * model.particle_inv_mass[i] * shares[k]
-                                                 * weights[k] * (gap * n + slip * tangential))
-    return slip * length
+        slip = ti.min(friction * -depth / length, 1.0)
+    resolved = RESOLVED * stage.thickness[None]
+    unresolved = depth < -MARGIN * stage.thickness[None] - resolved or slip * length > resolved
+    if stage.applying[None] and (first or unresolved) and norm > 0:
+        move = -(depth * n + slip * tangential) / norm
+        for k in ti.static(range(4)):
+            i = corners[k]
+            step = model.particle_inv_mass[i] * shares[k] * weights[k] * move
+            if pressed:                     # between two holders: the pass's mean
+                stage.move_sum[i] = stage.move_sum[i] + step
+                stage.share_sum[i] = stage.share_sum[i] + shares[k]
+            else:
+                state.particle_position[i] += step
+                stage.drift[None] = ti.max(stage.drift[None],
+                                           (state.particle_position[i] - stage.near_at[i]).norm())
+        stage.moved[None] = 1
+    return unresolved
 
 
 @ti.func
@@ -622,7 +667,8 @@ def stack_shares(stage: ti.template(), corners, weights, motion, n):
     pair approached over the step (along n: -motion . n) by at most RESTING thicknesses, 0
     from twice that. A side's level is the highest of its corners' (weights != 0; the vertex
     side has weights > 0). Then each side's corners take the other side's level + 1 where
-    that is less (the support spreads through the contacts)."""
+    that is less (the support spreads through the contacts). Also returns whether both
+    sides are held (level 0)."""
     near, far = 0, 0                      # the vertex (first edge) side's, the other side's
     for k in ti.static(range(4)):
         if weights[k] > 0:
@@ -630,6 +676,7 @@ def stack_shares(stage: ti.template(), corners, weights, motion, n):
         elif weights[k] < 0:
             far = ti.max(far, stage.level[corners[k]])
     shares = ti.Vector([1.0, 1.0, 1.0, 1.0])
+    pressed = near == 0 and far == 0
     if near != far:
         limit = RESTING * stage.thickness[None]
         resting = ti.min(ti.max(2.0 + motion.dot(n) / limit, 0.0), 1.0)
@@ -643,7 +690,7 @@ def stack_shares(stage: ti.template(), corners, weights, motion, n):
             stage.level[i] = ti.min(stage.level[i], far + 1)
         elif weights[k] < 0:
             stage.level[i] = ti.min(stage.level[i], near + 1)
-    return shares
+    return shares, pressed
 
 
 @ti.func
@@ -669,9 +716,11 @@ def keep_position(state: ti.template(), kept: ti.template(), i):
 
 @ti.func
 def begin_passes(stage: ti.template()):
-    """Before the first pass: passing, none made, nothing left deep, every pair evaluated."""
+    """Before the first pass: passing and moving, none made, nothing left deep, the near
+    pairs marked."""
     stage.passes[None] = 0
     stage.go[None] = 1
+    stage.applying[None] = 1
     stage.left_deep[None] = 0
     stage.full[None] = 1
 
@@ -684,89 +733,83 @@ def passing(stage: ti.template()):
 
 @ti.func
 def clear_counts(stage: ti.template()):
+    """Before a pass: no contact counted or moved yet; before one that evaluates every pair,
+    no drift since."""
     stage.touching[None] = ti.Vector([0, 0])
     stage.deepest[None] = 0.0
-    stage.drift[None] = 0.0
+    stage.moved[None] = 0
+    if stage.full[None]:
+        stage.drift[None] = 0.0
 
 
 @ti.func
 def keep_near_at(stage: ti.template(), state: ti.template(), i):
-    """Before a pass that evaluates every pair: where particle i is (near_at)."""
+    """Before a pass that marks the near pairs: where particle i is (near_at)."""
     if stage.full[None]:
         stage.near_at[i] = state.particle_position[i]
 
 
 @ti.func
 def measure_drift(stage: ti.template(), state: ti.template(), i):
-    """drift = the most any particle moved since the last pass that evaluated every pair (a
-    max: exact, in any order)."""
+    """drift: the most any particle has been from where it was at the last pass that evaluated
+    every pair (a max: exact, in any order; the contact moves keep it up to date as they
+    move the particles, so it bounds every position on the way)."""
     ti.atomic_max(stage.drift[None], (state.particle_position[i] - stage.near_at[i]).norm())
 
 
 @ti.func
+def _pair_contact(stage: ti.template(), pairs: ti.template(), state: ti.template(), p):
+    """Listed pair p at the current positions: (in contact, n, gap, weights g_k of its four
+    particles), against the reach (1 + MARGIN thicknesses: module doc)."""
+    reach = (1.0 + MARGIN) * stage.thickness[None]
+    corners = pairs.particles[p]
+    touching = False
+    n = ti.Vector([0.0, 0.0, 0.0])
+    gap = 0.0
+    weights = ti.Vector([0.0, 0.0, 0.0, 0.0])
+    if p < stage.pair_start[stage.triangle_count]:
+        touching, n, gap, w = _vertex_triangle(state.particle_position, stage.step_start,
+                                               corners, reach)
+        weights = ti.Vector([1.0, -w[0], -w[1], -w[2]])
+    else:
+        touching, n, gap, s, t = _edge_edge(state.particle_position, stage.step_start,
+                                            corners, reach)
+        weights = ti.Vector([1.0 - s, s, t - 1.0, -t])
+    touching = touching and not torn_pair(stage, state, pairs.elements[p],
+                                          p < stage.pair_start[stage.triangle_count])
+    return touching, n, gap, weights
+
+
+@ti.func
 def evaluate_pair(stage: ti.template(), pairs: ti.template(), model: ti.template(),
-                  state: ti.template(), p):
+                  state: ti.template(), p, dt):
     """Listed pair p at the current positions (if p is listed, and near or in a pass that
     evaluates every pair, which marks it near when its gap is below NEAR thicknesses):
     active[p] (in contact in this or an earlier evaluation of the step) and, in contact, its
-    moves; counts the contacts and those unresolved (decide) in touching (integer counts:
-    exact), the smallest gap in deepest (a min: exact, in any order)."""
+    moves (_contact_move); counts the contacts and those unresolved in touching, the smallest
+    gap in deepest."""
     if (p < stage.pair_start[stage.triangle_count + stage.edge_count]
             and (stage.full[None] or pairs.near[p])):
-        thickness = stage.thickness[None]
-        reach = (1.0 + MARGIN) * thickness        # contact: nearer than this (module doc)
-        corners = pairs.particles[p]
-        touching = False
-        n = ti.Vector([0.0, 0.0, 0.0])
-        gap = 0.0
-        weights = ti.Vector([0.0, 0.0, 0.0, 0.0])
-        elements = pairs.elements[p]
-        if p < stage.pair_start[stage.triangle_count]:
-            touching, n, gap, w = _vertex_triangle(state.particle_position, stage.step_start,
-                                                   corners, reach)
-            weights = ti.Vector([1.0, -w[0], -w[1], -w[2]])
-        else:
-            touching, n, gap, s, t = _edge_edge(state.particle_position, stage.step_start,
-                                                corners, reach)
-            weights = ti.Vector([1.0 - s, s, t - 1.0, -t])
+        touching, n, gap, weights = _pair_contact(stage, pairs, state, p)
         if stage.full[None]:
-            pairs.near[p] = ti.select(gap < NEAR * thickness, 1, 0)
-        touching = touching and not torn_pair(stage, state, elements,
-                                              p < stage.pair_start[stage.triangle_count])
+            pairs.near[p] = ti.select(gap < NEAR * stage.thickness[None], 1, 0)
         first = stage.passes[None] == 0           # the step's first evaluation (full)
         pairs.active[p] = ti.select(touching or (pairs.active[p] != 0 and not first), 1, 0)
         if touching:
-            held = _contact_move(stage, pairs, model, state, p, corners, weights, n, gap,
-                                 stage.friction[None])
-            ti.atomic_add(stage.touching[None][0], 1)
-            ti.atomic_min(stage.deepest[None], gap)
-            if gap < -(MARGIN + RESOLVED) * thickness or held > RESOLVED * thickness:
-                ti.atomic_add(stage.touching[None][1], 1)
+            unresolved = _contact_move(stage, model, state, pairs.particles[p], weights, n, gap,
+                                       stage.friction[None], first, dt)
+            stage.touching[None][0] += 1
+            stage.deepest[None] = ti.min(stage.deepest[None], gap)
+            if unresolved:
+                stage.touching[None][1] += 1
 
 
 @ti.func
-def decide(stage: ti.template()):
-    """After an evaluation: no contact, or after a first pass none unresolved (deeper than
-    RESOLVED thicknesses past the margin, or friction still moving it more than that), ends
-    the passes (a step's contacts move the particles, and apply their friction, at least
-    once); after the last pass, the evaluation only measures what is left; otherwise the
-    particles move (applying)."""
-    stage.applying[None] = 0
-    if stage.touching[None][0] == 0 or (stage.touching[None][1] == 0 and stage.passes[None] > 0):
-        stage.go[None] = 0
-    elif stage.passes[None] == stage.iterations[None]:
-        stage.left_deep[None] = 1
-        stage.go[None] = 0
-    else:
-        stage.applying[None] = 1
-
-
-@ti.func
-def apply_contacts(stage: ti.template(), model: ti.template(), state: ti.template(), i):
-    """Particle i moves by the sum of its contacts' moves over the sum of their shares, or
-    over 1 if less (module doc; in a pass that applies); the sums start again at 0."""
+def apply_means(stage: ti.template(), model: ti.template(), state: ti.template(), i):
+    """Particle i moves by the sum of its held contacts' moves over the sum of their shares,
+    or over 1 if less (module doc); the sums start again at 0."""
     shares = stage.share_sum[i]
-    if stage.applying[None] and model.particle_inv_mass[i] > 0 and shares > 0:
+    if model.particle_inv_mass[i] > 0 and shares > 0:
         state.particle_position[i] += stage.move_sum[i] / ti.max(shares, 1.0)
     stage.move_sum[i] = ti.Vector([0.0, 0.0, 0.0])
     stage.share_sum[i] = 0.0
@@ -774,11 +817,22 @@ def apply_contacts(stage: ti.template(), model: ti.template(), state: ti.templat
 
 @ti.func
 def end_pass(stage: ti.template()):
-    """A pass that applied counts. The next evaluates every pair once a particle has moved
-    NEAR / 2 thicknesses since the last that did."""
-    if stage.applying[None]:
+    """After a pass: one that applied counts. No contact, or none unresolved in a pass that
+    moved none (any but the step's first, which moves every contact: a step's contacts apply
+    their friction at least once), ends the passes in the state it evaluated; after the last
+    pass, one more evaluation only measures what is left. The next pass marks the near pairs
+    again once a particle has moved NEAR / 2 thicknesses since the last that did."""
+    first = stage.applying[None] and stage.passes[None] == 0
+    if stage.applying[None] and stage.touching[None][0] > 0:
         stage.passes[None] += 1
-    stage.full[None] = ti.select(stage.drift[None] > 0.5 * NEAR * stage.thickness[None], 1, 0)
+    if stage.touching[None][0] == 0 or (stage.touching[None][1] == 0 and not first):
+        stage.go[None] = 0
+    elif not stage.applying[None]:
+        stage.left_deep[None] = 1
+        stage.go[None] = 0
+    elif stage.passes[None] == stage.iterations[None]:
+        stage.applying[None] = 0
+    stage.full[None] = ti.select(stage.drift[None] > 0.25 * NEAR * stage.thickness[None], 1, 0)
 
 
 @ti.func
