@@ -458,7 +458,7 @@ class SelfCollisionStage:
         workspace: a bigger list is another kernel), one serial launch (after_step: each
         pass moves the particles contact by contact, in pair order). At most `iterations`
         passes, each evaluating the listed pairs near contact (marked in the first, and again
-        once a particle has moved NEAR / 2 thicknesses since: module doc), moving the
+        once a particle has been NEAR / 4 thicknesses away since: module doc), moving the
         particles by their contacts and out of the colliders again; they stop at a pass that
         finds none unresolved, which moves nothing (end_pass). Passes run out with contacts
         still deep: one more evaluation measures what is left (left_deep, deepest). Then the
