@@ -341,6 +341,7 @@ class SelfCollisionStage:
         self.moved_total_run = 0
         self.unresolved_left = None
         self.passed = False             # the last step ran the passes (else it made none)
+        self.step_contacts = None       # its contacts, where its list was made again after them
 
     def saved(self) -> dict:
         """The candidate list and where it was made: a list made at another step would order
@@ -429,6 +430,7 @@ class SelfCollisionStage:
         (never_through.py's assumption: a pair that met is nearer than that wherever the list
         was made); then the fail-safe."""
         self.passed = False
+        self.step_contacts = None
         if self.triangle_count == 0:
             return
         thickness = self.settings.thickness
@@ -443,7 +445,9 @@ class SelfCollisionStage:
             self._report((1.0 + MARGIN) * thickness + float(self.deepest[None]), step_index)
         if self.settings.never_through:
             if self._moved_past(state, 1.0 + self.skin - MARGIN):
+                self.step_contacts = self._rows(True)    # found on the list being replaced
                 self._make_list(model, state, step_index)
+                self.candidates.active.fill(0)
             plan.run(self, model, state, None, self.candidates, dt, step_index, False,
                      part="fail_safe", serial=True)
             self.moved_total_run += int(self.moved_total[None])
@@ -558,18 +562,26 @@ class SelfCollisionStage:
 
     def pairs(self, active: bool = True) -> SelfContacts:
         """The listed candidate pairs, or (active) those in contact in any pass of the last
-        step."""
+        step (kept from the list they were found on where the list was made again after
+        the passes)."""
+        vertex_rows, edge_rows = (self.step_contacts if active and self.step_contacts is not None
+                                  else self._rows(active))
+        return SelfContacts(vertex_rows, edge_rows, self.edge_rows,
+                            self.closest_left, self.candidates.capacity, tuple(self.grown),
+                            self.moved_total_run, self.unresolved_left,
+                            int(self.passes[None]) if self.passed else 0,
+                            self.skin * self.settings.thickness)
+
+    def _rows(self, active: bool) -> tuple:
+        """The (vertex, triangle) and (edge, edge) rows of the listed pairs, or of those
+        marked active."""
         total = self.pair_total
         kept = np.arange(total)
         if active:
             kept = kept[self.candidates.active.to_numpy()[:total] > 0]
         elements = self.candidates.elements.to_numpy()[kept]
         vertex = kept < self.vertex_pairs
-        return SelfContacts(elements[vertex], elements[~vertex], self.edge_rows,
-                            self.closest_left, self.candidates.capacity, tuple(self.grown),
-                            self.moved_total_run, self.unresolved_left,
-                            int(self.passes[None]) if self.passed else 0,
-                            self.skin * self.settings.thickness)
+        return elements[vertex], elements[~vertex]
 
 
 @ti.func
