@@ -822,8 +822,8 @@ def evaluate_pair(stage: ti.template(), pairs: ti.template(), model: ti.template
 
 @ti.func
 def apply_means(stage: ti.template(), model: ti.template(), state: ti.template(), i):
-    """Particle i moves by the sum of its held contacts' moves over the sum of their shares,
-    or over 1 if less (module doc); the sums start again at 0."""
+    """Particle i moves by the sum of its moves from contacts between two held sides over the
+    sum of their shares, or over 1 if less (module doc); the sums start again at 0."""
     shares = stage.share_sum[i]
     if model.particle_inv_mass[i] > 0 and shares > 0:
         state.particle_position[i] += stage.move_sum[i] / ti.max(shares, 1.0)
@@ -837,7 +837,8 @@ def end_pass(stage: ti.template()):
     moved none (any but the step's first, which moves every contact: a step's contacts apply
     their friction at least once), ends the passes in the state it evaluated; after the last
     pass, one more evaluation only measures what is left. The next pass marks the near pairs
-    again once a particle has moved NEAR / 2 thicknesses since the last that did."""
+    again once a particle has been NEAR / 4 thicknesses from where it was at the last that did
+    (drift)."""
     first = stage.applying[None] and stage.passes[None] == 0
     if stage.applying[None] and stage.touching[None][0] > 0:
         stage.passes[None] += 1
