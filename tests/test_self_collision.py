@@ -616,8 +616,7 @@ def test_never_through_keeps_a_twisted_sheet_from_passing_through_itself(f64):
     never-through fail-safe no free edge ever passes through a free triangle: every pair that
     may have met in a step has its free particles moved back to the step's start
     (contact/never_through.py's theorem). What it costs: the twisted part stops where the
-    passes could not keep it apart (moved_back counts the particles). (A full turn each way
-    no longer beats the passes since they move the particles contact by contact.)"""
+    passes could not keep it apart (moved_back counts the particles)."""
     body, handles, held = twisted_sheet(turns=3.0)
     results = {}
     for never_through in (False, True):
