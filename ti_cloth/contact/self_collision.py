@@ -11,11 +11,12 @@ turning figure moves its hem centimetres a step against a 4 mm thickness, its li
 every step whatever the skin, and a lean skin lists fewer pairs (the cape's 12,300 against
 4,900, its list made in 7 ms against 11). Any skin is exact: the list is made again before
 the passes of a step that moved two particles apart by more than its own (less the margin).
-It is made again after the passes too where they moved two particles apart by more than a
-thickness and its skin since it was made: a pair that met in the step was then nearer than
-that where the list was made, so the list holds it, as the never-through fail-safe assumes
-(never_through.py; before this check a 24² twist kept 228 crossings through the fail-safe,
-the passes having carried particles past a lean list's reach).
+With the fail-safe on, it is made again after the passes where they moved two particles
+apart by more than a thickness and its skin since it was made: a pair that met in the step
+was then nearer than that where the list was made, so the list holds it, as the
+never-through fail-safe assumes (never_through.py; before this check a 24² twist kept 228
+crossings through the fail-safe, the passes having carried particles past a lean list's
+reach).
 
 Each contact pass evaluates every listed pair:
 - vertex v and triangle t: v's foot on t's plane inside t, and v's height over t, measured on
