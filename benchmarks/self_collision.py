@@ -71,11 +71,11 @@ def ms_per_step(sim, steps, repeats, warm_up):
 def profile(sim, steps):
     """ms per step spent in each self-collision kernel (and the grid's builds)."""
     spent = {}
-    originals = {}
+    originals = []
 
     def timed(module, name):
         kernel = getattr(module, name)
-        originals[(module, name)] = kernel
+        originals.append((module, name, kernel))
 
         def run(*args, **kwargs):
             start = time.perf_counter()
@@ -94,7 +94,7 @@ def profile(sim, steps):
     try:
         sim.step(steps)
     finally:
-        for (module, name), kernel in originals.items():
+        for module, name, kernel in originals:
             setattr(module, name, kernel)
         self_collision.plan = plan
     spent[PASSES] = spent.pop("run", 0.0)

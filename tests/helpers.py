@@ -179,3 +179,22 @@ def base_install():
         for name in optional:
             sys.modules.pop(name, None)
         sys.modules.update(saved)
+
+
+def twisted_sheet(n=12, size=0.4, turns=1.0):
+    """An n x n sheet whose two opposite edges (handles) turn opposite ways about its middle
+    line, `turns` half turns each in a second (Newton's cloth_twist); with the edges held."""
+    body = tc.Cloth(tc.grid_mesh(n, n, size=(size, size), plane="xz", origin=(0.0, 0.5, -size / 2)),
+                    tc.Material.preset("cotton_springs"))
+    x = body.particle_position
+    handles = []
+    for edge, sense in ((np.isclose(x[:, 0], 0.0), 1.0), (np.isclose(x[:, 0], size), -1.0)):
+        for i in np.flatnonzero(edge):
+            y, z = x[i, 1] - 0.5, x[i, 2]
+
+            def turned(t, y=y, z=z, sense=sense):
+                a = sense * np.pi * turns * min(t, 1.0)
+                return (0.0, y * np.cos(a) - z * np.sin(a) - y, y * np.sin(a) + z * np.cos(a) - z)
+            handles.append(tc.Handle([i], turned))
+    held = np.concatenate([h.particles for h in handles])
+    return body, handles, held

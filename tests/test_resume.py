@@ -10,11 +10,13 @@ import signal
 import subprocess
 import sys
 import time
+import warnings
 import zipfile
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import twisted_sheet
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -79,6 +81,9 @@ def test_a_loaded_state_continues_with_the_same_bits(f64, tmp_path, integrator):
     again = resumed.self_contacts(active=False)
     for key in ("vertex_triangle", "edge_edge"):
         np.testing.assert_array_equal(getattr(again, key), getattr(listed, key))
+        np.testing.assert_array_equal(getattr(resumed.self_contacts(), key),
+                                      getattr(touching, key))
+    assert resumed.self_contacts().passes == touching.passes > 0
     resumed.step(STEPS - SAVE_AT)
     assert_same_bits(expected, outcome(resumed))
     resumed.restart()
@@ -86,6 +91,39 @@ def test_a_loaded_state_continues_with_the_same_bits(f64, tmp_path, integrator):
     resumed.set_velocities(saved["v"])
     resumed.step(STEPS - SAVE_AT)
     assert not np.array_equal(resumed.positions(), expected["x"])
+
+
+def test_a_state_saved_after_its_list_was_made_again_reports_that_steps_contacts(f64, tmp_path):
+    """Where the passes of a step moved the cloth past its list, the list is made again after
+    them and the step's contacts are those of the list they were found on (self_collision.py).
+    A 24 x 24 sheet twisted two half turns a second does so at step 56: saved there and
+    loaded, self_contacts() reports the same pairs in contact and passes (the new list's
+    flags hold none of them: without the rows saved it reported none), and 8 more steps
+    give the bits of the run never stopped."""
+    body, handles, _ = twisted_sheet(n=24, size=0.6, turns=2.0)
+
+    def twist():
+        return tc.Simulation(body, integrator="xpbd", dt=1 / 240, handles=handles,
+                             gravity=(0.0, 0.0, 0.0),
+                             self_collision=tc.SelfCollision(thickness=0.005))
+    sim = twist()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")        # the passes' reports of a tight twist
+        sim.step(56)
+        assert sim.self_collision.step_contacts is not None, "made again after the passes"
+        saved = sim.self_contacts()
+        assert len(saved.vertex_triangle) > 0 and len(saved.edge_edge) > 0
+        sim.save_state(tmp_path / "twist.npz")
+        sim.step(8)
+        resumed = twist()
+        resumed.load_state(tmp_path / "twist.npz")
+        loaded = resumed.self_contacts()
+        for key in ("vertex_triangle", "edge_edge"):
+            np.testing.assert_array_equal(getattr(loaded, key), getattr(saved, key))
+        assert loaded.passes == saved.passes
+        resumed.step(8)
+    np.testing.assert_array_equal(resumed.positions(), sim.positions())
+    np.testing.assert_array_equal(resumed.velocities(), sim.velocities())
 
 
 def test_many_steps_per_launch_resume_on_the_same_bits(f64, tmp_path):
@@ -319,6 +357,9 @@ CONTACT_CORRUPTIONS = {
     "length": lambda a, k: a.__setitem__("self_contact.active", a["self_contact.active"][:-1]),
     "dtype": lambda a, k: a.__setitem__("self_contact.elements",
                                         a["self_contact.elements"].astype(np.int64)),
+    "passes": lambda a, k: a.__setitem__("self_contact.passes", np.array(17 + k)),
+    "step rows": lambda a, k: a.__setitem__("self_contact.step_vertex_triangle",
+                                            np.array([[0, 10**6 + k]], np.int32)),
 }
 
 

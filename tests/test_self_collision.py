@@ -5,7 +5,7 @@ import warnings
 
 import numpy as np
 import pytest
-from helpers import report
+from helpers import report, twisted_sheet
 from scipy.spatial.transform import Rotation
 
 import ti_cloth as tc
@@ -574,25 +574,6 @@ def test_an_overflowing_animated_candidate_list_falls_back_and_says_so(f64):
     assert 0 < overflowed <= made
     np.testing.assert_array_equal(runs[0][0], runs[1][0])
     assert (np.linalg.norm(runs[0][0], axis=1) > 0.2 + 0.06 * 0.99).all()
-
-
-def twisted_sheet(n=12, size=0.4, turns=1.0):
-    """An n x n sheet whose two opposite edges (handles) turn opposite ways about its middle
-    line, `turns` half turns each in a second (Newton's cloth_twist); with the edges held."""
-    body = tc.Cloth(tc.grid_mesh(n, n, size=(size, size), plane="xz", origin=(0.0, 0.5, -size / 2)),
-                    tc.Material.preset("cotton_springs"))
-    x = body.particle_position
-    handles = []
-    for edge, sense in ((np.isclose(x[:, 0], 0.0), 1.0), (np.isclose(x[:, 0], size), -1.0)):
-        for i in np.flatnonzero(edge):
-            y, z = x[i, 1] - 0.5, x[i, 2]
-
-            def turned(t, y=y, z=z, sense=sense):
-                a = sense * np.pi * turns * min(t, 1.0)
-                return (0.0, y * np.cos(a) - z * np.sin(a) - y, y * np.sin(a) + z * np.cos(a) - z)
-            handles.append(tc.Handle([i], turned))
-    held = np.concatenate([h.particles for h in handles])
-    return body, handles, held
 
 
 def free_crossings(body, held, x):

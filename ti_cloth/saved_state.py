@@ -24,7 +24,7 @@ import numpy as np
 from .errors import StateMismatch
 from .inputs.files import atomic_path
 
-FORMAT = 2      # bump when what a state holds or means changes: older files are refused
+FORMAT = 3      # bump when what a state holds or means changes: older files are refused
                 # (2: a Fabric's torn triangles, face_alive and face_torn_step)
 
 

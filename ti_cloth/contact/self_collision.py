@@ -351,16 +351,23 @@ class SelfCollisionStage:
 
     def saved(self) -> dict:
         """The candidate list and where it was made: a list made at another step would order
-        the per-particle sums differently (different bits)."""
+        the per-particle sums differently (different bits). With it what self_contacts()
+        reports of the last step: its passes and, where the list was made again after them,
+        the pairs in contact (the new list's flags do not hold them)."""
         total = self.pair_total
-        return {"listed": np.array(self.listed), "skin": np.array(self.skin),
-                "pair_total": np.array(total),
-                "vertex_pairs": np.array(self.vertex_pairs),
-                "capacity": np.array(self.candidates.capacity),
-                "listed_at": self.listed_at.to_numpy(), "pair_start": self.pair_start.to_numpy(),
-                "elements": self.candidates.elements.to_numpy()[:total],
-                "particles": self.candidates.particles.to_numpy()[:total],
-                "active": self.candidates.active.to_numpy()[:total]}
+        arrays = {"listed": np.array(self.listed), "skin": np.array(self.skin),
+                  "pair_total": np.array(total),
+                  "vertex_pairs": np.array(self.vertex_pairs),
+                  "capacity": np.array(self.candidates.capacity),
+                  "listed_at": self.listed_at.to_numpy(),
+                  "pair_start": self.pair_start.to_numpy(),
+                  "elements": self.candidates.elements.to_numpy()[:total],
+                  "particles": self.candidates.particles.to_numpy()[:total],
+                  "active": self.candidates.active.to_numpy()[:total],
+                  "passes": np.array(int(self.passes[None]) if self.passed else 0)}
+        if self.step_contacts is not None:
+            arrays["step_vertex_triangle"], arrays["step_edge_edge"] = self.step_contacts
+        return arrays
 
     def check_saved(self, path, arrays: dict, limit: float) -> None:
         """errors.StateMismatch naming the array unless `arrays` is what saved() of this body
@@ -368,7 +375,7 @@ class SelfCollisionStage:
         list's capacity within what it may grow to, its pairs within the capacity, starts
         rising within the pairs, indices within the body), so that restore() allocates
         nothing unbounded and no kernel reads out of its fields."""
-        scalars = ("listed", "skin", "pair_total", "vertex_pairs", "capacity")
+        scalars = ("listed", "skin", "pair_total", "vertex_pairs", "capacity", "passes")
         missing = sorted(set(scalars) - set(arrays))
         if missing:
             raise StateMismatch(f"{path}: self_contact arrays missing: {missing}; it is "
@@ -388,6 +395,7 @@ class SelfCollisionStage:
         if not (skin.shape == () and skin.dtype.kind == "f" and float(skin) in (SKIN, LEAN_SKIN)):
             raise StateMismatch(f"{path}: self_contact skin is {skin!r}, not {SKIN} or "
                                 f"{LEAN_SKIN}")
+        self._check_step_report(path, arrays)
         total = values["pair_total"]
         expected = {"elements": np.empty((total, 2), np.int32),       # PairList's fields
                     "particles": np.empty((total, 4), np.int32),
@@ -406,6 +414,32 @@ class SelfCollisionStage:
                                     f"[0, {high}]{'' if rising else ' or falling'}; it is "
                                     "damaged: run it again")
 
+    def _check_step_report(self, path, arrays: dict) -> None:
+        """StateMismatch unless the last step's report in `arrays` is a pass count within
+        the iterations and, where saved() wrote them, rows of (vertex, triangle) and (edge,
+        edge) indices within the body."""
+        passes = arrays["passes"]
+        if not (passes.shape == () and np.issubdtype(passes.dtype, np.integer)
+                and 0 <= passes <= self.settings.iterations):
+            raise StateMismatch(f"{path}: self_contact passes is {passes!r}, not a count in "
+                                f"[0, {self.settings.iterations}]")
+        rows = [name for name in ("step_vertex_triangle", "step_edge_edge") if name in arrays]
+        if rows and len(rows) != 2:
+            raise StateMismatch(f"{path}: self_contact holds {rows[0]} without its other "
+                                "half; it is damaged: run it again")
+        bounds = {"step_vertex_triangle": (self.particle_count, self.triangle_count),
+                  "step_edge_edge": (self.edge_count, self.edge_count)}
+        for name in rows:
+            array = arrays[name]
+            if not (array.ndim == 2 and array.shape[1] == 2
+                    and np.issubdtype(array.dtype, np.integer)):
+                raise StateMismatch(f"{path}: self_contact {name} is {array.dtype}"
+                                    f"{list(array.shape)}, not rows of two indices")
+            if len(array) and not (array.min() >= 0
+                                   and (array.max(axis=0) < bounds[name]).all()):
+                raise StateMismatch(f"{path}: self_contact {name} holds indices outside this "
+                                    "body; it is damaged: run it again")
+
     def restore(self, arrays: dict) -> None:
         """Load what saved() returned (for this body; check_saved first)."""
         capacity = int(arrays["capacity"])
@@ -422,6 +456,11 @@ class SelfCollisionStage:
         self.listed, self.pair_total = bool(arrays["listed"]), total
         self.skin = float(arrays["skin"])
         self.vertex_pairs = int(arrays["vertex_pairs"])
+        passes = int(arrays["passes"])
+        self.passes[None] = passes
+        self.passed = passes > 0
+        self.step_contacts = ((arrays["step_vertex_triangle"], arrays["step_edge_edge"])
+                              if "step_vertex_triangle" in arrays else None)
 
     def before_step(self, state, t: float) -> None:
         copy_positions(state, self.step_start)
