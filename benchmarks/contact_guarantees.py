@@ -10,14 +10,24 @@ closest pair as a fraction of the thickness, the particles the never-through fai
 back, and the wall time per step with and without self-contact (medians of --repeats
 alternated runs in this process, after a warm-up); each scene with the fail-safe on and off.
 
-Scenes (sizes of this default; --scale 2 doubles every side, the issue's sizes are larger):
+Scenes (N particles a side: 16, 24 and 6 times --scale, or --size; the issue's sizes are
+--scenes pile --size 64 --layers 16 and --scenes twist --size 128):
   pile     --layers sheets of N x N (0.5 m) dropped 4 cm apart onto a horizontal cylinder
-  twist    an N x N sheet whose two opposite edges turn opposite ways (Newton's cloth_twist)
+  twist    an N x N sheet (0.6 m) whose two opposite edges turn opposite ways (Newton's
+           cloth_twist)
+  (both 5 mm thick, or half an edge where that is less, as SelfCollision asks of a mesh)
   press    a sheet pressed onto another by a handle, 6 mm over the ground, thickness 20 mm
            (the dense pile the docs report: no pass can make room)
+  land     an N x N sheet of issue 53's denim (0.4 m) dropped 15 cm onto another (0.5 m) that
+           lies on a ball: the large steps' case (--dt 1/60, and --integrator)
 
     python benchmarks/contact_guarantees.py [--scenes pile twist press] [--scale 1]
+                                            [--size N] [--layers 4] [--fail-safe both]
+                                            [--integrator xpbd] [--dt 0.0041667]
                                             [--every 4] [--repeats 3]
+
+Every scene steps with --integrator (xpbd: 10 iterations; any other integrator by its name,
+with its defaults) at --dt (1/240 s).
 """
 
 import argparse
@@ -37,8 +47,7 @@ def sheet(n: int, size: float, origin, plane: str = "xz") -> tc.Cloth:
                     tc.Material.preset("cotton_springs"))
 
 
-def pile(scale: int, layers: int):
-    n = 16 * scale
+def pile(n: int, layers: int):
     body = tc.Cloth.combine([sheet(n, 0.5, (-0.25, 0.5 + 0.04 * k, -0.25))
                              for k in range(layers)])
     colliders = [tc.Capsule(a=(-0.5, 0.3, 0.0), b=(0.5, 0.3, 0.0), radius=0.1,
@@ -46,8 +55,7 @@ def pile(scale: int, layers: int):
     return body, dict(colliders=colliders), 1.5
 
 
-def twist(scale: int, layers: int):
-    n = 24 * scale
+def twist(n: int, layers: int):
     body = sheet(n, 0.6, (0.0, 0.5, -0.3))
     x = body.particle_position
     handles = []
@@ -62,8 +70,7 @@ def twist(scale: int, layers: int):
     return body, dict(handles=handles, gravity=(0.0, 0.0, 0.0)), 2.5
 
 
-def press(scale: int, layers: int):
-    n = 6 * scale
+def press(n: int, layers: int):
     lower = sheet(n, 0.3, (0.0, 0.0, 0.0))
     mesh = tc.grid_mesh(n, n, size=(0.2, 0.2), plane="xz")
     upper = tc.Cloth(tc.Mesh(mesh.vertices + [0.05, 0.05, 0.05], mesh.triangles),
@@ -75,7 +82,19 @@ def press(scale: int, layers: int):
     return body, dict(handles=[handle], colliders=[tc.Plane(thickness=0.0)]), 0.5
 
 
-SCENES = {"pile": (pile, THICKNESS), "twist": (twist, THICKNESS), "press": (press, 0.02)}
+def land(n: int, layers: int):
+    denim = dict(density=0.324, stretch=5e3, shear=1e3, bending=1e-4)
+    lower = tc.Cloth(tc.grid_mesh(n, n, size=(0.5, 0.5), plane="xz", origin=(-0.25, 0.2, -0.25)),
+                     tc.Fabric(**denim))
+    upper = tc.Cloth(tc.grid_mesh(n, n, size=(0.4, 0.4), plane="xz", origin=(-0.2, 0.35, -0.2)),
+                     tc.Fabric(**denim))
+    colliders = [tc.Sphere(centre=(0.0, 0.1, 0.0), radius=0.1), tc.Plane()]
+    return tc.Cloth.combine([lower, upper]), dict(colliders=colliders), 1.5
+
+
+SCENES = {"pile": (pile, THICKNESS), "twist": (twist, THICKNESS), "press": (press, 0.02),
+          "land": (land, THICKNESS)}
+SIDES = {"pile": 16, "twist": 24, "press": 6, "land": 16}    # particles a side at --scale 1
 
 
 def crossings(x: np.ndarray, triangles: np.ndarray, edges: np.ndarray, reach: float) -> int:
@@ -148,18 +167,21 @@ def point_triangle(p, a, b, c) -> np.ndarray:
     return np.linalg.norm(p - closest, axis=1)
 
 
-def measure(name: str, scale: int, layers: int, every: int, repeats: int,
-            never_through: bool) -> dict:
+def measure(name: str, n: int, layers: int, every: int, repeats: int,
+            never_through: bool, integrator: str, dt: float) -> dict:
     build, thickness = SCENES[name]
-    body, options, seconds = build(scale, layers)
-    dt = 1 / 240
+    body, options, seconds = build(n, layers)
     steps = int(round(seconds / dt))
     triangles = body.mesh.triangles
     edges = np.unique(np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
-    longest = float(np.linalg.norm(body.particle_position[edges[:, 0]]
-                                   - body.particle_position[edges[:, 1]], axis=1).max())
+    lengths = np.linalg.norm(body.particle_position[edges[:, 0]]
+                             - body.particle_position[edges[:, 1]], axis=1)
+    longest = float(lengths.max())
+    if name != "press":                 # as SelfCollision asks of a mesh (warn_if_thick)
+        thickness = min(thickness, 0.5 * float(lengths.mean()))
     reach = longest + 2 * thickness
-    sims = {contact: tc.Simulation(body, integrator=tc.XPBD(iterations=10), dt=dt,
+    sims = {contact: tc.Simulation(body, dt=dt, integrator=tc.XPBD(iterations=10)
+                                   if integrator == "xpbd" else integrator,
                                    self_collision=tc.SelfCollision(
                                        thickness=thickness, never_through=never_through)
                                    if contact else None, **options)
@@ -198,18 +220,26 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--scenes", nargs="+", choices=sorted(SCENES), default=sorted(SCENES))
     parser.add_argument("--scale", type=int, default=1)
+    parser.add_argument("--size", type=int, help="particles a side (overrides --scale)")
+    parser.add_argument("--fail-safe", choices=["both", "on", "off"], default="both")
     parser.add_argument("--layers", type=int, default=4)
+    parser.add_argument("--integrator", default="xpbd")
+    parser.add_argument("--dt", type=float, default=1 / 240)
     parser.add_argument("--every", type=int, default=4)
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
     tc.init(arch="cpu", precision="f32")
+    print(f"{args.integrator} at {args.dt:.4g} s")
     print("| scene | never_through | particles | thickness | frames checked | crossings | "
           "of free elements | closest far pair / thickness | moved back | step with contact | "
           "free step | ratio |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name in args.scenes:
-        for never_through in (True, False):
-            r = measure(name, args.scale, args.layers, args.every, args.repeats, never_through)
+        n = args.size or SIDES[name] * args.scale
+        for never_through in {"both": (True, False), "on": (True,), "off": (False,)}[
+                args.fail_safe]:
+            r = measure(name, n, args.layers, args.every, args.repeats, never_through,
+                        args.integrator, args.dt)
             print(f"| {r['scene']} | {'on' if never_through else 'off'} | {r['particles']:,} | "
                   f"{r['thickness'] * 1e3:g} mm | {r['frames']} | {r['crossings']} | "
                   f"{r['free_crossings']} | "

@@ -16,7 +16,9 @@ apart by more than a thickness and its skin since it was made: a pair that met i
 was then nearer than that where the list was made, so the list holds it, as the
 never-through fail-safe assumes (never_through.py; before this check a 24² twist kept 228
 crossings through the fail-safe, the passes having carried particles past a lean list's
-reach).
+reach). So is it after the fail-safe moved particles back that far (their paths through the
+step changed), and the fail-safe runs again on it, until a run moves nobody back or not
+that far.
 
 Each contact pass evaluates every listed pair:
 - vertex v and triangle t: v's foot on t's plane inside t, and v's height over t, measured on
@@ -489,13 +491,23 @@ class SelfCollisionStage:
         if self.left_deep[None]:
             self._report((1.0 + MARGIN) * thickness + float(self.deepest[None]), step_index)
         if self.settings.never_through:
-            if self._moved_past(state, 1.0 + self.skin - MARGIN):
-                self.step_contacts = self._rows(True)    # found on the list being replaced
-                self._make_list(model, state, step_index)
-                self.candidates.active.fill(0)
-            plan.run(self, model, state, None, self.candidates, dt, step_index, False,
-                     part="fail_safe", serial=True)
-            self.moved_total_run += int(self.moved_total[None])
+            remake = self._moved_past(state, 1.0 + self.skin - MARGIN)
+            while True:
+                if remake:
+                    if self.step_contacts is None:   # found on the list being replaced
+                        self.step_contacts = self._rows(True)
+                    self._make_list(model, state, step_index)
+                    self.candidates.active.fill(0)
+                plan.run(self, model, state, None, self.candidates, dt, step_index, False,
+                         part="fail_safe", serial=True)
+                moved = int(self.moved_total[None])
+                self.moved_total_run += moved
+                # particles moved back took another path through the step: the list is
+                # made again for it where they moved that far, and checked again (those
+                # moved back stay back: each check moves new ones, or it is the last)
+                remake = moved > 0 and self._moved_past(state, 1.0 + self.skin - MARGIN)
+                if not remake:
+                    break
             if self.unresolved[None]:
                 self._unresolved(int(self.unresolved[None]), step_index)
 
@@ -522,7 +534,9 @@ class SelfCollisionStage:
                                         self.moved)),))
         seed = (Loop(n, seed_level, self, model, STATE, ITEM) if colliders is None else
                 Loop(n, seed_level_on, self, model, STATE, colliders, ITEM))
-        return (Phase(Loop(n, keep_position, STATE, self.before, ITEM)),
+        marks = ((Loop(n, never_through.clear_back, self, ITEM),)     # none moved back yet
+                 if self.settings.never_through else ())
+        return (Phase(Loop(n, keep_position, STATE, self.before, ITEM), *marks),
                 Phase(seed),
                 Once(begin_passes, self),
                 Until(passing,
