@@ -640,23 +640,29 @@ def test_the_fail_safe_holds_where_the_passes_carry_particles_past_the_list(f64)
     assert crossings == 0 and moved_back > 0
 
 
-def test_the_fail_safe_checks_the_paths_of_the_particles_it_moved_back(f32):
-    """A 0.4 m denim sheet dropped 15 cm onto a 0.5 m one lying on a ball (12 x 12 each), at
-    a large step (xpbd, 1/60 s): the contact passes run out and the fail-safe moves particles
-    back to the step's start. A particle moved back takes another path through the step than
-    the one its list was made for (two particles that fell together no longer do), so the
-    list is made again for those paths and checked again: no edge passes through a triangle
-    at steps 20 and 24. Without it (measured, f32): 6 crossings in every step from step 18,
-    pairs of a particle moved back and one that was not, missing from the list."""
+def landing(n: int) -> tuple[tc.Cloth, dict]:
+    """A 0.4 m sheet of issue 53's denim dropped 15 cm onto a 0.5 m one lying on a ball (n x n
+    each; benchmarks/contact_guarantees.py's land): its colliders."""
     denim = tc.Fabric(density=0.324, stretch=5e3, shear=1e3, bending=1e-4)
-    lower = tc.Cloth(tc.grid_mesh(12, 12, size=(0.5, 0.5), plane="xz",
+    lower = tc.Cloth(tc.grid_mesh(n, n, size=(0.5, 0.5), plane="xz",
                                   origin=(-0.25, 0.2, -0.25)), denim)
-    upper = tc.Cloth(tc.grid_mesh(12, 12, size=(0.4, 0.4), plane="xz",
+    upper = tc.Cloth(tc.grid_mesh(n, n, size=(0.4, 0.4), plane="xz",
                                   origin=(-0.2, 0.35, -0.2)), denim)
-    body = tc.Cloth.combine([lower, upper])
+    return (tc.Cloth.combine([lower, upper]),
+            dict(colliders=[tc.Sphere(centre=(0.0, 0.1, 0.0), radius=0.1), tc.Plane()]))
+
+
+def test_the_fail_safe_checks_the_paths_of_the_particles_it_moved_back(f32):
+    """The landing (12 x 12 sheets) at a large step (xpbd, 1/60 s): the contact passes run
+    out and the fail-safe moves particles back to the step's start. A particle moved back
+    takes another path through the step than the one its list was made for (two particles
+    that fell together no longer do), so the list is made again for those paths and checked
+    again: no edge passes through a triangle at steps 20 and 24. Without it (measured, f32):
+    6 crossings in every step from step 18, pairs of a particle moved back and one that was
+    not, missing from the list."""
+    body, options = landing(12)
     sim = tc.Simulation(body, integrator=tc.XPBD(iterations=10), dt=1 / 60,
-                        colliders=[tc.Sphere(centre=(0.0, 0.1, 0.0), radius=0.1), tc.Plane()],
-                        self_collision=tc.SelfCollision(thickness=0.005))
+                        self_collision=tc.SelfCollision(thickness=0.005), **options)
     counts = []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")          # the passes' reports: they run out here
@@ -667,6 +673,31 @@ def test_the_fail_safe_checks_the_paths_of_the_particles_it_moved_back(f32):
     report("crossings at steps 20 and 24, particles moved back", (counts, moved_back),
            "[0, 0], > 0")
     assert counts == [0, 0] and moved_back > 0
+
+
+def test_the_passes_keep_the_thickness_beside_the_particles_moved_back(f32):
+    """The landing (16 x 16 sheets) at xpbd's 1/240 s: as the upper sheet lands (step 67)
+    the fail-safe moves 4 particles back to where the step started them, beside particles
+    the passes had moved, and left a pair 0.709 of the 5 mm thickness apart (measured,
+    f32). The passes run again with those particles held where they are, then the fail-safe
+    checks again: in every step from 60 to 75 no vertex is nearer than 0.99 of the
+    thickness to a triangle it is not a corner of, and none passes through (violations:
+    brute force in this test)."""
+    body, options = landing(16)
+    sim = tc.Simulation(body, integrator=tc.XPBD(iterations=10), dt=1 / 240,
+                        self_collision=tc.SelfCollision(thickness=0.005), **options)
+    sim.step(59)
+    worst = []
+    for _ in range(16):
+        sim.step(1)
+        worst.append(violations(body, sim.positions()))
+    closest = min(c for c, _ in worst) / 0.005
+    crossings = sum(k for _, k in worst)
+    moved_back = sim.self_contacts().moved_back
+    report("closest / thickness, crossings, particles moved back", (closest, crossings,
+                                                                     moved_back),
+           ">= 0.99, 0, > 0")
+    assert closest >= 0.99 and crossings == 0 and moved_back > 0
 
 
 def offset_stack(layers: int, n: int, size: float, thickness: float, turn) -> tc.Cloth:

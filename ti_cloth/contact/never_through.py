@@ -35,8 +35,9 @@ one, with these assumptions, stated in docs/api.md:
   as they end the step, so a list made for the step's paths before particles were moved back
   may miss a pair one of them now meets (two particles that fell together: one moved back,
   the other not): where the rounds moved particles that far the list is made again for the
-  new paths and the rounds run again, the particles moved back staying back
-  (self_collision.py; at a large step, 1/60 s, such pairs had passed through);
+  new paths and the rounds run again (after the contact passes, run again with the
+  particles moved back held: self_collision.py), the particles moved back staying back and
+  unmoved (at a large step, 1/60 s, such pairs had passed through);
 - held particles do not carry an element through another by themselves (such a pair is
   counted and reported: SelfContacts.unresolved);
 - colliders: a particle moved back is where it was at the step's start, outside the colliders

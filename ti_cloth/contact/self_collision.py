@@ -16,9 +16,11 @@ apart by more than a thickness and its skin since it was made: a pair that met i
 was then nearer than that where the list was made, so the list holds it, as the
 never-through fail-safe assumes (never_through.py; before this check a 24² twist kept 228
 crossings through the fail-safe, the passes having carried particles past a lean list's
-reach). So is it after the fail-safe moved particles back that far (their paths through the
-step changed), and the fail-safe runs again on it, until a run moves nobody back or not
-that far.
+reach). After a run of the fail-safe that moved particles back, the passes run again with
+those held where the step started them (a particle moved back beside one the passes had
+moved is nearer than the thickness: a landing at 1/240 s left a pair 0.709 of it apart,
+the 24² twist 0.001), the list made again where the particles moved that far (the paths of
+those moved back changed), and the fail-safe checks again, until a run moves nobody back.
 
 Each contact pass evaluates every listed pair:
 - vertex v and triangle t: v's foot on t's plane inside t, and v's height over t, measured on
@@ -306,6 +308,7 @@ class SelfCollisionStage:
         self.moved_total = fields.scalar(ti.i32, ())  # in this step
         self.rounds = fields.scalar(ti.i32, ())
         self.unresolved = fields.scalar(ti.i32, ())
+        self.again = fields.scalar(ti.i32, ())        # 1: passes after the fail-safe
         fields.finalize(self)
         self.grid = BoxGrid(n, len(edges))         # particles, then edges
         self.candidates = PairList(PAIRS_PER_PARTICLE * max(n, 1))
@@ -491,25 +494,43 @@ class SelfCollisionStage:
         if self.left_deep[None]:
             self._report((1.0 + MARGIN) * thickness + float(self.deepest[None]), step_index)
         if self.settings.never_through:
-            remake = self._moved_past(state, 1.0 + self.skin - MARGIN)
-            while True:
-                if remake:
-                    if self.step_contacts is None:   # found on the list being replaced
-                        self.step_contacts = self._rows(True)
-                    self._make_list(model, state, step_index)
-                    self.candidates.active.fill(0)
-                plan.run(self, model, state, None, self.candidates, dt, step_index, False,
-                         part="fail_safe", serial=True)
-                moved = int(self.moved_total[None])
-                self.moved_total_run += moved
-                # particles moved back took another path through the step: the list is
-                # made again for it where they moved that far, and checked again (those
-                # moved back stay back: each check moves new ones, or it is the last)
-                remake = moved > 0 and self._moved_past(state, 1.0 + self.skin - MARGIN)
-                if not remake:
-                    break
-            if self.unresolved[None]:
-                self._unresolved(int(self.unresolved[None]), step_index)
+            self._fail_safe(model, state, dt, step_index)
+
+    def _fail_safe(self, model, state, dt: float, step_index: int) -> None:
+        """never_through.py's rounds until a run moves nobody back. Particles moved back took
+        another path through the step: where they moved that far the list is made again for
+        those paths, and the passes run again with them held where they started (one moved
+        back beside one that was not is nearer than the thickness; nor is it projected out
+        of a collider again: the rounds could not move it back twice), then the rounds check
+        again. Those moved back stay back: each run moves new ones, or is the last."""
+        again = False
+        while True:
+            if self._moved_past(state, 1.0 + self.skin - MARGIN):
+                self._list_again(model, state, step_index)
+            plan.run(self, model, state, None, self.candidates, dt, step_index, False,
+                     part="fail_safe", serial=True)
+            moved = int(self.moved_total[None])
+            self.moved_total_run += moved
+            if moved == 0:
+                break
+            if not again:
+                self.again[None] = again = 1
+            if self._moved_past(state, self.skin - MARGIN):
+                self._list_again(model, state, step_index)
+            plan.run(self, model, state, None, self.candidates, dt, step_index, False,
+                     serial=True)
+        if again:
+            self.again[None] = 0
+        if self.unresolved[None]:
+            self._unresolved(int(self.unresolved[None]), step_index)
+
+    def _list_again(self, model, state, step_index: int) -> None:
+        """The list made again within a step: the pairs found in contact so far kept for
+        self_contacts() (the new list's flags cleared)."""
+        if self.step_contacts is None:
+            self.step_contacts = self._rows(True)
+        self._make_list(model, state, step_index)
+        self.candidates.active.fill(0)
 
     def _moved_past(self, state, thicknesses: float) -> bool:
         """Whether two particles moved apart by more than `thicknesses` since the list was
@@ -530,11 +551,11 @@ class SelfCollisionStage:
         n = model.particle_count
         colliders = self.colliders
         out_of_colliders = (() if colliders is None else
-                            (Phase(Loop(n, project_particle_out, model, STATE, colliders, ITEM,
-                                        self.moved)),))
+                            (Phase(Loop(n, _out_of_colliders, self, model, STATE, colliders,
+                                        ITEM)),))
         seed = (Loop(n, seed_level, self, model, STATE, ITEM) if colliders is None else
                 Loop(n, seed_level_on, self, model, STATE, colliders, ITEM))
-        marks = ((Loop(n, never_through.clear_back, self, ITEM),)     # none moved back yet
+        marks = ((Loop(n, _clear_back, self, ITEM),)
                  if self.settings.never_through else ())
         return (Phase(Loop(n, keep_position, STATE, self.before, ITEM), *marks),
                 Phase(seed),
@@ -708,7 +729,7 @@ def _contact_move(stage: ti.template(), model: ti.template(), state: ti.template
     shares, pressed = stack_shares(stage, corners, weights, motion, n)
     norm = 0.0
     for k in ti.static(range(4)):
-        norm += model.particle_inv_mass[corners[k]] * shares[k] * weights[k] * weights[k]
+        norm += _inverse_mass(stage, model, corners[k]) * shares[k] * weights[k] * weights[k]
     started = gap - motion.dot(n)              # the gap at the step's start, along n
     depth = ti.min(gap - ti.min(started + SEPARATING * dt, 0.0), 0.0)
     tangential = motion - motion.dot(n) * n
@@ -725,14 +746,15 @@ def _contact_move(stage: ti.template(), model: ti.template(), state: ti.template
         if not pressed:
             for k in ti.static(range(4)):
                 i = corners[k]
-                length = model.particle_inv_mass[i] * shares[k] * ti.abs(weights[k]) * move.norm()
+                length = (_inverse_mass(stage, model, i) * shares[k] * ti.abs(weights[k])
+                          * move.norm())
                 if length > 0:
                     room = (STRIDE * stage.thickness[None]
                             - (state.particle_position[i] - stage.pass_at[i]).norm())
                     part = ti.min(part, ti.max(room, 0.0) / length)
         for k in ti.static(range(4)):
             i = corners[k]
-            step = part * model.particle_inv_mass[i] * shares[k] * weights[k] * move
+            step = part * _inverse_mass(stage, model, i) * shares[k] * weights[k] * move
             if pressed:                     # between two holders: the pass's mean
                 stage.move_sum[i] = stage.move_sum[i] + step
                 stage.share_sum[i] = stage.share_sum[i] + shares[k]
@@ -778,9 +800,33 @@ def stack_shares(stage: ti.template(), corners, weights, motion, n):
 
 
 @ti.func
+def _inverse_mass(stage: ti.template(), model: ti.template(), i):
+    """Particle i's inverse mass in the passes: 0 once the fail-safe moved it back in this
+    step (it stays where the step started it: held, as a pin)."""
+    return ti.select(stage.back[i] == 0, model.particle_inv_mass[i], 0.0)
+
+
+@ti.func
+def _out_of_colliders(stage: ti.template(), model: ti.template(), state: ti.template(),
+                      colliders: ti.template(), i):
+    """Particle i projected out of the colliders again after a pass's moves, unless the
+    fail-safe moved it back in this step: it stays where the step started it."""
+    if stage.back[i] == 0:
+        project_particle_out(model, state, colliders, i, stage.moved)
+
+
+@ti.func
+def _clear_back(stage: ti.template(), i):
+    """None moved back yet, before a step's first passes (not before the passes that follow
+    the fail-safe)."""
+    if stage.again[None] == 0:
+        never_through.clear_back(stage, i)
+
+
+@ti.func
 def seed_level(stage: ti.template(), model: ti.template(), state: ti.template(), i):
     """Before a step's passes: level 0 for a held particle (a pin, a handle), else UNHELD."""
-    stage.level[i] = ti.select(model.particle_inv_mass[i] > 0, UNHELD, 0)
+    stage.level[i] = ti.select(_inverse_mass(stage, model, i) > 0, UNHELD, 0)
 
 
 @ti.func
@@ -895,7 +941,7 @@ def apply_means(stage: ti.template(), model: ti.template(), state: ti.template()
     """Particle i moves by the sum of its moves from contacts between two held sides over the
     sum of their shares, or over 1 if less (module doc); the sums start again at 0."""
     shares = stage.share_sum[i]
-    if model.particle_inv_mass[i] > 0 and shares > 0:
+    if _inverse_mass(stage, model, i) > 0 and shares > 0:
         state.particle_position[i] += stage.move_sum[i] / ti.max(shares, 1.0)
     stage.move_sum[i] = ti.Vector([0.0, 0.0, 0.0])
     stage.share_sum[i] = 0.0
