@@ -504,23 +504,25 @@ class SelfCollisionStage:
         of a collider again: the rounds could not move it back twice), then the rounds check
         again. Those moved back stay back: each run moves new ones, or is the last."""
         again = False
-        while True:
-            if self._moved_past(state, 1.0 + self.skin - MARGIN):
-                self._list_again(model, state, step_index)
-            plan.run(self, model, state, None, self.candidates, dt, step_index, False,
-                     part="fail_safe", serial=True)
-            moved = int(self.moved_total[None])
-            self.moved_total_run += moved
-            if moved == 0:
-                break
-            if not again:
-                self.again[None] = again = 1
-            if self._moved_past(state, self.skin - MARGIN):
-                self._list_again(model, state, step_index)
-            plan.run(self, model, state, None, self.candidates, dt, step_index, False,
-                     serial=True)
-        if again:
-            self.again[None] = 0
+        try:
+            while True:
+                if self._moved_past(state, 1.0 + self.skin - MARGIN):
+                    self._list_again(model, state, step_index)
+                plan.run(self, model, state, None, self.candidates, dt, step_index, False,
+                         part="fail_safe", serial=True)
+                moved = int(self.moved_total[None])
+                self.moved_total_run += moved
+                if moved == 0:
+                    break
+                if not again:
+                    self.again[None] = again = 1
+                if self._moved_past(state, self.skin - MARGIN):
+                    self._list_again(model, state, step_index)
+                plan.run(self, model, state, None, self.candidates, dt, step_index, False,
+                         serial=True)
+        finally:        # the next step's passes start with nobody moved back
+            if again:
+                self.again[None] = 0
         if self.unresolved[None]:
             self._unresolved(int(self.unresolved[None]), step_index)
 
