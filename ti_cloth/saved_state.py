@@ -25,7 +25,8 @@ from .errors import StateMismatch
 from .inputs.files import atomic_path
 
 FORMAT = 3      # bump when what a state holds or means changes: older files are refused
-                # (2: a Fabric's torn triangles, face_alive and face_torn_step)
+                # (2: a Fabric's torn triangles, face_alive and face_torn_step; 3: the last
+                # step's self-contact report, its passes and the rows of a list made again)
 
 
 def fingerprint(*parts) -> str:

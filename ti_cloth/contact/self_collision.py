@@ -215,7 +215,8 @@ class SelfContacts:
     moved back to their step's start, over the run so far; unresolved: (pairs, step) when a
     step left pairs that may have met and that only held particles moved (the fail-safe's
     assumption broken), the last such step; None otherwise. passes: the contact passes the
-    last step made (at most SelfCollision.iterations). skin: the slack [m] of the list, which
+    last step made (at most SelfCollision.iterations; the last run of them, where the
+    fail-safe had them run again). skin: the slack [m] of the list, which
     holds the pairs that came within thickness + skin: a thickness (SKIN), or a quarter
     (LEAN_SKIN) when it was made after a fast step."""
 
