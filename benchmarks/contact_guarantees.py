@@ -15,13 +15,14 @@ Scenes (N particles a side: 16, 24 and 6 times --scale, or --size; the issue's s
   pile     --layers sheets of N x N (0.5 m) dropped 4 cm apart onto a horizontal cylinder
   twist    an N x N sheet (0.6 m) whose two opposite edges turn opposite ways (Newton's
            cloth_twist)
-  (both 5 mm thick, or half an edge where that is less, as SelfCollision asks of a mesh)
   press    a sheet pressed onto another by a handle, 6 mm over the ground, thickness 20 mm
            (the dense pile the docs report: no pass can make room)
   land     an N x N sheet of issue 53's denim (0.4 m) dropped 15 cm onto another (0.5 m) that
            lies on a ball: the large steps' case (--dt 1/60, and --integrator)
+(all but the press 5 mm thick, or half the mean rest edge where that is less, as
+SelfCollision asks of a mesh)
 
-    python benchmarks/contact_guarantees.py [--scenes pile twist press] [--scale 1]
+    python benchmarks/contact_guarantees.py [--scenes land pile press twist] [--scale 1]
                                             [--size N] [--layers 4] [--fail-safe both]
                                             [--integrator xpbd] [--dt 0.0041667]
                                             [--every 4] [--repeats 3]
