@@ -34,6 +34,14 @@ def face_columns(model: ti.template(), vectors: ti.template(), f):
 
 
 @ti.func
+def corner_coefficients(model: ti.template(), f):
+    """(alpha, beta): grad lambda_c's components (warp, weft) for triangle f's corners c, the
+    coefficients of x_c in F's columns (face_columns) and of a corner's share (store_corners)."""
+    g = model.face_gradient[f]
+    return (ti.Vector([-g[0] - g[2], g[0], g[2]]), ti.Vector([-g[1] - g[3], g[1], g[3]]))
+
+
+@ti.func
 def store_corners(model: ti.template(), target: ti.template(), f, along_warp, along_weft):
     """target[3 f + c] = P grad lambda_c for triangle f's corners c, P the 3 x 2 matrix of
     columns (along_warp, along_weft) (grad lambda_0 = -grad lambda_1 - grad lambda_2)."""

@@ -149,6 +149,28 @@ def face_product(model: ti.template(), ws: ti.template(), f, vectors: ti.templat
 
 
 @ti.func
+def face_block(model: ti.template(), ws: ti.template(), f, alpha_i, beta_i, alpha_j, beta_j,
+               stiff, geometric):
+    """The 3x3 block of stiff A J^T C J + geometric A S (x) I (face_product's) coupling two
+    sets of triangle f's corners that each move as one (a coarse level's aggregates:
+    integrators/coarse.py): each set given by the sums of its corners' grad lambda components
+    (alpha along the warp, beta along the weft: faces.corner_coefficients); the row set i,
+    the column set j."""
+    warp, weft, s = ws.face_warp[f], ws.face_weft[f], ws.face_stress[f]
+    c = model.face_moduli[f]
+    ww = c[0] * alpha_i * alpha_j + c[3] * beta_i * beta_j
+    wf = c[1] * alpha_i * beta_j + c[3] * beta_i * alpha_j
+    fw = c[3] * alpha_i * beta_j + c[1] * beta_i * alpha_j
+    ff = c[3] * alpha_i * alpha_j + c[2] * beta_i * beta_j
+    g = (s[0] * alpha_i * alpha_j + s[2] * (alpha_i * beta_j + beta_i * alpha_j)
+         + s[1] * beta_i * beta_j)
+    return model.face_area[f] * (
+        stiff * (ww * warp.outer_product(warp) + wf * warp.outer_product(weft)
+                 + fw * weft.outer_product(warp) + ff * weft.outer_product(weft))
+        + geometric * g * ti.Matrix.identity(float, 3))
+
+
+@ti.func
 def corner_diagonal(warp, weft, s, c, g0, g1):
     """The diagonal of a corner's blocks (J^T C J, S (x) I) for grad lambda = (g0, g1)."""
     e11 = g0 * warp

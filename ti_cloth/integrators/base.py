@@ -78,9 +78,14 @@ class Integrator:
 
     def buffers(self, state, make):
         """This integrator's working storage for `state`, made by make() on first use and
-        kept with the State (State.workspace, under the integrator's class: an equal
-        integrator of a later simulation lent the same State reuses it)."""
-        return state.workspace(type(self), make)
+        kept with the State (State.workspace, under buffer_key(): an integrator of a later
+        simulation lent the same State reuses it)."""
+        return state.workspace(self.buffer_key(), make)
+
+    def buffer_key(self):
+        """What this integrator's working storage depends on: its class (and options that
+        change what it holds)."""
+        return type(self)
 
     def options(self) -> dict:
         """Constructor options, for reports and repr."""

@@ -7,7 +7,9 @@ implicit_start fills its blocks and its share of the 3x3 diagonal, implicit_prod
 them), h the step of the solve (implicit Euler's step, or the sub-step of implicit midpoint
 and TR-BDF2: newton.py). The system is never assembled: each iteration gathers A p per
 particle in the Model's fixed adjacency order, and every dot product is summed in fixed blocks
-of BLOCK particles, so a run is bit-for-bit repeatable. Jacobi (3x3-diagonal) preconditioner.
+of BLOCK particles, so a run is bit-for-bit repeatable. Preconditioner (Preconditioner): the
+3x3 diagonal (Jacobi), and by default a coarse level (coarse.py: z = D^-1 r + P A_c^-1 P^T r,
+its solve in the scalar steps, its matrix assembled at a solve's first linearisation).
 Pins: dv is filtered to zero on particles of inverse mass 0 (Baraff & Witkin's modified CG
 with S = 0 there). Three synchronisation points per iteration: after A p, the update, the new
 direction; every worker sums the same partial sums in block order, so all take the same
@@ -31,12 +33,14 @@ from ..energies import ROWS
 from ..energies.altitude import linearise_altitude, project_altitude
 from ..energies.bending import bending_phases
 from ..energies.springs import linearise_spring
+from ..inputs import limits
+from ..inputs.validation import count, require
 from ..physics import wind
 from ..physics.forces import force_loops, gather_force
 from ..runtime import backend
 from ..runtime.plan import ITEM, NOW, STATE, Loop, Once, Phase, Until
 from ..runtime.team import MAX_WORKERS
-from . import implicit_elements
+from . import coarse, implicit_elements
 
 BLOCK = 64                      # particles per partial sum of a dot product
 TYPICAL_ITERATIONS = 20         # CG iterations a step is assumed to take (sizing launches)
@@ -45,12 +49,50 @@ CG, NEWTON, CG_TOTAL = range(3)     # slots of a row of its iteration counts
 ROW = 16                        # slots per row (a worker's row fills its own cache line)
 
 
+PRECONDITIONERS = ("two-level", "jacobi")
+
+
+class Preconditioner:
+    """A solve's preconditioner, checked.
+
+    kind: "two-level" (the 3x3 diagonal and a coarse level of aggregates: coarse.py) or
+        "jacobi" (the 3x3 diagonal alone).
+    aggregate_size: particles per aggregate of the coarse level, >= 1; None: about
+        1 / coarse.AGGREGATES of the body, at least coarse.SMALLEST.
+    """
+
+    def __init__(self, owner: str, kind: str, aggregate_size: int | None):
+        require(kind in PRECONDITIONERS, f"{owner}.preconditioner", kind,
+                f"one of {', '.join(map(repr, PRECONDITIONERS))}")
+        self.kind = kind
+        self.aggregate_size = (None if aggregate_size is None else
+                               count(f"{owner}.aggregate_size", aggregate_size,
+                                     limits.AGGREGATE))
+
+    def options(self) -> dict:
+        return {"preconditioner": self.kind, "aggregate_size": self.aggregate_size}
+
+    def key(self) -> tuple:
+        """What the workspace's fields depend on (Integrator.buffer_key)."""
+        return (self.kind, self.aggregate_size)
+
+    def workspace(self, integrator, model, state, newton: bool = False) -> "Workspace":
+        """`state`'s workspace for `integrator`'s solve with this preconditioner (made on
+        first use: Integrator.buffers; the coarse level's fields are part of it)."""
+        return integrator.buffers(state, lambda: Workspace(
+            model.particle_count, model.spring_count, model.altitude_count, model.face_count,
+            model.hinge_count, newton,
+            coarse.Layout(model.cloth, self.aggregate_size) if self.kind == "two-level"
+            else None))
+
+
 @backend.kernel_argument
 class Workspace:
     """CG vectors, per-spring linearisation and the partial sums of one State's solve."""
 
     def __init__(self, particle_count: int, spring_count: int, altitude_count: int,
-                 face_count: int, hinge_count: int, newton: bool = False):
+                 face_count: int, hinge_count: int, newton: bool = False,
+                 layout: coarse.Layout | None = None):
         real = backend.real()
         n = particle_count
         self.block_count = math.ceil(n / BLOCK)
@@ -82,7 +124,12 @@ class Workspace:
             self.step_position = fields.vector(3, real, n)
             self.step_velocity = fields.vector(3, real, n)
             self.partial_change = fields.scalar(real, self.block_count)
+        self.two_level = layout is not None     # the coarse level's correction (coarse.py)
+        if self.two_level:
+            coarse.add_fields(self, fields, layout)
         fields.finalize(self)
+        if self.two_level:
+            coarse.upload_layout(self, layout)
 
 
 @ti.func
@@ -171,14 +218,36 @@ def update_block(model: ti.template(), ws: ti.template(), block, now: ti.templat
 @ti.func
 def turn_block(model: ti.template(), ws: ti.template(), block, now: ti.template()):
     """p = z + beta p on the particles of `block` (z of the representative of a sewn
-    particle: the module doc's P)."""
+    particle: the module doc's P; with the coarse level's correction)."""
     beta = ws.scalar[now.row * ROW + BETA]
     begin, end = block_range(block, model.particle_count)
     for i in range(begin, end):
         z = ws.z[i]
         if ti.static(model.sewn):
             z = ws.z[model.particle_weld[i]]
+        if ti.static(ws.two_level):
+            z += coarse.correction(ws, i, now.row)
         ws.p[i] = z + beta * ws.p[i]
+
+
+@ti.func
+def coarse_level(model: ti.template(), forces: ti.template(), ws: ti.template(), item,
+                 now: ti.template()):
+    """The coarse level's A_c and its factor (coarse.assemble; a Loop of one item) at the
+    first linearisation of a solve: a Newton solve's later iterations keep it (a fixed
+    symmetric positive definite preconditioner for each of their CG solves, a little less
+    close to their A: 109 CG iterations a step against 103 on issue 53's sheet at 1/120 s,
+    for a quarter of the assemblies)."""
+    if ws.iterations[now.row * ROW + NEWTON] == 0:
+        coarse.assemble(model, forces, ws, now.dt)
+
+
+@ti.func
+def coarse_start(model: ti.template(), ws: ti.template(), block, now: ti.template()):
+    """p = z + the coarse level's correction on the particles of `block` (the CG start)."""
+    begin, end = block_range(block, model.particle_count)
+    for i in range(begin, end):
+        ws.p[i] = ws.p[i] + coarse.correction(ws, i, now.row)
 
 
 @ti.func
@@ -239,6 +308,8 @@ def weld_product(model: ti.template(), ws: ti.template(), g):
 def begin_solve(ws: ti.template(), now: ti.template()):
     """The start's r . z, r . r and b . b (r = b), in the worker's row; no iteration yet."""
     total = block_sum(ws, ws.partial, ti.Vector([0.0, 0.0]))
+    if ti.static(ws.two_level):
+        total[0] += coarse.solve(ws, ws.r, now.row)
     ws.scalar[now.row * ROW + RZ] = total[0]
     ws.scalar[now.row * ROW + RR] = total[1]
     ws.scalar[now.row * ROW + BB] = total[1]
@@ -255,6 +326,8 @@ def step_length(ws: ti.template(), now: ti.template()):
 def next_direction(ws: ti.template(), now: ti.template()):
     """beta = new r . z / old r . z; the new r . z and r . r; one more iteration."""
     sums = block_sum(ws, ws.partial, ti.Vector([0.0, 0.0]))
+    if ti.static(ws.two_level):
+        sums[0] += coarse.solve(ws, ws.r, now.row)
     ws.scalar[now.row * ROW + BETA] = sums[0] / ws.scalar[now.row * ROW + RZ]
     ws.scalar[now.row * ROW + RZ] = sums[0]
     ws.scalar[now.row * ROW + RR] = sums[1]
@@ -306,8 +379,13 @@ def linearisation(model, forces, ws, start: Loop) -> tuple:
         begin += (Phase(Loop(model.weld_count, weld_start, model, ws, ITEM)),
                   Phase(Loop(ws.block_count, start_sums, model, ws, ITEM)))
     bending = bending_phases(model, *implicit_elements.bending_loops(model, ws))
+    solve_start = (Once(begin_solve, ws, NOW),)
+    if ws.two_level:
+        solve_start = ((Phase(Loop(1, coarse_level, model, forces, ws, ITEM, NOW)),)
+                       + solve_start
+                       + (Phase(Loop(ws.block_count, coarse_start, model, ws, ITEM, NOW)),))
     return (wind.phases(model, forces) + ((Phase(*linear),) if linear else ()) + bending
-            + begin + (Once(begin_solve, ws, NOW),))
+            + begin + solve_start)
 
 
 def system_product(model, forces, ws) -> tuple:

@@ -34,7 +34,7 @@ from .conjugate_gradients import (
     BB,
     RR,
     TYPICAL_ITERATIONS,
-    Workspace,
+    Preconditioner,
     block_range,
     start_row,
     system_row,
@@ -76,6 +76,7 @@ class ImplicitEuler(Integrator):
     max_iterations: CG iterations per step at most, >= 1; a step that needs more keeps its
         best iterate (still damped, not exact). last_iterations and last_residual report the
         latest solve.
+    preconditioner, aggregate_size: CG's (conjugate_gradients.Preconditioner).
     Order 1. Unconditionally stable for the linearised springs: stiff springs and large steps
     damp out (numerical dissipation grows with h k / m) instead of blowing up.
     """
@@ -84,24 +85,28 @@ class ImplicitEuler(Integrator):
     order = 1
     step_limited = False
 
-    def __init__(self, *, tolerance: float = 1e-5, max_iterations: int = 200):
+    def __init__(self, *, tolerance: float = 1e-5, max_iterations: int = 200,
+                 preconditioner: str = "two-level", aggregate_size: int | None = None):
         self.tolerance = finite_number("ImplicitEuler.tolerance", tolerance, 0.0, strict=True)
         require(self.tolerance < 1.0, "ImplicitEuler.tolerance", tolerance, "a number in (0, 1)")
         self.max_iterations = count("ImplicitEuler.max_iterations", max_iterations, limits.ITERATIONS)
+        self.preconditioner = Preconditioner("ImplicitEuler", preconditioner, aggregate_size)
         self.last_iterations = 0
         self.last_residual = 0.0
 
     def options(self):
-        return {"tolerance": self.tolerance, "max_iterations": self.max_iterations}
+        return {"tolerance": self.tolerance, "max_iterations": self.max_iterations,
+                **self.preconditioner.options()}
 
     def copy_reports(self, stepper):
         self.last_iterations = stepper.last_iterations
         self.last_residual = stepper.last_residual
 
     def workspace(self, model, state):
-        return self.buffers(state, lambda: Workspace(model.particle_count, model.spring_count,
-                                                      model.altitude_count, model.face_count,
-                                                      model.hinge_count))
+        return self.preconditioner.workspace(self, model, state)
+
+    def buffer_key(self):
+        return (type(self), *self.preconditioner.key())
 
     def step_work(self, model):
         return (2 + 2 * TYPICAL_ITERATIONS) * fused.spring_work(model)

@@ -39,7 +39,7 @@ from .conjugate_gradients import (
     NEWTON,
     ROW,
     TYPICAL_ITERATIONS,
-    Workspace,
+    Preconditioner,
     block_range,
     start_row,
     system_row,
@@ -129,10 +129,11 @@ class NewtonSettings:
     most_newton: Newton iterations per solve at most, >= 1.
     cg_tolerance: each linear solve's relative residual, in (0, 1).
     most_cg: CG iterations per linear solve at most, >= 1.
+    preconditioner, aggregate_size: each linear solve's (conjugate_gradients.Preconditioner).
     """
 
     def __init__(self, owner: str, tolerance: float, most_newton: int, cg_tolerance: float,
-                 most_cg: int):
+                 most_cg: int, preconditioner: str, aggregate_size: int | None):
         self.tolerance = finite_number(f"{owner}.tolerance", tolerance, 0.0, strict=True,
                                        unit="m")
         self.most_newton = count(f"{owner}.most_newton", most_newton, limits.ITERATIONS)
@@ -141,10 +142,12 @@ class NewtonSettings:
         require(self.cg_tolerance < 1.0, f"{owner}.cg_tolerance", cg_tolerance,
                 "a number in (0, 1)")
         self.most_cg = count(f"{owner}.most_cg", most_cg, limits.ITERATIONS)
+        self.preconditioner = Preconditioner(owner, preconditioner, aggregate_size)
 
     def options(self) -> dict:
         return {"tolerance": self.tolerance, "most_newton": self.most_newton,
-                "cg_tolerance": self.cg_tolerance, "most_cg": self.most_cg}
+                "cg_tolerance": self.cg_tolerance, "most_cg": self.most_cg,
+                **self.preconditioner.options()}
 
 
 def solve(settings: NewtonSettings, model, forces, ws) -> tuple:
@@ -166,7 +169,8 @@ class NewtonIntegrator(Integrator):
     """An integrator whose step is `solves` backward-Euler stages solved by solve(): the
     options, workspace, launch sizing and reports they share.
 
-    tolerance, most_newton, cg_tolerance, most_cg: each solve's (NewtonSettings).
+    tolerance, most_newton, cg_tolerance, most_cg, preconditioner, aggregate_size: each
+        solve's (NewtonSettings).
     last_newton and last_cg report the latest solve's Newton and CG iterations.
     """
 
@@ -174,18 +178,20 @@ class NewtonIntegrator(Integrator):
     solves: ClassVar[int]
 
     def __init__(self, *, tolerance: float = 1e-6, most_newton: int = 8,
-                 cg_tolerance: float = 1e-3, most_cg: int = 500):
+                 cg_tolerance: float = 1e-3, most_cg: int = 500,
+                 preconditioner: str = "two-level", aggregate_size: int | None = None):
         self.settings = NewtonSettings(type(self).__name__, tolerance, most_newton,
-                                       cg_tolerance, most_cg)
+                                       cg_tolerance, most_cg, preconditioner, aggregate_size)
         self.last_newton = self.last_cg = 0
 
     def options(self):
         return self.settings.options()
 
     def workspace(self, model, state):
-        return self.buffers(state, lambda: Workspace(
-            model.particle_count, model.spring_count, model.altitude_count, model.face_count,
-            model.hinge_count, newton=True))
+        return self.settings.preconditioner.workspace(self, model, state, newton=True)
+
+    def buffer_key(self):
+        return (type(self), *self.settings.preconditioner.key())
 
     def step_work(self, model):
         return (self.solves * TYPICAL_NEWTON * (2 + 2 * TYPICAL_ITERATIONS)
