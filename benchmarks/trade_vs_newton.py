@@ -31,6 +31,7 @@ Prints, per size, every run, the Pareto front (cost against max error) of each s
 the cheapest run under 1 cm, 1 mm and 0.1 mm with the ratio Newton / ti_cloth.
 
     python benchmarks/trade_vs_newton.py [--sizes 32 64] [--repeats 3] [--no-newton]
+        [--only symplectic implicit_midpoint]
 
 Needs newton 1.8 and warp-lang 1.19 beside ti_cloth (pip install "newton==1.8.0"
 "warp-lang==1.19.*"), unless --no-newton; other versions are refused (peers.py).
@@ -160,8 +161,9 @@ def newton_reference(cloth: tc.Cloth, n: int, solver: str) -> np.ndarray:
     return results[0]
 
 
-def configurations(cloth: tc.Cloth, n: int, newton: bool) -> list:
-    """(label, maker) of every run: ti_cloth's solvers over their useful steps, Newton's."""
+def configurations(cloth: tc.Cloth, n: int, newton: bool, only: tuple = ("",)) -> list:
+    """(label, maker) of every run: ti_cloth's solvers over their useful steps (those whose
+    label holds a word of `only`), Newton's."""
     stable = tc.stable_dt(cloth, "symplectic_euler", 0.0, pinned=cloth.pinned)
     runs = [(f"symplectic_euler h={f:g}x stable", "symplectic_euler", f * stable)
             for f in (0.95, 0.5)]
@@ -175,6 +177,14 @@ def configurations(cloth: tc.Cloth, n: int, newton: bool) -> list:
                  for r in (60, 120, 240)]
         runs += [(f"{name} tight 1/{r}", cls(tolerance=1e-5, cg_tolerance=1e-2), 1 / r)
                  for r in (240, 480)]
+    # the CG preconditioned by the diagonal alone (the default adds a coarse level: coarse.py)
+    runs += [(f"implicit_midpoint jacobi 1/{r}", tc.ImplicitMidpoint(
+        tolerance=1e-4, cg_tolerance=1e-1, preconditioner="jacobi"), 1 / r) for r in (60, 120)]
+    runs += [("implicit_midpoint jacobi tight 1/480", tc.ImplicitMidpoint(
+        tolerance=1e-5, cg_tolerance=1e-2, preconditioner="jacobi"), 1 / 480)]
+    runs += [("implicit_euler jacobi 1/60", tc.ImplicitEuler(tolerance=1e-3,
+                                                              preconditioner="jacobi"), 1 / 60)]
+    runs = [run for run in runs if any(word in run[0] for word in only)]
     made = [(label, lambda l=label, i=integ, h=dt: TiRun(l, i, h, cloth))
             for label, integ, dt in runs]
     if newton:
@@ -209,14 +219,14 @@ def cheapest(rows: list[dict], level: float) -> dict | None:
     return min(within, key=lambda r: r["cost"]) if within else None
 
 
-def measure(n: int, repeats: int, newton: bool) -> list[dict]:
+def measure(n: int, repeats: int, newton: bool, only: tuple = ("",)) -> list[dict]:
     cloth = fabric_cloth(n)
     print(f"\n## {n} x {n} ({n * n} particles)")
     references = {"ti_cloth": ti_reference(cloth)}
     if newton:
         references["newton"] = newton_reference(cloth, n, "semi_implicit")
         references["newton xpbd"] = newton_reference(cloth, n, "springs")
-    runs = [make() for _, make in configurations(cloth, n, newton)]
+    runs = [make() for _, make in configurations(cloth, n, newton, only)]
     positions = {}
     for run in runs:                                 # compile, and the run's positions
         positions[run.label] = run.run()[0]
@@ -262,6 +272,8 @@ def main() -> None:
     parser.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--no-newton", action="store_true")
+    parser.add_argument("--only", nargs="+", default=[""],
+                        help="ti_cloth's runs whose label holds one of these words")
     args = parser.parse_args()
     newton = not args.no_newton
     if newton:
@@ -271,7 +283,7 @@ def main() -> None:
     print(f"CPU, f32; error at t = {DURATION} s; cost = wall s "
           f"per simulated s, median of {args.repeats} alternated runs")
     for n in args.sizes:
-        measure(n, args.repeats, newton)
+        measure(n, args.repeats, newton, tuple(args.only))
 
 
 if __name__ == "__main__":

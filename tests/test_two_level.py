@@ -3,7 +3,7 @@ matrix is P^T A P of the mass, the springs and the membrane exactly (with an agg
 particle, CG's iterations no longer grow with the stiffness, as Jacobi's do), it solves to the
 same motion as Jacobi (pins, a pinned aggregate, seams), and it takes fewer CG iterations on
 a denim sheet. Its bits across plans and thread counts: tests/test_stepping.py (the implicit
-solvers' rows run it, the default)."""
+solvers' rows run it, the default; TR-BDF2 on a sewn garment among them)."""
 
 import numpy as np
 import pytest
@@ -51,8 +51,8 @@ def test_an_exact_coarse_level_makes_the_solve_blind_to_the_mesh(f64, make):
     (the membrane's stiffness is a Laplacian: h^2 k / m is 10^3-10^4 here). A coarse matrix
     that missed a term's blocks (the springs', the membrane's, the mass), a sign or a
     transposed block would leave that part to the diagonal and grow like Jacobi."""
-    jacobi = [iterations(make(n), "jacobi") for n in (8, 24)]
-    exact = [iterations(make(n), "two-level", 1) for n in (8, 24)]
+    jacobi = [iterations(make(n), "jacobi") for n in (6, 18)]
+    exact = [iterations(make(n), "two-level", 1) for n in (6, 18)]
     print(f"{make.__name__}: jacobi {jacobi}, an aggregate per particle {exact}")
     assert jacobi[1] > 2 * jacobi[0]
     assert exact[1] <= exact[0] + 3
@@ -60,36 +60,38 @@ def test_an_exact_coarse_level_makes_the_solve_blind_to_the_mesh(f64, make):
 
 
 def pinned_edge() -> tuple:
-    """A denim sheet hung from its whole first row (aggregates of pinned particles only)."""
+    """A denim sheet hung from its whole first row, in aggregates of two particles: the first
+    ones (particles 0 and 1) pinned both, a coarse unknown that solves for 0."""
     n = 8
     cloth = tc.Cloth(tc.grid_mesh(n, n, (0.4, 0.4)), tc.Fabric.preset("denim"),
                      pinned=list(range(n)))
-    return cloth, disturbed(cloth)
+    return cloth, disturbed(cloth), tc.ImplicitMidpoint, 2
 
 
 def seamed() -> tuple:
-    """Two panels sewn by a seam (the solve moves each sewn group as one particle)."""
+    """Two panels sewn by a seam (the solve moves each sewn group as one particle; an
+    aggregate holds a group whole)."""
     piece = tc.panel([(0, 0), (0.3, 0), (0.3, 0.4), (0, 0.4)], 0.08)
     garment = tc.Garment([piece, piece.moved(translate=(0.3, 0.0, 0.0))], [(0, 1, 1, 3)])
     cloth = tc.Cloth(garment.mesh, tc.Fabric.preset("denim"), seams=garment.seam_pairs,
                      pinned=garment.particles(0, 2))
-    return cloth, disturbed(cloth)
+    return cloth, disturbed(cloth), tc.ImplicitMidpoint, None
 
 
 def corners() -> tuple:
+    """A spring sheet hung by two corners."""
     cloth = spring_sheet(9)
-    return cloth, disturbed(cloth)
+    return cloth, disturbed(cloth), tc.ImplicitMidpoint, None
 
 
 @pytest.mark.parametrize("body", [pinned_edge, seamed, corners])
-@pytest.mark.parametrize("integrator", [tc.ImplicitMidpoint, tc.TRBDF2])
-def test_it_solves_to_the_same_motion_as_jacobi(f64, body, integrator):
+def test_it_solves_to_the_same_motion_as_jacobi(f64, body):
     """Solved tightly (Newton to 1e-11 m, CG to 1e-11) both preconditioners reach the same
     implicit solution: 12 steps of 1/120 s agree to 1e-8 m, where the sheet moves centimetres
     (a wrong coarse correction would stall CG at most_cg and leave Newton's updates short)."""
-    cloth, start = body()
+    cloth, start, integrator, size = body()
     ends = []
-    for kind, size in (("jacobi", None), ("two-level", None), ("two-level", 3)):
+    for kind in ("jacobi", "two-level"):
         sim = tc.Simulation(cloth, dt=1 / 120, integrator=integrator(
             tolerance=1e-11, cg_tolerance=1e-11, most_cg=5000, preconditioner=kind,
             aggregate_size=size))
@@ -97,7 +99,7 @@ def test_it_solves_to_the_same_motion_as_jacobi(f64, body, integrator):
         sim.step(12)
         ends.append(sim.positions())
     moved = np.abs(ends[0] - start).max()
-    apart = max(np.abs(x - ends[0]).max() for x in ends[1:])
+    apart = np.abs(ends[1] - ends[0]).max()
     print(f"{body.__name__}, {integrator.__name__}: moved {moved:.3g} m, apart {apart:.3g} m")
     assert moved > 5e-3 and np.isfinite(ends).all()
     assert apart < 1e-8

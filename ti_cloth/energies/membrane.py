@@ -18,7 +18,8 @@ TOG 28(4), 2009, sec. 3). Everything each solver needs of it, together:
   part S (x) I is not under compression, so S is projected onto its non-negative eigenvalues
   (Teran et al. 2005; projected_stress); Rayleigh damping adds h beta A J^T C J: implicit
   Euler's linearisation, product and 3x3 diagonal (linearise_face, face_product,
-  corner_diagonal);
+  corner_diagonal), and its blocks between sets of corners moved as one (face_block: a coarse
+  level's, integrators/coarse.py);
 - projection: XPBD on the strain e with compliance (A C)^-1 (xpbd_membrane; faces.py).
 """
 
