@@ -147,7 +147,15 @@ def test_it_settles_where_implicit_euler_does(f64, body):
 @pytest.mark.parametrize("cls", [tc.ImplicitMidpoint, tc.TRBDF2])
 @pytest.mark.parametrize("option, value", [("tolerance", 0.0), ("tolerance", float("nan")),
                                            ("most_newton", 0), ("cg_tolerance", 1.0),
-                                           ("most_cg", -3)])
+                                           ("most_cg", -3), ("preconditioner", "ilu"),
+                                           ("aggregate_size", 0), ("aggregate_size", 2.5)])
 def test_bad_options_are_refused_by_name(cls, option, value):
     with pytest.raises(ValueError, match=f"{cls.__name__}.{option}"):
         cls(**{option: value})
+
+
+@pytest.mark.parametrize("option, value", [("preconditioner", "multigrid"),
+                                           ("aggregate_size", -1)])
+def test_implicit_euler_refuses_a_bad_preconditioner_by_name(option, value):
+    with pytest.raises(ValueError, match=f"ImplicitEuler.{option}.*{value}"):
+        tc.ImplicitEuler(**{option: value})
