@@ -49,21 +49,25 @@ AGGREGATES = 96     # aggregates a body is split into, about (each at least SMAL
 SMALLEST = 12       # particles of an aggregate, at least (smaller ones join a neighbour)
 
 
+def coupled_pairs(cloth) -> np.ndarray:
+    """(P, 2): the particle pairs of every spring and every triangle's edge (A's off-diagonal
+    blocks but the hinges' and the altitude springs')."""
+    faces = np.asarray(cloth.face_indices, np.int64).reshape(-1, 3)
+    return np.concatenate([np.asarray(cloth.spring_indices, np.int64).reshape(-1, 2),
+                           faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+
+
 def particle_graph(cloth) -> list[list[int]]:
     """Each particle's neighbours through a spring or a triangle's edge, with the particles
     sewn together (Cloth.particle_weld) as their representative, in increasing order."""
     weld = np.asarray(cloth.particle_weld, np.int64)
-    pairs = [np.asarray(cloth.spring_indices, np.int64).reshape(-1, 2)]
-    faces = np.asarray(cloth.face_indices, np.int64).reshape(-1, 3)
-    pairs += [faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]
-    ends = weld[np.concatenate(pairs)]
-    ends = ends[ends[:, 0] != ends[:, 1]]
-    ends = np.unique(np.sort(np.concatenate([ends, ends[:, ::-1]]), axis=1), axis=0)
+    ends = weld[coupled_pairs(cloth)]
+    ends = np.unique(np.sort(ends[ends[:, 0] != ends[:, 1]], axis=1), axis=0)
     graph = [[] for _ in range(len(weld))]
     for a, b in ends:
         graph[a].append(int(b))
         graph[b].append(int(a))
-    return [sorted(set(n)) for n in graph]
+    return [sorted(n) for n in graph]
 
 
 def aggregates(cloth, size: int) -> np.ndarray:
@@ -134,10 +138,7 @@ class Layout:
             size = max(SMALLEST, -(-n // AGGREGATES))
         owner = aggregates(cloth, size)
         self.count = int(owner.max()) + 1 if n else 1
-        pairs = [np.asarray(cloth.spring_indices, np.int64).reshape(-1, 2)]
-        faces = np.asarray(cloth.face_indices, np.int64).reshape(-1, 3)
-        pairs += [faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]
-        ends = owner[np.concatenate(pairs)]
+        ends = owner[coupled_pairs(cloth)]
         ends = np.sort(ends[ends[:, 0] != ends[:, 1]], axis=1)
         coupled = {(int(a), int(b)) for a, b in np.unique(ends, axis=0)}
         rank = cuthill_mckee(coupled, self.count)
