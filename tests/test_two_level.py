@@ -23,6 +23,13 @@ def membrane_sheet(n: int) -> tc.Cloth:
     return tc.Cloth(tc.grid_mesh(n, n, (0.5, 0.5)), fabric, pinned=[0, n - 1])
 
 
+def strands(n: int) -> tc.Cloth:
+    """Two hair strands of n segments: ghost particles and altitude springs (their blocks in
+    A_c too)."""
+    return tc.hair(2, n, 0.3, mass=1e-3, stretch=tc.SpringParams(2e3, 0.0),
+                   bend=tc.SpringParams(20.0, 0.0))
+
+
 def disturbed(cloth: tc.Cloth, seed: int = 3) -> np.ndarray:
     """The rest sheet with every free particle moved a few millimetres (every mode loaded)."""
     x = cloth.particle_position.copy()
@@ -42,15 +49,16 @@ def iterations(cloth: tc.Cloth, kind: str, size=None) -> int:
     return integrator.last_iterations
 
 
-@pytest.mark.parametrize("make", [spring_sheet, membrane_sheet])
+@pytest.mark.parametrize("make", [spring_sheet, membrane_sheet, strands])
 def test_an_exact_coarse_level_makes_the_solve_blind_to_the_mesh(f64, make):
     """With an aggregate per particle P is the identity (on free particles) and A_c is A, so
     z = D^-1 r + A^-1 r and CG runs on I + D^-1 A, whose eigenvalues lie in
     [1, 1 + lambda_max(D^-1 A)] on any mesh. Jacobi's iterations grow with the square root of
     D^-1 A's condition number, which a mesh three times finer makes about nine times larger
     (the membrane's stiffness is a Laplacian: h^2 k / m is 10^3-10^4 here). A coarse matrix
-    that missed a term's blocks (the springs', the membrane's, the mass), a sign or a
-    transposed block would leave that part to the diagonal and grow like Jacobi."""
+    that missed a term's blocks (the springs', the membrane's, the altitude springs', the
+    mass), a sign or a transposed block would leave that part to the diagonal and grow like
+    Jacobi. (Two hair strands: a chain, whose condition number grows likewise.)"""
     jacobi = [iterations(make(n), "jacobi") for n in (6, 18)]
     exact = [iterations(make(n), "two-level", 1) for n in (6, 18)]
     print(f"{make.__name__}: jacobi {jacobi}, an aggregate per particle {exact}")

@@ -146,6 +146,16 @@ def altitudes_times(model: ti.template(), ws: ti.template(), i, dt):
 
 
 @ti.func
+def altitude_block(model: ti.template(), ws: ti.template(), e, dt, weight_i, weight_j):
+    """The 3x3 block (h^2 k + h kd) g_i g_j n n^T of altitude spring e (its linearisation)
+    coupling two sets of its corners that each move as one (a coarse level's aggregates:
+    integrators/coarse.py), each set given by the sum of its corners' weights g."""
+    n = ws.altitude_normal[e]
+    return ((dt * dt * model.altitude_stiffness[e] + dt * model.altitude_damping[e])
+            * weight_i * weight_j * n.outer_product(n))
+
+
+@ti.func
 def implicit_start(model: ti.template(), state: ti.template(), forces: ti.template(),
                    ws: ti.template(), i, dt, kv, diagonal):
     """(kv, diagonal) with particle i's altitude springs: k g_i n (G . v_n) and
