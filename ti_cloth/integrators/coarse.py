@@ -65,8 +65,9 @@ def coupled_pairs(cloth) -> np.ndarray:
 
 
 def particle_graph(cloth) -> list[list[int]]:
-    """Each particle's neighbours through a spring or a triangle's edge, with the particles
-    sewn together (Cloth.particle_weld) as their representative, in increasing order."""
+    """Each particle's neighbours through a spring, a triangle's edge or an altitude spring
+    (coupled_pairs), with the particles sewn together (Cloth.particle_weld) as their
+    representative, in increasing order."""
     weld = np.asarray(cloth.particle_weld, np.int64)
     ends = weld[coupled_pairs(cloth)]
     ends = np.unique(np.sort(ends[ends[:, 0] != ends[:, 1]], axis=1), axis=0)
