@@ -275,10 +275,11 @@ def _add_face(model: ti.template(), ws: ti.template(), f, h):
     alpha, beta = corner_coefficients(model, f)
     for c in range(3):
         if _first(owner, c):
+            alpha_c = _summed(ws, corner, owner, alpha, c)
+            beta_c = _summed(ws, corner, owner, beta, c)
             for d in range(c + 1):
                 if _first(owner, d):
-                    block = face_block(model, ws, f, _summed(ws, corner, owner, alpha, c),
-                                       _summed(ws, corner, owner, beta, c),
+                    block = face_block(model, ws, f, alpha_c, beta_c,
                                        _summed(ws, corner, owner, alpha, d),
                                        _summed(ws, corner, owner, beta, d),
                                        h * h + h * model.face_damping[f], h * h)
@@ -293,9 +294,10 @@ def _add_altitude(model: ti.template(), ws: ti.template(), e, h):
     weight = ti.Vector([ws.altitude_weight[4 * e + c] for c in ti.static(range(4))])
     for c in range(4):
         if _first(owner, c):
+            weight_c = _summed(ws, corner, owner, weight, c)
             for d in range(c + 1):
                 if _first(owner, d):
-                    block = altitude_block(model, ws, e, h, _summed(ws, corner, owner, weight, c),
+                    block = altitude_block(model, ws, e, h, weight_c,
                                            _summed(ws, corner, owner, weight, d))
                     _add(ws, owner[c], owner[d], block)
 
