@@ -14,6 +14,7 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from helpers import SWINGING_STRING, report
 
@@ -222,10 +223,13 @@ def test_a_scheduler_that_does_not_answer_is_named_within_seconds():
 def test_the_advisor_weighs_tr_bdf2_at_frame_steps_against_tiny_explicit_ones(f64, tmp_path):
     """A stiff string (k = 5e8 N/m: symplectic Euler needs steps of 4e-6 s) swinging as a
     near-inextensible chain: TR-BDF2, among the advisor's default candidates, meets 1 cm at
-    1/60 s, where every explicit step above 1e-5 s diverges; the pick is the cheapest passing
-    run of either, and re-run it meets the tolerance. (Which one is cheaper on a body of six
+    1/60 s with its default solves, where every explicit step above 1e-5 s diverges; its
+    loose solves (Integrator.presets) are swept beside them, and measured, not trusted (on
+    springs this stiff 0.1 mm of Newton tolerance is 5e4 N of force); the pick is the
+    cheapest passing run of any, and re-run it meets the tolerance. (Which one is cheaper on a body of six
     particles is a matter of microseconds per launch, not asserted.)"""
     assert {"implicit_midpoint", "tr_bdf2"} <= set(study.DEFAULT_INTEGRATORS)
+    assert "loose" in study.DEFAULT_SOLVES
     path = tmp_path / "stiff.toml"
     path.write_text(STRING.replace("k = 50.0, kd = 0.01", "k = 5e8, kd = 0.0"))
     scene = tc.load_scene(path)
@@ -234,13 +238,55 @@ def test_the_advisor_weighs_tr_bdf2_at_frame_steps_against_tiny_explicit_ones(f6
                             integrators=["symplectic_euler", "tr_bdf2"], precisions=["f64"])
     runs = advice.study.runs
     large = [r for r in runs if r.integrator == "tr_bdf2" and abs(r.dt - 1 / 60) < 1e-12]
-    assert large and all(r.max_error <= tolerance and not r.diverged for r in large)
+    assert sorted(r.solve or "" for r in large) == ["", "loose"]
+    assert all(r.max_error <= tolerance and not r.diverged for r in large if r.solve is None)
     assert all(r.diverged for r in runs if r.integrator == "symplectic_euler" and r.dt > 1e-5)
+    assert {r.solve for r in runs if r.integrator == "symplectic_euler"} == {None}
     passing = [r for r in runs if r.max_error <= tolerance and not r.diverged]
     pick = advice.choice
-    report("pick", (pick.integrator, pick.dt, pick.max_error, pick.cost), "")
+    report("pick", (pick.label, pick.dt, pick.max_error, pick.cost), "")
     assert_the_rule_picked(pick, passing)
     rerun = study.run_study(scene, integrators=[pick.integrator], dts=[pick.dt],
-                            precisions=["f64"], reference=advice.study.reference, repeats=1,
-                            progress=False).runs[0]
+                            precisions=["f64"], solves=[pick.solve] if pick.solve else [],
+                            reference=advice.study.reference, repeats=1, progress=False).runs[-1]
+    assert rerun.label == pick.label
     assert rerun.max_error == pick.max_error <= tolerance
+
+
+def test_a_loose_run_is_its_preset_solver_and_its_advice_builds_it(f64, tmp_path):
+    """The study's loose TR-BDF2 run is the integrator of its preset: its max error is the one
+    a Simulation built here with TRBDF2(**TRBDF2.presets["loose"]) gives over the same frames,
+    and not the default solves' (the preset reached the solver: the stiff string's Newton
+    solves stop at 0.1 mm instead of 1 um). Advice choosing it writes a [simulation] block
+    that, pasted into the scene file, loads that same integrator. An unknown preset is
+    refused, naming the known ones."""
+    path = tmp_path / "stiff.toml"
+    path.write_text(STRING.replace("k = 50.0, kd = 0.01", "k = 5e8, kd = 0.0"))
+    scene = tc.load_scene(path)
+    dt = scene.frame_dt / 2
+    result = study.run_study(scene, integrators=["tr_bdf2"], dts=[dt], precisions=["f64"],
+                             solves=["loose"], progress=False)
+    default, loose = result.runs
+    assert (default.solve, loose.solve) == (None, "loose") and loose.label == "tr_bdf2[loose] f64"
+    reference = result.reference
+    sim = scene.build(integrator=tc.TRBDF2(**tc.TRBDF2.presets["loose"]), dt=dt)
+    frames = np.rint(reference.times / scene.frame_dt).astype(int)
+    errors = []
+    for frame in frames[:reference.predictable]:
+        sim.step(int(2 * frame) - sim.step_count)
+        here = sim.positions()[scene.own_particles]
+        errors.append(np.linalg.norm(here - reference.positions[len(errors)], axis=1).max())
+    report("loose / default max error", (loose.max_error, default.max_error), "")
+    assert loose.max_error == pytest.approx(max(errors) / reference.size, rel=1e-12)
+    assert loose.max_error != default.max_error
+    advice = advisor.Advice(scene.name, 1.0, "max_error", reference.times[-1], loose, loose,
+                            result)
+    block = advice.simulation_block(scene.frame_dt)
+    pasted = tmp_path / "pasted.toml"
+    text = path.read_text()
+    start = text.index("[simulation]")
+    end = text.index("\n[", start + 1)
+    pasted.write_text(text[:start] + block + text[end:])
+    assert tc.load_scene(pasted).integrator == tc.TRBDF2(**tc.TRBDF2.presets["loose"])
+    with pytest.raises(ValueError, match=r"solves: 'tight' is not a preset.*\['loose'\]"):
+        study.run_study(scene, integrators=["tr_bdf2"], solves=["tight"], progress=False)

@@ -4,7 +4,8 @@
     advice.choice                                   # the cheapest run within the tolerance
     advice.write("renders/advise_cloth")            # advise.md, advise.csv
 
-The pilot study sweeps the candidates (integrator x dt x precision x iterations) over the
+The pilot study sweeps the candidates (integrator x dt x precision x iterations for pbd/xpbd
+x solves for the Newton-solved integrators: their loose preset beside their defaults) over the
 scene's first `window` seconds against the rk4/f64 reference, at each of `resolutions` (the
 scene's bodies refined; the reference then finer than all of them, study.py). A candidate
 passes when it did not diverge and its error (`metric`: max or RMS position error over the
@@ -33,13 +34,15 @@ from pathlib import Path
 
 from ..inputs.files import atomic_path
 from ..inputs.scene_file import SceneError
-from ..integrators import INTEGRATORS, make_integrator
 from ..saved_state import fingerprint
 from .study import (
     DEFAULT_INTEGRATORS,
     DEFAULT_ITERATIONS,
+    DEFAULT_SOLVES,
     Run,
     StudyResult,
+    configured_integrator,
+    integrator_options,
     retime_in_turn,
     run_study,
 )
@@ -133,8 +136,10 @@ class Advice:
         c = self.choice
         if c is None:
             return ""
-        integrator = (f'"{c.integrator}"' if c.iterations is None else
-                      f'{{ name = "{c.integrator}", iterations = {c.iterations} }}')
+        options = integrator_options(c.integrator, c.iterations, c.solve)
+        integrator = (f'"{c.integrator}"' if not options else
+                      f'{{ name = "{c.integrator}", '
+                      + ", ".join(f"{k} = {v!r}" for k, v in options.items()) + " }")
         return ("[simulation]\n"
                 f"integrator = {integrator}\n"
                 f"substeps = {round(frame_dt / c.dt)}             # dt = {c.dt:.6g} s\n"
@@ -152,7 +157,7 @@ class Advice:
                   "cost [s/s] | meets | |", "|---|---|---|---|---|---|---|---|---|"]
         for run in self.nearby():
             mark = "chosen" if run is self.choice else "closest" if run is self.closest else ""
-            lines.append(f"| {run.resolution} | {describe_integrator(run)} | {run.precision} | "
+            lines.append(f"| {run.resolution} | {run.method} | {run.precision} | "
                          f"{run.dt:.3g} | "
                          f"{run.max_error:.2e} | {run.rms_error:.2e} | {run.cost:.3g} | "
                          f"{'yes' if self.passes(run) else 'no'} | {mark} |")
@@ -192,13 +197,9 @@ def meets(run: Run, metric: str, tolerance: float) -> bool:
     return not run.diverged and getattr(run, metric) <= tolerance
 
 
-def describe_integrator(run: Run) -> str:
-    return run.integrator if run.iterations is None else f"{run.integrator} ({run.iterations} it)"
-
-
 def describe(run: Run) -> str:
     where = f" at resolution {run.resolution}" if run.resolution != 1 else ""
-    return f"{describe_integrator(run)} {run.precision}{where} at dt = {run.dt:.3g} s"
+    return f"{run.method} {run.precision}{where} at dt = {run.dt:.3g} s"
 
 
 def _margin(study: StudyResult, metric: str = "max_error") -> float:
@@ -235,12 +236,13 @@ def choose(runs, metric: str, tolerance: float) -> tuple[Run | None, Run | None]
 
 def advise(scene, tolerance: float, *, metric: str = "max_error", window: float | None = None,
            precisions=("f64", "f32"), integrators=DEFAULT_INTEGRATORS,
-           iterations=DEFAULT_ITERATIONS, dts=None, arch: str = "cpu", repeats: int = REPEATS,
-           resolutions=None, executor=None, progress: bool = True) -> Advice:
-    """The cheapest (resolution, integrator, dt, precision, iterations) whose `metric` stays
-    within `tolerance` (a fraction of the cloth size) over the first `window` seconds
-    (default: the scene's duration), from a pilot study (run_study: `dts`, `resolutions`,
-    `executor` as there)."""
+           iterations=DEFAULT_ITERATIONS, solves=DEFAULT_SOLVES, dts=None, arch: str = "cpu",
+           repeats: int = REPEATS, resolutions=None, executor=None,
+           progress: bool = True) -> Advice:
+    """The cheapest (resolution, integrator, dt, precision, iterations or solve) whose
+    `metric` stays within `tolerance` (a fraction of the cloth size) over the first `window`
+    seconds (default: the scene's duration), from a pilot study (run_study: `dts`,
+    `iterations`, `solves`, `resolutions`, `executor` as there)."""
     if metric not in METRICS:
         raise ValueError(f"metric must be one of {METRICS}, got {metric!r}")
     if not (isinstance(tolerance, (int, float)) and not isinstance(tolerance, bool)
@@ -252,7 +254,8 @@ def advise(scene, tolerance: float, *, metric: str = "max_error", window: float 
         raise ValueError(f"window must be in (0, {duration:g}] s (the scene's duration), "
                          f"got {window!r}")
     pilot = run_study(scene, integrators=integrators, dts=dts, precisions=precisions,
-                      iterations=iterations, duration=window, arch=arch, resolutions=resolutions,
+                      iterations=iterations, solves=solves, duration=window, arch=arch,
+                      resolutions=resolutions,
                       executor=executor, progress=progress)
     within = tolerance - _margin(pilot, metric)
     passing = sorted((r for r in pilot.runs if meets(r, metric, within)), key=lambda r: r.cost)
@@ -288,22 +291,21 @@ def resolve(scene, folder, *, arch: str = "cpu", progress: bool = True):
                              "a larger tolerance or other integrators")
         c = advice.choice
         cached = {"key": key, "integrator": c.integrator, "iterations": c.iterations,
-                  "substeps": round(scene.frame_dt / c.dt), "precision": c.precision,
+                  "solve": c.solve, "substeps": round(scene.frame_dt / c.dt), "precision": c.precision,
                   "resolution": c.resolution, "why": advice.summary()}
         with atomic_path(path) as tmp:
             tmp.write_text(json.dumps(cached, indent=1))
         note = cached["why"]
     else:
         note = f"{cached['why']} (cached in {path})"
-    name, iterations = cached["integrator"], cached["iterations"]
-    integrator = (INTEGRATORS[name](iterations=iterations) if iterations is not None
-                  else make_integrator(name))
+    integrator = configured_integrator(cached["integrator"], cached["iterations"],
+                                       cached["solve"])
     resolved = replace(scene.refined(cached["resolution"]), integrator=integrator,
                        substeps=cached["substeps"], precision=cached["precision"], advice=None)
     return resolved, note
 
 
-FORMAT = 2     # of the cached advice: bump when its meaning changes
+FORMAT = 3     # of the cached advice: bump when its meaning changes
 
 
 def _read_cache(path: Path, key: str) -> dict | None:

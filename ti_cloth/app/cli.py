@@ -249,13 +249,13 @@ def _sweep(scene_path, jobs, scheduler, compute, write, lost: str):
 
 
 def study(scene_path, *, out=None, integrators=None, dts=None, precisions=("f64", "f32"),
-          iterations=None, duration=None, arch="cpu", plot=True, progress=True, jobs=None,
-          scheduler=None, resolutions=None) -> int:
+          iterations=None, solves=None, duration=None, arch="cpu", plot=True, progress=True,
+          jobs=None, scheduler=None, resolutions=None) -> int:
     """Run the speed/accuracy study of a scene and write study.csv, study.md, study.png."""
     from . import study as study_module
 
     options = {"integrators": integrators, "dts": dts, "iterations": iterations,
-               "resolutions": resolutions}
+               "solves": solves, "resolutions": resolutions}
     options = {k: v for k, v in options.items() if v is not None}
     start = time.perf_counter()
     code, _, result, written = _sweep(
@@ -275,14 +275,15 @@ def study(scene_path, *, out=None, integrators=None, dts=None, precisions=("f64"
 
 
 def advise(scene_path, *, tolerance: float, metric="max_error", window=None, out=None,
-           integrators=None, precisions=("f64", "f32"), iterations=None, arch="cpu",
+           integrators=None, precisions=("f64", "f32"), iterations=None, solves=None, arch="cpu",
            progress=True, jobs=None, scheduler=None, resolutions=None) -> int:
     """Pick the cheapest integrator, step and precision for a tolerance; write advise.md and
     advise.csv; print the candidates and a [simulation] block. Exit code 1 when no candidate
     meets the tolerance."""
     from . import advisor
 
-    options = {"integrators": integrators, "iterations": iterations, "resolutions": resolutions}
+    options = {"integrators": integrators, "iterations": iterations, "solves": solves,
+               "resolutions": resolutions}
     options = {k: v for k, v in options.items() if v is not None}
     code, scene, advice, written = _sweep(
         scene_path, jobs, scheduler,
@@ -387,19 +388,28 @@ def main(argv=None) -> int:
                     arch=args.arch, record=args.record, mp4=args.mp4)
     if args.command == "study":
         return study(args.scene, out=args.out, integrators=args.integrators, dts=args.dts,
-                     precisions=args.precisions, iterations=args.iterations, duration=args.duration,
+                     precisions=args.precisions, iterations=args.iterations, solves=args.solves,
+                     duration=args.duration,
                      arch=args.arch, plot=not args.no_plot, progress=not args.no_progress,
                      jobs=args.jobs, scheduler=args.scheduler, resolutions=args.resolutions)
     if args.command == "advise":
         return advise(args.scene, tolerance=args.tolerance, metric=args.metric, window=args.window,
                       out=args.out, integrators=args.integrators, precisions=args.precisions,
-                      iterations=args.iterations, arch=args.arch, progress=not args.no_progress,
+                      iterations=args.iterations, solves=args.solves, arch=args.arch,
+                      progress=not args.no_progress,
                       jobs=args.jobs, scheduler=args.scheduler, resolutions=args.resolutions)
     code, _ = run(args.scene, out=args.out, frames=args.frames, arch=args.arch,
                   precision=args.precision, progress=not args.no_progress, export=args.export,
                   mp4=args.mp4 or None, resume=args.resume,
                   checkpoint_every=args.checkpoint_every)
     return code
+
+
+def _solves_argument(parser) -> None:
+    parser.add_argument("--solves", nargs="*", metavar="PRESET",
+                        help="presets of the solvers' accuracy to sweep beside each one's "
+                             "defaults (default: loose, the Newton-solved integrators' 0.1 mm "
+                             "and a tenth of CG's residual); none: --solves alone")
 
 
 def _resolution_argument(parser) -> None:
@@ -448,6 +458,7 @@ def build_parser() -> argparse.ArgumentParser:
                               default=["f64", "f32"])
     study_parser.add_argument("--iterations", nargs="+", type=_positive, metavar="N",
                               help="pbd/xpbd passes per step to sweep (default 4 16)")
+    _solves_argument(study_parser)
     study_parser.add_argument("--duration", type=_seconds,
                               help="simulated seconds (default: the scene's)")
     study_parser.add_argument("--arch", choices=list(limits.ARCH_NAMES), default="cpu")
@@ -475,6 +486,7 @@ def build_parser() -> argparse.ArgumentParser:
                                default=["f64", "f32"])
     advise_parser.add_argument("--iterations", nargs="+", type=_positive, metavar="N",
                                help="pbd/xpbd passes per step to try (default 4 16)")
+    _solves_argument(advise_parser)
     advise_parser.add_argument("--arch", choices=list(limits.ARCH_NAMES), default="cpu")
     _resolution_argument(advise_parser)
     _sweep_arguments(advise_parser)

@@ -2,7 +2,8 @@
 where each one blows up, for one scene.
 
     reference = reference_trajectory(scene)          # rk4, f64, converged by halving dt
-    result = run_study(scene)                        # integrator x dt (x precision, x iterations)
+    result = run_study(scene)                        # integrator x dt x precision (x iterations,
+                                                     # x solves)
     result.write("renders/study_cloth")              # study.csv, study.md, study.png
 
 Every run starts the scene from rest and samples positions at each frame time; errors are
@@ -19,8 +20,8 @@ discretisation errors of successive resolutions (spatial_orders), and with them 
 of the reference's own error and of the resolution a tolerance needs. With one resolution
 only, the reference is that resolution's own converged run (integration error alone). Cost is wall time per simulated second of the stepping alone (kernels are
 compiled before timing; one Simulation per integrator and precision is restarted for each dt),
-the median of `repeats` timings. Each configuration (precision, integrator, iterations) is one
-task: run here one after the other, or on local processes or a Dask cluster (sweep.py; the
+the median of `repeats` timings. Each configuration (precision, integrator, iterations or
+solve) is one task: run here one after the other, or on local processes or a Dask cluster (sweep.py; the
 timings are then taken with other tasks running, and the result says so).
 """
 
@@ -38,7 +39,7 @@ import numpy as np
 
 from ..errors import SimulationDiverged
 from ..inputs import limits
-from ..integrators import INTEGRATORS, make_integrator
+from ..integrators import INTEGRATORS
 from ..runtime import backend
 from ..stability import stable_dt
 from . import observables, study_report
@@ -52,6 +53,7 @@ REFERENCE_BUDGET = 3e8         # particle-steps a reference may take in all (rk4
 DEFAULT_INTEGRATORS = ("explicit_euler", "symplectic_euler", "verlet", "rk4", "implicit_euler",
                        "implicit_midpoint", "tr_bdf2", "pbd", "xpbd")
 DEFAULT_ITERATIONS = (4, 16)   # passes per step of the position-based integrators
+DEFAULT_SOLVES = ("loose",)    # presets (Integrator.presets) swept beside each one's defaults
 ENERGY_BLOWUP = 1.0            # a run is diverged once its energy is off the reference's by more
                                # than the energy scale (or its guard trips: scene.GUARD_SIZES)
 
@@ -110,7 +112,8 @@ class Reference:
 
 @dataclass(frozen=True)
 class Run:
-    """One integrator at one dt, precision and iteration count, with its metrics.
+    """One integrator at one dt, precision and iteration count (pbd, xpbd) or solve (None: its
+    defaults; else the name of its preset, Integrator.presets), with its metrics.
 
     max_error / rms_error: particle position error against the reference, max and RMS over all
     particles and the sample times up to the reference's horizon (Reference.predictable; NaN
@@ -148,11 +151,19 @@ class Run:
     integration_error: float = math.nan
     observable_error: float = math.nan
     cost_spread: float = math.nan
+    solve: str | None = None
 
     @property
     def label(self) -> str:
-        name = self.integrator if self.iterations is None else f"{self.integrator}({self.iterations})"
+        name = integrator_label(self.integrator, self.iterations, self.solve)
         return f"{name} {self.precision}" + (f" x{self.resolution}" if self.resolution != 1 else "")
+
+    @property
+    def method(self) -> str:
+        """The integrator and its passes or solves in words: "xpbd (16 it)",
+        "implicit_midpoint (loose solves)"."""
+        return (self.integrator + ("" if self.iterations is None else f" ({self.iterations} it)")
+                + ("" if self.solve is None else f" ({self.solve} solves)"))
 
 
 def sample_times(scene, duration: float | None = None) -> np.ndarray:
@@ -476,21 +487,56 @@ def left_out(scene, integrators) -> dict[str, str]:
             if not INTEGRATORS[name].runs_fabric}
 
 
-def _configurations(integrators, iterations):
-    """(name, iterations or None) of every configuration of the sweep, in order."""
+def _configurations(integrators, iterations, solves):
+    """(name, iterations or None, solve or None) of every configuration of the sweep, in
+    order: a position-based integrator at each pass count, any other at its defaults, then
+    with each of `solves` that is one of its presets."""
     for name in integrators:
         if INTEGRATORS[name].position_based:
             for count in iterations:
-                yield name, count
+                yield name, count, None
         else:
-            yield name, None
+            yield name, None, None
+            for solve in solves:
+                if solve in INTEGRATORS[name].presets:
+                    yield name, None, solve
+
+
+def _check_solves(solves) -> tuple[str, ...]:
+    """`solves` as a tuple, each the name of some integrator's preset."""
+    known = sorted({name for cls in INTEGRATORS.values() for name in cls.presets})
+    values = (solves,) if isinstance(solves, str) else tuple(solves)
+    for solve in values:
+        if solve not in known:
+            raise ValueError(f"solves: {solve!r} is not a preset of any integrator; the "
+                             f"presets are {known} (Integrator.presets), or none: ()")
+    return values
+
+
+def integrator_options(name: str, iterations: int | None, solve: str | None) -> dict:
+    """The options a configuration gives its integrator beyond the defaults: `iterations`
+    passes a step (pbd, xpbd) and the preset `solve` (Integrator.presets)."""
+    options = {} if iterations is None else {"iterations": iterations}
+    return options | (INTEGRATORS[name].presets[solve] if solve is not None else {})
+
+
+def configured_integrator(name: str, iterations: int | None, solve: str | None):
+    """The Integrator of a configuration (integrator_options)."""
+    return INTEGRATORS[name](**integrator_options(name, iterations, solve))
+
+
+def integrator_label(name: str, iterations: int | None, solve: str | None) -> str:
+    """xpbd(16) for 16 passes a step, implicit_midpoint[loose] for a preset, else the name."""
+    return (name + ("" if iterations is None else f"({iterations})")
+            + ("" if solve is None else f"[{solve}]"))
 
 
 @dataclass(frozen=True)
 class Configuration:
     """One task of a study: every dt of one integrator (with `iterations` passes for pbd /
-    xpbd) in one precision on `scene` (at one resolution), against `reference` and its
-    resolution's `converged` run; `threads`: Taichi's CPU threads (None: all)."""
+    xpbd, or its preset `solve`) in one precision on `scene` (at one resolution), against
+    `reference` and its resolution's `converged` run; `threads`: Taichi's CPU threads (None:
+    all)."""
 
     scene: object
     reference: Reference
@@ -503,10 +549,11 @@ class Configuration:
     arch: str
     threads: int | None
     repeats: int
+    solve: str | None = None
 
     @property
     def label(self) -> str:
-        name = self.integrator if self.iterations is None else f"{self.integrator}({self.iterations})"
+        name = integrator_label(self.integrator, self.iterations, self.solve)
         resolution = self.scene.resolution
         return f"{name} {self.precision}" + (f" x{resolution}" if resolution != 1 else "")
 
@@ -521,8 +568,7 @@ def measure_configuration(task: Configuration) -> list[Run]:
     on one timing of several runs, not on all timings of one."""
     with _ONE_AT_A_TIME:
         backend.ensure(arch=task.arch, precision=task.precision, threads=task.threads)
-        integrator = (INTEGRATORS[task.integrator](iterations=task.iterations)
-                      if task.iterations is not None else make_integrator(task.integrator))
+        integrator = configured_integrator(task.integrator, task.iterations, task.solve)
         sim = task.scene.build(integrator=integrator, dt=task.dts[-1])
         try:
             sim.step(1)     # compile outside the timing (a step that diverges compiles too)
@@ -569,17 +615,19 @@ def retime(scene, run: Run, result: "StudyResult", repeats: int, arch: str = "cp
     converged = result.converged.get(run.resolution, result.reference)
     task = Configuration(refined, result.reference, converged, run.precision, run.integrator,
                          run.iterations, (run.dt,), (round(scene.frame_dt / run.dt),), arch, None,
-                         repeats)
+                         repeats, run.solve)
     return measure_configuration(task)[0]
 
 
 def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("f64", "f32"),
-              iterations=DEFAULT_ITERATIONS, duration: float | None = None, arch: str = "cpu",
-              reference: Reference | None = None, repeats: int = 1, resolutions=None,
+              iterations=DEFAULT_ITERATIONS, solves=DEFAULT_SOLVES, duration: float | None = None,
+              arch: str = "cpu", reference: Reference | None = None, repeats: int = 1,
+              resolutions=None,
               reference_resolution: int | None = None, executor=None,
               progress: bool = True) -> StudyResult:
-    """Sweep resolution x integrator x dt x precision (x iterations for pbd/xpbd) on `scene` (a
-    Scene from load_scene). resolutions: the bodies' refinements to sweep (default the
+    """Sweep resolution x integrator x dt x precision (x iterations for pbd/xpbd, x solves
+    for the integrators with those presets: Integrator.presets, each beside the integrator's
+    defaults) on `scene` (a Scene from load_scene). resolutions: the bodies' refinements to sweep (default the
     scene's own); reference_resolution: the reference's (default: twice the finest swept when
     more than the scene's own resolution is swept, else the scene's own). dts: steps [s],
     each frame_dt / an integer (default: default_dts of each resolution). duration:
@@ -613,7 +661,7 @@ def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("
     if not integrators:
         raise ValueError(f"integrators: none of {sorted(skipped)} can run this scene "
                          f"({'; '.join(f'{n} {why}' for n, why in skipped.items())})")
-    configurations = list(_configurations(integrators, iterations))
+    configurations = list(_configurations(integrators, iterations, _check_solves(solves)))
     workers = as_workers(executor)
     if reference is None:
         reference = reference_trajectory(scene.refined(reference_resolution), duration, arch)
@@ -626,8 +674,8 @@ def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("
         substeps = tuple(_substeps(scene, dt) for dt in steps)
         tasks += [Configuration(refined, reference, converged[f], precision, name, count,
                                 tuple(steps), substeps, arch,
-                                workers.threads if workers is not None else None, repeats)
-                  for precision in precisions for name, count in configurations]
+                                workers.threads if workers is not None else None, repeats, solve)
+                  for precision in precisions for name, count, solve in configurations]
     with tqdm(total=sum(len(t.dts) for t in tasks), unit="run", disable=not progress,
               dynamic_ncols=True) as bar:        # closed on Ctrl-C too
         results, incidents = run_tasks(measure_configuration, tasks, workers,
@@ -675,7 +723,7 @@ def _measure(task: Configuration, sim, substeps: int, predicted: float) -> Run:
         positions, energies, wall = _trajectory(sim, reference.times, substeps)
     except SimulationDiverged as err:
         return Run(task.integrator, task.precision, task.iterations, sim.dt, sim.step_count, nan,
-                   nan, True, err.step, nan, nan, nan, nan, predicted, *where)
+                   nan, True, err.step, nan, nan, nan, nan, predicted, *where, solve=task.solve)
     own = positions[:, task.scene.own_particles]
     k, j = reference.predictable, min(converged.predictable, reference.predictable)
     error = np.linalg.norm(own[:k] - reference.positions[:k], axis=2) / reference.size
@@ -694,4 +742,4 @@ def _measure(task: Configuration, sim, substeps: int, predicted: float) -> Run:
                float(error.max()) if k else nan, rms(error) if k else nan,
                float(energy_error.max()), _max_strain(task.scene.cloth, positions), predicted,
                *where, discretisation, float(integration.max()) if j else nan,
-               observable_error)
+               observable_error, solve=task.solve)

@@ -51,7 +51,6 @@ def markdown(result) -> str:
         lines[-1] = "|---" * 14 + "|"
     front = {id(r) for r in result.pareto_front()}
     for run in sorted(result.runs, key=lambda r: (r.resolution, r.label, -r.dt)):
-        name = run.integrator if run.iterations is None else f"{run.integrator} ({run.iterations} it)"
         split = (f"{run.discretisation_error:.2e} | {run.integration_error:.2e} | " if swept
                  else "")
         if run.diverged:
@@ -63,7 +62,7 @@ def markdown(result) -> str:
                        f"{run.energy_drift:.2e} | {run.max_strain:.3f} | "
                        f"{run.observable_error:.2e} | {run.cost:.3g}{spread} |")
         where = f"{run.resolution} | {run.particles} | " if swept else ""
-        lines.append(f"| {where}{name} | {run.precision} | {run.dt:.3g} | {metrics} "
+        lines.append(f"| {where}{run.method} | {run.precision} | {run.dt:.3g} | {metrics} "
                      f"{'yes' if id(run) in front else ''} |")
     for label, error in result.failed.items():
         lines.append(f"| {label} | failed: {error} | | | | | | | | |")
@@ -126,7 +125,8 @@ def resolution_lines(result) -> list[str]:
 def plot(result, path) -> Path:
     """Log-log max error against cost, one line per configuration (colour: integrator;
     dashed: f32; marker: resolution, o ^ v D ... from the coarsest, or squares for the most
-    pbd/xpbd iterations; the label ends in xN at resolution N), the Pareto front outlined;
+    pbd/xpbd iterations, hollow for an integrator's preset solves; the label ends in xN at
+    resolution N), the Pareto front outlined;
     when the reference's horizon is short of the run, beside it the observable error over the
     whole run against cost (needs matplotlib: pip install "ti_cloth[study]")."""
     try:
@@ -158,7 +158,8 @@ def plot(result, path) -> Path:
                 ax.plot([r.cost for r in runs], [max(getattr(r, metric), 1e-16) for r in runs],
                         label=label, color=colours[first.integrator],
                         ls="--" if first.precision == "f32" else "-",
-                        marker="s" if most else markers[first.resolution], ms=4, lw=1)
+                        marker="s" if most else markers[first.resolution], ms=4, lw=1,
+                        mfc="none" if first.solve is not None else None)
         if metric == "max_error":
             front = sorted(result.pareto_front(), key=lambda r: r.cost)
             if front:

@@ -32,6 +32,9 @@ class Integrator:
     fused: ClassVar[bool] = False           # True: defines move(), fused.py writes the phases
     records_history: ClassVar[bool] = False  # True: a step leaves x_n in particle_prev_position
     runs_fabric: ClassVar[bool] = True      # False: steps springs only, not a Fabric's elements
+    # named sets of options that trade the solve's accuracy for speed, which the study and the
+    # advisor sweep beside the defaults (app/study.py: solves)
+    presets: ClassVar[dict[str, dict]] = {}
 
     def phases(self, model, forces, work) -> tuple:
         """One step as runtime/plan.py's nodes; `work` is workspace()'s object."""
