@@ -226,8 +226,8 @@ def test_the_advisor_weighs_tr_bdf2_at_frame_steps_against_tiny_explicit_ones(f6
     1/60 s with its default solves, where every explicit step above 1e-5 s diverges; its
     loose solves (Integrator.presets) are swept beside them, and measured, not trusted (on
     springs this stiff 0.1 mm of Newton tolerance is 5e4 N of force); the pick is the
-    cheapest passing run of any, and re-run it meets the tolerance. (Which one is cheaper on a body of six
-    particles is a matter of microseconds per launch, not asserted.)"""
+    cheapest passing run of any, and re-run it meets the tolerance. (Which one is cheaper on
+    a body of six particles is a matter of microseconds per launch, not asserted.)"""
     assert {"implicit_midpoint", "tr_bdf2"} <= set(study.DEFAULT_INTEGRATORS)
     assert "loose" in study.DEFAULT_SOLVES
     path = tmp_path / "stiff.toml"
