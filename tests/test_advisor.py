@@ -253,13 +253,13 @@ def test_the_advisor_weighs_tr_bdf2_at_frame_steps_against_tiny_explicit_ones(f6
     assert rerun.max_error == pick.max_error <= tolerance
 
 
-def test_a_loose_run_is_its_preset_solver_and_its_advice_builds_it(f64, tmp_path):
+def test_a_loose_run_is_its_preset_solver_and_its_advice_builds_it(f64, tmp_path, capsys):
     """The study's loose TR-BDF2 run is the integrator of its preset: its max error is the one
     a Simulation built here with TRBDF2(**TRBDF2.presets["loose"]) gives over the same frames,
     and not the default solves' (the preset reached the solver: the stiff string's Newton
     solves stop at 0.1 mm instead of 1 um). Advice choosing it writes a [simulation] block
     that, pasted into the scene file, loads that same integrator. An unknown preset is
-    refused, naming the known ones."""
+    refused, naming the known ones (by the API and by `ti-cloth advise --solves`)."""
     path = tmp_path / "stiff.toml"
     path.write_text(STRING.replace("k = 50.0, kd = 0.01", "k = 5e8, kd = 0.0"))
     scene = tc.load_scene(path)
@@ -290,3 +290,6 @@ def test_a_loose_run_is_its_preset_solver_and_its_advice_builds_it(f64, tmp_path
     assert tc.load_scene(pasted).integrator == tc.TRBDF2(**tc.TRBDF2.presets["loose"])
     with pytest.raises(ValueError, match=r"solves: 'tight' is not a preset.*\['loose'\]"):
         study.run_study(scene, integrators=["tr_bdf2"], solves=["tight"], progress=False)
+    code = cli.main(["advise", str(path), "--tolerance", "0.01", "--solves", "tight",
+                     "--out", str(tmp_path / "advice"), "--no-progress"])
+    assert code == 2 and "solves: 'tight' is not a preset" in capsys.readouterr().err

@@ -255,8 +255,7 @@ def advise(scene, tolerance: float, *, metric: str = "max_error", window: float 
                          f"got {window!r}")
     pilot = run_study(scene, integrators=integrators, dts=dts, precisions=precisions,
                       iterations=iterations, solves=solves, duration=window, arch=arch,
-                      resolutions=resolutions,
-                      executor=executor, progress=progress)
+                      resolutions=resolutions, executor=executor, progress=progress)
     within = tolerance - _margin(pilot, metric)
     passing = sorted((r for r in pilot.runs if meets(r, metric, within)), key=lambda r: r.cost)
     contenders = [r for r in passing if r.cost <= RETIME_SPAN * passing[0].cost][:RETIME_MOST]
@@ -291,8 +290,8 @@ def resolve(scene, folder, *, arch: str = "cpu", progress: bool = True):
                              "a larger tolerance or other integrators")
         c = advice.choice
         cached = {"key": key, "integrator": c.integrator, "iterations": c.iterations,
-                  "solve": c.solve, "substeps": round(scene.frame_dt / c.dt), "precision": c.precision,
-                  "resolution": c.resolution, "why": advice.summary()}
+                  "solve": c.solve, "substeps": round(scene.frame_dt / c.dt),
+                  "precision": c.precision, "resolution": c.resolution, "why": advice.summary()}
         with atomic_path(path) as tmp:
             tmp.write_text(json.dumps(cached, indent=1))
         note = cached["why"]

@@ -389,15 +389,15 @@ def main(argv=None) -> int:
     if args.command == "study":
         return study(args.scene, out=args.out, integrators=args.integrators, dts=args.dts,
                      precisions=args.precisions, iterations=args.iterations, solves=args.solves,
-                     duration=args.duration,
-                     arch=args.arch, plot=not args.no_plot, progress=not args.no_progress,
+                     duration=args.duration, arch=args.arch, plot=not args.no_plot,
+                     progress=not args.no_progress,
                      jobs=args.jobs, scheduler=args.scheduler, resolutions=args.resolutions)
     if args.command == "advise":
         return advise(args.scene, tolerance=args.tolerance, metric=args.metric, window=args.window,
                       out=args.out, integrators=args.integrators, precisions=args.precisions,
                       iterations=args.iterations, solves=args.solves, arch=args.arch,
-                      progress=not args.no_progress,
-                      jobs=args.jobs, scheduler=args.scheduler, resolutions=args.resolutions)
+                      progress=not args.no_progress, jobs=args.jobs, scheduler=args.scheduler,
+                      resolutions=args.resolutions)
     code, _ = run(args.scene, out=args.out, frames=args.frames, arch=args.arch,
                   precision=args.precision, progress=not args.no_progress, export=args.export,
                   mp4=args.mp4 or None, resume=args.resume,

@@ -21,8 +21,8 @@ of the reference's own error and of the resolution a tolerance needs. With one r
 only, the reference is that resolution's own converged run (integration error alone). Cost is wall time per simulated second of the stepping alone (kernels are
 compiled before timing; one Simulation per integrator and precision is restarted for each dt),
 the median of `repeats` timings. Each configuration (precision, integrator, iterations or
-solve) is one task: run here one after the other, or on local processes or a Dask cluster (sweep.py; the
-timings are then taken with other tasks running, and the result says so).
+solve) is one task: run here one after the other, or on local processes or a Dask cluster
+(sweep.py; the timings are then taken with other tasks running, and the result says so).
 """
 
 from __future__ import annotations
@@ -627,8 +627,9 @@ def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("
               progress: bool = True) -> StudyResult:
     """Sweep resolution x integrator x dt x precision (x iterations for pbd/xpbd, x solves
     for the integrators with those presets: Integrator.presets, each beside the integrator's
-    defaults) on `scene` (a Scene from load_scene). resolutions: the bodies' refinements to sweep (default the
-    scene's own); reference_resolution: the reference's (default: twice the finest swept when
+    defaults; solves=() for the defaults alone) on `scene` (a Scene from load_scene).
+    resolutions: the bodies' refinements to sweep (default the scene's own);
+    reference_resolution: the reference's (default: twice the finest swept when
     more than the scene's own resolution is swept, else the scene's own). dts: steps [s],
     each frame_dt / an integer (default: default_dts of each resolution). duration:
     simulated seconds (default the scene's). repeats: timings per run (cost: their median).
