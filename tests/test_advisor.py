@@ -290,6 +290,8 @@ def test_a_loose_run_is_its_preset_solver_and_its_advice_builds_it(f64, tmp_path
     assert tc.load_scene(pasted).integrator == tc.TRBDF2(**tc.TRBDF2.presets["loose"])
     with pytest.raises(ValueError, match=r"solves: 'tight' is not a preset.*\['loose'\]"):
         study.run_study(scene, integrators=["tr_bdf2"], solves=["tight"], progress=False)
+    with pytest.raises(ValueError, match="solves: None is not a list of preset names"):
+        study.run_study(scene, integrators=["tr_bdf2"], solves=None, progress=False)
     code = cli.main(["advise", str(path), "--tolerance", "0.01", "--solves", "tight",
                      "--out", str(tmp_path / "advice"), "--no-progress"])
     assert code == 2 and "solves: 'tight' is not a preset" in capsys.readouterr().err

@@ -505,6 +505,9 @@ def _configurations(integrators, iterations, solves):
 def _check_solves(solves) -> tuple[str, ...]:
     """`solves` as a tuple, each the name of some integrator's preset."""
     known = sorted({name for cls in INTEGRATORS.values() for name in cls.presets})
+    if not isinstance(solves, (str, list, tuple)):
+        raise ValueError(f"solves: {solves!r} is not a list of preset names; the presets are "
+                         f"{known} (Integrator.presets), or none: ()")
     values = (solves,) if isinstance(solves, str) else tuple(solves)
     for solve in values:
         if solve not in known:
@@ -622,8 +625,7 @@ def retime(scene, run: Run, result: "StudyResult", repeats: int, arch: str = "cp
 def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("f64", "f32"),
               iterations=DEFAULT_ITERATIONS, solves=DEFAULT_SOLVES, duration: float | None = None,
               arch: str = "cpu", reference: Reference | None = None, repeats: int = 1,
-              resolutions=None,
-              reference_resolution: int | None = None, executor=None,
+              resolutions=None, reference_resolution: int | None = None, executor=None,
               progress: bool = True) -> StudyResult:
     """Sweep resolution x integrator x dt x precision (x iterations for pbd/xpbd, x solves
     for the integrators with those presets: Integrator.presets, each beside the integrator's
