@@ -69,6 +69,25 @@ def test_the_choice_is_the_cheapest_passing_run_and_rerun_meets_the_tolerance(f6
     assert f"substeps = {round(scene.frame_dt / pick.dt)} " in block
 
 
+def test_each_methods_cheapest_passing_run_is_timed_again_within_its_span():
+    """The rounds take the runs within RETIME_SPAN of the cheapest and each method's cheapest
+    within METHOD_SPAN: a method whose one pilot timing came out 3x the cheapest (a shared
+    machine) is timed again, its dearer runs and a method beyond METHOD_SPAN are not."""
+    def run(integrator, cost, solve=None, precision="f64", dt=0.01):
+        return study.Run(integrator, precision, None, dt, 10, cost, cost, False, -1, 1e-4, 1e-4,
+                         0.0, 0.0, 1.0, solve=solve)
+    cheap = run("tr_bdf2", 1.0, "loose")
+    near = run("tr_bdf2", 1.5, "loose", dt=0.005)
+    slow_timing = run("symplectic_euler", 3.0)
+    dearer = run("symplectic_euler", 3.5, dt=0.001)
+    defaults = run("tr_bdf2", 2.5)           # the same integrator, another method (its solves)
+    too_dear = run("rk4", 1.01 * advisor.METHOD_SPAN)
+    picked = advisor.contenders([too_dear, dearer, slow_timing, defaults, near, cheap])
+    assert picked == [cheap, near, defaults, slow_timing]
+    assert advisor.RETIME_SPAN < 3.0 < advisor.METHOD_SPAN
+    assert advisor.contenders([]) == []
+
+
 def test_an_impossible_tolerance_is_said_so_with_the_closest(f64, scene_path, tmp_path, capsys):
     out = tmp_path / "advice"
     code = cli.main(["advise", str(scene_path), "--tolerance", "1e-14", "--integrators",

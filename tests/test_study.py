@@ -136,6 +136,38 @@ def test_study_orders_stability_and_outputs(tmp_path):
     assert image.shape[0] > 300 and image.std() > 10
 
 
+def test_a_step_limited_integrator_also_runs_at_its_stable_limit(tmp_path):
+    """The steps frame_dt / 2^k can fall to half an explicit method's stable step, where it
+    costs twice what it must (symplectic Euler ran at 0.7 of its step on issue 53's denim):
+    by default the study also runs each step-limited integrator at the largest frame_dt / n
+    within STABLE_FRACTION of its predicted stable step. On the swinging string that is
+    frame_dt / 3 for symplectic Euler, which no power of two is; it runs stable there, with
+    an error between those of the steps either side (the larger diverges, or errs more), and
+    an integrator without a limit runs the grid alone."""
+    scene = scene_file(tmp_path, SWINGING_STRING)
+    stable = tc.stable_dt(scene.cloth, "symplectic_euler", scene.drag)
+    limit = study.limit_dt(scene, "symplectic_euler")
+    n = round(scene.frame_dt / limit)
+    assert limit == scene.frame_dt / n <= study.STABLE_FRACTION * stable
+    assert scene.frame_dt / (n - 1) > study.STABLE_FRACTION * stable and n & (n - 1)
+    result = study.run_study(scene, integrators=["symplectic_euler", "implicit_euler"],
+                             precisions=["f64"], solves=(), progress=False)
+    grid = study.default_dts(scene, ["symplectic_euler", "implicit_euler"])
+    steps = {name: sorted(r.dt for r in result.runs if r.integrator == name)
+             for name in ("symplectic_euler", "implicit_euler")}
+    assert steps["implicit_euler"] == sorted(grid)
+    assert steps["symplectic_euler"] == sorted([*grid, limit])
+    runs = {r.dt: r for r in result.runs if r.integrator == "symplectic_euler"}
+    at_limit = runs[limit]
+    finer = runs[max(dt for dt in grid if dt < limit)]
+    coarser = runs[min(dt for dt in grid if dt > limit)]
+    report("symplectic at its limit, a grid step below", (at_limit.max_error, finer.max_error),
+           "stable, more error")
+    assert not at_limit.diverged and at_limit.steps < finer.steps
+    assert finer.max_error < at_limit.max_error
+    assert coarser.diverged or coarser.max_error > at_limit.max_error
+
+
 def test_pareto_front_keeps_only_undominated_runs():
     def run(cost, error, diverged=False):
         return study.Run("rk4", "f64", None, 0.1, 1, cost, cost, diverged, -1, error, error, 0, 0, 1)

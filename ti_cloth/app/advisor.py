@@ -15,9 +15,10 @@ or observable_error over the whole run, plus the observables' spread over pertur
 starts: observables.py) is within the tolerance; the choice is the passing one with the
 least measured cost (wall seconds per simulated second), costs within TIE (or the timings'
 spread) counting as equal, the least error deciding among them (choose). The passing runs
-within RETIME_SPAN of the cheapest (at most RETIME_MOST) are timed again, here, `repeats`
-rounds each timing every one of them in turn, and compared on the medians: one timing
-decides nothing on a shared machine. Integrators that cannot run the scene (pbd on a
+within RETIME_SPAN of the cheapest (at most RETIME_MOST), and each method's cheapest passing
+run within METHOD_SPAN of it, are timed again, here, `repeats` rounds each timing every one
+of them in turn, and compared on the medians: one timing decides nothing on a shared
+machine (contenders). Integrators that cannot run the scene (pbd on a
 Fabric) are left out, and the advice says so. When none passes, the advice
 says so, names the closest and, from the observed order of spatial convergence, the
 resolution it estimates would meet the tolerance.
@@ -51,6 +52,7 @@ METRICS = ("max_error", "rms_error", "observable_error")
 REPEATS = 3          # timings of each contender: the choice rests on costs
 RETIME_SPAN = 2.0    # passing runs up to this x the cheapest one's cost are timed again
 RETIME_MOST = 6
+METHOD_SPAN = 5.0    # and each method's cheapest passing run up to this x (contenders)
 TIE = 0.10           # costs within this fraction of the cheapest (or within the timings' spread,
                      # when larger) are equal: then the least error is chosen (choose)
 AROUND = 3           # candidates shown either side of the choice
@@ -257,13 +259,32 @@ def advise(scene, tolerance: float, *, metric: str = "max_error", window: float 
                       iterations=iterations, solves=solves, duration=window, arch=arch,
                       resolutions=resolutions, executor=executor, progress=progress)
     within = tolerance - _margin(pilot, metric)
-    passing = sorted((r for r in pilot.runs if meets(r, metric, within)), key=lambda r: r.cost)
-    contenders = [r for r in passing if r.cost <= RETIME_SPAN * passing[0].cost][:RETIME_MOST]
-    retimed = retime_in_turn(scene, contenders, pilot, repeats, arch)
+    passing = [r for r in pilot.runs if meets(r, metric, within)]
+    retimed = retime_in_turn(scene, contenders(passing), pilot, repeats, arch)
     pilot.runs = [retimed.get(id(r), r) for r in pilot.runs]
     choice, closest = choose(pilot.runs, metric, within)
     return Advice(scene.name, float(tolerance), metric, float(pilot.reference.times[-1]),
                   choice, closest, pilot)
+
+
+def contenders(passing) -> list[Run]:
+    """The passing runs timed again: each method's cheapest (integrator with its passes or
+    solves, precision, resolution) within METHOD_SPAN of the cheapest run's cost, then the
+    other runs within RETIME_SPAN (at most RETIME_MOST of them), cheapest first. A pilot's
+    one timing can be several times too slow on a shared machine (a denim sheet's symplectic
+    Euler once timed at 3.2x its cost): RETIME_SPAN alone kept such a method out of the
+    rounds, and its one slow timing decided against it."""
+    ranked = sorted(passing, key=lambda r: r.cost)
+    if not ranked:
+        return []
+    cheapest = ranked[0].cost
+    best = {}
+    for r in ranked:
+        best.setdefault((r.method, r.precision, r.resolution), r)
+    chosen = [r for r in best.values() if r.cost <= METHOD_SPAN * cheapest]
+    others = [r for r in ranked if r.cost <= RETIME_SPAN * cheapest
+              and not any(r is c for c in chosen)]
+    return sorted(chosen + others[:RETIME_MOST], key=lambda r: r.cost)
 
 
 # What decides a scene's motion besides its integrator, step and precision (the advice's key)

@@ -453,7 +453,8 @@ def build_parser() -> argparse.ArgumentParser:
                               help="integrators to sweep (default: all)")
     study_parser.add_argument("--dt", nargs="+", type=_seconds, dest="dts", metavar="DT",
                               help="steps [s], each frame_dt / an integer (default: frame_dt / 2^k "
-                                   "down to half the smallest stable step)")
+                                   "down to half the smallest stable step, and each explicit "
+                                   "integrator at 0.9 of its stable step)")
     study_parser.add_argument("--precisions", nargs="+", choices=list(limits.PRECISION_NAMES),
                               default=["f64", "f32"])
     study_parser.add_argument("--iterations", nargs="+", type=_positive, metavar="N",

@@ -54,6 +54,8 @@ DEFAULT_INTEGRATORS = ("explicit_euler", "symplectic_euler", "verlet", "rk4", "i
                        "implicit_midpoint", "tr_bdf2", "pbd", "xpbd")
 DEFAULT_ITERATIONS = (4, 16)   # passes per step of the position-based integrators
 DEFAULT_SOLVES = ("loose",)    # presets (Integrator.presets) swept beside each one's defaults
+STABLE_FRACTION = 0.9          # limit_dt: a step-limited integrator's step at most this x its
+                               # predicted stable step (0.95 runs in trade_vs_newton.py)
 ENERGY_BLOWUP = 1.0            # a run is diverged once its energy is off the reference's by more
                                # than the energy scale (or its guard trips: scene.GUARD_SIZES)
 
@@ -371,6 +373,25 @@ def default_dts(scene, integrators) -> list[float]:
     return [scene.frame_dt / 2 ** k for k in range(count)]
 
 
+def limit_dt(scene, integrator: str) -> float | None:
+    """The largest frame_dt / n at most STABLE_FRACTION of `integrator`'s predicted stable
+    step on `scene`: the step an explicit method is cheapest at. None for an integrator
+    without a limit, or where one step per frame is within it (default_dts has that step)."""
+    stable = stable_dt(scene.cloth, integrator, scene.drag)
+    if not 0 < stable < math.inf:
+        return None
+    n = math.ceil(scene.frame_dt / (STABLE_FRACTION * stable) * (1 - 1e-12))
+    return scene.frame_dt / n if n > 1 else None
+
+
+def _steps_of(steps: list[float], scene, integrator: str) -> list[float]:
+    """The default `steps` and `integrator`'s limit_dt, largest first (once)."""
+    limit = limit_dt(scene, integrator)
+    if limit is None or any(math.isclose(limit, dt, rel_tol=1e-9) for dt in steps):
+        return steps
+    return sorted([*steps, limit], reverse=True)
+
+
 @dataclass
 class StudyResult:
     """The reference and every run; write() produces the CSV, the markdown table and the plot.
@@ -633,8 +654,10 @@ def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("
     resolutions: the bodies' refinements to sweep (default the scene's own);
     reference_resolution: the reference's (default: twice the finest swept when
     more than the scene's own resolution is swept, else the scene's own). dts: steps [s],
-    each frame_dt / an integer (default: default_dts of each resolution). duration:
-    simulated seconds (default the scene's). repeats: timings per run (cost: their median).
+    each frame_dt / an integer (default: default_dts of each resolution and, for a
+    step-limited integrator, its limit_dt too: the step it is cheapest at, which the steps
+    frame_dt / 2^k may miss by up to half). duration: simulated seconds (default the
+    scene's). repeats: timings per run (cost: their median).
     executor: where the configurations run: any concurrent.futures.Executor, or the
     sweep.Workers of sweep.local_jobs / sweep.dask_cluster (default: here, one after the
     other). Rows come in configuration order whichever finishes first. Leaves Taichi
@@ -674,11 +697,13 @@ def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("
     for f in resolutions:
         refined = scene.refined(f)
         steps = sorted(default_dts(refined, integrators) if dts is None else dts, reverse=True)
-        substeps = tuple(_substeps(scene, dt) for dt in steps)
-        tasks += [Configuration(refined, reference, converged[f], precision, name, count,
-                                tuple(steps), substeps, arch,
-                                workers.threads if workers is not None else None, repeats, solve)
-                  for precision in precisions for name, count, solve in configurations]
+        for precision in precisions:
+            for name, count, solve in configurations:
+                own = steps if dts is not None else _steps_of(steps, refined, name)
+                tasks.append(Configuration(
+                    refined, reference, converged[f], precision, name, count, tuple(own),
+                    tuple(_substeps(scene, dt) for dt in own), arch,
+                    workers.threads if workers is not None else None, repeats, solve))
     with tqdm(total=sum(len(t.dts) for t in tasks), unit="run", disable=not progress,
               dynamic_ncols=True) as bar:        # closed on Ctrl-C too
         results, incidents = run_tasks(measure_configuration, tasks, workers,
