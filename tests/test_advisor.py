@@ -148,7 +148,10 @@ def test_studies_on_local_jobs_and_a_dask_cluster_give_the_serial_rows(scene_pat
         assert cli.main([*arguments, "--out", str(tmp_path / "dask"), "--scheduler",
                          cluster.scheduler_address]) == 0
     serial = study_rows(tmp_path / "serial")
-    assert len(serial) == 2 * len({row["dt"] for row in serial})
+    scene = tc.load_scene(scene_path)      # each integrator at the grid and at its stable limit
+    names = ("symplectic_euler", "rk4")
+    grid = study.default_dts(scene, names)
+    assert len(serial) == sum(len(study.steps_of(grid, scene, name)) for name in names)
     assert study_rows(tmp_path / "jobs") == serial
     assert study_rows(tmp_path / "dask") == serial
     assert "2 jobs at once" in (tmp_path / "jobs" / "study.md").read_text()

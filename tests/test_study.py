@@ -157,6 +157,7 @@ def test_a_step_limited_integrator_also_runs_at_its_stable_limit(tmp_path):
              for name in ("symplectic_euler", "implicit_euler")}
     assert steps["implicit_euler"] == sorted(grid)
     assert steps["symplectic_euler"] == sorted([*grid, limit])
+    assert sorted(study.steps_of(grid, scene, "symplectic_euler")) == sorted([*grid, limit])
     runs = {r.dt: r for r in result.runs if r.integrator == "symplectic_euler"}
     at_limit = runs[limit]
     finer = runs[max(dt for dt in grid if dt < limit)]

@@ -384,8 +384,9 @@ def limit_dt(scene, integrator: str) -> float | None:
     return scene.frame_dt / n if n > 1 else None
 
 
-def _steps_of(steps: list[float], scene, integrator: str) -> list[float]:
-    """The default `steps` and `integrator`'s limit_dt, largest first (once)."""
+def steps_of(steps: list[float], scene, integrator: str) -> list[float]:
+    """The default steps of `integrator` in a study: `steps` (default_dts) and its limit_dt,
+    largest first (once)."""
     limit = limit_dt(scene, integrator)
     if limit is None or any(math.isclose(limit, dt, rel_tol=1e-9) for dt in steps):
         return steps
@@ -699,7 +700,7 @@ def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("
         steps = sorted(default_dts(refined, integrators) if dts is None else dts, reverse=True)
         for precision in precisions:
             for name, count, solve in configurations:
-                own = steps if dts is not None else _steps_of(steps, refined, name)
+                own = steps if dts is not None else steps_of(steps, refined, name)
                 tasks.append(Configuration(
                     refined, reference, converged[f], precision, name, count, tuple(own),
                     tuple(_substeps(scene, dt) for dt in own), arch,
