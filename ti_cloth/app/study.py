@@ -698,13 +698,13 @@ def run_study(scene, *, integrators=DEFAULT_INTEGRATORS, dts=None, precisions=("
     for f in resolutions:
         refined = scene.refined(f)
         steps = sorted(default_dts(refined, integrators) if dts is None else dts, reverse=True)
-        for precision in precisions:
-            for name, count, solve in configurations:
-                own = steps if dts is not None else steps_of(steps, refined, name)
-                tasks.append(Configuration(
-                    refined, reference, converged[f], precision, name, count, tuple(own),
-                    tuple(_substeps(scene, dt) for dt in own), arch,
-                    workers.threads if workers is not None else None, repeats, solve))
+        own = {name: steps if dts is not None else steps_of(steps, refined, name)
+               for name in integrators}
+        tasks += [Configuration(refined, reference, converged[f], precision, name, count,
+                                tuple(own[name]), tuple(_substeps(scene, dt) for dt in own[name]),
+                                arch, workers.threads if workers is not None else None, repeats,
+                                solve)
+                  for precision in precisions for name, count, solve in configurations]
     with tqdm(total=sum(len(t.dts) for t in tasks), unit="run", disable=not progress,
               dynamic_ncols=True) as bar:        # closed on Ctrl-C too
         results, incidents = run_tasks(measure_configuration, tasks, workers,
