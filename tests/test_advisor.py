@@ -67,6 +67,13 @@ def test_the_choice_is_the_cheapest_passing_run_and_rerun_meets_the_tolerance(f6
     block = advice.simulation_block(scene.frame_dt)
     assert f'precision = "{pick.precision}"' in block
     assert f"substeps = {round(scene.frame_dt / pick.dt)} " in block
+    # the table says what its errors are fractions of (the rest box's diagonal, measured
+    # here) and the chosen run's cost with the spread of the rounds that timed it again
+    text = advice.markdown(scene.frame_dt)
+    size = np.linalg.norm(np.ptp(scene.cloth.rest_position, axis=0))
+    assert f"bounding box ({size:.3g} m, so 1e-3 is {size:.3g} mm)" in text
+    chosen = next(line for line in text.splitlines() if line.endswith("| chosen |"))
+    assert f"| {pick.cost:.3g} ± {pick.cost_spread:.0%} |" in chosen
 
 
 def test_each_methods_cheapest_passing_run_is_timed_again_within_its_span():

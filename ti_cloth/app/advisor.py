@@ -159,10 +159,16 @@ class Advice:
                   "cost [s/s] | meets | |", "|---|---|---|---|---|---|---|---|---|"]
         for run in self.nearby():
             mark = "chosen" if run is self.choice else "closest" if run is self.closest else ""
+            spread = (f" ± {run.cost_spread:.0%}" if math.isfinite(run.cost_spread) else "")
             lines.append(f"| {run.resolution} | {run.method} | {run.precision} | "
                          f"{run.dt:.3g} | "
-                         f"{run.max_error:.2e} | {run.rms_error:.2e} | {run.cost:.3g} | "
+                         f"{run.max_error:.2e} | {run.rms_error:.2e} | {run.cost:.3g}{spread} | "
                          f"{'yes' if self.passes(run) else 'no'} | {mark} |")
+        size = self.study.reference.size
+        lines += ["", f"Errors are fractions of the cloth's size, the diagonal of its rest "
+                  f"bounding box ({size:.3g} m, so 1e-3 is {size:.3g} mm). A cost with a "
+                  "spread (±) is the median of the rounds that timed it again; the others are "
+                  "one timing."]
         if self.study.timing != "serial":
             lines += ["", f"Costs measured with other runs at once ({self.study.timing})."]
         if not self.study.swept:
