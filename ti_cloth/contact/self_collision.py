@@ -131,6 +131,7 @@ from ..state import copy_positions
 from . import never_through
 from .broad_phase.box_grid import BLOCK, BoxGrid
 from .broad_phase.contact_pairs import (
+    FOUND_KEPT,
     PairList,
     cloth_edges,
     displacement_box,
@@ -285,6 +286,9 @@ class SelfCollisionStage:
         self.block_length = fields.scalar(real, self.edge_block_count)
         self.mean_edge = fields.scalar(real, ())
         self.pair_start = fields.scalar(ti.i32, len(triangles) + len(edges) + 1)
+        # the first FOUND_KEPT pairs each triangle and edge found when the list was counted
+        # (contact_pairs.py: the write copies them)
+        self.found = fields.scalar(ti.i32, FOUND_KEPT * max(len(triangles) + len(edges), 1))
         self.touching = fields.vector(2, ti.i32, ())
         self.deepest = fields.scalar(real, ())    # the smallest gap of a contact evaluated
         self.thickness = fields.scalar(real, ())  # the settings' (loaded: kernels outlive them)

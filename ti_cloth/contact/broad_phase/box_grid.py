@@ -10,12 +10,14 @@ bounding box of all boxes (each block of BLOCK items reduced by one thread, then
 order: a max and a min are exact), cells of side >= `cell_size` over it, each item entered in
 every cell its box meets (integer counts per cell, an exclusive prefix sum, then a serial fill
 in item order), so a cell lists its items in increasing index and every query visits them in
-the same order on every run and thread count. No hashing: a cell is a cell. When the box would
+the same order on every run and thread count. Each entry holds a copy of its item's box, so
+that a query scans a cell's boxes front to back instead of reading them item by item (the
+broad phase of self-collision was most of a pile's step: docs/performance.md). No hashing: a cell is a cell. When the box would
 need more than CELL_BUDGET cells per item, or the entries more than ENTRY_BUDGET per item (a
 body blown apart, a particle flung far in one step), the cells grow until they do not: queries
 stay exact, only slower.
 
-Query (cell_box, box_cell_count, box_cell, cell_range, found_here): the items of a kind whose
+Query (cell_box, box_cell_count, box_cell, cell_range, found_at): the items of a kind whose
 boxes meet a query box are in that kind's cells the query box meets; an item met in several of
 them is reported from the first cell the two share (the componentwise max of their first
 cells), so exactly once.
@@ -37,7 +39,8 @@ class BoxGrid:
     from sum(counts[:k])). The owner writes box i into lo[i], hi[i]; after build(): side [m]
     (>= the cell_size asked for), lower [m] (the grid's corner) and dims (cells per axis);
     cell_start and cell_item: the items of kind k whose boxes meet cell c are
-    cell_item[cell_start[k C + c]:cell_start[k C + c + 1]] (C cells), in increasing index."""
+    cell_item[cell_start[k C + c]:cell_start[k C + c + 1]] (C cells), in increasing index;
+    entry_lo and entry_hi: the box of each entry's item."""
 
     def __init__(self, *counts: int):
         self.kind_count = len(counts)
@@ -50,7 +53,6 @@ class BoxGrid:
         fields = backend.FieldGroup()
         self.lo = fields.vector(3, real, max(n, 1))
         self.hi = fields.vector(3, real, max(n, 1))
-        self.item_first = fields.vector(3, ti.i32, max(n, 1))
         self.block_bounds = fields.vector(3, real, 2 * self.block_count)
         self.lower = fields.vector(3, real, ())
         self.upper = fields.vector(3, real, ())
@@ -60,6 +62,8 @@ class BoxGrid:
         self.cell_start = fields.scalar(ti.i32, self.kind_count * self.cell_capacity + 1)
         self.cell_fill = fields.scalar(ti.i32, self.kind_count * self.cell_capacity)
         self.cell_item = fields.scalar(ti.i32, self.entry_capacity)
+        self.entry_lo = fields.vector(3, real, self.entry_capacity)
+        self.entry_hi = fields.vector(3, real, self.entry_capacity)
         fields.finalize(self)
 
     def build(self, cell_size: float) -> None:
@@ -116,7 +120,6 @@ def _count(grid: ti.template()) -> ti.i32:
     for i in range(grid.item_count):
         base = _kind(grid, i) * cells + 1
         first, last = cell_box(grid, grid.lo[i], grid.hi[i])
-        grid.item_first[i] = first
         for k in range(box_cell_count(first, last)):
             ti.atomic_add(grid.cell_start[base + cell_index(grid, box_cell(first, last, k))], 1)
         ti.atomic_add(grid.entries[None], box_cell_count(first, last))
@@ -135,7 +138,7 @@ def _kind(grid: ti.template(), i):
 @backend.kernel
 def _fill(grid: ti.template()):
     """Exclusive prefix sum of the counts, then each item entered in its cells in item order
-    (serial: a cell lists its items in increasing index)."""
+    (serial: a cell lists its items in increasing index), with its box."""
     d = grid.dims[None]
     cells = d[0] * d[1] * d[2]
     for _ in range(1):
@@ -147,7 +150,10 @@ def _fill(grid: ti.template()):
             first, last = cell_box(grid, grid.lo[i], grid.hi[i])
             for k in range(box_cell_count(first, last)):
                 c = base + cell_index(grid, box_cell(first, last, k))
-                grid.cell_item[grid.cell_fill[c]] = i
+                a = grid.cell_fill[c]
+                grid.cell_item[a] = i
+                grid.entry_lo[a] = grid.lo[i]
+                grid.entry_hi[a] = grid.hi[i]
                 grid.cell_fill[c] += 1
 
 
@@ -196,10 +202,11 @@ def cell_range(grid: ti.template(), kind, cell):
 
 
 @ti.func
-def found_here(grid: ti.template(), i, cell, first, lo, hi):
-    """Whether a query of the box [lo, hi], whose cells start at `first`, reports item i from
-    `cell`: i's box meets the query box and `cell` is the first cell they share."""
+def found_at(grid: ti.template(), a, cell, first, lo, hi):
+    """Whether a query of the box [lo, hi], whose cells start at `first`, reports entry a
+    (cell_item[a]) from `cell`: the entry's box meets the query box and `cell` is the first
+    cell they share."""
     found = False
-    if (grid.lo[i] <= hi).all() and (lo <= grid.hi[i]).all():    # the cheap test first
-        found = (ti.max(grid.item_first[i], first) == cell).all()
+    if (grid.entry_lo[a] <= hi).all() and (lo <= grid.entry_hi[a]).all():    # the cheap test first
+        found = (ti.max(cell_of(grid, grid.entry_lo[a]), first) == cell).all()
     return found

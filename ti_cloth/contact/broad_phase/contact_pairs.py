@@ -11,7 +11,9 @@ tunnels between list and contact. The broad phase is a uniform grid of swept box
 (queried by each edge's, f > e), each pair met once. Counted, prefix-summed and written per
 triangle and per edge in index order: a fixed list. Pairs within `thickness` in the rest
 shape (neighbours through the mesh), and triangles and edges that lost a spring to tearing,
-are never listed.
+are never listed. The count keeps the first FOUND_KEPT pairs of each triangle and edge, which
+the write copies; only one that found more walks the grid again (a dense pile's list took
+two walks of about the same time before).
 The list is kept while no two particles have moved more than the skin relative to each other
 since it was made - their relative motion is at most the diagonal of the bounding box of all
 displacements (an exact max/min reduction) - so a pair left out cannot come within `thickness`,
@@ -25,7 +27,9 @@ import taichi as ti
 from ...body.mesh import triangle_edges, unique_rows
 from ...geometry import segment_distance, triangle_distance
 from ...runtime import backend
-from .box_grid import BLOCK, box_cell, box_cell_count, cell_box, cell_range, found_here
+from .box_grid import BLOCK, box_cell, box_cell_count, cell_box, cell_range, found_at
+
+FOUND_KEPT = 16     # pairs of a triangle or an edge the count keeps for the write
 
 
 def cloth_edges(cloth) -> tuple[np.ndarray, np.ndarray]:
@@ -203,8 +207,8 @@ def _triangle_pairs(stage: ti.template(), pairs: ti.template(), model: ti.templa
                     state: ti.template(), t, near, thickness, write):
     """Vertices v whose box over the step meets triangle t's grown by `near`, nearer to t now
     than `near` + how far v moved relative to t's corners in the step, and farther than
-    `thickness` from it in the rest shape (counted, or written from pair_start[t] when
-    `write`), in cell order."""
+    `thickness` from it in the rest shape (counted, the first FOUND_KEPT kept in `found`, or
+    written from pair_start[t] when `write`), in cell order."""
     found = 0
     x = ti.static(state.particle_position)
     tri = stage.triangles[t]
@@ -221,11 +225,11 @@ def _triangle_pairs(stage: ti.template(), pairs: ti.template(), model: ti.templa
         cell = box_cell(first, last, k)
         begin, end = cell_range(stage.grid, 0, cell)
         for a in range(begin, end):
+            if not found_at(stage.grid, a, cell, first, lo, hi):    # the cell's boxes in turn
+                continue
             v = stage.grid.cell_item[a]
             if not (_joined(model, v, tri[0]) or _joined(model, v, tri[1])
                     or _joined(model, v, tri[2])):
-                if not found_here(stage.grid, v, cell, first, lo, hi):
-                    continue
                 moved = ti.max(_moved(stage, state, v, tri[0]), _moved(stage, state, v, tri[1]),
                                _moved(stage, state, v, tri[2]))
                 keep = _box_gap(x[v], x[v], now_lo, now_hi) < near + moved   # a cheap bound first
@@ -238,9 +242,9 @@ def _triangle_pairs(stage: ti.template(), pairs: ti.template(), model: ti.templa
                         keep = ti.select(shape == 0, d < near + moved, d >= thickness)
                 if keep:
                     if write:
-                        slot = stage.pair_start[t] + found
-                        pairs.elements[slot] = ti.Vector([v, t])
-                        pairs.particles[slot] = ti.Vector([v, tri[0], tri[1], tri[2]])
+                        _write_vertex_pair(stage, pairs, stage.pair_start[t] + found, v, t)
+                    elif found < FOUND_KEPT:
+                        stage.found[FOUND_KEPT * t + found] = v
                     found += 1
     return found
 
@@ -250,8 +254,8 @@ def _edge_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template()
                 state: ti.template(), e, near, thickness, write):
     """Edges f > e sharing no particle with e whose boxes over the step meet e's grown by
     `near`, nearer to e now than `near` + how far their ends moved relative to each other in
-    the step, and farther than `thickness` in the rest shape (counted, or written from
-    pair_start[T + e])."""
+    the step, and farther than `thickness` in the rest shape (counted, the first FOUND_KEPT
+    kept in `found`, or written from pair_start[T + e])."""
     found = 0
     x = ti.static(state.particle_position)
     ends = stage.edges[e]
@@ -266,16 +270,13 @@ def _edge_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template()
         cell = box_cell(first, last, k)
         begin, end = cell_range(stage.grid, 1, cell)
         for a in range(begin, end):
-            item = stage.grid.cell_item[a]
-            f = item - stage.particle_count
+            f = stage.grid.cell_item[a] - stage.particle_count
+            if f <= e or not found_at(stage.grid, a, cell, first, lo, hi):
+                continue
             other = stage.edges[f]
-            if f > e and not (_joined(model, other[0], ends[0])
-                              or _joined(model, other[0], ends[1])
-                              or _joined(model, other[1], ends[0])
-                              or _joined(model, other[1], ends[1])) \
+            if not (_joined(model, other[0], ends[0]) or _joined(model, other[0], ends[1])
+                    or _joined(model, other[1], ends[0]) or _joined(model, other[1], ends[1])) \
                     and not torn_edge(stage, state, f):
-                if not found_here(stage.grid, item, cell, first, lo, hi):
-                    continue
                 moved = ti.max(_moved(stage, state, ends[0], other[0]),
                                _moved(stage, state, ends[0], other[1]),
                                _moved(stage, state, ends[1], other[0]),
@@ -291,31 +292,54 @@ def _edge_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template()
                         keep = ti.select(shape == 0, d < near + moved, d >= thickness)
                 if keep:
                     if write:
-                        slot = stage.pair_start[stage.triangle_count + e] + found
-                        pairs.elements[slot] = ti.Vector([e, f])
-                        pairs.particles[slot] = ti.Vector([ends[0], ends[1], other[0],
-                                                           other[1]])
+                        _write_edge_pair(stage, pairs,
+                                         stage.pair_start[stage.triangle_count + e] + found, e, f)
+                    elif found < FOUND_KEPT:
+                        stage.found[FOUND_KEPT * (stage.triangle_count + e) + found] = f
                     found += 1
     return found
+
+
+@ti.func
+def _write_vertex_pair(stage: ti.template(), pairs: ti.template(), slot, v, t):
+    tri = stage.triangles[t]
+    pairs.elements[slot] = ti.Vector([v, t])
+    pairs.particles[slot] = ti.Vector([v, tri[0], tri[1], tri[2]])
+
+
+@ti.func
+def _write_edge_pair(stage: ti.template(), pairs: ti.template(), slot, e, f):
+    ends, other = stage.edges[e], stage.edges[f]
+    pairs.elements[slot] = ti.Vector([e, f])
+    pairs.particles[slot] = ti.Vector([ends[0], ends[1], other[0], other[1]])
 
 
 @backend.kernel
 def list_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template(),
                 state: ti.template(), near: float, thickness: float, write: ti.i32):
     """Count (write = 0: pair_start[1 + t] = the pairs of triangle t, pair_start[1 + T + e] =
-    of edge e) or, after the prefix sum, write them (write = 1). One kernel for both: it is
-    the largest kernel self-collision compiles."""
+    of edge e, the first FOUND_KEPT of each kept in `found`) or, after the prefix sum, write
+    them (write = 1: copied from `found`, or found again by a triangle or edge with more).
+    One kernel for both: it is the largest kernel self-collision compiles."""
     for t in range(stage.triangle_count):
-        if not write or stage.pair_start[t + 1] > stage.pair_start[t]:
+        begin, end = stage.pair_start[t], stage.pair_start[t + 1]
+        if not write or end - begin > FOUND_KEPT:
             found = _triangle_pairs(stage, pairs, model, state, t, near, thickness, write)
             if not write:
                 stage.pair_start[t + 1] = found
+        else:
+            for k in range(end - begin):
+                _write_vertex_pair(stage, pairs, begin + k, stage.found[FOUND_KEPT * t + k], t)
     for e in range(stage.edge_count):
         k = stage.triangle_count + e
-        if not write or stage.pair_start[k + 1] > stage.pair_start[k]:
+        begin, end = stage.pair_start[k], stage.pair_start[k + 1]
+        if not write or end - begin > FOUND_KEPT:
             found = _edge_pairs(stage, pairs, model, state, e, near, thickness, write)
             if not write:
                 stage.pair_start[k + 1] = found
+        else:
+            for j in range(end - begin):
+                _write_edge_pair(stage, pairs, begin + j, e, stage.found[FOUND_KEPT * k + j])
 
 
 @backend.kernel
