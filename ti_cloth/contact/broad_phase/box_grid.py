@@ -12,10 +12,10 @@ every cell its box meets (integer counts per cell, an exclusive prefix sum, then
 in item order), so a cell lists its items in increasing index and every query visits them in
 the same order on every run and thread count. Each entry holds a copy of its item's box, so
 that a query scans a cell's boxes front to back instead of reading them item by item (the
-broad phase of self-collision was most of a pile's step: docs/performance.md). No hashing: a cell is a cell. When the box would
-need more than CELL_BUDGET cells per item, or the entries more than ENTRY_BUDGET per item (a
-body blown apart, a particle flung far in one step), the cells grow until they do not: queries
-stay exact, only slower.
+broad phase of self-collision was most of a pile's step: docs/performance.md). No hashing: a
+cell is a cell. When the box would need more than CELL_BUDGET cells per item, or the entries
+more than ENTRY_BUDGET per item (a body blown apart, a particle flung far in one step), the
+cells grow until they do not: queries stay exact, only slower.
 
 Query (cell_box, box_cell_count, box_cell, cell_range, found_at): the items of a kind whose
 boxes meet a query box are in that kind's cells the query box meets; an item met in several of
