@@ -527,7 +527,9 @@ def test_a_full_candidate_list_grows_says_so_and_keeps_every_near_pair(f64):
     first room (PAIRS_PER_PARTICLE a particle), so the first list grows,
     self_contacts says when and to what, and the list still holds every vertex-triangle pair
     of the two sheets within a contact's reach ((1 + MARGIN) thicknesses, on it included:
-    brute force here) where it was made, none dropped."""
+    brute force here) where it was made, none dropped: both the triangles whose pairs the
+    list's count kept (FOUND_KEPT or fewer) and those with more, found again to be written."""
+    from ti_cloth.contact.broad_phase.contact_pairs import FOUND_KEPT
     from ti_cloth.contact.self_collision import MARGIN, PAIRS_PER_PARTICLE
     sheet = tc.grid_mesh(8, 8, size=(0.1, 0.1), plane="xz")
     lower, upper = (tc.Cloth(tc.Mesh(sheet.vertices + (0.0, y, 0.0), sheet.triangles),
@@ -552,6 +554,9 @@ def test_a_full_candidate_list_grows_says_so_and_keeps_every_near_pair(f64):
     listed = {tuple(row) for row in contacts.vertex_triangle.tolist()}
     missing = [(a, b) for a, b in zip(v[near].tolist(), t[near].tolist()) if (a, b) not in listed]
     assert near.sum() > 100 and not missing
+    per_triangle = np.bincount(contacts.vertex_triangle[:, 1])
+    assert (per_triangle > FOUND_KEPT).any() and ((per_triangle > 0)
+                                                  & (per_triangle <= FOUND_KEPT)).any()
 
 
 def test_an_overflowing_animated_candidate_list_falls_back_and_says_so(f64):
