@@ -322,7 +322,9 @@ def list_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template(),
     them (write = 1: copied from `found`, or found again by a triangle or edge with more).
     One kernel for both: it is the largest kernel self-collision compiles."""
     for t in range(stage.triangle_count):
-        begin, end = stage.pair_start[t], stage.pair_start[t + 1]
+        begin, end = 0, 0
+        if write:       # offsets once prefix-summed (the count writes them in parallel)
+            begin, end = stage.pair_start[t], stage.pair_start[t + 1]
         if not write or end - begin > FOUND_KEPT:
             found = _triangle_pairs(stage, pairs, model, state, t, near, thickness, write)
             if not write:
@@ -332,7 +334,9 @@ def list_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template(),
                 _write_vertex_pair(stage, pairs, begin + k, stage.found[FOUND_KEPT * t + k], t)
     for e in range(stage.edge_count):
         k = stage.triangle_count + e
-        begin, end = stage.pair_start[k], stage.pair_start[k + 1]
+        begin, end = 0, 0
+        if write:       # offsets once prefix-summed (the count writes them in parallel)
+            begin, end = stage.pair_start[k], stage.pair_start[k + 1]
         if not write or end - begin > FOUND_KEPT:
             found = _edge_pairs(stage, pairs, model, state, e, near, thickness, write)
             if not write:
