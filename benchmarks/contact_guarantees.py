@@ -228,9 +228,10 @@ def main() -> None:
     parser.add_argument("--dt", type=float, default=1 / 240)
     parser.add_argument("--every", type=int, default=4)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--arch", default="cpu", choices=["cpu", "cuda", "vulkan", "gpu"])
     args = parser.parse_args()
-    tc.init(arch="cpu", precision="f32")
-    print(f"{args.integrator} at {args.dt:.4g} s")
+    tc.init(arch=args.arch, precision="f32")
+    print(f"{args.integrator} at {args.dt:.4g} s on {args.arch}")
     print("| scene | never_through | particles | thickness | frames checked | crossings | "
           "of free elements | closest far pair / thickness | moved back | step with contact | "
           "free step | ratio |")

@@ -1,9 +1,12 @@
 """Steps per second of N x N cloths for every integrator, f32 and f64, next to hand-written
 baselines of the same step measured in the same run.
 
-The scene: grid_mesh(N, N) with stretch + shear + bend springs of the default Material, two
-corners pinned, gravity, starting at rest stretched by STRETCH about its centre; dt = the explicit Euler "auto" step at that N (the smallest
-of the integrators' limits, so every integrator runs the same steps without diverging).
+The scene: grid_mesh(N, N) with stretch + shear + bend springs of the default Material, 1 m a
+side up to N = FINEST and N / FINEST m beyond, its edge kept at about 1 / FINEST m (the
+explicit step shrinks as the edge squared: from N = 512 on a 1 m sheet's falls under
+Simulation's 1e-7 s floor), two corners pinned, gravity, starting at rest stretched by
+STRETCH about its centre; dt = the explicit Euler "auto" step at that N (the smallest of the
+integrators' limits, so every integrator runs the same steps without diverging).
 ti_cloth runs the full simulator (Simulation.step, divergence guard included). Baselines,
 symplectic Euler only:
   numpy   vectorised NumPy written below: per-spring forces, scattered with np.bincount
@@ -41,11 +44,14 @@ NEWTON_CHECKED = ("1.8.",)
 
 CHECK_STEPS = 20
 STRETCH = 1.01
+FINEST = 128          # particles a side of the finest 1 m sheet (module doc)
 
 
 def scene(n: int) -> tuple[tc.Cloth, np.ndarray]:
-    """The cloth and its start positions."""
-    cloth = tc.Cloth(tc.grid_mesh(n, n), tc.Material(), pinned=[n * (n - 1), n * n - 1])
+    """The cloth and its start positions (module doc)."""
+    side = max(1.0, n / FINEST)
+    cloth = tc.Cloth(tc.grid_mesh(n, n, size=(side, side)), tc.Material(),
+                     pinned=[n * (n - 1), n * n - 1])
     centre = cloth.particle_position.mean(axis=0)
     return cloth, centre + STRETCH * (cloth.particle_position - centre)
 

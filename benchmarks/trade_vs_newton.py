@@ -135,9 +135,9 @@ class NewtonRun:
         return states[0].particle_q.numpy().astype(np.float64), time.perf_counter() - start
 
 
-def ti_reference(cloth: tc.Cloth) -> np.ndarray:
-    """RK4 in f64 at half the symplectic stable step; prints the halving check."""
-    tc.init(arch="cpu", precision="f64")
+def ti_reference(cloth: tc.Cloth, arch: str) -> np.ndarray:
+    """RK4 in f64 at half the symplectic stable step on `arch`; prints the halving check."""
+    tc.init(arch=arch, precision="f64")
     dt = 0.5 * tc.stable_dt(cloth, "symplectic_euler", 0.0, pinned=cloth.pinned)
     results = []
     for h in (dt, 2 * dt):
@@ -146,7 +146,7 @@ def ti_reference(cloth: tc.Cloth) -> np.ndarray:
         del run
     print(f"  ti_cloth reference: RK4 f64, dt {dt:.3g} s; against twice that "
           f"step {1e3 * np.abs(results[0] - results[1]).max():.3g} mm")
-    tc.init(arch="cpu", precision="f32")
+    tc.init(arch=arch, precision="f32")
     return results[0]
 
 
@@ -219,10 +219,11 @@ def cheapest(rows: list[dict], level: float) -> dict | None:
     return min(within, key=lambda r: r["cost"]) if within else None
 
 
-def measure(n: int, repeats: int, newton: bool, only: tuple = ("",)) -> list[dict]:
+def measure(n: int, repeats: int, newton: bool, only: tuple = ("",),
+            arch: str = "cpu") -> list[dict]:
     cloth = fabric_cloth(n)
     print(f"\n## {n} x {n} ({n * n} particles)")
-    references = {"ti_cloth": ti_reference(cloth)}
+    references = {"ti_cloth": ti_reference(cloth, arch)}
     if newton:
         references["newton"] = newton_reference(cloth, n, "semi_implicit")
         references["newton xpbd"] = newton_reference(cloth, n, "springs")
@@ -274,16 +275,18 @@ def main() -> None:
     parser.add_argument("--no-newton", action="store_true")
     parser.add_argument("--only", nargs="+", default=[""],
                         help="ti_cloth's runs whose label holds one of these words")
+    parser.add_argument("--arch", default="cpu", choices=["cpu", "cuda", "vulkan", "gpu"],
+                        help="ti_cloth's (Newton's runs stay on the CPU)")
     args = parser.parse_args()
     newton = not args.no_newton
     if newton:
         peers.require("newton", NEWTON_CHECKED, "trade_vs_newton.py")
         peers.require("warp-lang", WARP_CHECKED, "trade_vs_newton.py")
-    tc.init(arch="cpu", precision="f32")
-    print(f"CPU, f32; error at t = {DURATION} s; cost = wall s "
+    tc.init(arch=args.arch, precision="f32")
+    print(f"ti_cloth on {args.arch}, f32; error at t = {DURATION} s; cost = wall s "
           f"per simulated s, median of {args.repeats} alternated runs")
     for n in args.sizes:
-        measure(n, args.repeats, newton, tuple(args.only))
+        measure(n, args.repeats, newton, tuple(args.only), args.arch)
 
 
 if __name__ == "__main__":
