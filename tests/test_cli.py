@@ -202,6 +202,28 @@ def test_the_console_script_is_installed_and_quiet(scene, tmp_path):
     assert "[Taichi] version" in verbose.stdout + verbose.stderr
 
 
+def test_the_command_runs_from_a_source_tree_pip_never_installed(scene, tmp_path, monkeypatch,
+                                                                  capsys):
+    """The package on PYTHONPATH without its metadata (a machine without an index): the
+    command still parses, runs a scene and says what it is."""
+    import importlib.metadata as metadata
+
+    real = metadata.version
+
+    def version(name):
+        if name == "ti_cloth":
+            raise metadata.PackageNotFoundError(name)
+        return real(name)
+
+    monkeypatch.setattr(metadata, "version", version)
+    assert cli.main(["run", str(scene), "--out", str(tmp_path / "o"), "--frames", "1",
+                     "--no-progress"]) == 0
+    assert len(frames_in(tmp_path / "o")) == 1
+    with pytest.raises(SystemExit):
+        cli.main(["--version"])
+    assert "ti-cloth (not installed: run from a source tree)" in capsys.readouterr().out
+
+
 def test_help_and_version_import_no_taichi():
     """--help and --version answer from the parser alone: Taichi is never imported (run in a
     fresh interpreter: this one has it)."""

@@ -315,7 +315,7 @@ def info() -> int:
     from ..runtime import backend
 
     config = backend.init(arch="cpu")
-    print(f"ti_cloth {version('ti_cloth')}\n"
+    print(f"ti_cloth {package_version()}\n"
           f"python   {platform.python_version()} ({platform.platform()})\n"
           f"taichi   {'.'.join(map(str, ti.__version__))}\n"
           f"numpy    {numpy.__version__}\n"
@@ -429,14 +429,23 @@ def _resolution(text: str) -> int:
     return value
 
 
+def package_version() -> str:
+    """ti_cloth's installed version; run from a source tree that pip never installed (the
+    package on PYTHONPATH, a machine without an index), a note saying so instead of an error."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("ti_cloth")
+    except PackageNotFoundError:
+        return "(not installed: run from a source tree)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The `ti-cloth` command's argument parser (its subcommands run, study, advise, view,
     info, fit); building it imports no Taichi, so --help and --version answer at once."""
-    from importlib.metadata import version
-
     parser = argparse.ArgumentParser(prog="ti-cloth", description="Mass-spring cloth, strings, "
                                      "hair and soft bodies in Taichi, rendered headlessly.")
-    parser.add_argument("--version", action="version", version=f"ti-cloth {version('ti_cloth')}")
+    parser.add_argument("--version", action="version", version=f"ti-cloth {package_version()}")
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--verbose", action="store_true", help="let Taichi print its banner")
     commands = parser.add_subparsers(dest="command", required=True)
