@@ -137,8 +137,8 @@ class NewtonRun:
 
 def ti_reference(cloth: tc.Cloth, arch: str) -> np.ndarray:
     """RK4 in f64 at half the symplectic stable step, on the CPU whatever `arch` the runs take
-    (on an H100 the 32² sheet's reference took over 100 s); prints the
-    halving check and starts `arch` in f32 again."""
+    (on an H100 the 32² sheet's reference took over 100 s); prints the halving check and
+    starts `arch` in f32 again."""
     tc.init(arch="cpu", precision="f64")
     dt = 0.5 * tc.stable_dt(cloth, "symplectic_euler", 0.0, pinned=cloth.pinned)
     results = []
