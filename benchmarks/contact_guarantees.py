@@ -25,7 +25,8 @@ SelfCollision asks of a mesh)
     python benchmarks/contact_guarantees.py [--scenes land pile press twist] [--scale 1]
                                             [--size N] [--layers 4] [--fail-safe both]
                                             [--integrator xpbd] [--dt 0.0041667]
-                                            [--every 4] [--repeats 3]
+                                            [--every 4] [--repeats 3] [--arch cpu]
+                                            [--progress 0]
 
 Every scene steps with --integrator (xpbd: 10 iterations; any other integrator by its name,
 with its defaults) at --dt (1/240 s).
@@ -33,6 +34,7 @@ with its defaults) at --dt (1/240 s).
 
 import argparse
 import statistics
+import sys
 import time
 
 import numpy as np
@@ -169,7 +171,7 @@ def point_triangle(p, a, b, c) -> np.ndarray:
 
 
 def measure(name: str, n: int, layers: int, every: int, repeats: int,
-            never_through: bool, integrator: str, dt: float) -> dict:
+            never_through: bool, integrator: str, dt: float, progress: int = 0) -> dict:
     build, thickness = SCENES[name]
     body, options, seconds = build(n, layers)
     steps = int(round(seconds / dt))
@@ -192,7 +194,8 @@ def measure(name: str, n: int, layers: int, every: int, repeats: int,
     free_edges = edges[~np.isin(edges, held).any(axis=1)]
     crossed, crossed_free, nearest, watched = 0, 0, np.inf, 0
     sim = sims[True]
-    for _ in range(steps // every):
+    start = time.perf_counter()
+    for check in range(steps // every):
         sim.step(every)
         x = sim.positions()
         crossed += crossings(x, triangles, edges, reach)
@@ -200,6 +203,10 @@ def measure(name: str, n: int, layers: int, every: int, repeats: int,
         nearest = min(nearest, closest_far(x, body.particle_position, triangles, reach,
                                            2 * thickness))
         watched += 1
+        if progress and (check + 1) % progress == 0:     # a long run at the issue's sizes
+            print(f"  {name}: step {(check + 1) * every} of {steps}, "
+                  f"{time.perf_counter() - start:.0f} s, crossings {crossed}, closest far pair "
+                  f"{nearest / thickness:.3f} thicknesses", file=sys.stderr, flush=True)
     moved_back = sim.self_contacts().moved_back
     cost = {True: [], False: []}
     for _ in range(repeats):
@@ -229,6 +236,8 @@ def main() -> None:
     parser.add_argument("--every", type=int, default=4)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--arch", default="cpu", choices=["cpu", "cuda", "vulkan", "gpu"])
+    parser.add_argument("--progress", type=int, default=0,
+                        help="a line on stderr every this many checked frames (0: none)")
     args = parser.parse_args()
     tc.init(arch=args.arch, precision="f32")
     print(f"{args.integrator} at {args.dt:.4g} s on {args.arch}")
@@ -241,7 +250,7 @@ def main() -> None:
         for never_through in {"both": (True, False), "on": (True,), "off": (False,)}[
                 args.fail_safe]:
             r = measure(name, n, args.layers, args.every, args.repeats, never_through,
-                        args.integrator, args.dt)
+                        args.integrator, args.dt, args.progress)
             print(f"| {r['scene']} | {'on' if never_through else 'off'} | {r['particles']:,} | "
                   f"{r['thickness'] * 1e3:g} mm | {r['frames']} | {r['crossings']} | "
                   f"{r['free_crossings']} | "
