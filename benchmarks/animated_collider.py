@@ -17,6 +17,7 @@ import numpy as np
 from mesh_collider import CENTRE, RADIUS, step_costs
 
 import ti_cloth as tc
+from ti_cloth.inputs import limits
 
 SPHERE = tc.sphere_mesh(RADIUS, CENTRE, subdivisions=4)
 FPS = 60
@@ -50,7 +51,7 @@ def simulation(n, integrator, variant):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[64])
-    parser.add_argument("--arch", default="cpu", choices=["cpu", "cuda", "vulkan", "gpu"])
+    parser.add_argument("--arch", default="cpu", choices=limits.ARCH_NAMES)
     parser.add_argument("--precision", default="f32", choices=["f32", "f64"])
     parser.add_argument("--steps", type=int, default=40)
     parser.add_argument("--repeats", type=int, default=5)

@@ -41,6 +41,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 import ti_cloth as tc
+from ti_cloth.inputs import limits
 
 THICKNESS = 0.005
 
@@ -235,7 +236,7 @@ def main() -> None:
     parser.add_argument("--dt", type=float, default=1 / 240)
     parser.add_argument("--every", type=int, default=4)
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--arch", default="cpu", choices=["cpu", "cuda", "vulkan", "gpu"])
+    parser.add_argument("--arch", default="cpu", choices=limits.ARCH_NAMES)
     parser.add_argument("--progress", type=int, default=0,
                         help="a line on stderr every this many checked frames (0: none)")
     args = parser.parse_args()

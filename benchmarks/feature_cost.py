@@ -11,6 +11,7 @@ import statistics
 import time
 
 import ti_cloth as tc
+from ti_cloth.inputs import limits
 
 
 def minimal(n):
@@ -44,7 +45,7 @@ def steps_per_second(sim, steps, repeats):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[32, 64])
-    parser.add_argument("--arch", default="cpu", choices=["cpu", "cuda", "vulkan", "gpu"])
+    parser.add_argument("--arch", default="cpu", choices=limits.ARCH_NAMES)
     parser.add_argument("--precision", default="f32", choices=["f32", "f64"])
     parser.add_argument("--steps", type=int, default=300)
     parser.add_argument("--repeats", type=int, default=5)

@@ -24,6 +24,7 @@ import numpy as np
 
 import ti_cloth as tc
 from ti_cloth.contact.colliders import sdf
+from ti_cloth.inputs import limits
 
 RADIUS, CENTRE = 0.3, (0.0, 0.0, 0.0)
 
@@ -103,7 +104,7 @@ def build_times(resolutions, repeats):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[64, 128])
-    parser.add_argument("--arch", default="cpu", choices=["cpu", "cuda", "vulkan", "gpu"])
+    parser.add_argument("--arch", default="cpu", choices=limits.ARCH_NAMES)
     parser.add_argument("--precision", default="f32", choices=["f32", "f64"])
     parser.add_argument("--steps", type=int, default=40)
     parser.add_argument("--repeats", type=int, default=5)

@@ -17,6 +17,7 @@ import time
 import numpy as np
 
 import ti_cloth as tc
+from ti_cloth.inputs import limits
 from ti_cloth.render import Camera, Renderer, SurfaceStyle
 
 FPS = 30.0
@@ -62,7 +63,7 @@ def render_ms_per_frame(renderer, sim, frames, window=False):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[32, 128, 512])
-    parser.add_argument("--arch", default="cpu", choices=["cpu", "cuda", "vulkan", "gpu"])
+    parser.add_argument("--arch", default="cpu", choices=limits.ARCH_NAMES)
     parser.add_argument("--width", type=int, default=1280)
     parser.add_argument("--height", type=int, default=720)
     parser.add_argument("--frames", type=int, default=7, help="timed frames per case (median)")

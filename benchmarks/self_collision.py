@@ -31,6 +31,7 @@ import ti_cloth as tc
 from ti_cloth.app.scene import load_scene
 from ti_cloth.contact import self_collision
 from ti_cloth.contact.broad_phase import box_grid
+from ti_cloth.inputs import limits
 
 KERNELS = {self_collision: ("displacement_box", "sweep_boxes", "mean_edge", "list_pairs",
                             "prefix_pairs"),
@@ -131,7 +132,7 @@ def scene_frames(path, start: float, frames: int, repeats: int) -> None:
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="*", default=[32, 64, 128])
-    parser.add_argument("--arch", default="cpu", choices=["cpu", "cuda", "vulkan", "gpu"])
+    parser.add_argument("--arch", default="cpu", choices=limits.ARCH_NAMES)
     parser.add_argument("--precision", default="f32", choices=["f32", "f64"])
     parser.add_argument("--thickness", type=float, default=0.005)
     parser.add_argument("--steps", type=int, default=40)

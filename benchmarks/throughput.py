@@ -37,6 +37,7 @@ import peers
 import taichi as ti
 
 import ti_cloth as tc
+from ti_cloth.inputs import limits
 from ti_cloth.runtime import backend
 
 WARP_CHECKED = ("1.19.",)     # the versions the docs' figures were measured with
@@ -343,7 +344,7 @@ def main(argv=None):
                         choices=list(tc.INTEGRATORS))
     parser.add_argument("--all-integrators-up-to", type=int, default=512,
                         help="larger N run symplectic Euler only")
-    parser.add_argument("--arch", default="cpu", choices=["cpu", "cuda", "vulkan", "gpu"])
+    parser.add_argument("--arch", default="cpu", choices=limits.ARCH_NAMES)
     parser.add_argument("--threads", type=int, default=None, help="CPU threads (default: all)")
     parser.add_argument("--warp", action="store_true", help="also time hand-written Warp kernels")
     parser.add_argument("--newton", action="store_true", help="also time Newton's semi-implicit solver")

@@ -46,6 +46,7 @@ import numpy as np
 import peers
 
 import ti_cloth as tc
+from ti_cloth.inputs import limits
 
 NEWTON_CHECKED = ("1.8.",)
 WARP_CHECKED = ("1.19.",)
@@ -277,7 +278,7 @@ def main() -> None:
     parser.add_argument("--no-newton", action="store_true")
     parser.add_argument("--only", nargs="+", default=[""],
                         help="ti_cloth's runs whose label holds one of these words")
-    parser.add_argument("--arch", default="cpu", choices=["cpu", "cuda", "vulkan", "gpu"],
+    parser.add_argument("--arch", default="cpu", choices=limits.ARCH_NAMES,
                         help="ti_cloth's (Newton's runs stay on the CPU)")
     args = parser.parse_args()
     newton = not args.no_newton
