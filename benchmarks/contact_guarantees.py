@@ -4,11 +4,13 @@ For each scene, with self-collision on (and, for the cost, off: the free step), 
 `--every` steps: the edge-triangle crossings of the cloth (segment through triangle, sharing
 no particle, by float64 orientation tests: Moller-Trumbore with a determinant filter), also
 over the elements with no held particle alone (the never-through fail-safe's assumption),
-and the closest far vertex-triangle pair (sharing no particle and at least two thicknesses apart at
-rest), both over candidate pairs a k-d tree finds within reach; then the run's totals, the
-closest pair as a fraction of the thickness, the particles the never-through fail-safe moved
-back, and the wall time per step with and without self-contact (medians of --repeats
-alternated runs in this process, after a warm-up); each scene with the fail-safe on and off.
+and the closest far vertex-triangle pair (sharing no particle and at least two thicknesses
+apart at rest; also over those with no held particle), both over candidate pairs a k-d tree
+finds within reach; then the run's totals, the closest pair as a fraction of the thickness,
+the particles the fail-safe moved back, and the wall time per step with and without
+self-contact (medians of --repeats alternated runs in this process, after a warm-up); each
+scene with each --fail-safe: on (never_through and keep_thickness, the defaults), through
+(never_through alone) and off (the contact passes alone).
 
 Scenes (N particles a side: 16, 24 and 6 times --scale, or --size; the issue's sizes are
 --scenes pile --size 64 --layers 16 and --scenes twist --size 128):
@@ -19,31 +21,40 @@ Scenes (N particles a side: 16, 24 and 6 times --scale, or --size; the issue's s
            (the dense pile the docs report: no pass can make room)
   land     an N x N sheet of issue 53's denim (0.4 m) dropped 15 cm onto another (0.5 m) that
            lies on a ball: the large steps' case (--dt 1/60, and --integrator)
-(all but the press 5 mm thick, or half the mean rest edge where that is less, as
-SelfCollision asks of a mesh)
+  cape     demos/cape.toml as it is (its own step, xpbd, thickness 4 mm and friction; its
+           attached neck held), over its 3.3 s
+  skirt    demos/skirt_walk.toml likewise (two panels sewn on a walking figure; particles its
+           seams sew together count as one)
+(all but the press and the demos 5 mm thick, or half the mean rest edge where that is less,
+as SelfCollision asks of a mesh)
 
-    python benchmarks/contact_guarantees.py [--scenes land pile press twist] [--scale 1]
-                                            [--size N] [--layers 4] [--fail-safe both]
+    python benchmarks/contact_guarantees.py [--scenes cape land pile press skirt twist]
+                                            [--scale 1] [--size N] [--layers 4]
+                                            [--fail-safe on off]
                                             [--integrator xpbd] [--dt 0.0041667]
                                             [--every 4] [--repeats 3] [--arch cpu]
                                             [--progress 0]
 
-Every scene steps with --integrator (xpbd: 10 iterations; any other integrator by its name,
-with its defaults) at --dt (1/240 s).
+Every scene but the demos steps with --integrator (xpbd: 10 iterations; any other integrator
+by its name, with its defaults) at --dt (1/240 s). --scenes defaults to all but the demos.
 """
 
 import argparse
+import dataclasses
 import statistics
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 import ti_cloth as tc
+from ti_cloth.app.scene import load_scene
 from ti_cloth.inputs import limits
 
 THICKNESS = 0.005
+DEMOS = Path(__file__).resolve().parent.parent / "demos"
 
 
 def sheet(n: int, size: float, origin, plane: str = "xz") -> tc.Cloth:
@@ -96,21 +107,71 @@ def land(n: int, layers: int):
     return tc.Cloth.combine([lower, upper]), dict(colliders=colliders), 1.5
 
 
-SCENES = {"pile": (pile, THICKNESS), "twist": (twist, THICKNESS), "press": (press, 0.02),
-          "land": (land, THICKNESS)}
+def demo(file: str):
+    """A demo's scene file as it is (its integrator, step, colliders, attachments and
+    self-collision), with the fail-safe measured: (body, simulation(FAIL_SAFES' flags, or
+    None: no self-collision), seconds, held particles, thickness)."""
+    def build(n: int, layers: int, integrator: str, dt: float):
+        scene = load_scene(DEMOS / file)
+        held = np.concatenate([h.particles for h in scene.handles] or [[]]).astype(int)
+        contact = scene.self_collision
+
+        def simulation(flags):
+            return dataclasses.replace(scene, self_collision=flags and dataclasses.replace(
+                contact, **flags)).build()
+        return scene.cloth, simulation, scene.frames / scene.fps, held, contact.thickness
+    return build
+
+
+def made(scene, thickness: float):
+    """A scene above as demo() gives it, at --integrator and --dt; `thickness`, or half the
+    mean rest edge where that is less (as SelfCollision asks of a mesh: warn_if_thick) but
+    for the press (pressed on purpose)."""
+    def build(n: int, layers: int, integrator: str, dt: float):
+        body, options, seconds = scene(n, layers)
+        held = np.concatenate([h.particles for h in options.get("handles", ())]
+                              or [[]]).astype(int)
+        chosen = tc.XPBD(iterations=10) if integrator == "xpbd" else integrator
+        kept = thickness
+        if scene is not press:
+            kept = min(kept, 0.5 * float(np.mean(rest_edges(body))))
+
+        def simulation(flags):
+            return tc.Simulation(body, dt=dt, integrator=chosen, self_collision=flags and
+                                 tc.SelfCollision(thickness=kept, **flags), **options)
+        return body, simulation, seconds, held, kept
+    return build
+
+
+def rest_edges(body) -> np.ndarray:
+    """The rest lengths of the mesh's edges."""
+    triangles = body.mesh.triangles
+    edges = np.unique(np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
+    x = body.particle_position
+    return np.linalg.norm(x[edges[:, 0]] - x[edges[:, 1]], axis=1)
+
+
+SCENES = {"pile": made(pile, THICKNESS), "twist": made(twist, THICKNESS),
+          "press": made(press, 0.02), "land": made(land, THICKNESS),
+          "cape": demo("cape.toml"), "skirt": demo("skirt_walk.toml")}
+FAIL_SAFES = {"on": dict(never_through=True, keep_thickness=True),     # the defaults
+              "through": dict(never_through=True, keep_thickness=False),
+              "off": dict(never_through=False, keep_thickness=False)}
 SIDES = {"pile": 16, "twist": 24, "press": 6, "land": 16}    # particles a side at --scale 1
 
 
-def crossings(x: np.ndarray, triangles: np.ndarray, edges: np.ndarray, reach: float) -> int:
-    """Edges through triangles they share no particle with (candidates: edge midpoints
-    within `reach` of a triangle's centroid)."""
+def crossings(x: np.ndarray, triangles: np.ndarray, edges: np.ndarray, reach: float,
+              weld: np.ndarray) -> int:
+    """Edges through triangles they share no particle with (`weld`: each particle's
+    representative among those a garment's seams sew together, which count as one;
+    candidates: edge midpoints within `reach` of a triangle's centroid)."""
     tree = cKDTree(x[triangles].mean(axis=1))
     mids = x[edges].mean(axis=1)
     pairs = [(e, t) for e, near in enumerate(tree.query_ball_point(mids, reach)) for t in near]
     if not pairs:
         return 0
     e, t = np.array(pairs).T
-    keep = ~(edges[e][:, :, None] == triangles[t][:, None, :]).any(axis=(1, 2))
+    keep = ~(weld[edges[e]][:, :, None] == weld[triangles[t]][:, None, :]).any(axis=(1, 2))
     e, t = e[keep], t[keep]
     p, q = x[edges[e, 0]], x[edges[e, 1]]
     a, b, c = (x[triangles[t, k]] for k in range(3))
@@ -128,21 +189,24 @@ def crossings(x: np.ndarray, triangles: np.ndarray, edges: np.ndarray, reach: fl
 
 
 def closest_far(x: np.ndarray, rest: np.ndarray, triangles: np.ndarray, reach: float,
-                far: float) -> float:
-    """The nearest vertex-triangle distance over pairs sharing no particle whose rest
-    distance (vertex to centroid) is at least `far`; inf when none is within `reach`."""
+                far: float, held: np.ndarray, weld: np.ndarray) -> tuple[float, float]:
+    """The nearest vertex-triangle distance over pairs sharing no particle (up to `weld`)
+    whose rest distance (vertex to centroid) is at least `far`, and over those of them with
+    no `held` particle; inf when none is within `reach`."""
     tree = cKDTree(x[triangles].mean(axis=1))
     pairs = [(v, t) for v, near in enumerate(tree.query_ball_point(x, reach)) for t in near]
     if not pairs:
-        return np.inf
+        return np.inf, np.inf
     v, t = np.array(pairs).T
-    keep = ~(triangles[t] == v[:, None]).any(axis=1)
+    keep = ~(weld[triangles[t]] == weld[v][:, None]).any(axis=1)
     keep &= np.linalg.norm(rest[v] - rest[triangles[t]].mean(axis=1), axis=1) >= far
     v, t = v[keep], t[keep]
     if not len(v):
-        return np.inf
+        return np.inf, np.inf
     a, b, c = (x[triangles[t, k]] for k in range(3))
-    return float(point_triangle(x[v], a, b, c).min())
+    distance = point_triangle(x[v], a, b, c)
+    free = ~np.isin(v, held) & ~np.isin(triangles[t], held).any(axis=1)
+    return float(distance.min()), float(distance[free].min()) if free.any() else np.inf
 
 
 def point_triangle(p, a, b, c) -> np.ndarray:
@@ -172,37 +236,28 @@ def point_triangle(p, a, b, c) -> np.ndarray:
 
 
 def measure(name: str, n: int, layers: int, every: int, repeats: int,
-            never_through: bool, integrator: str, dt: float, progress: int = 0) -> dict:
-    build, thickness = SCENES[name]
-    body, options, seconds = build(n, layers)
-    steps = int(round(seconds / dt))
+            fail_safe: str, integrator: str, dt: float, progress: int = 0) -> dict:
+    body, simulation, seconds, held, thickness = SCENES[name](n, layers, integrator, dt)
     triangles = body.mesh.triangles
     edges = np.unique(np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
-    lengths = np.linalg.norm(body.particle_position[edges[:, 0]]
-                             - body.particle_position[edges[:, 1]], axis=1)
-    longest = float(lengths.max())
-    if name != "press":                 # as SelfCollision asks of a mesh (warn_if_thick)
-        thickness = min(thickness, 0.5 * float(lengths.mean()))
-    reach = longest + 2 * thickness
-    sims = {contact: tc.Simulation(body, dt=dt, integrator=tc.XPBD(iterations=10)
-                                   if integrator == "xpbd" else integrator,
-                                   self_collision=tc.SelfCollision(
-                                       thickness=thickness, never_through=never_through)
-                                   if contact else None, **options)
+    reach = float(rest_edges(body).max()) + 2 * thickness
+    sims = {contact: simulation(FAIL_SAFES[fail_safe] if contact else None)
             for contact in (True, False)}
-    held = np.concatenate([h.particles for h in options.get("handles", ())] or [[]]).astype(int)
+    steps = int(round(seconds / sims[True].dt))
+    weld = np.asarray(body.particle_weld)
     free_triangles = triangles[~np.isin(triangles, held).any(axis=1)]
     free_edges = edges[~np.isin(edges, held).any(axis=1)]
-    crossed, crossed_free, nearest, watched = 0, 0, np.inf, 0
+    crossed, crossed_free, nearest, nearest_free, watched = 0, 0, np.inf, np.inf, 0
     sim = sims[True]
     start = time.perf_counter()
     for check in range(steps // every):
         sim.step(every)
         x = sim.positions()
-        crossed += crossings(x, triangles, edges, reach)
-        crossed_free += crossings(x, free_triangles, free_edges, reach)
-        nearest = min(nearest, closest_far(x, body.particle_position, triangles, reach,
-                                           2 * thickness))
+        crossed += crossings(x, triangles, edges, reach, weld)
+        crossed_free += crossings(x, free_triangles, free_edges, reach, weld)
+        closest, closest_free = closest_far(x, body.particle_position, triangles, reach,
+                                            2 * thickness, held, weld)
+        nearest, nearest_free = min(nearest, closest), min(nearest_free, closest_free)
         watched += 1
         if progress and (check + 1) % progress == 0:     # a long run at the issue's sizes
             print(f"  {name}: step {(check + 1) * every} of {steps}, "
@@ -217,20 +272,22 @@ def measure(name: str, n: int, layers: int, every: int, repeats: int,
             start = time.perf_counter()
             timed.step(4 * every)
             cost[contact].append((time.perf_counter() - start) / (4 * every))
-    return dict(scene=name, never_through=never_through, moved_back=moved_back,
+    return dict(scene=name, moved_back=moved_back,
                 particles=body.particle_count, thickness=thickness,
                 frames=watched, crossings=crossed, free_crossings=crossed_free,
-                closest=nearest / thickness,
+                closest=nearest / thickness, closest_free=nearest_free / thickness,
                 contact_ms=1e3 * statistics.median(cost[True]),
                 free_ms=1e3 * statistics.median(cost[False]))
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--scenes", nargs="+", choices=sorted(SCENES), default=sorted(SCENES))
+    parser.add_argument("--scenes", nargs="+", choices=sorted(SCENES),
+                        default=["land", "pile", "press", "twist"])
     parser.add_argument("--scale", type=int, default=1)
     parser.add_argument("--size", type=int, help="particles a side (overrides --scale)")
-    parser.add_argument("--fail-safe", choices=["both", "on", "off"], default="both")
+    parser.add_argument("--fail-safe", nargs="+", choices=sorted(FAIL_SAFES),
+                        default=["on", "off"])
     parser.add_argument("--layers", type=int, default=4)
     parser.add_argument("--integrator", default="xpbd")
     parser.add_argument("--dt", type=float, default=1 / 240)
@@ -242,20 +299,19 @@ def main() -> None:
     args = parser.parse_args()
     tc.init(arch=args.arch, precision="f32")
     print(f"{args.integrator} at {args.dt:.4g} s on {args.arch}")
-    print("| scene | never_through | particles | thickness | frames checked | crossings | "
-          "of free elements | closest far pair / thickness | moved back | step with contact | "
-          "free step | ratio |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("| scene | fail-safe | particles | thickness | frames checked | crossings | "
+          "of free elements | closest far pair / thickness | of free elements | moved back | "
+          "step with contact | free step | ratio |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name in args.scenes:
-        n = args.size or SIDES[name] * args.scale
-        for never_through in {"both": (True, False), "on": (True,), "off": (False,)}[
-                args.fail_safe]:
-            r = measure(name, n, args.layers, args.every, args.repeats, never_through,
+        n = args.size or SIDES.get(name, 0) * args.scale
+        for fail_safe in args.fail_safe:
+            r = measure(name, n, args.layers, args.every, args.repeats, fail_safe,
                         args.integrator, args.dt, args.progress)
-            print(f"| {r['scene']} | {'on' if never_through else 'off'} | {r['particles']:,} | "
+            print(f"| {r['scene']} | {fail_safe} | {r['particles']:,} | "
                   f"{r['thickness'] * 1e3:g} mm | {r['frames']} | {r['crossings']} | "
-                  f"{r['free_crossings']} | "
-                  f"{r['closest']:.3f} | {r['moved_back']:,} | {r['contact_ms']:.2f} ms | "
+                  f"{r['free_crossings']} | {r['closest']:.3f} | {r['closest_free']:.3f} | "
+                  f"{r['moved_back']:,} | {r['contact_ms']:.2f} ms | "
                   f"{r['free_ms']:.2f} ms | {r['contact_ms'] / r['free_ms']:.1f}x |",
                   flush=True)
 

@@ -210,7 +210,9 @@ def test_a_list_made_after_a_fast_step_is_lean_and_misses_no_pair(f64):
 @pytest.mark.parametrize("kwargs, field", [({"thickness": 0.0}, "SelfCollision.thickness"),
                                            ({"thickness": float("nan")}, "SelfCollision.thickness"),
                                            ({"iterations": 0}, "SelfCollision.iterations"),
-                                           ({"stacking": 1}, "SelfCollision.stacking")])
+                                           ({"stacking": 1}, "SelfCollision.stacking"),
+                                           ({"keep_thickness": 1},
+                                            "SelfCollision.keep_thickness")])
 def test_bad_settings_are_refused_by_name(kwargs, field):
     with pytest.raises(ValueError, match=field):
         tc.SelfCollision(**kwargs)
@@ -234,8 +236,8 @@ def test_one_thread_and_all_cores_and_a_rerun_give_the_same_bits():
     thread and on every core (two on CI), and on a rerun; with them a turning mesh collider
     (a ball under the lower sheet lifting the upper one, which holds up the layers: stacking's
     levels, integer writes in list order), a pile settling on an animated plate (levels
-    seeded by its contacts), and the never-through fail-safe
-    moving particles back in a twisted sheet (its marks and rounds: integer writes and counts).
+    seeded by its contacts), and the fail-safe (never_through and keep_thickness) moving
+    particles back in a twisted sheet (its marks and rounds: integer writes and counts).
     The default runtime comes back after the one-thread run and serves the other two (one
     re-initialisation fewer: each drops every kernel this worker compiled)."""
     from ti_cloth.runtime import backend
@@ -599,7 +601,9 @@ def test_never_through_keeps_a_twisted_sheet_from_passing_through_itself(f64):
     """Two edges of a 12 x 12 sheet turned one and a half turns each way in a second wind it
     into a tight twist that the contact passes alone let through itself (Moller-Trumbore in this
     test, over every pair of a free edge and a free triangle, every 4th step). With the
-    never-through fail-safe no free edge ever passes through a free triangle: every pair that
+    never-through fail-safe (alone: keep_thickness, off here, also catches most such pairs,
+    nearer than the thickness where they end the step) no free edge ever passes through a
+    free triangle: every pair that
     may have met in a step has its free particles moved back to the step's start
     (contact/never_through.py's theorem). What it costs: the twisted part stops where the
     passes could not keep it apart (moved_back counts the particles)."""
@@ -609,7 +613,8 @@ def test_never_through_keeps_a_twisted_sheet_from_passing_through_itself(f64):
         sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240, handles=handles,
                             gravity=(0.0, 0.0, 0.0),
                             self_collision=tc.SelfCollision(thickness=THICKNESS,
-                                                            never_through=never_through))
+                                                            never_through=never_through,
+                                                            keep_thickness=False))
         counts = []
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -621,6 +626,56 @@ def test_never_through_keeps_a_twisted_sheet_from_passing_through_itself(f64):
            results, "off > 0; on 0, some moved back")
     assert results[False][0] > 0 and results[False][1] == 0
     assert results[True][0] == 0 and results[True][1] > 0
+
+
+def closest_free(body, held, x):
+    """The nearest pair over free elements (no held particle) sharing no particle: vertex to
+    triangle (point_triangle_distances) and edge to edge (segment_distances), brute force."""
+    tris = body.mesh.triangles
+    free = tris[~np.isin(tris, held).any(axis=1)]
+    v, t = np.meshgrid(np.setdiff1d(np.arange(len(x)), held), np.arange(len(free)),
+                       indexing="ij")
+    v, t = v.ravel(), t.ravel()
+    apart = ~(free[t] == v[:, None]).any(axis=1)
+    nearest = point_triangle_distances(x[v[apart]], x[free[t[apart]]]).min()
+    edges = np.unique(np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]),
+                              1), axis=0)
+    edges = edges[~np.isin(edges, held).any(axis=1)]
+    e, f = np.triu_indices(len(edges), 1)
+    apart = ~(edges[e][:, :, None] == edges[f][:, None, :]).any(axis=(1, 2))
+    ends = x[edges[e[apart]]], x[edges[f[apart]]]
+    return min(nearest, segment_distances(ends[0][:, 0], ends[0][:, 1], ends[1][:, 0],
+                                          ends[1][:, 1]).min())
+
+
+def test_keep_thickness_keeps_every_free_pair_a_thickness_apart_in_a_tight_twist(f64):
+    """The twist above, wound faster than the passes part it: with the passes alone (and
+    never_through) free pairs come far nearer than the thickness; with keep_thickness (the
+    default) the fail-safe's rounds also move back the free particles of any pair the step
+    left nearer than 0.999 of it and nearer than it started (contact/never_through.py, (3)),
+    so in every 4th step no free vertex is nearer than that to a free triangle it is not a
+    corner of, nor a free edge to one it shares no particle with (closest_free, brute force
+    here; the sheet starts flat, every such pair farther apart than the thickness), and
+    none passes through."""
+    body, handles, held = twisted_sheet(turns=3.0)
+    results = {}
+    for keep in (False, True):
+        sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240, handles=handles,
+                            gravity=(0.0, 0.0, 0.0),
+                            self_collision=tc.SelfCollision(thickness=THICKNESS,
+                                                            keep_thickness=keep))
+        closest, crossings = [], 0
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            for _ in range(24):
+                sim.step(4)
+                closest.append(closest_free(body, held, sim.positions()) / THICKNESS)
+                crossings += free_crossings(body, held, sim.positions())
+        results[keep] = (min(closest), crossings)
+    report("closest free pair / thickness, free crossings: keep_thickness off, on", results,
+           "off < 0.999; on >= 0.999, 0")
+    assert results[False][0] < 0.999
+    assert results[True][0] >= 0.999 and results[True][1] == 0
 
 
 def test_the_fail_safe_holds_where_the_passes_carry_particles_past_the_list(f64):
@@ -724,16 +779,18 @@ TURN = Rotation.from_rotvec(np.pi / 3 * np.array([1.0, 0.0, 1.0]) / np.sqrt(2.0)
 
 def settle_pile(collider, stacking: bool, steps: int = 60) -> tuple[int, float, np.ndarray]:
     """Six 6 x 6 sheets 5 mm thick (offset_stack, turned by TURN) pressed by gravity onto
-    `collider` (lying in the turned plane y = 0), xpbd at 1/240 s for `steps` steps: (the most
-    passes a step made from 0.1 s on, the closest far vertex-triangle pair / thickness then,
-    brute force; the positions at the end)."""
+    `collider` (lying in the turned plane y = 0), xpbd at 1/240 s for `steps` steps, the
+    thickness kept by the passes alone (keep_thickness off: it would keep it whatever they
+    leave): (the most passes a step made from 0.1 s on, the closest far vertex-triangle pair /
+    thickness then, brute force; the positions at the end)."""
     thickness = 0.005
     body = offset_stack(6, 6, 0.1, thickness, TURN)
     tris = body.mesh.triangles
     v, t = np.nonzero(body.particle_body[:, None] != body.particle_body[tris[:, 0]][None])
     sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240, gravity=TURN @ [0.0, -9.81, 0.0],
                         colliders=[collider],
-                        self_collision=tc.SelfCollision(thickness=thickness, stacking=stacking))
+                        self_collision=tc.SelfCollision(thickness=thickness, stacking=stacking,
+                                                        keep_thickness=False))
     passes, closest = [], []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")       # mass-weighted, the pile may be reported

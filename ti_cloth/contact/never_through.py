@@ -1,5 +1,6 @@
 """The self-contact fail-safe (issue 56): after the contact passes of a step, no listed pair
-has passed through itself during the step, by construction.
+has passed through itself during the step (SelfCollision.never_through), nor come nearer
+than KEEP thicknesses (SelfCollision.keep_thickness), by construction.
 
 The theorem. Over a step every particle moves on the straight line from x0 (the step's
 start) to x1 (where the step leaves it). For a vertex p and a triangle abc, and for two edges
@@ -45,8 +46,27 @@ one, with these assumptions, stated in docs/api.md:
 (1) and (2) are evaluated in floating point with margins (MARGIN) in the safe direction, so
 rounding can only move a particle back that did not need it.
 
-Cost: one evaluation of the listed pairs a round, one round in a step where nothing is moved
-back (benchmarks/contact_guarantees.py measures it).
+The thickness, the same way. With keep_thickness the rounds also move back the free
+particles of a listed pair whose distance d at the step's end is
+
+    d(1) < KEEP (1 + ROUNDING) thickness   and   d(1) < d(0)                  (3)
+
+(d the vertex's distance to the triangle's nearest point, or the two segments'). Where the
+rounds end no listed pair meets (3), unless held particles moved it (counted in
+`unresolved` as above): a pair whose particles are all back has d(1) = d(0). So every pair
+ends a step at least min(d(0), KEEP (1 + ROUNDING) thickness) apart, and by induction a cloth
+that starts with no pair nearer than KEEP thicknesses never has one, whatever the contact
+passes leave when they run out (a fast twist, a landing at a large step); one that starts
+nearer (an overlap the scene began with) never has that pair nearer than it began. The
+pairs nearer than a thickness at the step's end are listed (the list holds the pairs that
+came within thickness + skin over the step), so the list's assumption is the same as above.
+ROUNDING covers the positions' rounding (f32: about 1e-5 of a 5 mm thickness at a metre from
+the origin), so that the guarantee holds measured in float64 too. What it costs is the
+passes' work left undone: a pair they could not part in a step stops where the step started
+it, at rest, instead of sinking into the other.
+
+Cost: one evaluation of the listed pairs a round ((1) or (2), then (3)), one round in a step
+where nothing is moved back (benchmarks/contact_guarantees.py measures it).
 """
 
 import taichi as ti
@@ -57,6 +77,8 @@ from .broad_phase.contact_pairs import torn_pair
 
 MARGIN = 1e-6       # relative: (1) needs d0 + d1 > R (1 + MARGIN), (2) |b_k| > MARGIN max |b_k|
 PIECES = 8          # a step's parts, each checked by (1) or (2), for a pair the whole step fails
+KEEP = 0.999        # keep_thickness: no pair is left nearer than this (in thicknesses), (3)
+ROUNDING = 1e-4     # relative: (3) is checked at KEEP (1 + ROUNDING) thicknesses, in floats
 
 
 @ti.func
@@ -139,6 +161,18 @@ def _safe(start: ti.template(), now: ti.template(), corners, vertex_triangle):
 
 
 @ti.func
+def _nearer(start: ti.template(), now: ti.template(), corners, vertex_triangle, keep):
+    """Whether the pair on `corners` ends the step nearer than `keep` and nearer than it
+    started it (module doc, (3)); never for keep 0 (keep_thickness off)."""
+    a, b, c, d = corners[0], corners[1], corners[2], corners[3]
+    near = False
+    end = _distance(now[a], now[b], now[c], now[d], vertex_triangle)
+    if end < keep:
+        near = end < _distance(start[a], start[b], start[c], start[d], vertex_triangle)
+    return near
+
+
+@ti.func
 def begin_rounds(stage: ti.template()):
     stage.moved_back[None] = 1
     stage.moved_total[None] = 0
@@ -168,14 +202,23 @@ def clear_back(stage: ti.template(), i):
 def check_pair(stage: ti.template(), pairs: ti.template(), model: ti.template(),
                state: ti.template(), p):
     """Listed pair p (not beside a tear: torn pieces pass through the opening): if it may have
-    met in the step, mark its free particles not yet moved back (marked: written 1 by any
-    pair, the same value in any order); count it if it has none left to move (unresolved)."""
+    met in the step (never_through), or the step left it nearer than the kept distance and
+    than it started (keep_thickness), mark its free particles not yet moved back (marked:
+    written 1 by any pair, the same value in any order); count it if it has none left to
+    move (unresolved)."""
     if p < stage.pair_start[stage.triangle_count + stage.edge_count]:
         corners = pairs.particles[p]
         elements = pairs.elements[p]
         vertex_triangle = p < stage.pair_start[stage.triangle_count]
-        if not torn_pair(stage, state, elements, vertex_triangle) and not _safe(
-                stage.step_start, state.particle_position, corners, vertex_triangle):
+        failed = False
+        if not torn_pair(stage, state, elements, vertex_triangle):
+            if stage.through[None]:
+                failed = not _safe(stage.step_start, state.particle_position, corners,
+                                   vertex_triangle)
+            if not failed:
+                failed = _nearer(stage.step_start, state.particle_position, corners,
+                                 vertex_triangle, stage.keep[None])
+        if failed:
             left = 0
             for k in ti.static(range(4)):
                 i = corners[k]

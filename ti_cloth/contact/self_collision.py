@@ -175,6 +175,11 @@ class SelfCollision:
     the step's start every free particle of a pair that may have passed through the other in
     the step, so that no listed pair ever does (a theorem, with its assumptions, in that
     module and docs/api.md); False: the passes alone, which a fast twist or fold can beat.
+    keep_thickness: the same rounds also move back the free particles of a pair the step
+    left nearer than 0.999 of the thickness and nearer than it started it, so that no pair
+    that starts a step farther apart than that ever ends one nearer, whatever the passes
+    leave (the same module's theorem); False: the passes keep the thickness as far as
+    `iterations` allow, and report what they leave (closest_left).
     stacking: a resting contact moves the side farther (in contacts) from what holds it up:
     a collider, a pin, a handle (module doc: shock propagation), so the passes settle a pile
     about a layer a pass; False: every contact mass-weighted (piles take many more passes and
@@ -185,6 +190,7 @@ class SelfCollision:
     friction: float = 0.0
     iterations: int = 16
     never_through: bool = True
+    keep_thickness: bool = True
     stacking: bool = True
 
     def __post_init__(self):
@@ -199,8 +205,15 @@ class SelfCollision:
                                                      limits.ITERATIONS))
         require(isinstance(self.never_through, bool), "SelfCollision.never_through",
                 self.never_through, "True or False")
+        require(isinstance(self.keep_thickness, bool), "SelfCollision.keep_thickness",
+                self.keep_thickness, "True or False")
         require(isinstance(self.stacking, bool), "SelfCollision.stacking", self.stacking,
                 "True or False")
+
+    @property
+    def fail_safe(self) -> bool:
+        """Whether the rounds of contact/never_through.py run after the passes."""
+        return self.never_through or self.keep_thickness
 
 
 @dataclass(frozen=True)
@@ -214,8 +227,9 @@ class SelfContacts:
     for and the list grew (it never drops a pair: a list past MAX_PAIRS_PER_PARTICLE a
     particle is a CrushedContact). moved_back: the particles the never-through fail-safe
     moved back to their step's start, over the run so far; unresolved: (pairs, step) when a
-    step left pairs that may have met and that only held particles moved (the fail-safe's
-    assumption broken), the last such step; None otherwise. passes: the contact passes the
+    step left pairs that may have met, or nearer than the thickness (keep_thickness), that
+    only held particles moved (the fail-safe's assumption broken), the last such step; None
+    otherwise. passes: the contact passes the
     last step made (at most SelfCollision.iterations; the last run of them, where the
     fail-safe had them run again). skin: the slack [m] of the list, which
     holds the pairs that came within thickness + skin: a thickness (SKIN), or a quarter
@@ -313,6 +327,8 @@ class SelfCollisionStage:
         self.moved_total = fields.scalar(ti.i32, ())  # in this step
         self.rounds = fields.scalar(ti.i32, ())
         self.unresolved = fields.scalar(ti.i32, ())
+        self.through = fields.scalar(ti.i32, ())      # 1: never_through
+        self.keep = fields.scalar(real, ())           # keep_thickness's distance, or 0
         self.again = fields.scalar(ti.i32, ())        # 1: passes after the fail-safe
         fields.finalize(self)
         self.grid = BoxGrid(n, len(edges))         # particles, then edges
@@ -323,7 +339,7 @@ class SelfCollisionStage:
     @staticmethod
     def structure(settings: SelfCollision, cloth) -> tuple:
         triangles = np.ascontiguousarray(cloth.mesh.triangles).tobytes()
-        return ("SelfCollisionStage", cloth.particle_count, settings.never_through,
+        return ("SelfCollisionStage", cloth.particle_count, settings.fail_safe,
                 hashlib.blake2b(triangles, digest_size=16).hexdigest())
 
     def load(self, settings: SelfCollision, cloth) -> None:
@@ -334,6 +350,9 @@ class SelfCollisionStage:
         self.friction[None] = settings.friction
         self.stack[None] = STACK if settings.stacking else 1.0
         self.iterations[None] = settings.iterations
+        self.through[None] = int(settings.never_through)
+        self.keep[None] = (never_through.KEEP * (1.0 + never_through.ROUNDING)
+                           * settings.thickness if settings.keep_thickness else 0.0)
         self.colliders = None
         self.forget()
         if self.triangle_count:
@@ -498,7 +517,7 @@ class SelfCollisionStage:
         self.passed = True
         if self.left_deep[None]:
             self._report((1.0 + MARGIN) * thickness + float(self.deepest[None]), step_index)
-        if self.settings.never_through:
+        if self.settings.fail_safe:
             self._fail_safe(model, state, dt, step_index)
 
     def _fail_safe(self, model, state, dt: float, step_index: int) -> None:
@@ -563,7 +582,7 @@ class SelfCollisionStage:
         seed = (Loop(n, seed_level, self, model, STATE, ITEM) if colliders is None else
                 Loop(n, seed_level_on, self, model, STATE, colliders, ITEM))
         marks = ((Loop(n, _clear_back, self, ITEM),)
-                 if self.settings.never_through else ())
+                 if self.settings.fail_safe else ())
         return (Phase(Loop(n, keep_position, STATE, self.before, ITEM), *marks),
                 Phase(seed),
                 Once(begin_passes, self),
@@ -585,14 +604,14 @@ class SelfCollisionStage:
         return never_through.phases(self, model, pairs)
 
     def _unresolved(self, count: int, step_index: int) -> None:
-        """Keep the last step whose held particles carried a pair through (never_through.py's
-        assumption); warn the first time."""
+        """Keep the last step whose held particles carried a pair through, or nearer than the
+        thickness (never_through.py's assumption); warn the first time."""
         if self.unresolved_left is None:
             warnings.warn(
                 f"self-collision: in step {step_index}, {count} pair(s) may have passed "
-                "through each other by the motion of held particles alone (pins, handles, "
-                "attachments), which the never-through fail-safe does not move back: a "
-                "scripted motion carries the cloth through itself there "
+                "through each other, or come nearer than the thickness, by the motion of held "
+                "particles alone (pins, handles, attachments), which the fail-safe does not "
+                "move back: a scripted motion presses the cloth into itself there "
                 "(Simulation.self_contacts().unresolved follows the last)", stacklevel=2)
         self.unresolved_left = (count, step_index)
 
