@@ -217,8 +217,8 @@ def test_the_study_never_raises_on_a_demo_scene(path, f64, tmp_path):
     """A demo scene's study at a tiny size (one frame, a reference budget of 3e5
     particle-steps, rk4 at the frame step: stiff scenes diverge there, torn ones tear)
     returns a result whose report says what its reference reached. The skirt's panels cut
-    at 3 cm, not 1.5, and without its self-collision; the pile's without the never-through
-    fail-safe (the suite's time: the kernels of each are built in the files that test them)."""
+    at 3 cm, not 1.5, and without its self-collision; the pile's without the fail-safe
+    (never_through and keep_thickness off: the suite's time: the kernels of each are built in the files that test them)."""
     if path.stem == "skirt_walk":
         text = (path.read_text().replace("edge_length = 0.015", "edge_length = 0.03")
                 .replace('path = "assets/', f'path = "{path.parent}/assets/'))
@@ -228,7 +228,8 @@ def test_the_study_never_raises_on_a_demo_scene(path, f64, tmp_path):
     if path.stem == "skirt_walk":
         scene = replace(scene, self_collision=None)
     elif scene.self_collision is not None:      # its fail-safe is tested in its own file
-        scene = replace(scene, self_collision=replace(scene.self_collision, never_through=False))
+        scene = replace(scene, self_collision=replace(scene.self_collision, never_through=False,
+                                                      keep_thickness=False))
     result = study.run_study(scene, integrators=["rk4"], precisions=["f64"],
                              duration=1 / scene.fps, dts=[scene.frame_dt], progress=False,
                              reference=study.reference_trajectory(scene, 1 / scene.fps,
