@@ -597,37 +597,6 @@ def free_crossings(body, held, x):
     return int(segments_cross_triangles(x[edges[e[apart]]], x[tris[t[apart]]]).sum())
 
 
-def test_never_through_keeps_a_twisted_sheet_from_passing_through_itself(f64):
-    """Two edges of a 12 x 12 sheet turned one and a half turns each way in a second wind it
-    into a tight twist that the contact passes alone let through itself (Moller-Trumbore in this
-    test, over every pair of a free edge and a free triangle, every 4th step). With the
-    never-through fail-safe (alone: keep_thickness, off here, also catches most such pairs,
-    nearer than the thickness where they end the step) no free edge ever passes through a
-    free triangle: every pair that
-    may have met in a step has its free particles moved back to the step's start
-    (contact/never_through.py's theorem). What it costs: the twisted part stops where the
-    passes could not keep it apart (moved_back counts the particles)."""
-    body, handles, held = twisted_sheet(turns=3.0)
-    results = {}
-    for never_through in (False, True):
-        sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240, handles=handles,
-                            gravity=(0.0, 0.0, 0.0),
-                            self_collision=tc.SelfCollision(thickness=THICKNESS,
-                                                            never_through=never_through,
-                                                            keep_thickness=False))
-        counts = []
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            for _ in range(24):
-                sim.step(4)
-                counts.append(free_crossings(body, held, sim.positions()))
-        results[never_through] = (sum(counts), sim.self_contacts().moved_back)
-    report("free crossings summed over the checked steps, particles moved back: off, on",
-           results, "off > 0; on 0, some moved back")
-    assert results[False][0] > 0 and results[False][1] == 0
-    assert results[True][0] == 0 and results[True][1] > 0
-
-
 def closest_free(body, held, x):
     """The nearest pair over free elements (no held particle) sharing no particle: vertex to
     triangle (point_triangle_distances) and edge to edge (segment_distances), brute force."""
@@ -648,34 +617,44 @@ def closest_free(body, held, x):
                                           ends[1][:, 1]).min())
 
 
-def test_keep_thickness_keeps_every_free_pair_a_thickness_apart_in_a_tight_twist(f64):
-    """The twist above, wound faster than the passes part it: with the passes alone (and
-    never_through) free pairs come far nearer than the thickness; with keep_thickness (the
-    default) the fail-safe's rounds also move back the free particles of any pair the step
-    left nearer than 0.999 of it and nearer than it started (contact/never_through.py, (3)),
-    so in every 4th step no free vertex is nearer than that to a free triangle it is not a
-    corner of, nor a free edge to one it shares no particle with (closest_free, brute force
-    here; the sheet starts flat, every such pair farther apart than the thickness), and
-    none passes through."""
+def test_the_fail_safe_keeps_a_twisted_sheet_from_passing_through_itself_and_apart(f64):
+    """Two edges of a 12 x 12 sheet turned one and a half turns each way in a second wind it
+    into a tight twist faster than the contact passes part it; every 4th step, over free
+    elements (no held particle) sharing no particle: the edges through triangles
+    (free_crossings, Moller-Trumbore) and the closest pair (closest_free, brute force; the
+    sheet starts flat, every such pair farther apart than the thickness).
+    - The passes alone let the sheet through itself.
+    - never_through alone: no free edge ever passes through a free triangle (every pair that
+      may have met in a step has its free particles moved back to the step's start:
+      contact/never_through.py's theorem), but pairs come nearer than the thickness.
+    - With keep_thickness too (the defaults) the rounds also move back the free particles of
+      any pair the step left nearer than 0.999 of it and nearer than it started ((3) there):
+      no free pair is ever nearer than 0.999 of the thickness, and none passes through.
+    What it costs: the twisted part stops where the passes could not keep it apart
+    (moved_back counts the particles)."""
     body, handles, held = twisted_sheet(turns=3.0)
     results = {}
-    for keep in (False, True):
+    for through, keep in ((False, False), (True, False), (True, True)):
         sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240, handles=handles,
                             gravity=(0.0, 0.0, 0.0),
                             self_collision=tc.SelfCollision(thickness=THICKNESS,
+                                                            never_through=through,
                                                             keep_thickness=keep))
-        closest, crossings = [], 0
+        crossings, closest = 0, []
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             for _ in range(24):
                 sim.step(4)
-                closest.append(closest_free(body, held, sim.positions()) / THICKNESS)
                 crossings += free_crossings(body, held, sim.positions())
-        results[keep] = (min(closest), crossings)
-    report("closest free pair / thickness, free crossings: keep_thickness off, on", results,
-           "off < 0.999; on >= 0.999, 0")
-    assert results[False][0] < 0.999
-    assert results[True][0] >= 0.999 and results[True][1] == 0
+                closest.append(closest_free(body, held, sim.positions()) / THICKNESS)
+        results[through, keep] = (crossings, min(closest), sim.self_contacts().moved_back)
+    report("free crossings summed over the checked steps, closest free pair / thickness, "
+           "particles moved back: passes alone, never_through, and keep_thickness", results,
+           "> 0, 0 moved back; 0, < 0.999; 0, >= 0.999")
+    assert results[False, False][0] > 0 and results[False, False][2] == 0
+    assert results[True, False][0] == 0 and results[True, False][1] < 0.999
+    assert results[True, True][0] == 0 and results[True, True][1] >= 0.999
+    assert results[True, True][2] > 0
 
 
 def test_the_fail_safe_holds_where_the_passes_carry_particles_past_the_list(f64):
