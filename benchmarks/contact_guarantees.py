@@ -262,7 +262,7 @@ def measure(name: str, n: int, layers: int, every: int, repeats: int,
         if progress and (check + 1) % progress == 0:     # a long run at the sizes
             print(f"  {name}: step {(check + 1) * every} of {steps}, "
                   f"{time.perf_counter() - start:.0f} s, crossings {crossed}, closest far pair "
-                  f"{nearest / thickness:.3f} thicknesses", file=sys.stderr, flush=True)
+                  f"{nearest / thickness:.4f} thicknesses", file=sys.stderr, flush=True)
     moved_back = sim.self_contacts().moved_back
     cost = {True: [], False: []}
     for _ in range(repeats):
@@ -310,7 +310,7 @@ def main() -> None:
                         args.integrator, args.dt, args.progress)
             print(f"| {r['scene']} | {fail_safe} | {r['particles']:,} | "
                   f"{r['thickness'] * 1e3:g} mm | {r['frames']} | {r['crossings']} | "
-                  f"{r['free_crossings']} | {r['closest']:.3f} | {r['closest_free']:.3f} | "
+                  f"{r['free_crossings']} | {r['closest']:.4f} | {r['closest_free']:.4f} | "
                   f"{r['moved_back']:,} | {r['contact_ms']:.2f} ms | "
                   f"{r['free_ms']:.2f} ms | {r['contact_ms'] / r['free_ms']:.1f}x |",
                   flush=True)
