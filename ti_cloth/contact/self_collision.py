@@ -625,6 +625,10 @@ class SelfCollisionStage:
         if first or distance < self.closest_left[0]:
             self.closest_left = (distance, step_index)
         if first:
+            kept = (" keep_thickness then moves the free particles of such a pair back to "
+                    "where the step started them, so it ends the step no nearer than it "
+                    "began, that part of the cloth stopped for the step."
+                    if self.settings.keep_thickness else "")
             warnings.warn(
                 f"self-collision left a contact {distance / thickness:.2f} of the thickness "
                 f"apart ({distance:.3g} m of {thickness:.3g} m) after "
@@ -632,7 +636,7 @@ class SelfCollisionStage:
                 "against another by a pin, a handle, a collider or a seam being sewn shut, or "
                 "the pile is too dense for the passes; raise SelfCollision.iterations, add "
                 "substeps or use a smaller thickness (Simulation.self_contacts().closest_left "
-                "follows the nearest)",
+                f"follows the nearest).{kept}",
                 stacklevel=2)
 
     def _make_list(self, model, state, step_index: int) -> None:
