@@ -257,7 +257,8 @@ def test_one_thread_and_all_cores_and_a_rerun_give_the_same_bits():
         grid, listed = sim.self_collision.grid, sim.self_contacts(active=False)
         twist = tc.Simulation(twisted, integrator="xpbd", dt=1 / 240, handles=handles,
                               gravity=(0.0, 0.0, 0.0),
-                              self_collision=tc.SelfCollision(thickness=THICKNESS))
+                              self_collision=tc.SelfCollision(thickness=THICKNESS,
+                                                              keep_thickness=True))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             twist.step(90)
@@ -627,7 +628,7 @@ def test_the_fail_safe_keeps_a_twisted_sheet_from_passing_through_itself_and_apa
     - never_through alone: no free edge ever passes through a free triangle (every pair that
       may have met in a step has its free particles moved back to the step's start:
       contact/never_through.py's theorem), but pairs come nearer than the thickness.
-    - With keep_thickness too (the defaults) the rounds also move back the free particles of
+    - With keep_thickness too the rounds also move back the free particles of
       any pair the step left nearer than 0.999 of it and nearer than it started ((3) there):
       no free pair is ever nearer than 0.999 of the thickness, and none passes through.
     What it costs: the twisted part stops where the passes could not keep it apart
