@@ -143,11 +143,14 @@ def made(scene, thickness: float):
     return build
 
 
+def mesh_edges(triangles: np.ndarray) -> np.ndarray:
+    """The triangles' edges, each once, as sorted particle pairs."""
+    return np.unique(np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
+
+
 def rest_edges(body) -> np.ndarray:
     """The rest lengths of the mesh's edges."""
-    triangles = body.mesh.triangles
-    edges = np.unique(np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
-    x = body.particle_position
+    edges, x = mesh_edges(body.mesh.triangles), body.particle_position
     return np.linalg.norm(x[edges[:, 0]] - x[edges[:, 1]], axis=1)
 
 
@@ -239,7 +242,7 @@ def measure(name: str, n: int, layers: int, every: int, repeats: int,
             fail_safe: str, integrator: str, dt: float, progress: int = 0) -> dict:
     body, simulation, seconds, held, thickness = SCENES[name](n, layers, integrator, dt)
     triangles = body.mesh.triangles
-    edges = np.unique(np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
+    edges = mesh_edges(triangles)
     reach = float(rest_edges(body).max()) + 2 * thickness
     sims = {contact: simulation(FAIL_SAFES[fail_safe] if contact else None)
             for contact in (True, False)}

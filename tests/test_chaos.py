@@ -218,7 +218,8 @@ def test_the_study_never_raises_on_a_demo_scene(path, f64, tmp_path):
     particle-steps, rk4 at the frame step: stiff scenes diverge there, torn ones tear)
     returns a result whose report says what its reference reached. The skirt's panels cut
     at 3 cm, not 1.5, and without its self-collision; the pile's without the fail-safe
-    (never_through and keep_thickness off: the suite's time: the kernels of each are built in the files that test them)."""
+    (never_through and keep_thickness off; the suite's time: the kernels of each are built
+    in the files that test them)."""
     if path.stem == "skirt_walk":
         text = (path.read_text().replace("edge_length = 0.015", "edge_length = 0.03")
                 .replace('path = "assets/', f'path = "{path.parent}/assets/'))

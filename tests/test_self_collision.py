@@ -51,6 +51,12 @@ def segments_cross_triangles(ends, corners):
     return ok & (u > 0) & (v > 0) & (u + v < 1) & (t > 0) & (t < 1)
 
 
+def mesh_edges(tris):
+    """The triangles' edges, each once, as sorted particle pairs (in np.unique's order)."""
+    return np.unique(np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]),
+                             1), axis=0)
+
+
 def violations(cloth, x):
     """(closest vertex-triangle distance over pairs sharing no particle, or inf beyond
     THICKNESS; how many edges pass through a triangle they share no particle with), brute force
@@ -62,8 +68,7 @@ def violations(cloth, x):
     near &= ~(np.arange(len(x))[:, None, None] == tris[None]).any(axis=2)
     v, t = np.nonzero(near)
     closest = point_triangle_distances(x[v], corners[t]).min() if len(v) else np.inf
-    edges = np.unique(np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), 1),
-                      axis=0)
+    edges = mesh_edges(tris)
     ends = x[edges]
     meets = ((ends.min(axis=1)[:, None] <= hi[None]) & (ends.max(axis=1)[:, None] >= lo[None])).all(axis=2)
     meets &= ~(edges[:, None, :, None] == tris[None, :, None, :]).any(axis=(2, 3))
@@ -102,8 +107,7 @@ def close_pairs(cloth, x, distance):
     v, t = np.nonzero(~(np.arange(len(x))[:, None, None] == tris[None]).any(axis=2))
     near = point_triangle_distances(x[v], x[tris[t]]) < distance
     near &= point_triangle_distances(rest[v], rest[tris[t]]) >= THICKNESS
-    edges = np.unique(np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), 1),
-                      axis=0)
+    edges = mesh_edges(tris)
     lo, hi = x[edges].min(axis=1) - distance, x[edges].max(axis=1) + distance
     meet = np.triu((lo[:, None] <= hi[None]).all(axis=2) & (lo[None] <= hi[:, None]).all(axis=2), 1)
     e, f = np.nonzero(meet)                           # only boxes that meet can be that near
@@ -589,8 +593,7 @@ def free_crossings(body, held, x):
     assumption: scripted particles are not moved back), brute force (violations)."""
     tris = body.mesh.triangles
     free = ~np.isin(tris, held).any(axis=1)
-    edges = np.unique(np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]),
-                              1), axis=0)
+    edges = mesh_edges(tris)
     edges = edges[~np.isin(edges, held).any(axis=1)]
     e, t = np.meshgrid(np.arange(len(edges)), np.flatnonzero(free), indexing="ij")
     e, t = e.ravel(), t.ravel()
@@ -608,8 +611,7 @@ def closest_free(body, held, x):
     v, t = v.ravel(), t.ravel()
     apart = ~(free[t] == v[:, None]).any(axis=1)
     nearest = point_triangle_distances(x[v[apart]], x[free[t[apart]]]).min()
-    edges = np.unique(np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]),
-                              1), axis=0)
+    edges = mesh_edges(tris)
     edges = edges[~np.isin(edges, held).any(axis=1)]
     e, f = np.triu_indices(len(edges), 1)
     apart = ~(edges[e][:, :, None] == edges[f][:, None, :]).any(axis=(1, 2))

@@ -165,12 +165,13 @@ def _safe(start: ti.template(), now: ti.template(), corners, vertex_triangle):
 @ti.func
 def _nearer(start: ti.template(), now: ti.template(), corners, vertex_triangle, keep):
     """Whether the pair on `corners` ends the step nearer than `keep` and nearer than it
-    started it (module doc, (3)); never for keep 0 (keep_thickness off)."""
+    started it (module doc, (3)); never for keep 0 (keep_thickness off: no distance taken)."""
     a, b, c, d = corners[0], corners[1], corners[2], corners[3]
     near = False
-    end = _distance(now[a], now[b], now[c], now[d], vertex_triangle)
-    if end < keep:
-        near = end < _distance(start[a], start[b], start[c], start[d], vertex_triangle)
+    if keep > 0.0:
+        end = _distance(now[a], now[b], now[c], now[d], vertex_triangle)
+        if end < keep:
+            near = end < _distance(start[a], start[b], start[c], start[d], vertex_triangle)
     return near
 
 
