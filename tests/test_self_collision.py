@@ -419,6 +419,36 @@ def test_a_sheet_dropped_from_2_m_onto_a_folded_sheet_makes_a_pile_of_four_layer
     assert results[False][0] < 0.5 * THICKNESS and results[False][1] > 0 and results[False][2] > 0
 
 
+def test_a_pressed_contact_moves_a_light_corner_no_farther_than_the_stride(f64):
+    """A handle brings a vertex down onto a triangle whose two corners are pinned and whose
+    third, A, rests against a wall (level 0: held up by a collider, stacking), over a foot 1 %
+    of the way from B C to A: both sides are held, so the contact goes into the pass's means
+    (pressed), and only A can move, by depth / weight = 70 thicknesses in a pass. The passes
+    alone (never_through off: the fail-safe would move it back, or leave it where a collider
+    took its start, as the cape demo did, 26 km away) must move no particle more than
+    STRIDE thicknesses a pass (measured before the stride applied to pressed contacts: A
+    moved 72.7 thicknesses in the step; now 2.0)."""
+    from ti_cloth.contact.self_collision import STRIDE
+
+    weights = np.array([0.01, 0.495, 0.495])
+    corners = np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.0, 0.1]])
+    vertex = weights @ corners + [0.0, 2.0 * THICKNESS, 0.0]
+    mesh = tc.Mesh(np.vstack([corners, vertex, vertex + [0.0, 0.3, 0.0], vertex + [0.05, 0.3, 0.0]]),
+                   np.array([[0, 1, 2], [3, 4, 5]]))
+    press = tc.Handle([3, 4, 5], lambda t: (0.0, -1.7 * THICKNESS * min(240 * t, 1.0), 0.0))
+    sim = tc.Simulation(tc.Cloth(mesh, tc.Material(), pinned=[1, 2]), integrator="xpbd",
+                        dt=1 / 240, handles=[press],
+                        colliders=[tc.Plane(normal=(1.0, 0.0, 0.0), thickness=0.0)],
+                        self_collision=tc.SelfCollision(thickness=THICKNESS,
+                                                        never_through=False))
+    with pytest.warns(UserWarning, match="left a contact"):
+        sim.step(1)
+    moved = np.linalg.norm(sim.positions()[0] - corners[0]) / THICKNESS
+    passes = sim.self_contacts().passes
+    report("A's move / thickness, passes", (moved, passes), f"<= {STRIDE} x passes")
+    assert 0 < moved <= STRIDE * passes * (1 + 1e-9)
+
+
 def test_a_contact_the_passes_cannot_resolve_is_reported_with_its_distance(f64):
     """A sheet on the ground and a sheet over it pressed down by a handle to 6 mm above the
     ground, the thickness 20 mm: no pass can make room (issue 40, a dense pile: the ground and
@@ -740,6 +770,47 @@ def test_the_passes_keep_the_thickness_beside_the_particles_moved_back(f32):
                                                                      moved_back),
            ">= 0.99, 0, > 0")
     assert closest >= 0.99 and crossings == 0 and moved_back > 0
+
+
+def test_the_fail_safe_leaves_no_particle_where_a_moving_collider_now_is(f64):
+    """A box (analytic, then the same box as an animated mesh: its contacts are found per
+    triangle, continuously) comes down in one step 8 mm onto a 6 x 6 sheet resting 1.05
+    thicknesses above a pinned one, and stays: it presses the sheet to 0.35 of the thickness
+    from the pinned one, which no contact pass can part. keep_thickness would move the
+    pressed particles back to where the step started them, which the box now holds
+    (measured with that check taken out: all 36 inside the box from the first step, and no
+    warning). It moves a particle back only where that leaves it outside the colliders as
+    they are at the step's end (colliders.taken_at): here none, so the 36 stay where the
+    box pressed them (counted: self_contacts().stayed), and the pairs they press are
+    reported as unresolved with a warning, since the guarantee yields there. Checked every
+    step: no particle inside the box as its path has it (its bottom face, in the test)."""
+    lo, hi = np.array([-0.1, 0.0135, -0.1]), np.array([1.1, 0.2, 1.1])
+
+    def path(t):
+        return (0.0, -min(2.0 * t, 0.008), 0.0)
+
+    mesh = tc.box_mesh(tuple(lo), tuple(hi))
+    boxes = {"analytic": tc.Box(lo=tuple(lo), hi=tuple(hi), thickness=0.002, path=path),
+             "animated": tc.AnimatedMeshCollider(mesh, lambda t: mesh.vertices + path(t),
+                                                 thickness=0.002)}
+    body = two_sheets(n=6, height=1.05 * THICKNESS)
+    results = {}
+    for name, box in boxes.items():
+        sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240, colliders=[box],
+                            self_collision=tc.SelfCollision(thickness=THICKNESS,
+                                                            keep_thickness=True))
+        inside = 0
+        with pytest.warns(UserWarning, match="whose step start a collider had taken"):
+            for step in range(1, 7):
+                sim.step(1)
+                bottom = lo[1] + path(step / 240)[1]
+                inside = max(inside, int((sim.positions()[:, 1] > bottom).sum()))
+        contacts = sim.self_contacts()
+        results[name] = (inside, contacts.stayed, contacts.unresolved)
+    report("most particles inside the box, particles that stayed, unresolved (pairs, step)",
+           results, "0, >= 36, (> 0, 0)")
+    for inside, stayed, unresolved in results.values():
+        assert inside == 0 and stayed >= 36 and unresolved[0] > 0 and unresolved[1] == 0
 
 
 def offset_stack(layers: int, n: int, size: float, thickness: float, turn) -> tc.Cloth:

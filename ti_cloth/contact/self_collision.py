@@ -47,7 +47,9 @@ in a tight twist carried particles 20 cm in a step and flung them at 16 m/s (3 m
 means, 2.7 with the stride). Only a contact between two held sides (level 0 both, stacking
 below: a layer pressed between a handle and the ground) still goes into each particle's mean
 of its pass, applied after it: there no move can make room, and one contact after another
-pushed the layer sideways through itself.
+pushed the layer sideways through itself. Its move is within the stride too: a free corner
+of small weight (an edge touched near its held end) between held ones takes the depth over
+its weight, and one was flung 26 km in a step of the cape demo with keep_thickness.
 
 The margin: contacts are found, and pushed, MARGIN thicknesses beyond the thickness (C above
 is distance - (1 + MARGIN) thickness), and after a first pass the passes go on until an
@@ -229,9 +231,11 @@ class SelfContacts:
     has room for; grown: (step, capacity) each time a step found more pairs than it had room
     for and the list grew (it never drops a pair: a list past MAX_PAIRS_PER_PARTICLE a
     particle is a CrushedContact). moved_back: the particles the never-through fail-safe
-    moved back to their step's start, over the run so far; unresolved: (pairs, step) when a
-    step left pairs that may have met, or nearer than the thickness (keep_thickness), that
-    only held particles moved (the fail-safe's assumption broken), the last such step; None
+    moved back to their step's start, over the run so far; stayed: those it left where the
+    step left them instead, a collider having taken their step's start (never_through.py),
+    over the run so far; unresolved: (pairs, step) when a step left pairs that may have met,
+    or nearer than the thickness (keep_thickness), that only held particles (or particles
+    that stayed) moved (the fail-safe's assumption broken), the last such step; None
     otherwise. passes: the contact passes the
     last step made (at most SelfCollision.iterations; the last run of them, where the
     fail-safe had them run again). skin: the slack [m] of the list, which
@@ -245,6 +249,7 @@ class SelfContacts:
     capacity: int = 0
     grown: tuple = ()
     moved_back: int = 0
+    stayed: int = 0
     unresolved: tuple[int, int] | None = None
     passes: int = 0
     skin: float = 0.0
@@ -328,6 +333,7 @@ class SelfCollisionStage:
         self.marked = fields.scalar(ti.i32, n)        # to move back in this round
         self.moved_back = fields.scalar(ti.i32, ())   # in this round
         self.moved_total = fields.scalar(ti.i32, ())  # in this step
+        self.stayed = fields.scalar(ti.i32, ())       # in this step: a collider took the place
         self.rounds = fields.scalar(ti.i32, ())
         self.unresolved = fields.scalar(ti.i32, ())
         self.through = fields.scalar(ti.i32, ())      # 1: never_through
@@ -377,6 +383,7 @@ class SelfCollisionStage:
         self.closest_left = None
         self.grown = []
         self.moved_total_run = 0
+        self.stayed_run = 0
         self.unresolved_left = None
         self.passed = False             # the last step ran the passes (else it made none)
         self.step_contacts = None       # its contacts, where its list was made again after them
@@ -539,6 +546,7 @@ class SelfCollisionStage:
                          part="fail_safe", serial=True)
                 moved = int(self.moved_total[None])
                 self.moved_total_run += moved
+                self.stayed_run += int(self.stayed[None])
                 if moved == 0:
                     break
                 if not again:
@@ -614,8 +622,10 @@ class SelfCollisionStage:
                 f"self-collision: in step {step_index}, {count} pair(s) may have passed "
                 "through each other, or come nearer than the thickness, by the motion of held "
                 "particles alone (pins, handles, attachments), which the fail-safe does not "
-                "move back: a scripted motion presses the cloth into itself there "
-                "(Simulation.self_contacts().unresolved follows the last)", stacklevel=2)
+                "move back, or of particles whose step start a collider had taken, which it "
+                "cannot: a scripted motion presses the cloth into itself there "
+                "(Simulation.self_contacts().unresolved follows the last; .stayed counts the "
+                "particles a collider kept)", stacklevel=2)
         self.unresolved_left = (count, step_index)
 
     def _report(self, distance: float, step_index: int) -> None:
@@ -681,7 +691,7 @@ class SelfCollisionStage:
                                   else self._rows(active))
         return SelfContacts(vertex_rows, edge_rows, self.edge_rows,
                             self.closest_left, self.candidates.capacity, tuple(self.grown),
-                            self.moved_total_run, self.unresolved_left,
+                            self.moved_total_run, self.stayed_run, self.unresolved_left,
                             int(self.passes[None]) if self.passed else 0,
                             self.skin * self.settings.thickness)
 
@@ -776,15 +786,14 @@ def _contact_move(stage: ti.template(), model: ti.template(), state: ti.template
     if stage.applying[None] and (first or unresolved) and norm > 0:
         move = -(depth * n + slip * tangential) / norm
         part = 1.0           # of the move, keeping every corner within STRIDE of its pass start
-        if not pressed:
-            for k in ti.static(range(4)):
-                i = corners[k]
-                length = (_inverse_mass(stage, model, i) * shares[k] * ti.abs(weights[k])
-                          * move.norm())
-                if length > 0:
-                    room = (STRIDE * stage.thickness[None]
-                            - (state.particle_position[i] - stage.pass_at[i]).norm())
-                    part = ti.min(part, ti.max(room, 0.0) / length)
+        for k in ti.static(range(4)):
+            i = corners[k]
+            length = (_inverse_mass(stage, model, i) * shares[k] * ti.abs(weights[k])
+                      * move.norm())
+            if length > 0:
+                room = (STRIDE * stage.thickness[None]
+                        - (state.particle_position[i] - stage.pass_at[i]).norm())
+                part = ti.min(part, ti.max(room, 0.0) / length)
         for k in ti.static(range(4)):
             i = corners[k]
             step = part * _inverse_mass(stage, model, i) * shares[k] * weights[k] * move

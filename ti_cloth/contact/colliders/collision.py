@@ -445,6 +445,29 @@ def rests_on(colliders: ti.template(), i, x, reach):
 
 
 @ti.func
+def taken_at(colliders: ti.template(), i, x):
+    """Whether particle i, put back at x (where it started the step) and left there, would
+    be in a collider at the step's end: nearer than its thickness to the surface (less
+    RESOLVED of it: a particle resting on it is not), or, for an animated body, met by it on
+    the way (a body that swept over x: the continuous test of animated_contact.py on the
+    still path x -> x). For stages that put particles back (contact/never_through.py)."""
+    taken = False
+    for c in range(colliders.count):
+        if not taken:
+            animated = False
+            if ti.static(colliders.animated):
+                animated = colliders.kind[c] == ANIMATED
+                if animated:
+                    found, _, _, _ = worst_contact(colliders, c, i, x, x, colliders.thickness[c],
+                                                   RESOLVED * colliders.thickness[c])
+                    taken = found
+            if not animated:
+                d, _ = collider_distance(colliders, c, x, x)
+                taken = d < (1.0 - RESOLVED) * colliders.thickness[c]
+    return taken
+
+
+@ti.func
 def project_particle_out(model: ti.template(), state: ti.template(), colliders: ti.template(),
                          i, applying: ti.template()):
     """Project particle i (if free, and while applying[None]) out of every collider,
