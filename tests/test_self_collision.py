@@ -433,8 +433,8 @@ def test_a_pressed_contact_moves_a_light_corner_no_farther_than_the_stride(f64):
     weights = np.array([0.01, 0.495, 0.495])
     corners = np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.0, 0.1]])
     vertex = weights @ corners + [0.0, 2.0 * THICKNESS, 0.0]
-    mesh = tc.Mesh(np.vstack([corners, vertex, vertex + [0.0, 0.3, 0.0], vertex + [0.05, 0.3, 0.0]]),
-                   np.array([[0, 1, 2], [3, 4, 5]]))
+    above = np.vstack([vertex, vertex + [0.0, 0.3, 0.0], vertex + [0.05, 0.3, 0.0]])
+    mesh = tc.Mesh(np.vstack([corners, above]), np.array([[0, 1, 2], [3, 4, 5]]))
     press = tc.Handle([3, 4, 5], lambda t: (0.0, -1.7 * THICKNESS * min(240 * t, 1.0), 0.0))
     sim = tc.Simulation(tc.Cloth(mesh, tc.Material(), pinned=[1, 2]), integrator="xpbd",
                         dt=1 / 240, handles=[press],
