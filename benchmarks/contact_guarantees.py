@@ -7,10 +7,14 @@ over the elements with no held particle alone (the never-through fail-safe's ass
 and the closest far vertex-triangle pair (sharing no particle and at least two thicknesses
 apart at rest; also over those with no held particle), both over candidate pairs a k-d tree
 finds within reach; then the run's totals, the closest pair as a fraction of the thickness,
-the particles the fail-safe moved back, and the wall time per step with and without
-self-contact (medians of --repeats alternated runs in this process, after a warm-up); each
-scene with each --fail-safe: on (never_through and keep_thickness), through (never_through
-alone, the default) and off (the contact passes alone).
+the particles the fail-safe moved back and those it left where a collider had taken their
+step start (stayed), the most particles inside a collider at a checked step (a negative
+Simulation.collider_distance: the demos' figures are closed animated meshes), the checked
+run's wall time (checks included: compare it between fail-safes of one scene in one run),
+and the wall time per step with and without self-contact (medians of --repeats alternated
+runs in this process, after a warm-up); each scene with each --fail-safe: on (never_through
+and keep_thickness), through (never_through alone, the default) and off (the contact
+passes alone).
 
 Scenes (N particles a side: 16, 24 and 6 times --scale, or --size; the issue's sizes are
 --scenes pile --size 64 --layers 16 and --scenes twist --size 128):
@@ -250,7 +254,7 @@ def measure(name: str, n: int, layers: int, every: int, repeats: int,
     weld = np.asarray(body.particle_weld)
     free_triangles = triangles[~np.isin(triangles, held).any(axis=1)]
     free_edges = edges[~np.isin(edges, held).any(axis=1)]
-    crossed, crossed_free, nearest, nearest_free, watched = 0, 0, np.inf, np.inf, 0
+    crossed, crossed_free, nearest, nearest_free, watched, inside = 0, 0, np.inf, np.inf, 0, 0
     sim = sims[True]
     start = time.perf_counter()
     for check in range(steps // every):
@@ -261,12 +265,14 @@ def measure(name: str, n: int, layers: int, every: int, repeats: int,
         closest, closest_free = closest_far(x, body.particle_position, triangles, reach,
                                             2 * thickness, held, weld)
         nearest, nearest_free = min(nearest, closest), min(nearest_free, closest_free)
+        inside = max(inside, int((sim.collider_distance(x)[0] < 0).sum()))
         watched += 1
         if progress and (check + 1) % progress == 0:     # a long run at the issue's sizes
             print(f"  {name}: step {(check + 1) * every} of {steps}, "
                   f"{time.perf_counter() - start:.0f} s, crossings {crossed}, closest far pair "
                   f"{nearest / thickness:.4f} thicknesses", file=sys.stderr, flush=True)
-    moved_back = sim.self_contacts().moved_back
+    run_s = time.perf_counter() - start
+    moved_back, stayed = sim.self_contacts().moved_back, sim.self_contacts().stayed
     cost = {True: [], False: []}
     for _ in range(repeats):
         for contact, timed in sims.items():
@@ -275,7 +281,7 @@ def measure(name: str, n: int, layers: int, every: int, repeats: int,
             start = time.perf_counter()
             timed.step(4 * every)
             cost[contact].append((time.perf_counter() - start) / (4 * every))
-    return dict(scene=name, moved_back=moved_back,
+    return dict(scene=name, moved_back=moved_back, stayed=stayed, inside=inside, run_s=run_s,
                 particles=body.particle_count, thickness=thickness,
                 frames=watched, crossings=crossed, free_crossings=crossed_free,
                 closest=nearest / thickness, closest_free=nearest_free / thickness,
@@ -304,8 +310,9 @@ def main() -> None:
     print(f"{args.integrator} at {args.dt:.4g} s on {args.arch}")
     print("| scene | fail-safe | particles | thickness | frames checked | crossings | "
           "of free elements | closest far pair / thickness | of free elements | moved back | "
-          "step with contact | free step | ratio |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "stayed | most inside a collider | run (checks included) | step with contact | "
+          "free step | ratio |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name in args.scenes:
         n = args.size or SIDES.get(name, 0) * args.scale
         for fail_safe in args.fail_safe:
@@ -314,7 +321,8 @@ def main() -> None:
             print(f"| {r['scene']} | {fail_safe} | {r['particles']:,} | "
                   f"{r['thickness'] * 1e3:g} mm | {r['frames']} | {r['crossings']} | "
                   f"{r['free_crossings']} | {r['closest']:.4f} | {r['closest_free']:.4f} | "
-                  f"{r['moved_back']:,} | {r['contact_ms']:.2f} ms | "
+                  f"{r['moved_back']:,} | {r['stayed']:,} | {r['inside']} | "
+                  f"{r['run_s']:.0f} s | {r['contact_ms']:.2f} ms | "
                   f"{r['free_ms']:.2f} ms | {r['contact_ms'] / r['free_ms']:.1f}x |",
                   flush=True)
 

@@ -181,10 +181,11 @@ class SelfCollision:
     left nearer than 0.999 of the thickness and nearer than it started it, so that no pair
     that starts a step farther apart than that ever ends one nearer, whatever the passes
     leave (the same module's theorem); False (the default): the passes keep the thickness
-    as far as `iterations` allow, and report what they leave (closest_left). Off by default
-    because a particle moved back sits where the step started it, which an animated
-    collider may have moved into since: the cape demo with it on ended 19 particles inside
-    its turning figure (0 with it off).
+    as far as `iterations` allow, and report what they leave (closest_left). A particle is
+    moved back only where no collider took its place since (else it stays: a figure pressing
+    the cloth is warned about, where the guarantee yields). Off by default for what it costs
+    the garment demos (docs/api.md): time, and much of the cloth frozen for the step where a
+    figure presses it.
     stacking: a resting contact moves the side farther (in contacts) from what holds it up:
     a collider, a pin, a handle (module doc: shock propagation), so the passes settle a pile
     about a layer a pass; False: every contact mass-weighted (piles take many more passes and
