@@ -425,10 +425,10 @@ def test_a_pressed_contact_moves_a_light_corner_no_farther_than_the_stride(f64):
     of the way from B C to A: both sides are held, so the contact goes into the pass's means
     (pressed), and only A can move, by depth / weight = 70 thicknesses in a pass. The passes
     alone (never_through off: the fail-safe would move it back, or leave it where a collider
-    took its start, as the cape demo did, 26 km away) must move no particle more than
-    STRIDE thicknesses a pass (measured before the stride applied to pressed contacts: A
+    took its start, as the cape demo did, 26 km away) must move no corner more than
+    PRESSED_STRIDE thicknesses a pressed contact, so a pass (measured before that bound: A
     moved 72.7 thicknesses in the step; now 2.0)."""
-    from ti_cloth.contact.self_collision import STRIDE
+    from ti_cloth.contact.self_collision import PRESSED_STRIDE
 
     weights = np.array([0.01, 0.495, 0.495])
     corners = np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.0, 0.1]])
@@ -445,8 +445,8 @@ def test_a_pressed_contact_moves_a_light_corner_no_farther_than_the_stride(f64):
         sim.step(1)
     moved = np.linalg.norm(sim.positions()[0] - corners[0]) / THICKNESS
     passes = sim.self_contacts().passes
-    report("A's move / thickness, passes", (moved, passes), f"<= {STRIDE} x passes")
-    assert 0 < moved <= STRIDE * passes * (1 + 1e-9)
+    report("A's move / thickness, passes", (moved, passes), f"<= {PRESSED_STRIDE} x passes")
+    assert 0 < moved <= PRESSED_STRIDE * passes * (1 + 1e-9)
 
 
 def test_a_contact_the_passes_cannot_resolve_is_reported_with_its_distance(f64):

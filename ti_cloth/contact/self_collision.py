@@ -47,9 +47,11 @@ in a tight twist carried particles 20 cm in a step and flung them at 16 m/s (3 m
 means, 2.7 with the stride). Only a contact between two held sides (level 0 both, stacking
 below: a layer pressed between a handle and the ground) still goes into each particle's mean
 of its pass, applied after it: there no move can make room, and one contact after another
-pushed the layer sideways through itself. Its move is within the stride too: a free corner
-of small weight (an edge touched near its held end) between held ones takes the depth over
-its weight, and one was flung 26 km in a step of the cape demo with keep_thickness.
+pushed the layer sideways through itself. Its move is bounded too, by PRESSED_STRIDE
+thicknesses a corner (STRIDE made the landing's pairs beside particles moved back end 0.963
+of the thickness apart, against 0.999): a free corner of small weight (an edge touched near
+its held end) between held ones takes the depth over its weight, and one was flung 26 km in
+a step of the cape demo with keep_thickness.
 
 The margin: contacts are found, and pushed, MARGIN thicknesses beyond the thickness (C above
 is distance - (1 + MARGIN) thickness), and after a first pass the passes go on until an
@@ -155,6 +157,7 @@ RESOLVED = 0.001            # contacts within this (in thicknesses) of resolved 
 MARGIN = 0.02               # a contact is pushed this far (in thicknesses) past the thickness
 SEPARATING = 0.5            # m/s: a pair that started a step in contact is pushed apart this fast
 STRIDE = 0.5                # a pass moves no particle farther than this (in thicknesses)
+PRESSED_STRIDE = 2.0        # nor a pressed contact a corner farther than this
 CROWDED = 0.5               # a contact left nearer than this (in thicknesses) is reported
 STACK = 0.01                # the weight of a resting contact's held side (stacking)
 RESTING = 0.25              # a contact approaching by at most this (in thicknesses) a step rests
@@ -792,8 +795,10 @@ def _contact_move(stage: ti.template(), model: ti.template(), state: ti.template
             length = (_inverse_mass(stage, model, i) * shares[k] * ti.abs(weights[k])
                       * move.norm())
             if length > 0:
-                room = (STRIDE * stage.thickness[None]
-                        - (state.particle_position[i] - stage.pass_at[i]).norm())
+                room = PRESSED_STRIDE * stage.thickness[None]   # a mean's share, at most
+                if not pressed:
+                    room = (STRIDE * stage.thickness[None]
+                            - (state.particle_position[i] - stage.pass_at[i]).norm())
                 part = ti.min(part, ti.max(room, 0.0) / length)
         for k in ti.static(range(4)):
             i = corners[k]
