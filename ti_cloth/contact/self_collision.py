@@ -49,7 +49,7 @@ below: a layer pressed between a handle and the ground) still goes into each par
 of its pass, applied after it: there no move can make room, and one contact after another
 pushed the layer sideways through itself. Its move is bounded too, by PRESSED_STRIDE
 thicknesses a corner (STRIDE made the landing's pairs beside particles moved back end 0.963
-of the thickness apart, against 0.999): a free corner of small weight (an edge touched near
+of the thickness apart, where its test asks 0.99): a free corner of small weight (an edge touched near
 its held end) between held ones takes the depth over its weight, and one was flung 26 km in
 a step of the cape demo with keep_thickness.
 
