@@ -211,6 +211,131 @@ def test_a_list_made_after_a_fast_step_is_lean_and_misses_no_pair(f64):
     assert watched > 50 and closest > 0.5 * THICKNESS and crossings == 0
 
 
+def test_a_vertex_that_comes_round_an_edge_onto_the_other_face_is_not_pushed_through_it(f64):
+    """A triangle thrown in one step (no gravity, as a whole: its springs keep their lengths)
+    past the edge of a pinned one: its apex from 3 thicknesses beside that edge and 0.3
+    above its plane to under its face, 2 thicknesses below. The apex's straight path crosses
+    the plane 12 mm beside the edge and passes it 6.2 mm off, never within the 5 mm
+    thickness, so no contact acts and the step ends where it ends without self-collision,
+    bit for bit. Before, the pair's side was taken from the step's start whatever the apex's
+    foot was then: it was "on the other side", and pushed back up through the triangle."""
+    s, tau = 0.1, 0.005
+    pinned = tc.Cloth(tc.Mesh(np.array([[0.0, 0.0, 0.0], [s, 0.0, 0.0], [0.0, 0.0, s]]),
+                              np.array([[0, 1, 2]])), tc.Material(), pinned=[0, 1, 2])
+    apex = np.array([-3 * tau, 0.3 * tau, 0.3 * s])
+    thrown = tc.Cloth(tc.Mesh(apex + np.array([[0.0, 0.0, 0.0], [-0.2, 0.0, -0.05],
+                                               [-0.2, 0.0, 0.05]]), np.array([[0, 1, 2]])),
+                      tc.Material())
+    body = tc.Cloth.combine([pinned, thrown])
+    ends = {}
+    for contact in (None, tc.SelfCollision(thickness=tau)):
+        sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240, gravity=(0.0, 0.0, 0.0),
+                            self_collision=contact)
+        v = sim.velocities()
+        v[3:] = (np.array([tau, -2 * tau, 0.3 * s]) - apex) * 240
+        sim.set_velocities(v)
+        sim.step(1)
+        ends[contact is not None] = sim.positions()[3:]
+    report("the apex's end with and without self-collision", ends[True][0], ends[False][0])
+    assert ends[False][0, 1] < -1.9 * tau and 0 < ends[False][0, 0] < s      # under the face
+    np.testing.assert_array_equal(ends[True], ends[False])
+
+
+TWIST_RUN = """
+import sys
+import numpy as np
+sys.path.insert(0, sys.argv[1])
+import ti_cloth as tc
+from ti_cloth.contact import self_collision
+from helpers import twisted_sheet
+self_collision.NEAR = 1e9               # every pair near: evaluated in every pass
+tc.init(precision="f32")
+body, handles, _ = twisted_sheet(n=24, size=0.6, turns=1.0)
+sim = tc.Simulation(body, integrator=tc.XPBD(iterations=10), dt=1 / 240, handles=handles,
+                    gravity=(0.0, 0.0, 0.0), self_collision=tc.SelfCollision(thickness=0.005))
+ends = []
+for _ in range(240):
+    sim.step(1)
+    ends.append(sim.positions())
+np.save(sys.argv[2], np.array(ends))
+"""
+
+
+def twist_ends(body, handles) -> np.ndarray:
+    sim = tc.Simulation(body, integrator=tc.XPBD(iterations=10), dt=1 / 240, handles=handles,
+                        gravity=(0.0, 0.0, 0.0),
+                        self_collision=tc.SelfCollision(thickness=0.005))
+    ends = []
+    for _ in range(240):
+        sim.step(1)
+        ends.append(sim.positions())
+    return np.array(ends)
+
+
+def test_the_near_marks_change_no_bit(f32, tmp_path):
+    """The passes evaluate only near pairs and those of stale particles (self_collision.py,
+    near pairs): a pair left out is out of contact, so they move the particles as passes that
+    evaluate every pair would. A 24 x 24 sheet (0.6 m, 5 mm thickness, f32) twisted a half
+    turn a second each way for a second, against the same run in a fresh process where every
+    pair is near (NEAR patched before its kernels compile; no offline cache, which keys a
+    kernel by its source): the same bits in every step. They were not, from step 213 of
+    this run, before a particle that moved half a thickness in the step was stale (a pair's
+    side is taken from the step's start, and two edges 9 mm apart changed sides)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    out = tmp_path / "every.npy"
+    env = dict(os.environ, TI_OFFLINE_CACHE="0")
+    process = subprocess.Popen([sys.executable, "-c", TWIST_RUN, str(Path(__file__).parent),
+                                str(out)], env=env, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+    body, handles, _ = twisted_sheet(n=24, size=0.6, turns=1.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")        # the passes' reports of a tight twist
+        marked = twist_ends(body, handles)
+    _, errors = process.communicate(timeout=600)
+    assert process.returncode == 0, errors
+    every = np.load(out)
+    differing = np.flatnonzero(np.abs(every - marked).reshape(len(every), -1).max(axis=1) > 0)
+    report("steps whose positions differ from every pair evaluated in every pass",
+           differing[:5] + 1, "none")
+    assert len(differing) == 0
+
+
+def test_the_fail_safe_tests_only_the_pairs_of_particles_past_their_bounds(f64):
+    """never_through.py's bounds: a pair whose particles all stayed within a quarter of their
+    nearest listed pair's distance since the list was made, less a common motion, passes its
+    tests, so the fail-safe skips it (`tested` counts those it tests). A 16 x 16 sheet at half
+    its edge's thickness (many pairs listed: its neighbours beyond the thickness) falling
+    flat as a whole: no pair is tested in any step, and none is moved back. Twisted, it tests
+    pairs (and keeps its guarantee: test_the_fail_safe_keeps_a_twisted_sheet_...)."""
+    body = tc.Cloth(tc.grid_mesh(16, 16, size=(0.3, 0.3), plane="xz"), tc.Material())
+    sim = tc.Simulation(body, integrator="xpbd", dt=1 / 240,
+                        self_collision=tc.SelfCollision(thickness=0.009))
+    tested = []
+    for _ in range(40):
+        sim.step(1)
+        tested.append(sim.self_contacts().tested)
+    listing = sim.self_contacts(active=False)
+    listed = len(listing.vertex_triangle) + len(listing.edge_edge)
+    twisted, handles, _ = twisted_sheet(turns=3.0)
+    wound = tc.Simulation(twisted, integrator="xpbd", dt=1 / 240, handles=handles,
+                          gravity=(0.0, 0.0, 0.0),
+                          self_collision=tc.SelfCollision(thickness=THICKNESS))
+    winding = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for _ in range(60):
+            wound.step(1)
+            winding.append(wound.self_contacts().tested)
+    report("pairs listed, tested in the falling sheet's steps (most), in the twist's (most)",
+           (listed, max(tested), max(winding)), "> 0, 0, > 0")
+    assert listed > 400 and max(tested) == 0 and sim.self_contacts().moved_back == 0
+    assert max(winding) > 0
+
+
 @pytest.mark.parametrize("kwargs, field", [({"thickness": 0.0}, "SelfCollision.thickness"),
                                            ({"thickness": float("nan")}, "SelfCollision.thickness"),
                                            ({"iterations": 0}, "SelfCollision.iterations"),

@@ -70,13 +70,33 @@ the origin), so that the guarantee holds measured in float64 too. What it costs 
 passes' work left undone: a pair they could not part in a step stops where the step started
 it, at rest, instead of sinking into the other.
 
-Cost: one evaluation of the listed pairs a round ((1) or (2), then (3)), one round in a step
-where nothing is moved back (benchmarks/contact_guarantees.py measures it).
+Bounds: most pairs need no test. The list records, for each particle i, the least distance
+m_i of a listed pair of its at the positions L where the list was made (pair_bounds). A
+point of an element is a convex combination of its corners, so over the step the distance of
+a pair is at least its distance at L less the most each element's corners have been from
+their L on the way, and a corner on its straight line from x0 to x1 is never farther from L
+than at one end. Taken less a common motion c (any vector for each instant: it moves both
+elements alike), a particle's D_i = max(|x0_i - L_i - c0|, |x1_i - L_i - c1|), c0 and c1 the
+middles of the boxes of the displacements from L at the step's start and now. A pair whose
+every particle has D_i <= m_i / 4 then has d(0) + d(1) >= 2 m - 2 (D_a + D_b) >= m and R <=
+2 (D_a + D_b) <= m / 2 (with m its own distance at L, at least each corner's m_i), so it
+meets (1) with room to spare; with keep_thickness D_i <= (m_i - KEEP ...) / 2 as well
+makes d(1) >= m - (D_a + D_b) at least the kept distance, so it does not meet (3). The
+rounds test only the pairs of a particle past those bounds (loose; BOUND_SLACK thicknesses
+inside them, far beyond rounding), and of one moved back: the pairs they skip are exactly
+those the tests would pass, so the rounds move back what they moved before, the same bits, for
+a test of a few particles where the body moves as a whole or rests (a 16-layer pile of 64²
+sheets falling: its 3.1 million pairs were tested every step).
+
+Cost: the bounds with each list (a distance a pair), then per step a pass over the particles
+and the tests of the loose particles' pairs a round, one round in a step where nothing is
+moved back (benchmarks/contact_guarantees.py measures it).
 """
 
 import taichi as ti
 
 from ..geometry import segment_distance, triangle_distance
+from ..runtime import backend
 from ..runtime.plan import ITEM, STATE, Loop, Once, Phase, Until
 from .broad_phase.contact_pairs import torn_pair
 from .colliders.collision import taken_at
@@ -85,6 +105,8 @@ MARGIN = 1e-6       # relative: (1) needs d0 + d1 > R (1 + MARGIN), (2) |b_k| > 
 PIECES = 8          # a step's parts, each checked by (1) or (2), for a pair the whole step fails
 KEEP = 0.999        # keep_thickness: no pair is left nearer than this (in thicknesses), (3)
 ROUNDING = 1e-4     # relative: (3) is checked at KEEP (1 + ROUNDING) thicknesses, in floats
+BOUND_SLACK = 1e-3  # thicknesses: a particle this near its bound is loose (its pairs tested)
+FAR = 1e30          # m_i of a particle in no listed pair
 
 
 @ti.func
@@ -179,12 +201,50 @@ def _nearer(start: ti.template(), now: ti.template(), corners, vertex_triangle, 
     return near
 
 
+@backend.kernel
+def pair_bounds(stage: ti.template(), pairs: ti.template(), x: ti.template()):
+    """bound[i]: the least distance of a listed pair of particle i at positions x, where the
+    list was made (module doc, bounds; FAR for a particle in none: an exact min, in any
+    order)."""
+    for i in range(stage.particle_count):
+        stage.bound[i] = FAR
+    for p in range(stage.pair_start[stage.triangle_count + stage.edge_count]):
+        corners = pairs.particles[p]
+        d = _distance(x[corners[0]], x[corners[1]], x[corners[2]], x[corners[3]],
+                      p < stage.pair_start[stage.triangle_count])
+        for k in ti.static(range(4)):
+            ti.atomic_min(stage.bound[corners[k]], d)
+
+
+@backend.kernel
+def keep_frame(stage: ti.template(), k: ti.i32):
+    """frames[k] = the middle of span (displacement_box's last box): c0 (k = 0), c1 (1), or
+    self_collision.py's step's common motion (2)."""
+    for _ in range(1):
+        stage.frames[k] = 0.5 * (stage.span[0] + stage.span[1])
+
+
 @ti.func
 def begin_rounds(stage: ti.template()):
     stage.moved_back[None] = 1
     stage.moved_total[None] = 0
     stage.stayed[None] = 0
     stage.rounds[None] = 0
+    stage.checked[None] = 0
+
+
+@ti.func
+def loosen(stage: ti.template(), state: ti.template(), i):
+    """Whether particle i is loose: past its bound, D_i > m_i / 4 (and (m_i - keep) / 2)
+    less BOUND_SLACK thicknesses (module doc, bounds)."""
+    at = stage.listed_at[i]
+    reach = ti.max((stage.step_start[i] - at - stage.frames[0]).norm(),
+                   (state.particle_position[i] - at - stage.frames[1]).norm())
+    m = stage.bound[i]
+    allowed = 0.25 * m
+    if stage.keep[None] > 0.0:
+        allowed = ti.min(allowed, 0.5 * (m - stage.keep[None]))
+    stage.loose[i] = ti.select(reach > allowed - BOUND_SLACK * stage.thickness[None], 1, 0)
 
 
 @ti.func
@@ -214,9 +274,13 @@ def check_pair(stage: ti.template(), pairs: ti.template(), model: ti.template(),
     met in the step (never_through), or the step left it nearer than the kept distance and
     than it started (keep_thickness), mark its free particles not yet moved back (marked:
     written 1 by any pair, the same value in any order); count it if it has none left to
-    move (unresolved)."""
-    if p < stage.pair_start[stage.triangle_count + stage.edge_count]:
-        corners = pairs.particles[p]
+    move (unresolved). Only a pair of a loose particle is tested (module doc, bounds: the
+    others pass), and counted in `checked`."""
+    corners = pairs.particles[p]
+    if (p < stage.pair_start[stage.triangle_count + stage.edge_count]
+            and stage.loose[corners[0]] + stage.loose[corners[1]] + stage.loose[corners[2]]
+            + stage.loose[corners[3]] > 0):
+        ti.atomic_add(stage.checked[None], 1)
         elements = pairs.elements[p]
         vertex_triangle = p < stage.pair_start[stage.triangle_count]
         failed = False
@@ -244,6 +308,7 @@ def _put_back(stage: ti.template(), state: ti.template(), i, free):
     not `free` (a collider took that place: colliders.taken_at): then it stays where the step
     left it, held there for the rest of the step as one moved back is (back 2, `stayed`)."""
     stage.marked[i] = 0
+    stage.loose[i] = 1              # a new path: its pairs are tested again
     if free:
         stage.back[i] = 1
         state.particle_position[i] = stage.step_start[i]
@@ -282,6 +347,7 @@ def phases(stage, model, pairs) -> tuple:
     back = (Loop(n, move_back, stage, STATE, ITEM) if colliders is None else
             Loop(n, move_back_outside, stage, STATE, colliders, ITEM))
     return (Once(begin_rounds, stage),
+            Phase(Loop(n, loosen, stage, STATE, ITEM)),
             Until(going,
                   Once(clear_round, stage),
                   Phase(Loop(pairs.capacity, check_pair, stage, pairs, model, STATE, ITEM)),

@@ -97,17 +97,34 @@ so that a contact pressed by a held upper side still moves it. In the means of t
 between two held sides a particle takes the sum of their moves over the sum of their weights
 s, or over 1 where that is less.
 
-Near pairs: the first pass of a step evaluates every listed pair and marks those whose gap
-(height over the plane, or distance, minus the thickness; negative for a pair that crossed)
-is below NEAR thicknesses; later passes evaluate only those, until some particle has been
-NEAR / 4 thicknesses from where it was at the start of that pass (drift: the contact moves
-keep it as they move the particles, so it bounds every position on the way), when the next
-pass evaluates every pair again. A pair was marked at positions within NEAR / 4 of those and
-is skipped at others within NEAR / 4 of them: its two sides came nearer by less than NEAR,
-so a pair left out is not in contact where it is skipped (a vertex that turns from beside a
-triangle to under it moves at least a thickness): the passes are the same as if they
-evaluated every pair, at a fraction of the cost (a pile's 24,000 listed pairs against its
-2,000 near).
+Near pairs: the first pass after the list is made evaluates every listed pair and marks
+those whose gap (height over the plane, or distance, minus the thickness; negative for a pair
+that crossed) is below NEAR thicknesses; later passes, in this step and the next ones while
+the list lasts, evaluate those, and mark again the pairs of the particles that are stale at
+the pass's start: more than NEAR / 4 thicknesses from their near_at (where they were at the
+start of the pass that last marked their pairs), now or at any evaluation since (`far`, kept
+up to date by the contact moves, at the end of each pass and at the start of the next), or
+more than MOVED thicknesses from where the step started them. Both are taken less a motion
+common to all particles (a pair's gap does not change when both sides move alike): the
+middle of the box of the displacements since the list was made (frame), and of the step's
+(frames[2]), so that a pile falling as a whole marks nothing. A stale particle's near_at is
+set again at the pass's start. So a pair none of whose particles has been stale since its
+mark is at positions within NEAR / 4 of those of its mark, relative to each other within
+NEAR thicknesses: it is not in contact where it is skipped; nor can it have changed sides
+since the step's start (a pair's side is taken from there: MOVED / 2 is below the reach),
+which a pair whose particles moved less than MOVED / 2 cannot, unless it came within the
+reach (the side is the start's only where the pair may have met in the step:
+_vertex_triangle, geometry.edge_contact). A pass that ends the passes moves nothing, so it
+evaluated every pair in contact where the step ends. The marks are a cost, not a result:
+the passes give the same bits as passes that evaluate every pair in every pass (the 24²
+twist's first second in tests/test_self_collision.py, against a process whose NEAR makes
+every pair near; 400 steps of it with and without keep_thickness, 240 of the 4-layer pile
+and 120 of the press of benchmarks/contact_guarantees.py, `/tmp` comparisons), and a run
+loaded from its saved state at every step, whose first pass marks every pair, ends on the
+bits of the run (tests/test_resume.py). The cost: a pile's 24,000 listed pairs against
+its 2,000 near; a 16-layer pile of 64² sheets (65,536 particles, 3.1 million pairs listed)
+marked all of them in every step's first pass, and now marks those of the particles that
+moved.
 
 No float atomics except exact max/min, so reruns and thread counts give the same bits.
 Velocities follow the positions' correction (v += dx / h), as after strain limiting.
@@ -163,6 +180,7 @@ STACK = 0.01                # the weight of a resting contact's held side (stack
 RESTING = 0.25              # a contact approaching by at most this (in thicknesses) a step rests
 UNHELD = 1 << 20            # the level of a particle nothing is known to hold up
 NEAR = 0.5                  # a pair within this (in thicknesses) of contact is evaluated every pass
+MOVED = 0.5                 # a particle moving this far (thicknesses) in a step is stale
 INSIDE = 1e-6               # a foot this far outside a triangle (in barycentric terms) is inside
 
 
@@ -244,7 +262,9 @@ class SelfContacts:
     last step made (at most SelfCollision.iterations; the last run of them, where the
     fail-safe had them run again). skin: the slack [m] of the list, which
     holds the pairs that came within thickness + skin: a thickness (SKIN), or a quarter
-    (LEAN_SKIN) when it was made after a fast step."""
+    (LEAN_SKIN) when it was made after a fast step. tested: the listed pairs the fail-safe
+    tested in the last step, over its rounds; it skips those whose particles all stayed
+    within their bounds since the list was made (never_through.py, bounds)."""
 
     vertex_triangle: np.ndarray
     edge_edge: np.ndarray
@@ -257,6 +277,7 @@ class SelfContacts:
     unresolved: tuple[int, int] | None = None
     passes: int = 0
     skin: float = 0.0
+    tested: int = 0
 
 
 def warn_if_thick(settings: SelfCollision, cloth) -> None:
@@ -327,9 +348,12 @@ class SelfCollisionStage:
         self.applying = fields.scalar(ti.i32, ())     # 1: this pass moves the particles
         self.left_deep = fields.scalar(ti.i32, ())    # 1: the passes ran out, contacts deep
         self.full = fields.scalar(ti.i32, ())         # 1: this pass evaluates every pair
-        self.near_at = fields.vector(3, real, n)      # the positions of the last full one
+        self.near_at = fields.vector(3, real, n)      # where its pairs were last marked
+        self.frame = fields.vector(3, real, ())       # the common motion those are taken less
+        self.far = fields.scalar(real, n)             # the most it has been from there since
+        self.stale = fields.scalar(ti.i32, n)         # 1: its pairs are marked in this pass
+        self.stale_count = fields.scalar(ti.i32, ())  # particles stale in this pass
         self.pass_at = fields.vector(3, real, n)      # the positions at this pass's start
-        self.drift = fields.scalar(real, ())          # the most a particle moved since
         self.moved = fields.scalar(ti.i32, ())        # 1: this pass moved a particle
         self.move_sum = fields.vector(3, real, n)     # a pass's held contacts' moves
         self.share_sum = fields.scalar(real, n)       # and their shares, per particle
@@ -343,6 +367,10 @@ class SelfCollisionStage:
         self.through = fields.scalar(ti.i32, ())      # 1: never_through
         self.keep = fields.scalar(real, ())           # keep_thickness's distance, or 0
         self.again = fields.scalar(ti.i32, ())        # 1: passes after the fail-safe
+        self.bound = fields.scalar(real, n)           # never_through.py's bounds: m_i
+        self.loose = fields.scalar(ti.i32, n)         # 1: its pairs are tested this round
+        self.frames = fields.vector(3, real, 3)       # c0, c1 (never_through); the step's
+        self.checked = fields.scalar(ti.i32, ())      # pairs tested in the last run
         fields.finalize(self)
         self.grid = BoxGrid(n, len(edges))         # particles, then edges
         self.candidates = PairList(PAIRS_PER_PARTICLE * max(n, 1))
@@ -390,6 +418,7 @@ class SelfCollisionStage:
         self.stayed_run = 0
         self.unresolved_left = None
         self.passed = False             # the last step ran the passes (else it made none)
+        self.tested = 0                 # pairs the fail-safe tested in the last step
         self.step_contacts = None       # its contacts, where its list was made again after them
 
     def saved(self) -> dict:
@@ -497,8 +526,11 @@ class SelfCollisionStage:
             full[:width * total] = arrays[name]
             field.from_numpy(full)
         self.listed, self.pair_total = bool(arrays["listed"]), total
+        self.full[None] = 1         # its near pairs not saved: marked again, the same bits
         self.skin = float(arrays["skin"])
         self.vertex_pairs = int(arrays["vertex_pairs"])
+        if self.settings.fail_safe:
+            never_through.pair_bounds(self, self.candidates, self.listed_at)
         passes = int(arrays["passes"])
         self.passes[None] = passes
         self.passed = passes > 0
@@ -519,9 +551,12 @@ class SelfCollisionStage:
         was made); then the fail-safe."""
         self.passed = False
         self.step_contacts = None
+        self.tested = 0
         if self.triangle_count == 0:
             return
         thickness = self.settings.thickness
+        displacement_box(self, state.particle_position, self.step_start)
+        never_through.keep_frame(self, 2)             # the step's common motion: MOVED
         if not self.listed or self._moved_past(state, self.skin - MARGIN):
             self._make_list(model, state, step_index)
         if self.pair_total == 0:
@@ -546,9 +581,13 @@ class SelfCollisionStage:
             while True:
                 if self._moved_past(state, 1.0 + self.skin - MARGIN):
                     self._list_again(model, state, step_index)
+                for k, positions in enumerate((self.step_start, state.particle_position)):
+                    displacement_box(self, positions, self.listed_at)    # never_through's
+                    never_through.keep_frame(self, k)                    # c0 and c1
                 plan.run(self, model, state, None, self.candidates, dt, step_index, False,
                          part="fail_safe", serial=True)
                 moved = int(self.moved_total[None])
+                self.tested += int(self.checked[None])
                 self.moved_total_run += moved
                 self.stayed_run += int(self.stayed[None])
                 if moved == 0:
@@ -576,7 +615,7 @@ class SelfCollisionStage:
     def _moved_past(self, state, thicknesses: float) -> bool:
         """Whether two particles moved apart by more than `thicknesses` since the list was
         made."""
-        return (displacement_box(self, state, self.listed_at)
+        return (displacement_box(self, state.particle_position, self.listed_at)
                 > thicknesses * self.settings.thickness)
 
     def phases(self, model, forces, pairs) -> tuple:
@@ -663,7 +702,7 @@ class SelfCollisionStage:
         apart by more than FAST x SKIN thicknesses: such a list would not outlast the next
         step or two whatever its skin, and a lean one lists fewer pairs (module doc)."""
         thickness = self.settings.thickness
-        moved = displacement_box(self, state, self.step_start)
+        moved = displacement_box(self, state.particle_position, self.step_start)
         self.skin = LEAN_SKIN if moved > FAST * SKIN * thickness else SKIN
         near = (1.0 + self.skin) * thickness
         sweep_boxes(self, state)
@@ -684,7 +723,10 @@ class SelfCollisionStage:
             self.grown.append((step_index, self.candidates.capacity))
         list_pairs(self, self.candidates, model, state, near, self.settings.thickness, 1)
         copy_positions(state, self.listed_at)
+        if self.settings.fail_safe:
+            never_through.pair_bounds(self, self.candidates, self.listed_at)
         self.listed, self.pair_total = True, total
+        self.full[None] = 1         # the next pass marks every pair of it
         self.vertex_pairs = int(self.pair_start[self.triangle_count])
 
     def pairs(self, active: bool = True) -> SelfContacts:
@@ -697,7 +739,7 @@ class SelfCollisionStage:
                             self.closest_left, self.candidates.capacity, tuple(self.grown),
                             self.moved_total_run, self.stayed_run, self.unresolved_left,
                             int(self.passes[None]) if self.passed else 0,
-                            self.skin * self.settings.thickness)
+                            self.skin * self.settings.thickness, self.tested)
 
     def _rows(self, active: bool) -> tuple:
         """The (vertex, triangle) and (edge, edge) rows of the listed pairs, or of those
@@ -714,9 +756,13 @@ class SelfCollisionStage:
 @ti.func
 def _vertex_triangle(positions: ti.template(), start: ti.template(), corners, thickness):
     """(in contact, n, gap, w) of vertex corners[0] and triangle corners[1:] at `positions`.
-    Its foot on the plane inside the triangle: the side taken from `start`, n the unit normal
-    towards the vertex's side at the start, gap = its height over the plane along n minus
-    thickness (< 0 in contact), w the barycentric coordinates of its foot. Its foot outside
+    Its foot on the plane inside the triangle: the side taken from `start` where its foot was
+    inside at the start too and the pair may have met in the step (|h0| + |h| at most the
+    vertex's largest move relative to a corner: never_through.py, (1)); else the side it is on
+    (a vertex that came round an edge onto the other face did not cross it, and one 2 cm
+    from it had been pushed back through it in a twist). n the unit normal towards the
+    vertex's side, gap = its height over the plane along n minus thickness (< 0 in contact),
+    w the barycentric coordinates of its foot. Its foot outside
     (the vertex beside an edge or a corner, on no side of the triangle): n from the nearest
     point of the triangle to the vertex, gap = their distance minus thickness, w the nearest
     point's coordinates (geometry.triangle_closest; the point's slide along the border moves
@@ -730,10 +776,16 @@ def _vertex_triangle(positions: ti.template(), start: ti.template(), corners, th
     touching = False
     gap = ti.abs(h) - thickness
     if n.norm() > 0 and inside:
-        n0, h0, _ = point_over_triangle(start[v], start[a], start[b], start[c])
-        side = ti.select(h0 >= 0.0, 1.0, -1.0)
-        if n.dot(n0) < 0.0:
-            side = -side                             # the triangle turned over in the step
+        side = ti.select(h >= 0.0, 1.0, -1.0)
+        n0, h0, w0 = point_over_triangle(start[v], start[a], start[b], start[c])
+        move = p - start[v]
+        reach = ti.max((move - positions[a] + start[a]).norm(),
+                       (move - positions[b] + start[b]).norm(),
+                       (move - positions[c] + start[c]).norm())
+        if n0.norm() > 0 and w0.min() >= -INSIDE and ti.abs(h0) + ti.abs(h) <= reach:
+            side = ti.select(h0 >= 0.0, 1.0, -1.0)   # over the face then, and it may have met
+            if n.dot(n0) < 0.0:
+                side = -side                         # the triangle turned over in the step
         n *= side
         gap = side * h - thickness
         touching = gap < 0.0
@@ -808,8 +860,7 @@ def _contact_move(stage: ti.template(), model: ti.template(), state: ti.template
                 stage.share_sum[i] = stage.share_sum[i] + shares[k]
             else:
                 state.particle_position[i] += step
-                stage.drift[None] = ti.max(stage.drift[None],
-                                           (state.particle_position[i] - stage.near_at[i]).norm())
+                stage.far[i] = ti.max(stage.far[i], _from_near_at(stage, state, i))
         stage.moved[None] = 1
     return unresolved
 
@@ -894,13 +945,16 @@ def keep_position(state: ti.template(), kept: ti.template(), i):
 
 @ti.func
 def begin_passes(stage: ti.template()):
-    """Before the first pass: passing and moving, none made, nothing left deep, the near
-    pairs marked."""
+    """Before the first pass: passing and moving, none made, nothing left deep (the near
+    pairs are marked as the passes find stale particles, or all of them in the first pass
+    on a new list: `full`, set where the list is made)."""
     stage.passes[None] = 0
     stage.go[None] = 1
     stage.applying[None] = 1
     stage.left_deep[None] = 0
-    stage.full[None] = 1
+    stage.frame[None] = ti.Vector([0.0, 0.0, 0.0])
+    if not stage.full[None]:        # span: the displacements since the list (after_step)
+        stage.frame[None] = 0.5 * (stage.span[0] + stage.span[1])
 
 
 @ti.func
@@ -911,30 +965,45 @@ def passing(stage: ti.template()):
 
 @ti.func
 def clear_counts(stage: ti.template()):
-    """Before a pass: no contact counted or moved yet; before one that evaluates every pair,
-    no drift since."""
+    """Before a pass: no contact counted or moved yet, no particle stale yet."""
     stage.touching[None] = ti.Vector([0, 0])
     stage.deepest[None] = 0.0
     stage.moved[None] = 0
-    if stage.full[None]:
-        stage.drift[None] = 0.0
+    stage.stale_count[None] = 0
 
 
 @ti.func
 def keep_pass_start(stage: ti.template(), state: ti.template(), i):
-    """Before a pass: where particle i is (pass_at; near_at too before a pass that marks the
-    near pairs)."""
-    stage.pass_at[i] = state.particle_position[i]
-    if stage.full[None]:
-        stage.near_at[i] = state.particle_position[i]
+    """Before a pass: where particle i is (pass_at), and whether it is stale: more than
+    NEAR / 4 thicknesses from its near_at now or on the way since (far), or more than MOVED
+    from its step's start (less the step's common motion, frames[2]); every particle in a
+    pass that marks every pair. A stale particle's pairs are marked in this pass, from here:
+    near_at is set again (module doc, near pairs)."""
+    x = state.particle_position[i]
+    stage.pass_at[i] = x
+    far = ti.max(stage.far[i], _from_near_at(stage, state, i))
+    moved = (x - stage.step_start[i] - stage.frames[2]).norm()
+    stale = (stage.full[None] != 0 or far > 0.25 * NEAR * stage.thickness[None]
+             or moved > MOVED * stage.thickness[None])
+    stage.stale[i] = ti.select(stale, 1, 0)
+    if stale:
+        stage.near_at[i] = x - stage.frame[None]
+        far = 0.0
+        ti.atomic_add(stage.stale_count[None], 1)
+    stage.far[i] = far
 
 
 @ti.func
 def measure_drift(stage: ti.template(), state: ti.template(), i):
-    """drift: the most any particle has been from where it was at the last pass that evaluated
-    every pair (a max: exact, in any order; the contact moves keep it up to date as they
-    move the particles, so it bounds every position on the way)."""
-    ti.atomic_max(stage.drift[None], (state.particle_position[i] - stage.near_at[i]).norm())
+    """far: the most particle i has been from its near_at, at the end of a pass too (the
+    means and the colliders move it after the contacts)."""
+    stage.far[i] = ti.max(stage.far[i], _from_near_at(stage, state, i))
+
+
+@ti.func
+def _from_near_at(stage: ti.template(), state: ti.template(), i):
+    """How far particle i is from its near_at, less the common motion (frame)."""
+    return (state.particle_position[i] - stage.frame[None] - stage.near_at[i]).norm()
 
 
 @ti.func
@@ -963,25 +1032,33 @@ def _pair_contact(stage: ti.template(), pairs: ti.template(), state: ti.template
 @ti.func
 def evaluate_pair(stage: ti.template(), pairs: ti.template(), model: ti.template(),
                   state: ti.template(), p, dt):
-    """Listed pair p at the current positions (if p is listed, and near or in a pass that
-    evaluates every pair, which marks it near when its gap is below NEAR thicknesses):
-    active[p] (in contact in this or an earlier evaluation of the step) and, in contact, its
-    moves (_contact_move); counts the contacts and those unresolved in touching, the smallest
-    gap in deepest."""
-    if (p < stage.pair_start[stage.triangle_count + stage.edge_count]
-            and (stage.full[None] or pairs.near[p])):
-        touching, n, gap, weights = _pair_contact(stage, pairs, state, p)
-        if stage.full[None]:
-            pairs.near[p] = ti.select(gap < NEAR * stage.thickness[None], 1, 0)
-        first = stage.passes[None] == 0           # the step's first evaluation (full)
-        pairs.active[p] = ti.select(touching or (pairs.active[p] != 0 and not first), 1, 0)
-        if touching:
-            unresolved = _contact_move(stage, model, state, pairs.particles[p], weights, n, gap,
-                                       stage.friction[None], first, dt)
-            stage.touching[None][0] += 1
-            stage.deepest[None] = ti.min(stage.deepest[None], gap)
-            if unresolved:
-                stage.touching[None][1] += 1
+    """Listed pair p at the current positions, if it is near or of a stale particle, whose
+    pairs this pass marks near when their gap is below NEAR thicknesses (a pair neither is
+    out of contact: module doc): active[p] (in contact in this or an earlier evaluation of
+    the step; a pair skipped in the step's first pass is not) and, in contact, its moves
+    (_contact_move); counts the contacts and those unresolved in touching, the smallest gap
+    in deepest."""
+    if p < stage.pair_start[stage.triangle_count + stage.edge_count]:
+        first = stage.passes[None] == 0           # the step's first evaluation
+        mark = False
+        if stage.stale_count[None] > 0:
+            corners = pairs.particles[p]
+            mark = (stage.stale[corners[0]] + stage.stale[corners[1]] + stage.stale[corners[2]]
+                    + stage.stale[corners[3]]) > 0
+        if mark or pairs.near[p]:
+            touching, n, gap, weights = _pair_contact(stage, pairs, state, p)
+            if mark:
+                pairs.near[p] = ti.select(gap < NEAR * stage.thickness[None], 1, 0)
+            pairs.active[p] = ti.select(touching or (pairs.active[p] != 0 and not first), 1, 0)
+            if touching:
+                unresolved = _contact_move(stage, model, state, pairs.particles[p], weights, n,
+                                           gap, stage.friction[None], first, dt)
+                stage.touching[None][0] += 1
+                stage.deepest[None] = ti.min(stage.deepest[None], gap)
+                if unresolved:
+                    stage.touching[None][1] += 1
+        elif first:
+            pairs.active[p] = 0
 
 
 @ti.func
@@ -1000,9 +1077,8 @@ def end_pass(stage: ti.template()):
     """After a pass: one that applied counts. No contact, or none unresolved in a pass that
     moved none (any but the step's first, which moves every contact: a step's contacts apply
     their friction at least once), ends the passes in the state it evaluated; after the last
-    pass, one more evaluation only measures what is left. The next pass marks the near pairs
-    again once a particle has been NEAR / 4 thicknesses from where it was at the last that did
-    (drift)."""
+    pass, one more evaluation only measures what is left. The next pass marks the pairs of
+    the particles then stale (keep_pass_start), not every pair."""
     first = stage.applying[None] and stage.passes[None] == 0
     if stage.applying[None] and stage.touching[None][0] > 0:
         stage.passes[None] += 1
@@ -1013,7 +1089,7 @@ def end_pass(stage: ti.template()):
         stage.go[None] = 0
     elif stage.passes[None] == stage.iterations[None]:
         stage.applying[None] = 0
-    stage.full[None] = ti.select(stage.drift[None] > 0.25 * NEAR * stage.thickness[None], 1, 0)
+    stage.full[None] = 0
 
 
 @ti.func

@@ -67,16 +67,17 @@ class PairList:
 
 
 @backend.kernel
-def displacement_box(stage: ti.template(), state: ti.template(), since: ti.template()) -> ti.f64:
-    """span[0], span[1] = the bounding box of every particle's displacement from `since`; returns
-    its diagonal [m], the most any two particles moved relative to each other. Each block of
-    BLOCK particles is reduced by one thread, then the blocks in order (a max and a min are
-    exact in any order; no contended atomics)."""
+def displacement_box(stage: ti.template(), positions: ti.template(), since: ti.template()
+                     ) -> ti.f64:
+    """span[0], span[1] = the bounding box of every particle's displacement from `since` to
+    `positions`; returns its diagonal [m], the most any two particles moved relative to each
+    other. Each block of BLOCK particles is reduced by one thread, then the blocks in order (a
+    max and a min are exact in any order; no contended atomics)."""
     for b in range(stage.block_count):
         begin = b * BLOCK
-        lo = hi = state.particle_position[begin] - since[begin]
+        lo = hi = positions[begin] - since[begin]
         for i in range(begin + 1, ti.min(begin + BLOCK, stage.particle_count)):
-            moved = state.particle_position[i] - since[i]
+            moved = positions[i] - since[i]
             lo, hi = ti.min(lo, moved), ti.max(hi, moved)
         stage.block_span[2 * b] = lo
         stage.block_span[2 * b + 1] = hi
