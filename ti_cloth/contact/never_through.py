@@ -236,15 +236,19 @@ def begin_rounds(stage: ti.template()):
 @ti.func
 def loosen(stage: ti.template(), state: ti.template(), i):
     """Whether particle i is loose: past its bound, D_i > m_i / 4 (and (m_i - keep) / 2)
-    less BOUND_SLACK thicknesses (module doc, bounds)."""
-    at = stage.listed_at[i]
-    reach = ti.max((stage.step_start[i] - at - stage.frames[0]).norm(),
-                   (state.particle_position[i] - at - stage.frames[1]).norm())
-    m = stage.bound[i]
-    allowed = 0.25 * m
-    if stage.keep[None] > 0.0:
-        allowed = ti.min(allowed, 0.5 * (m - stage.keep[None]))
-    stage.loose[i] = ti.select(reach > allowed - BOUND_SLACK * stage.thickness[None], 1, 0)
+    less BOUND_SLACK thicknesses (module doc, bounds); every particle where the list has no
+    bounds (loosening 0: a list is given them from its second step, so a list made every
+    step, as a busy pile's is, costs none)."""
+    stage.loose[i] = 1
+    if stage.loosening[None]:
+        at = stage.listed_at[i]
+        reach = ti.max((stage.step_start[i] - at - stage.frames[0]).norm(),
+                       (state.particle_position[i] - at - stage.frames[1]).norm())
+        m = stage.bound[i]
+        allowed = 0.25 * m
+        if stage.keep[None] > 0.0:
+            allowed = ti.min(allowed, 0.5 * (m - stage.keep[None]))
+        stage.loose[i] = ti.select(reach > allowed - BOUND_SLACK * stage.thickness[None], 1, 0)
 
 
 @ti.func

@@ -371,6 +371,7 @@ class SelfCollisionStage:
         self.loose = fields.scalar(ti.i32, n)         # 1: its pairs are tested this round
         self.frames = fields.vector(3, real, 3)       # c0, c1 (never_through); the step's
         self.checked = fields.scalar(ti.i32, ())      # pairs tested in the last run
+        self.loosening = fields.scalar(ti.i32, ())    # 1: bounds made (else all loose)
         fields.finalize(self)
         self.grid = BoxGrid(n, len(edges))         # particles, then edges
         self.candidates = PairList(PAIRS_PER_PARTICLE * max(n, 1))
@@ -410,6 +411,8 @@ class SelfCollisionStage:
     def forget(self) -> None:
         """Drop the candidate list: the next step makes a new one (after a restart)."""
         self.listed = False
+        self.bounded = False            # never_through's bounds made for the list
+        self.listed_step = -1           # the step it was made in
         self.skin = SKIN                # the list's, in thicknesses (_make_list)
         self.pair_total = self.vertex_pairs = 0
         self.closest_left = None
@@ -529,8 +532,8 @@ class SelfCollisionStage:
         self.full[None] = 1         # its near pairs not saved: marked again, the same bits
         self.skin = float(arrays["skin"])
         self.vertex_pairs = int(arrays["vertex_pairs"])
-        if self.settings.fail_safe:
-            never_through.pair_bounds(self, self.candidates, self.listed_at)
+        self.bounded = False
+        self.listed_step = -1
         passes = int(arrays["passes"])
         self.passes[None] = passes
         self.passed = passes > 0
@@ -581,6 +584,10 @@ class SelfCollisionStage:
             while True:
                 if self._moved_past(state, 1.0 + self.skin - MARGIN):
                     self._list_again(model, state, step_index)
+                if not self.bounded and self.listed_step < step_index:
+                    never_through.pair_bounds(self, self.candidates, self.listed_at)
+                    self.bounded = True     # from a list's second step (made every step:
+                self.loosening[None] = int(self.bounded)        # no bounds, all tested)
                 for k, positions in enumerate((self.step_start, state.particle_position)):
                     displacement_box(self, positions, self.listed_at)    # never_through's
                     never_through.keep_frame(self, k)                    # c0 and c1
@@ -723,9 +730,9 @@ class SelfCollisionStage:
             self.grown.append((step_index, self.candidates.capacity))
         list_pairs(self, self.candidates, model, state, near, self.settings.thickness, 1)
         copy_positions(state, self.listed_at)
-        if self.settings.fail_safe:
-            never_through.pair_bounds(self, self.candidates, self.listed_at)
         self.listed, self.pair_total = True, total
+        self.listed_step = step_index
+        self.bounded = False            # its bounds are made when the fail-safe first needs them
         self.full[None] = 1         # the next pass marks every pair of it
         self.vertex_pairs = int(self.pair_start[self.triangle_count])
 
@@ -1033,15 +1040,17 @@ def _pair_contact(stage: ti.template(), pairs: ti.template(), state: ti.template
 def evaluate_pair(stage: ti.template(), pairs: ti.template(), model: ti.template(),
                   state: ti.template(), p, dt):
     """Listed pair p at the current positions, if it is near or of a stale particle, whose
-    pairs this pass marks near when their gap is below NEAR thicknesses (a pair neither is
-    out of contact: module doc): active[p] (in contact in this or an earlier evaluation of
+    pairs this pass marks near when their gap is below NEAR thicknesses (every pair where
+    most particles are stale: a mark more is no harm, and reading the flags cost a busy
+    pile's passes 5 %; a pair neither near nor marked is out of contact: module doc):
+    active[p] (in contact in this or an earlier evaluation of
     the step; a pair skipped in the step's first pass is not) and, in contact, its moves
     (_contact_move); counts the contacts and those unresolved in touching, the smallest gap
     in deepest."""
     if p < stage.pair_start[stage.triangle_count + stage.edge_count]:
         first = stage.passes[None] == 0           # the step's first evaluation
-        mark = False
-        if stage.stale_count[None] > 0:
+        mark = 2 * stage.stale_count[None] > stage.particle_count   # most: all, unread
+        if stage.stale_count[None] > 0 and not mark:
             corners = pairs.particles[p]
             mark = (stage.stale[corners[0]] + stage.stale[corners[1]] + stage.stale[corners[2]]
                     + stage.stale[corners[3]]) > 0
