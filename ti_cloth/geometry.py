@@ -150,25 +150,16 @@ def segment_distance(p1, q1, p2, q2):
 def edge_contact(a, b, c, d, a0, b0, c0, d0, thickness):
     """(in contact, n, gap, s, t) of the moving edges ab and cd, now at a b c d and at the
     step's start at a0 b0 c0 d0: their closest points now at parameters s and t, n the unit
-    direction from cd's point to ab's on the side they were on at the start where their
-    closest points were interior to both then too and they may have met in the step (their
-    distances then and now add up to at most the largest move of an end of one relative to an
-    end of the other: contact/never_through.py, (1)): a pair that crossed during the step is
-    sent back; one whose closest points were at an end came round it, and two nearly
-    parallel edges whose closest points jumped did not cross: they keep their side. gap =
-    distance along n minus thickness. In contact: both points interior to their edges and
-    gap < 0 (an end's contacts are a vertex's)."""
+    direction from cd's point to ab's on the side they were on at the start (a pair that
+    crossed during the step is sent back), gap = distance along n minus thickness. In contact:
+    both points interior to their edges and gap < 0 (an end's contacts are a vertex's)."""
     s, t = segment_parameters(a, b, c, d)
     between = a + s * (b - a) - c - t * (d - c)
     s0, t0 = segment_parameters(a0, b0, c0, d0)
     before = a0 + s0 * (b0 - a0) - c0 - t0 * (d0 - c0)
     distance = between.norm()
     n = between / ti.max(distance, TINY)
-    reach = ti.max(((a - a0) - (c - c0)).norm(), ((a - a0) - (d - d0)).norm(),
-                   ((b - b0) - (c - c0)).norm(), ((b - b0) - (d - d0)).norm())
-    crossed = (s0 > 0.0 and s0 < 1.0 and t0 > 0.0 and t0 < 1.0 and between.dot(before) < 0.0
-               and before.norm() + distance <= reach)
-    if before.norm() > 0 and crossed:
+    if before.norm() > 0 and between.dot(before) < 0.0:
         n = -n                                       # crossed during the step: back to its side
     if distance == 0.0:
         n = before / ti.max(before.norm(), TINY)

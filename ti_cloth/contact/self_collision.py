@@ -110,13 +110,18 @@ middle of the box of the displacements since the list was made (frame), and of t
 (frames[2]), so that a pile falling as a whole marks nothing. A stale particle's near_at is
 set again at the pass's start. So a pair none of whose particles has been stale since its
 mark is at positions within NEAR / 4 of those of its mark, relative to each other within
-NEAR thicknesses: it is not in contact where it is skipped; nor can it have changed sides
-since the step's start (a pair's side is taken from there: MOVED / 2 is below the reach),
-which a pair whose particles moved less than MOVED / 2 cannot, unless it came within the
-reach (the side is the start's only where the pair may have met in the step:
-_vertex_triangle, geometry.edge_contact). A pass that ends the passes moves nothing, so it
-evaluated every pair in contact where the step ends. The marks are a cost, not a result:
-the passes give the same bits as passes that evaluate every pair in every pass (the 24²
+NEAR thicknesses: it is not in contact where it is skipped by distance. A pair's side is
+taken from the step's start, so a pair also counts in contact by changing sides in the
+step, which a pair whose particles moved less than MOVED does only where the side flips
+without a crossing (a vertex that comes round an edge onto the other face, nearly parallel
+edges whose closest points jump): without MOVED a 24² twist parted from passes that
+evaluate every pair at step 216, a vertex 2 cm under a face it had come round taken for
+crossed. That is a flaw of the side rule, left as it is: taking the start's side only where
+the pair may have met in the step cost the landing scene of
+benchmarks/contact_guarantees.py its thickness (0.9993 to 0.90-0.98 with never_through
+alone). A pass that ends the passes moves nothing, so it evaluated every pair in contact
+where the step ends. The marks are a cost, not a result: the passes give the same bits as
+passes that evaluate every pair in every pass (the 24²
 twist's first second in tests/test_self_collision.py, against a process whose NEAR makes
 every pair near; 400 steps of it with and without keep_thickness, 240 of the 4-layer pile
 and 120 of the press of benchmarks/contact_guarantees.py, `/tmp` comparisons), and a run
@@ -763,13 +768,9 @@ class SelfCollisionStage:
 @ti.func
 def _vertex_triangle(positions: ti.template(), start: ti.template(), corners, thickness):
     """(in contact, n, gap, w) of vertex corners[0] and triangle corners[1:] at `positions`.
-    Its foot on the plane inside the triangle: the side taken from `start` where its foot was
-    inside at the start too and the pair may have met in the step (|h0| + |h| at most the
-    vertex's largest move relative to a corner: never_through.py, (1)); else the side it is on
-    (a vertex that came round an edge onto the other face did not cross it, and one 2 cm
-    from it had been pushed back through it in a twist). n the unit normal towards the
-    vertex's side, gap = its height over the plane along n minus thickness (< 0 in contact),
-    w the barycentric coordinates of its foot. Its foot outside
+    Its foot on the plane inside the triangle: the side taken from `start`, n the unit normal
+    towards the vertex's side at the start, gap = its height over the plane along n minus
+    thickness (< 0 in contact), w the barycentric coordinates of its foot. Its foot outside
     (the vertex beside an edge or a corner, on no side of the triangle): n from the nearest
     point of the triangle to the vertex, gap = their distance minus thickness, w the nearest
     point's coordinates (geometry.triangle_closest; the point's slide along the border moves
@@ -783,16 +784,10 @@ def _vertex_triangle(positions: ti.template(), start: ti.template(), corners, th
     touching = False
     gap = ti.abs(h) - thickness
     if n.norm() > 0 and inside:
-        side = ti.select(h >= 0.0, 1.0, -1.0)
-        n0, h0, w0 = point_over_triangle(start[v], start[a], start[b], start[c])
-        move = p - start[v]
-        reach = ti.max((move - positions[a] + start[a]).norm(),
-                       (move - positions[b] + start[b]).norm(),
-                       (move - positions[c] + start[c]).norm())
-        if n0.norm() > 0 and w0.min() >= -INSIDE and ti.abs(h0) + ti.abs(h) <= reach:
-            side = ti.select(h0 >= 0.0, 1.0, -1.0)   # over the face then, and it may have met
-            if n.dot(n0) < 0.0:
-                side = -side                         # the triangle turned over in the step
+        n0, h0, _ = point_over_triangle(start[v], start[a], start[b], start[c])
+        side = ti.select(h0 >= 0.0, 1.0, -1.0)
+        if n.dot(n0) < 0.0:
+            side = -side                             # the triangle turned over in the step
         n *= side
         gap = side * h - thickness
         touching = gap < 0.0
