@@ -78,10 +78,11 @@ their L on the way, and a corner on its straight line from x0 to x1 is never far
 than at one end. Taken less a common motion c (any vector for each instant: it moves both
 elements alike), a particle's D_i = max(|x0_i - L_i - c0|, |x1_i - L_i - c1|), c0 and c1 the
 middles of the boxes of the displacements from L at the step's start and now. A pair whose
-every particle has D_i <= m_i / 4 then has d(0) + d(1) >= 2 m - 2 (D_a + D_b) >= m and R <=
-2 (D_a + D_b) <= m / 2 (with m its own distance at L, at least each corner's m_i), so it
-meets (1) with room to spare; with keep_thickness D_i <= (m_i - KEEP ...) / 2 as well
-makes d(1) >= m - (D_a + D_b) at least the kept distance, so it does not meet (3). The
+every particle has D_i <= m_i / 4 (D_a, D_b the largest of each element's) then has
+d(0) + d(1) >= 2 m - 2 (D_a + D_b) >= m and R <= 2 (D_a + D_b) <= m (with m its own distance
+at L, at least each corner's m_i), so it meets (1), strictly by the slack below; with
+keep_thickness D_i <= (m_i - KEEP ...) / 2 as well makes d(1) >= m - (D_a + D_b) at least
+the kept distance, so it does not meet (3). The
 rounds test only the pairs of a particle past those bounds (loose; BOUND_SLACK thicknesses
 inside them, far beyond rounding), and of one moved back: the pairs they skip are exactly
 those the tests would pass, so the rounds move back what they moved before, the same bits, for
