@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import twisted_sheet
+from helpers import twisted_sheet, wound_twist
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -396,14 +396,7 @@ def test_a_run_loaded_at_every_step_keeps_the_bits_of_the_run(f32, tmp_path):
     keep_thickness) twisted a half turn a second each way, saved and loaded again at every
     step from step 150, where it winds onto itself: every step of the loaded run marks
     every pair, and it ends each step on the bits of the run that did not."""
-    body, handles, _ = twisted_sheet(n=24, size=0.6, turns=1.0)
-
-    def twist():
-        return tc.Simulation(body, integrator=tc.XPBD(iterations=10), dt=1 / 240,
-                             handles=handles, gravity=(0.0, 0.0, 0.0),
-                             self_collision=tc.SelfCollision(thickness=0.005,
-                                                             keep_thickness=True))
-    run, loaded = twist(), twist()
+    run, loaded = wound_twist(), wound_twist()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")        # the passes' reports of a tight twist
         run.step(150)

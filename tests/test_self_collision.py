@@ -5,7 +5,7 @@ import warnings
 
 import numpy as np
 import pytest
-from helpers import report, twisted_sheet
+from helpers import positions_over, report, twisted_sheet, wound_twist
 from scipy.spatial.transform import Rotation
 
 import ti_cloth as tc
@@ -217,31 +217,11 @@ import numpy as np
 sys.path.insert(0, sys.argv[1])
 import ti_cloth as tc
 from ti_cloth.contact import self_collision
-from helpers import twisted_sheet
+from helpers import positions_over, wound_twist
 self_collision.NEAR = 1e9               # every pair near: evaluated in every pass
 tc.init(precision="f32")
-body, handles, _ = twisted_sheet(n=24, size=0.6, turns=1.0)
-sim = tc.Simulation(body, integrator=tc.XPBD(iterations=10), dt=1 / 240, handles=handles,
-                    gravity=(0.0, 0.0, 0.0),
-                    self_collision=tc.SelfCollision(thickness=0.005, keep_thickness=True))
-ends = []
-for _ in range(240):
-    sim.step(1)
-    ends.append(sim.positions())
-np.save(sys.argv[2], np.array(ends))
+np.save(sys.argv[2], positions_over(wound_twist(), 240))
 """
-
-
-def twist_ends(body, handles) -> np.ndarray:
-    sim = tc.Simulation(body, integrator=tc.XPBD(iterations=10), dt=1 / 240, handles=handles,
-                        gravity=(0.0, 0.0, 0.0),
-                        self_collision=tc.SelfCollision(thickness=0.005,
-                                                        keep_thickness=True))
-    ends = []
-    for _ in range(240):
-        sim.step(1)
-        ends.append(sim.positions())
-    return np.array(ends)
 
 
 def test_the_near_marks_change_no_bit(f32, tmp_path):
@@ -264,10 +244,9 @@ def test_the_near_marks_change_no_bit(f32, tmp_path):
     process = subprocess.Popen([sys.executable, "-c", TWIST_RUN, str(Path(__file__).parent),
                                 str(out)], env=env, stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True)
-    body, handles, _ = twisted_sheet(n=24, size=0.6, turns=1.0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")        # the passes' reports of a tight twist
-        marked = twist_ends(body, handles)
+        marked = positions_over(wound_twist(), 240)
     _, errors = process.communicate(timeout=600)
     assert process.returncode == 0, errors
     every = np.load(out)

@@ -593,9 +593,10 @@ class SelfCollisionStage:
                     never_through.pair_bounds(self, self.candidates, self.listed_at)
                     self.bounded = True     # from a list's second step (made every step:
                 self.loosening[None] = int(self.bounded)        # no bounds, all tested)
-                for k, positions in enumerate((self.step_start, state.particle_position)):
-                    displacement_box(self, positions, self.listed_at)    # never_through's
-                    never_through.keep_frame(self, k)                    # c0 and c1
+                if self.bounded:
+                    for k, positions in enumerate((self.step_start, state.particle_position)):
+                        displacement_box(self, positions, self.listed_at)  # never_through's
+                        never_through.keep_frame(self, k)                  # c0 and c1
                 plan.run(self, model, state, None, self.candidates, dt, step_index, False,
                          part="fail_safe", serial=True)
                 moved = int(self.moved_total[None])
