@@ -3,20 +3,32 @@ plane, with and without supersampling, next to the simulation's own time per fra
 the same run: symplectic Euler, f32, at half its predicted stable step, 30 frames per second.
 
     python benchmarks/render_ms_per_frame.py [--sizes 32 128 512] [--arch cpu] [--frames 7]
+    python benchmarks/render_ms_per_frame.py --sizes --scenes demos/cape.toml --width 960 \
+        --height 540
 
 Render time covers everything a demo pays per frame: reading positions back, the vertex and
 raster kernels, the resolve and the layout conversion to a numpy image (not the PNG write);
 "window ms" the same frame ended as the live viewer's window takes it (Renderer.end_window,
-no layout conversion).
+no layout conversion). The camera stands still, so the ground of every frame after the first
+is the last frame's, copied ("turning": the camera moved a little every frame, the ground
+ray-cast anew).
+
+`--scenes`: each scene file as `ti-cloth view` runs it without its window (app.view.viewer_for,
+960 x 540 by default there too, no supersampling): a frame's steps and its drawing, the
+camera still and turning, the real-time ratio and frames per second they allow.
 """
 
 import argparse
 import statistics
 import time
+from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
 import ti_cloth as tc
+from ti_cloth.app.scene import load_scene
+from ti_cloth.app.view import viewer_for
 from ti_cloth.inputs import limits
 from ti_cloth.render import Camera, Renderer, SurfaceStyle
 
@@ -44,36 +56,77 @@ def sim_ms_per_step(sim, repeats):
     return 1e3 * statistics.median(times), substeps
 
 
-def render_ms_per_frame(renderer, sim, frames, window=False):
+def turned(camera, k):
+    """`camera` turned k * 0.2 degrees about the vertical through its target."""
+    angle = np.radians(0.2 * k)
+    c, s = np.cos(angle), np.sin(angle)
+    offset = np.subtract(camera.position, camera.target)
+    offset = (c * offset[0] + s * offset[2], offset[1], -s * offset[0] + c * offset[2])
+    return replace(camera, position=tuple(np.add(camera.target, offset)))
+
+
+def render_ms_per_frame(renderer, sim, frames, window=False, turning=False):
     """Median ms of a frame ending as an image (Renderer.end: (H, W, 3), top row first) or,
-    with `window`, as a window takes it (Renderer.end_window: the live viewer's)."""
+    with `window`, as a window takes it (Renderer.end_window: the live viewer's); `turning`:
+    the camera turned a little every frame."""
     style = SurfaceStyle(checker=0.1)
     times = []
+    camera = renderer.camera
     for k in range(frames + 2):               # two warm-up frames compile the kernels
         start = time.perf_counter()
-        renderer.begin()
+        renderer.begin(turned(camera, k) if turning else camera)
         renderer.draw_plane(point=(0.0, -1.1, 0.0))
         renderer.draw_simulation(sim, style)
         renderer.end_window() if window else renderer.end()
         if k >= 2:
             times.append(time.perf_counter() - start)
+    renderer.camera = camera
     return 1e3 * statistics.median(times)
+
+
+def viewer_ms_per_frame(path, frames, width, height):
+    """A scene's frame as the live viewer runs it: (ms of its steps, ms of its drawing with
+    the camera still, the same turning), medians of `frames` frames after 5."""
+    viewer = viewer_for(load_scene(path), width=width, height=height)
+    camera = viewer.camera
+    for _ in range(5):
+        viewer.advance()
+        viewer.window_image()
+    steps, still, turning = [], [], []
+    for k in range(frames):
+        start = time.perf_counter()
+        viewer.advance()
+        steps.append(time.perf_counter() - start)
+        start = time.perf_counter()
+        viewer.window_image()
+        still.append(time.perf_counter() - start)
+    for k in range(frames):
+        viewer.camera = turned(camera, k + 1)
+        start = time.perf_counter()
+        viewer.window_image()
+        turning.append(time.perf_counter() - start)
+    viewer.camera = camera
+    return (1e3 * statistics.median(steps), viewer.frame_dt, viewer.substeps,
+            1e3 * statistics.median(still), 1e3 * statistics.median(turning))
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sizes", type=int, nargs="+", default=[32, 128, 512])
+    parser.add_argument("--sizes", type=int, nargs="*", default=[32, 128, 512])
+    parser.add_argument("--scenes", nargs="*", default=[],
+                        help="scene files to time as the live viewer runs them")
     parser.add_argument("--arch", default="cpu", choices=limits.ARCH_NAMES)
     parser.add_argument("--width", type=int, default=1280)
     parser.add_argument("--height", type=int, default=720)
     parser.add_argument("--frames", type=int, default=7, help="timed frames per case (median)")
     args = parser.parse_args(argv)
     tc.init(arch=args.arch, precision="f32")
-    print(f"arch={args.arch}, {args.width}x{args.height}, median of {args.frames} frames; "
-          f"simulation: symplectic Euler f32 at 0.5 x stable dt, {FPS:.0f} fps")
-    print(f"{'N':>5} {'triangles':>10} {'SSAA':>5} {'render ms':>10} {'sim ms/step':>12} "
-          f"{'substeps':>9} {'sim ms/frame':>13} {'render/sim':>11} {'render = steps':>15} "
-          f"{'window ms':>10}")
+    if args.sizes:
+        print(f"arch={args.arch}, {args.width}x{args.height}, median of {args.frames} frames; "
+              f"simulation: symplectic Euler f32 at 0.5 x stable dt, {FPS:.0f} fps")
+        print(f"{'N':>5} {'triangles':>10} {'SSAA':>5} {'render ms':>10} {'sim ms/step':>12} "
+              f"{'substeps':>9} {'sim ms/frame':>13} {'render/sim':>11} {'render = steps':>15} "
+              f"{'window ms':>10} {'turning':>8}")
     for n in args.sizes:
         cloth = hanging_cloth(n)
         dt = 0.5 * tc.stable_dt(cloth, "symplectic_euler")
@@ -85,9 +138,22 @@ def main(argv=None):
             with Renderer(args.width, args.height, camera, supersample=ss) as renderer:
                 ms = render_ms_per_frame(renderer, sim, args.frames)
                 window = render_ms_per_frame(renderer, sim, args.frames, window=True)
+                turning = render_ms_per_frame(renderer, sim, args.frames, window=True,
+                                              turning=True)
             print(f"{n:>5} {len(cloth.mesh.triangles):>10} {ss:>4}x {ms:>10.1f} {step_ms:>12.3f} "
                   f"{substeps:>9} {sim_ms:>13.0f} {ms / sim_ms:>11.4f} {ms / step_ms:>15.0f} "
-                  f"{window:>10.1f}")
+                  f"{window:>10.1f} {turning:>8.1f}")
+    if args.scenes:
+        print(f"\nthe live viewer, {args.width}x{args.height}, no supersampling, medians of "
+              f"{args.frames} frames after 5")
+        print(f"{'scene':>24} {'steps a frame':>14} {'steps ms':>9} {'drawing ms':>11} "
+              f"{'turning':>8} {'real time':>10} {'frames/s':>9}")
+    for path in args.scenes:
+        steps, frame_dt, substeps, still, turning = viewer_ms_per_frame(
+            path, args.frames, args.width, args.height)
+        print(f"{Path(path).stem:>24} {substeps:>14} {steps:>9.1f} {still:>11.1f} "
+              f"{turning:>8.1f} {1e3 * frame_dt / (steps + still):>9.2f}x "
+              f"{1e3 / (steps + still):>9.0f}")
 
 
 if __name__ == "__main__":

@@ -349,3 +349,57 @@ def test_colliders_of_a_simulation_are_drawn_where_their_paths_put_them(f32):
     drawn = r.end()[::-1].any(axis=2)
     y, x = np.mgrid[0:32, 0:32] + 0.5
     assert np.array_equal(drawn, (x - 16) ** 2 + (y - 8) ** 2 <= 16)
+
+
+def ground_frame(renderer, camera=None, point=(0.0, 0.0, 0.0), sim=None, **plane):
+    """A frame of the ground (a 0.5 m checker, as scene files draw it) and, with `sim`, its
+    colliders; plane: more of draw_plane's arguments."""
+    renderer.begin(camera)
+    renderer.draw_plane(point=point, checker=0.5, **plane)
+    if sim is not None:
+        renderer.draw_colliders(sim)
+    return renderer.end().copy()
+
+
+def test_a_plane_collider_in_the_grounds_plane_is_drawn_once(f32):
+    # The ground of a scene file is its plane collider's plane: drawing both used to put two
+    # checkers (0.5 and 0.25 m) in one set of samples, the darker winning each tie
+    cam = Camera(position=(0.3, 1.0, 2.0), target=(0.0, 0.0, 0.0), fov=60.0)
+
+    def sim_with(plane):
+        return tc.Simulation(tc.Cloth.from_particles([[0.0, 3.0, 0.0]], [1.0],
+                                                     np.zeros((0, 2), int)),
+                             dt=0.01, colliders=[plane])
+
+    r = Renderer(48, 32, cam, supersample=1)
+    alone = ground_frame(r)
+    for normal in ((0.0, 1.0, 0.0), (0.0, -1.0, 0.0)):       # either side up: one plane
+        same = sim_with(tc.Plane(point=(2.0, 0.0, -1.0), normal=normal))
+        assert np.array_equal(ground_frame(r, sim=same), alone)
+    higher = sim_with(tc.Plane(point=(0.0, 0.2, 0.0)))        # another plane is drawn
+    assert not np.array_equal(ground_frame(r, sim=higher), alone)
+
+
+def test_the_last_frames_ground_is_reused_only_for_the_same_camera_plane_and_light(f32):
+    # A frame's first unshaded plane is copied from the last frame when nothing it depends
+    # on changed: every frame must be the bits a fresh renderer draws
+    cams = [Camera(position=(0.3, 1.0, 2.0), target=(0.0, 0.0, 0.0), fov=60.0),
+            Camera(position=(0.35, 1.0, 2.0), target=(0.0, 0.0, 0.0), fov=60.0)]
+    frames = [(cams[0], (0.0, 0.0, 0.0), GREEN), (cams[0], (0.0, 0.0, 0.0), GREEN),
+              (cams[1], (0.0, 0.0, 0.0), GREEN), (cams[1], (0.0, 0.1, 0.0), GREEN),
+              (cams[1], (0.0, 0.1, 0.0), RED), (cams[0], (0.0, 0.0, 0.0), GREEN)]
+    kept = Renderer(48, 32, cams[0], supersample=2)
+    images = []
+    for camera, point, colour in frames:
+        got = ground_frame(kept, camera, point, colour=colour, contrast=0.5)
+        fresh = ground_frame(Renderer(48, 32, camera, supersample=2), point=point,
+                             colour=colour, contrast=0.5)
+        assert np.array_equal(got, fresh)
+        images.append(got)
+    assert all(not np.array_equal(a, b) for a, b in zip(images[1:], images[2:]))
+    kept.light = Light(direction=(0.0, 1.0, 0.0))         # a new light: the ground is lit anew
+    lit = ground_frame(kept, cams[0], colour=GREEN, contrast=0.5)
+    assert np.array_equal(lit, ground_frame(Renderer(48, 32, cams[0], supersample=2,
+                                                     light=Light(direction=(0.0, 1.0, 0.0))),
+                                            colour=GREEN, contrast=0.5))
+    assert not np.array_equal(lit, images[-1])

@@ -37,6 +37,12 @@ def row3(a: ti.template(), i):
 
 
 @ti.func
+def interpolate(a: ti.template(), ia, ib, ic, mu):
+    """Rows ia, ib, ic of `a` (N, 3) weighted by the barycentric weights mu."""
+    return mu[0] * row3(a, ia) + mu[1] * row3(a, ib) + mu[2] * row3(a, ic)
+
+
+@ti.func
 def camera_basis(cam: ti.template()):
     """eye, right, up, forward, as packed by Camera.packed."""
     return (ti.Vector([cam[0], cam[1], cam[2]]), ti.Vector([cam[3], cam[4], cam[5]]),
@@ -104,8 +110,16 @@ def bounding_box(lo, hi, samples: ti.template()):
 
 @backend.kernel
 def clear(samples: samples_type):
-    for i, j in samples:
-        samples[i, j] = ti.i64(EMPTY)
+    for i in range(samples.shape[0]):        # columns in parallel, rows in a serial loop
+        for j in range(samples.shape[1]):
+            samples[i, j] = ti.i64(EMPTY)
+
+
+@backend.kernel
+def copy(source: samples_type, target: samples_type):
+    for i in range(source.shape[0]):
+        for j in range(source.shape[1]):
+            target[i, j] = source[i, j]
 
 
 @backend.kernel
@@ -180,32 +194,36 @@ def raster_triangles(samples: samples_type, cam: ndarray_f32_1, triangles: ndarr
                     sb, sc = sc, sb
                     area, facing, albedo = -area, -1.0, back
                 x0, x1, y0, y1 = bounding_box(ti.min(sa, sb, sc), ti.max(sa, sb, sc), samples)
-                for x, y in ti.ndrange((x0, x1), (y0, y1)):
-                    centre = ti.Vector([x + 0.5, y + 0.5])
-                    wa, wb, wc = edge(sb, sc, centre), edge(sc, sa, centre), edge(sa, sb, centre)
-                    if covers(wa, sb, sc) and covers(wb, sc, sa) and covers(wc, sa, sb):
-                        q = ti.Vector([wa * screen[ia, 3], wb * screen[ib, 3], wc * screen[ic, 3]])
-                        mu = q / q.sum()
-                        depth = mu.dot(ti.Vector([screen[ia, 2], screen[ib, 2], screen[ic, 2]]))
-                        n = mu[0] * row3(normal, ia) + mu[1] * row3(normal, ib) + mu[2] * row3(normal, ic)
-                        n *= facing / ti.max(n.norm(), 1e-12)    # opposite normals at a crease: 0
-                        colour = albedo
-                        if ti.static(use_colours):
-                            colour = (mu[0] * row3(vertex_colour, ia) + mu[1] * row3(vertex_colour, ib)
-                                      + mu[2] * row3(vertex_colour, ic))
-                        if ti.static(use_strain):
-                            colour = strain_ramp(mu.dot(ti.Vector([strain[ia], strain[ib], strain[ic]])),
-                                                 strain_max)
-                        if ti.static(use_checker):
-                            r = mu[0] * row3(rest, ia) + mu[1] * row3(rest, ib) + mu[2] * row3(rest, ic)
-                            colour *= checker_factor(r, checker_size, checker_contrast)
-                        colour = lambert(colour, n, light, ambient)
-                        if ti.static(use_wire):    # distance to the nearest edge, in samples
-                            dist = ti.min(wa / (sc - sb).norm(), wb / (sa - sc).norm(),
-                                          wc / (sb - sa).norm())
-                            if dist < wire_width / 2:
-                                colour = wire
-                        ti.atomic_min(samples[x, y], pack(depth * depth_scale, colour))
+                for x in range(x0, x1):
+                    for y in range(y0, y1):
+                        centre = ti.Vector([x + 0.5, y + 0.5])
+                        wa = edge(sb, sc, centre)
+                        wb, wc = edge(sc, sa, centre), edge(sa, sb, centre)
+                        if covers(wa, sb, sc) and covers(wb, sc, sa) and covers(wc, sa, sb):
+                            q = ti.Vector([wa * screen[ia, 3], wb * screen[ib, 3],
+                                           wc * screen[ic, 3]])
+                            mu = q / q.sum()
+                            depth = mu.dot(ti.Vector([screen[ia, 2], screen[ib, 2],
+                                                      screen[ic, 2]]))
+                            n = interpolate(normal, ia, ib, ic, mu)
+                            # opposite normals at a crease: 0
+                            n *= facing / ti.max(n.norm(), 1e-12)
+                            colour = albedo
+                            if ti.static(use_colours):
+                                colour = interpolate(vertex_colour, ia, ib, ic, mu)
+                            if ti.static(use_strain):
+                                corners = ti.Vector([strain[ia], strain[ib], strain[ic]])
+                                colour = strain_ramp(mu.dot(corners), strain_max)
+                            if ti.static(use_checker):
+                                colour *= checker_factor(interpolate(rest, ia, ib, ic, mu),
+                                                         checker_size, checker_contrast)
+                            colour = lambert(colour, n, light, ambient)
+                            if ti.static(use_wire):    # distance to the nearest edge, in samples
+                                dist = ti.min(wa / (sc - sb).norm(), wb / (sa - sc).norm(),
+                                              wc / (sb - sa).norm())
+                                if dist < wire_width / 2:
+                                    colour = wire
+                            ti.atomic_min(samples[x, y], pack(depth * depth_scale, colour))
 
 
 @backend.kernel
@@ -226,17 +244,18 @@ def raster_segments(samples: samples_type, cam: ndarray_f32_1, position: ndarray
             half = width / 2
             x0, x1, y0, y1 = bounding_box(ti.min(sa, sb) - half, ti.max(sa, sb) + half, samples)
             d = sb - sa
-            for x, y in ti.ndrange((x0, x1), (y0, y1)):
-                centre = ti.Vector([x + 0.5, y + 0.5])
-                u = 0.0
-                if d.norm_sqr() > 0:
-                    u = ti.math.clamp((centre - sa).dot(d) / d.norm_sqr(), 0.0, 1.0)
-                if (centre - sa - u * d).norm_sqr() <= half * half:
-                    q = ti.Vector([(1 - u) * a[3], u * b[3]])
-                    mu = q / q.sum()
-                    c = mu[0] * row3(colour, i) + mu[1] * row3(colour, j)
-                    shaded = c * (ambient + (1.0 - ambient) * fibre)
-                    ti.atomic_min(samples[x, y], pack(mu[0] * a[2] + mu[1] * b[2], shaded))
+            for x in range(x0, x1):
+                for y in range(y0, y1):
+                    centre = ti.Vector([x + 0.5, y + 0.5])
+                    u = 0.0
+                    if d.norm_sqr() > 0:
+                        u = ti.math.clamp((centre - sa).dot(d) / d.norm_sqr(), 0.0, 1.0)
+                    if (centre - sa - u * d).norm_sqr() <= half * half:
+                        q = ti.Vector([(1 - u) * a[3], u * b[3]])
+                        mu = q / q.sum()
+                        c = mu[0] * row3(colour, i) + mu[1] * row3(colour, j)
+                        shaded = c * (ambient + (1.0 - ambient) * fibre)
+                        ti.atomic_min(samples[x, y], pack(mu[0] * a[2] + mu[1] * b[2], shaded))
 
 
 @backend.kernel
@@ -250,9 +269,10 @@ def raster_discs(samples: samples_type, cam: ndarray_f32_1, position: ndarray_f3
             s = ti.Vector([p[0], p[1]])
             x0, x1, y0, y1 = bounding_box(s - radius, s + radius, samples)
             key = pack(p[2] * (1.0 - depth_bias), row3(colour, i))
-            for x, y in ti.ndrange((x0, x1), (y0, y1)):
-                if (ti.Vector([x + 0.5, y + 0.5]) - s).norm_sqr() <= radius * radius:
-                    ti.atomic_min(samples[x, y], key)
+            for x in range(x0, x1):
+                for y in range(y0, y1):
+                    if (ti.Vector([x + 0.5, y + 0.5]) - s).norm_sqr() <= radius * radius:
+                        ti.atomic_min(samples[x, y], key)
 
 
 @backend.kernel
@@ -260,15 +280,17 @@ def resolve(samples: samples_type, image: ti.types.ndarray(dtype=ti.u8, ndim=3),
             top: ti.math.vec3, bottom: ti.math.vec3, supersample: ti.i32):
     """Average supersample x supersample samples per pixel (a box filter); empty samples show
     the vertical background gradient. Writes (width, height, 3) uint8, origin bottom-left."""
-    for x, y in ti.ndrange(image.shape[0], image.shape[1]):
-        background = ti.math.mix(bottom, top, (y + 0.5) / image.shape[1])
-        total = ti.Vector([0.0, 0.0, 0.0])
-        for i, j in ti.ndrange(supersample, supersample):
-            key = samples[x * supersample + i, y * supersample + j]
-            if (key >> 32) == INF_BITS:
-                total += background
-            else:
-                total += ti.Vector([key & 255, (key >> 8) & 255, (key >> 16) & 255]) / 255.0
-        rgb = total / (supersample * supersample)
-        for k in ti.static(range(3)):
-            image[x, y, k] = ti.cast(ti.math.clamp(rgb[k], 0.0, 1.0) * 255.0 + 0.5, ti.u8)
+    for x in range(image.shape[0]):           # columns in parallel, rows in a serial loop
+        for y in range(image.shape[1]):
+            background = ti.math.mix(bottom, top, (y + 0.5) / image.shape[1])
+            total = ti.Vector([0.0, 0.0, 0.0])
+            for i in range(supersample):
+                for j in range(supersample):
+                    key = samples[x * supersample + i, y * supersample + j]
+                    if (key >> 32) == INF_BITS:
+                        total += background
+                    else:
+                        total += ti.Vector([key & 255, (key >> 8) & 255, (key >> 16) & 255]) / 255.0
+            rgb = total / (supersample * supersample)
+            for k in ti.static(range(3)):
+                image[x, y, k] = ti.cast(ti.math.clamp(rgb[k], 0.0, 1.0) * 255.0 + 0.5, ti.u8)

@@ -135,33 +135,34 @@ def raster_plane(samples: samples_type, cam: ndarray_f32_1, point: ti.math.vec3,
     shadows: the light's shadow map (`shadow`, seen by `light_cam`) darkens it by `darkness`
     where it is covered (shadowed). clear_first: the frame's clear fused into this pass (one
     sweep over the samples, not two)."""
-    for x, y in samples:
-        o, d = camera_ray(cam, x, y)
-        denominator = d.dot(normal)
-        key = ti.i64(EMPTY)
-        if ti.abs(denominator) > 1e-9:
-            t = (point - o).dot(normal) / denominator
-            albedo = colour
-            if cell > 0:
-                p = o + t * d - point
-                cells = ti.cast(ti.floor(p.dot(axis_u) / cell), ti.i32) + ti.cast(
-                    ti.floor(p.dot(axis_v) / cell), ti.i32)
-                # a sample's footprint on the plane [m]: its size at depth t, stretched by the
-                # grazing angle; the checker fades to its mean as the footprint nears a cell
-                # (a box filter's limit: no aliasing)
-                size = ti.select(cam[15] != 0, 1.0, t) / cam[12]
-                footprint = size * d.norm() / ti.abs(denominator)
-                weight = contrast * ti.max(ti.min(1.0 - t / fade, 1.0 - footprint / cell), 0.0)
-                albedo = colour * (1.0 - 0.5 * contrast + weight * (0.5 - (cells & 1)))
-            if ti.static(shadows):
-                albedo *= 1.0 - darkness * shadowed(shadow, light_cam, o + t * d, bias)
-            facing = -ti.math.sign(denominator)
-            key = hit_key(t, depth_scale, cam[16], lambert(albedo, normal * facing, light,
-                                                           ambient))
-        if ti.static(clear_first):
-            samples[x, y] = key
-        else:
-            samples[x, y] = ti.min(samples[x, y], key)
+    for x in range(samples.shape[0]):      # columns in parallel, rows serially
+        for y in range(samples.shape[1]):
+            o, d = camera_ray(cam, x, y)
+            denominator = d.dot(normal)
+            key = ti.i64(EMPTY)
+            if ti.abs(denominator) > 1e-9:
+                t = (point - o).dot(normal) / denominator
+                albedo = colour
+                if cell > 0:
+                    p = o + t * d - point
+                    cells = ti.cast(ti.floor(p.dot(axis_u) / cell), ti.i32) + ti.cast(
+                        ti.floor(p.dot(axis_v) / cell), ti.i32)
+                    # a sample's footprint on the plane [m]: its size at depth t, stretched by the
+                    # grazing angle; the checker fades to its mean as the footprint nears a cell
+                    # (a box filter's limit: no aliasing)
+                    size = ti.select(cam[15] != 0, 1.0, t) / cam[12]
+                    footprint = size * d.norm() / ti.abs(denominator)
+                    weight = contrast * ti.max(ti.min(1.0 - t / fade, 1.0 - footprint / cell), 0.0)
+                    albedo = colour * (1.0 - 0.5 * contrast + weight * (0.5 - (cells & 1)))
+                if ti.static(shadows):
+                    albedo *= 1.0 - darkness * shadowed(shadow, light_cam, o + t * d, bias)
+                facing = -ti.math.sign(denominator)
+                key = hit_key(t, depth_scale, cam[16], lambert(albedo, normal * facing, light,
+                                                               ambient))
+            if ti.static(clear_first):
+                samples[x, y] = key
+            else:
+                samples[x, y] = ti.min(samples[x, y], key)
 
 
 @backend.kernel
@@ -171,14 +172,15 @@ def raster_solid(samples: samples_type, cam: ndarray_f32_1, shape: ti.template()
     """A sphere (centre a, radius), a box (corners a, b) or a capsule (segment a-b, radius);
     `shape` (colliders.SPHERE, BOX or CAPSULE) picks the ray test at compile time; depths
     times `depth_scale`, as raster_plane's."""
-    for x, y in samples:
-        o, d, depth_per_t = unit_camera_ray(cam, x, y)
-        t, n = MISS, ti.Vector([0.0, 0.0, 0.0])
-        if ti.static(shape == SPHERE):
-            t, n = hit_sphere(o, d, a, radius)
-        elif ti.static(shape == BOX):
-            t, n = hit_box(o, d, a, b)
-        else:
-            t, n = hit_capsule(o, d, a, b, radius)
-        plot_hit(samples, x, y, t, depth_per_t * depth_scale, cam[16],
-                 lambert(colour, n, light, ambient))
+    for x in range(samples.shape[0]):      # columns in parallel, rows serially
+        for y in range(samples.shape[1]):
+            o, d, depth_per_t = unit_camera_ray(cam, x, y)
+            t, n = MISS, ti.Vector([0.0, 0.0, 0.0])
+            if ti.static(shape == SPHERE):
+                t, n = hit_sphere(o, d, a, radius)
+            elif ti.static(shape == BOX):
+                t, n = hit_box(o, d, a, b)
+            else:
+                t, n = hit_capsule(o, d, a, b, radius)
+            plot_hit(samples, x, y, t, depth_per_t * depth_scale, cam[16],
+                     lambert(colour, n, light, ambient))
