@@ -13,6 +13,14 @@ MISS = -1.0
 
 
 @ti.func
+def camera_values(cam: ti.template()):
+    """The packed camera (Camera.packed) as a local vector: read once per column of samples,
+    where the loop over them would read the ndarray again for every sample (the compiler
+    cannot assume the samples written do not alias it)."""
+    return ti.Vector([cam[k] for k in ti.static(range(17))])
+
+
+@ti.func
 def camera_ray(cam: ti.template(), x, y):
     """Ray through the centre of sample (x, y): origin and direction, scaled so that its
     component along the viewing direction is 1 (t is then the depth)."""
@@ -136,8 +144,9 @@ def raster_plane(samples: samples_type, cam: ndarray_f32_1, point: ti.math.vec3,
     where it is covered (shadowed). clear_first: the frame's clear fused into this pass (one
     sweep over the samples, not two)."""
     for x in range(samples.shape[0]):      # columns in parallel, rows serially
+        view, light_view = camera_values(cam), camera_values(light_cam)
         for y in range(samples.shape[1]):
-            o, d = camera_ray(cam, x, y)
+            o, d = camera_ray(view, x, y)
             denominator = d.dot(normal)
             key = ti.i64(EMPTY)
             if ti.abs(denominator) > 1e-9:
@@ -150,15 +159,15 @@ def raster_plane(samples: samples_type, cam: ndarray_f32_1, point: ti.math.vec3,
                     # a sample's footprint on the plane [m]: its size at depth t, stretched by the
                     # grazing angle; the checker fades to its mean as the footprint nears a cell
                     # (a box filter's limit: no aliasing)
-                    size = ti.select(cam[15] != 0, 1.0, t) / cam[12]
+                    size = ti.select(view[15] != 0, 1.0, t) / view[12]
                     footprint = size * d.norm() / ti.abs(denominator)
                     weight = contrast * ti.max(ti.min(1.0 - t / fade, 1.0 - footprint / cell), 0.0)
                     albedo = colour * (1.0 - 0.5 * contrast + weight * (0.5 - (cells & 1)))
                 if ti.static(shadows):
-                    albedo *= 1.0 - darkness * shadowed(shadow, light_cam, o + t * d, bias)
+                    albedo *= 1.0 - darkness * shadowed(shadow, light_view, o + t * d, bias)
                 facing = -ti.math.sign(denominator)
-                key = hit_key(t, depth_scale, cam[16], lambert(albedo, normal * facing, light,
-                                                               ambient))
+                key = hit_key(t, depth_scale, view[16], lambert(albedo, normal * facing, light,
+                                                                ambient))
             if ti.static(clear_first):
                 samples[x, y] = key
             else:
@@ -173,8 +182,9 @@ def raster_solid(samples: samples_type, cam: ndarray_f32_1, shape: ti.template()
     `shape` (colliders.SPHERE, BOX or CAPSULE) picks the ray test at compile time; depths
     times `depth_scale`, as raster_plane's."""
     for x in range(samples.shape[0]):      # columns in parallel, rows serially
+        view = camera_values(cam)
         for y in range(samples.shape[1]):
-            o, d, depth_per_t = unit_camera_ray(cam, x, y)
+            o, d, depth_per_t = unit_camera_ray(view, x, y)
             t, n = MISS, ti.Vector([0.0, 0.0, 0.0])
             if ti.static(shape == SPHERE):
                 t, n = hit_sphere(o, d, a, radius)
@@ -182,5 +192,5 @@ def raster_solid(samples: samples_type, cam: ndarray_f32_1, shape: ti.template()
                 t, n = hit_box(o, d, a, b)
             else:
                 t, n = hit_capsule(o, d, a, b, radius)
-            plot_hit(samples, x, y, t, depth_per_t * depth_scale, cam[16],
+            plot_hit(samples, x, y, t, depth_per_t * depth_scale, view[16],
                      lambert(colour, n, light, ambient))
