@@ -99,7 +99,7 @@ import taichi as ti
 from ..geometry import segment_distance, triangle_distance
 from ..runtime import backend
 from ..runtime.plan import ITEM, STATE, Loop, Once, Phase, Until
-from .broad_phase.contact_pairs import torn_pair
+from .broad_phase.contact_pairs import span_middle, torn_pair
 from .colliders.collision import taken_at
 
 MARGIN = 1e-6       # relative: (1) needs d0 + d1 > R (1 + MARGIN), (2) |b_k| > MARGIN max |b_k|
@@ -222,7 +222,7 @@ def keep_frame(stage: ti.template(), k: ti.i32):
     """frames[k] = the middle of span (displacement_box's last box): c0 (k = 0), c1 (1), or
     self_collision.py's step's common motion (2)."""
     for _ in range(1):
-        stage.frames[k] = 0.5 * (stage.span[0] + stage.span[1])
+        stage.frames[k] = span_middle(stage)
 
 
 @ti.func

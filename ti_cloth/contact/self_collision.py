@@ -164,6 +164,7 @@ from .broad_phase.contact_pairs import (
     list_pairs,
     mean_edge,
     prefix_pairs,
+    span_middle,
     sweep_boxes,
     torn_pair,
 )
@@ -713,7 +714,9 @@ class SelfCollisionStage:
         meet) and are now nearer than that plus how far they moved relative to each other.
         The skin is SKIN thicknesses, or LEAN_SKIN after a step that moved two particles
         apart by more than FAST x SKIN thicknesses: such a list would not outlast the next
-        step or two whatever its skin, and a lean one lists fewer pairs (module doc)."""
+        step or two whatever its skin, and a lean one lists fewer pairs (module doc). The
+        step's displacement box is measured again here: _moved_past left span holding the
+        box since the list, and sweep_boxes takes the step's."""
         thickness = self.settings.thickness
         moved = displacement_box(self, state.particle_position, self.step_start)
         self.skin = LEAN_SKIN if moved > FAST * SKIN * thickness else SKIN
@@ -957,7 +960,7 @@ def begin_passes(stage: ti.template()):
     stage.left_deep[None] = 0
     stage.frame[None] = ti.Vector([0.0, 0.0, 0.0])
     if not stage.full[None]:        # span: the displacements since the list (after_step)
-        stage.frame[None] = 0.5 * (stage.span[0] + stage.span[1])
+        stage.frame[None] = span_middle(stage)
 
 
 @ti.func

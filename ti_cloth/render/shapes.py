@@ -151,23 +151,25 @@ def raster_plane(samples: samples_type, cam: ndarray_f32_1, point: ti.math.vec3,
             key = ti.i64(EMPTY)
             if ti.abs(denominator) > 1e-9:
                 t = (point - o).dot(normal) / denominator
-                albedo = colour
-                if cell > 0:
-                    p = o + t * d - point
-                    cells = ti.cast(ti.floor(p.dot(axis_u) / cell), ti.i32) + ti.cast(
-                        ti.floor(p.dot(axis_v) / cell), ti.i32)
-                    # a sample's footprint on the plane [m]: its size at depth t, stretched by the
-                    # grazing angle; the checker fades to its mean as the footprint nears a cell
-                    # (a box filter's limit: no aliasing)
-                    size = ti.select(view[15] != 0, 1.0, t) / view[12]
-                    footprint = size * d.norm() / ti.abs(denominator)
-                    weight = contrast * ti.max(ti.min(1.0 - t / fade, 1.0 - footprint / cell), 0.0)
-                    albedo = colour * (1.0 - 0.5 * contrast + weight * (0.5 - (cells & 1)))
-                if ti.static(shadows):
-                    albedo *= 1.0 - darkness * shadowed(shadow, light_view, o + t * d, bias)
-                facing = -ti.math.sign(denominator)
-                key = hit_key(t, depth_scale, view[16], lambert(albedo, normal * facing, light,
-                                                                ambient))
+                if t >= 0 and t * depth_scale > view[16]:    # a hit in front: shaded
+                    albedo = colour
+                    if cell > 0:
+                        p = o + t * d - point
+                        cells = ti.cast(ti.floor(p.dot(axis_u) / cell), ti.i32) + ti.cast(
+                            ti.floor(p.dot(axis_v) / cell), ti.i32)
+                        # a sample's footprint on the plane [m]: its size at depth t, stretched
+                        # by the grazing angle; the checker fades to its mean as the footprint
+                        # nears a cell (a box filter's limit: no aliasing)
+                        size = ti.select(view[15] != 0, 1.0, t) / view[12]
+                        footprint = size * d.norm() / ti.abs(denominator)
+                        weight = contrast * ti.max(ti.min(1.0 - t / fade, 1.0 - footprint / cell),
+                                                   0.0)
+                        albedo = colour * (1.0 - 0.5 * contrast + weight * (0.5 - (cells & 1)))
+                    if ti.static(shadows):
+                        albedo *= 1.0 - darkness * shadowed(shadow, light_view, o + t * d, bias)
+                    facing = -ti.math.sign(denominator)
+                    key = hit_key(t, depth_scale, view[16],
+                                  lambert(albedo, normal * facing, light, ambient))
             if ti.static(clear_first):
                 samples[x, y] = key
             else:

@@ -89,6 +89,12 @@ def displacement_box(stage: ti.template(), positions: ti.template(), since: ti.t
     return ti.cast((stage.span[1] - stage.span[0]).norm(), ti.f64)
 
 
+@ti.func
+def span_middle(stage: ti.template()):
+    """The middle of displacement_box's last box: the displacements' common motion."""
+    return 0.5 * (stage.span[0] + stage.span[1])
+
+
 @backend.kernel
 def sweep_boxes(stage: ti.template(), state: ti.template()):
     """Each particle's and each edge's box over the step: the box of its positions now and at
@@ -98,7 +104,7 @@ def sweep_boxes(stage: ti.template(), state: ti.template()):
     frame exactly when they do in the other - and it shrinks the boxes of a body moving as a
     whole to its motion relative to itself."""
     for _ in range(1):
-        stage.shift[None] = 0.5 * (stage.span[0] + stage.span[1])
+        stage.shift[None] = span_middle(stage)
     x = ti.static(state.particle_position)
     for i in range(stage.particle_count):
         start = _start(stage, i)
