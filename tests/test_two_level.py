@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
+from ti_cloth.integrators import coarse
 
 
 def spring_sheet(n: int) -> tc.Cloth:
@@ -65,6 +66,59 @@ def test_an_exact_coarse_level_makes_the_solve_blind_to_the_mesh(f64, make):
     assert jacobi[1] > 2 * jacobi[0]
     assert exact[1] <= exact[0] + 3
     assert exact[1] * 10 < jacobi[1]
+
+
+def test_a_narrow_body_is_its_own_coarse_level_by_default(f64):
+    """A body whose particles lie in a Cuthill-McKee band of at most coarse.EXACT_BAND
+    particles (hair strands, a sheet 14 particles wide) is its own coarse level by default:
+    its solve is aggregate_size=1's, iteration for iteration, where aggregates of 12 particles
+    leave a chain's stiff bending to the diagonal (the hair demo's CG ran out of its 200
+    iterations in most steps). A sheet wider than the band keeps its aggregates."""
+    hair = strands(18)
+    assert coarse.Layout(hair).count == hair.particle_count
+    default, exact, aggregated = (iterations(strands(18), "two-level", size)
+                                  for size in (None, 1, 12))
+    print(f"two strands of 18 segments: default {default}, an aggregate per particle {exact}, "
+          f"aggregates of 12 {aggregated} CG iterations")
+    assert default == exact and 5 * default < aggregated
+    for n in (14, 17):
+        layout = coarse.Layout(membrane_sheet(n))
+        print(f"{n} x {n} sheet: {layout.count} aggregates, band {layout.band}")
+        assert (layout.count == n * n) == (n <= coarse.EXACT_BAND)
+        assert layout.count < n * n or layout.band <= coarse.EXACT_BAND
+
+
+@pytest.mark.parametrize("graph", ["grid", "chain", "random"])
+def test_cuthill_mckee_gives_up_only_on_a_band_wider_than_asked(graph):
+    """The order is given up (None) only where its band exceeds `most`, and otherwise it is
+    the order made without a limit: the queue's length is a lower bound of the band."""
+    rng = np.random.default_rng(7)
+    gave_up = kept = 0
+    for size in (4, 9, 14, 20):
+        if graph == "grid":
+            index = np.arange(size * size).reshape(size, size)
+            pairs = np.concatenate([np.stack([index[:, :-1].ravel(), index[:, 1:].ravel()], 1),
+                                    np.stack([index[:-1].ravel(), index[1:].ravel()], 1)])
+            count = size * size
+        elif graph == "chain":
+            count = 10 * size
+            pairs = np.stack([np.arange(count - 2), np.arange(count - 2) + 2], 1)
+        else:
+            count = 6 * size
+            pairs = np.unique(np.sort(rng.integers(0, count, (3 * count, 2)), axis=1), axis=0)
+            pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+        full = coarse.cuthill_mckee(pairs, count)
+        assert sorted(full) == list(range(count))
+        band = int(np.abs(full[pairs[:, 0]] - full[pairs[:, 1]]).max())
+        for most in (2, 5, 8, 12, 16):
+            limited = coarse.cuthill_mckee(pairs, count, most)
+            if limited is None:
+                assert band > most
+                gave_up += 1
+            else:
+                assert np.array_equal(limited, full)
+                kept += 1
+    assert kept and (gave_up or graph == "chain")     # a chain is never wide
 
 
 def pinned_edge() -> tuple:

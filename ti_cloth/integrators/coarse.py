@@ -29,6 +29,13 @@ sewn group of particles whole (the solve's P of seams, conjugate_gradients.py, i
 constant on them); a pinned particle, and every particle of a pinned group, is in no
 aggregate's P. An aggregate left with no free particle solves for 0.
 
+A body narrow enough (its particles' Cuthill-McKee band at most EXACT_BAND: hair and strings,
+whose strands are chains, or a sheet at most that many particles wide) is its own coarse
+level: an aggregate per particle, A_c = A but for the hinges, P the identity on the free
+particles, and CG runs on I + D^-1 A, a few iterations whatever the stiffness (the hair
+demo's stiff strands took 10-13 a step, where aggregates of a strand each, translations only,
+left their bending to the diagonal and CG ran out of its 200 iterations in most steps).
+
 A_c is dense in a band: aggregates are numbered by Cuthill-McKee order (breadth first from a
 least-connected one, neighbours by degree), so two that share a triangle or a spring are at
 most `band` apart, and A_c (3 x aggregates square) is factored in its band, L L^T (Cholesky,
@@ -51,6 +58,7 @@ from ..runtime.transfer import upload
 
 AGGREGATES = 96     # aggregates a body is split into, about (each at least SMALLEST)
 SMALLEST = 12       # particles of an aggregate, at least (smaller ones join a neighbour)
+EXACT_BAND = 15     # a body whose particles lie in a band this wide is its own coarse level
 
 
 def coupled_pairs(cloth) -> np.ndarray:
@@ -109,52 +117,77 @@ def aggregates(cloth, size: int) -> np.ndarray:
     return owner[weld]
 
 
-def cuthill_mckee(coupled: set, count: int) -> np.ndarray:
-    """The rank of each of `count` nodes in Cuthill-McKee order of the graph of `coupled`
-    pairs: breadth first from a node of least degree, neighbours by (degree, index)."""
-    neighbours = [[] for _ in range(count)]
-    for a, b in coupled:
-        neighbours[a].append(b)
-        neighbours[b].append(a)
-    degree = [len(n) for n in neighbours]
-    order, seen = [], [False] * count
-    for start in sorted(range(count), key=lambda k: (degree[k], k)):
-        if seen[start]:
+def cuthill_mckee(pairs: np.ndarray, count: int, most: int | None = None) -> np.ndarray | None:
+    """The rank of each of `count` nodes in Cuthill-McKee order of the graph of `pairs`
+    ((P, 2), each pair once): breadth first from a node of least degree, neighbours by
+    (degree, index). With `most`: None as soon as the order's band must exceed it (when a
+    node is taken, the nodes found but not yet taken each follow it by their place in the
+    queue and were found from a node taken no later, so the band is at least the queue's
+    length): a wide graph is given up after about most^2 nodes."""
+    ends = np.concatenate([pairs, pairs[:, ::-1]]).reshape(-1, 2)
+    degree = np.bincount(ends[:, 0], minlength=count)
+    ends = ends[np.lexsort((ends[:, 1], degree[ends[:, 1]], ends[:, 0]))]
+    start = np.concatenate([[0], np.cumsum(degree)]).tolist()
+    neighbour = ends[:, 1].tolist()
+    rank = [-1] * count
+    found = 0                   # nodes ranked (in BFS, found and taken in the same order)
+    for root in np.lexsort((np.arange(count), degree)).tolist():
+        if rank[root] >= 0:
             continue
-        seen[start] = True
-        queue = deque([start])
+        rank[root] = found
+        found += 1
+        queue = deque([root])
         while queue:
+            if most is not None and len(queue) - 1 > most:
+                return None
             u = queue.popleft()
-            order.append(u)
-            for v in sorted(neighbours[u], key=lambda k: (degree[k], k)):
-                if not seen[v]:
-                    seen[v] = True
+            for v in neighbour[start[u]:start[u + 1]]:
+                if rank[v] < 0:
+                    rank[v] = found
+                    found += 1
                     queue.append(v)
-    rank = np.empty(count, np.int64)
-    rank[order] = np.arange(count)
-    return rank
+    return np.asarray(rank, np.int64)
 
 
 class Layout:
     """A body's aggregates for the coarse level: `aggregate` (N,) each particle's, numbered
     in Cuthill-McKee order; `count` aggregates; `band` the most two coupled aggregates are
-    apart; `start` / `member` each aggregate's particles in increasing order (CSR)."""
+    apart; `start` / `member` each aggregate's particles in increasing order (CSR).
+
+    size None: an aggregate per particle (or sewn group) where that order's band is at most
+    EXACT_BAND, A_c then A itself (strands, strings, small sheets: the band is their width in
+    particles); else about 1 / AGGREGATES of the body, at least SMALLEST particles each."""
 
     def __init__(self, cloth, size: int | None = None):
         n = cloth.particle_count
-        if size is None:
-            size = max(SMALLEST, -(-n // AGGREGATES))
-        owner = aggregates(cloth, size)
-        self.count = int(owner.max()) + 1 if n else 1
-        ends = owner[coupled_pairs(cloth)]
-        ends = np.sort(ends[ends[:, 0] != ends[:, 1]], axis=1)
-        coupled = {(int(a), int(b)) for a, b in np.unique(ends, axis=0)}
-        rank = cuthill_mckee(coupled, self.count)
-        self.aggregate = rank[owner]
-        self.band = max((abs(int(rank[a] - rank[b])) for a, b in coupled), default=0)
+        layout = None
+        if size in (None, 1):       # a particle (or sewn group) each
+            owner = np.unique(np.asarray(cloth.particle_weld, np.int64), return_inverse=True)[1]
+            layout = _ranked(owner, cloth, EXACT_BAND if size is None else None)
+            if layout is not None and size is None and layout[2] > EXACT_BAND:
+                layout = None
+        if layout is None:
+            layout = _ranked(aggregates(cloth, size or max(SMALLEST, -(-n // AGGREGATES))),
+                             cloth)
+        self.aggregate, self.count, self.band = layout
         self.start = np.concatenate([[0], np.cumsum(np.bincount(self.aggregate,
                                                                 minlength=self.count))])
         self.member = np.argsort(self.aggregate, kind="stable")
+
+
+def _ranked(owner: np.ndarray, cloth, most: int | None = None) -> tuple | None:
+    """(each particle's aggregate in Cuthill-McKee order, the aggregates, the band) of the
+    aggregates `owner` (N,) numbers; None where the band must exceed `most`."""
+    count = int(owner.max()) + 1 if len(owner) else 1
+    ends = owner[coupled_pairs(cloth)] if len(owner) else np.zeros((0, 2), np.int64)
+    ends = np.sort(ends[ends[:, 0] != ends[:, 1]], axis=1)
+    keys = np.unique(ends[:, 0] * count + ends[:, 1])      # each pair once, in row order
+    coupled = np.stack([keys // count, keys % count], axis=1)
+    rank = cuthill_mckee(coupled, count, most)
+    if rank is None:
+        return None
+    band = np.abs(rank[coupled[:, 0]] - rank[coupled[:, 1]]).max(initial=0)
+    return rank[owner], count, int(band)
 
 
 def add_fields(ws, fields, layout: Layout) -> None:

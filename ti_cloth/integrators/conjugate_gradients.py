@@ -57,7 +57,9 @@ class Preconditioner:
 
     kind: "two-level" (the 3x3 diagonal and a coarse level of aggregates: coarse.py) or
         "jacobi" (the 3x3 diagonal alone).
-    aggregate_size: particles per aggregate of the coarse level, >= 1; None: about
+    aggregate_size: particles per aggregate of the coarse level, >= 1; None: one (the coarse
+        level is then the whole system, solved exactly) where the body's particles lie in a
+        band of coarse.EXACT_BAND (hair, strings, narrow sheets), else about
         1 / coarse.AGGREGATES of the body, at least coarse.SMALLEST.
     """
 
