@@ -2,6 +2,8 @@
 same linear system, the exact energy decay of backward Euler, and the Hookean statics."""
 
 
+import warnings
+
 import numpy as np
 import pytest
 from helpers import report, stretched_energy_ratios
@@ -89,6 +91,37 @@ def test_implicit_cg_stops_at_its_tolerance(f64):
         first[tol] = integrator.last_iterations
     report("CG iterations by tolerance", first, "fewer for 1e-3")
     assert first[1e-3] < first[1e-9]
+
+
+def test_a_solve_that_runs_out_of_iterations_is_counted_and_warned_once(f64):
+    """A step whose solve stops at its cap short of its tolerance is damped, not the implicit
+    step asked for: each is counted (unconverged_solves) and the first warned of. Implicit
+    Euler's count follows its own report, the residual each step leaves (one step at a time),
+    and a batch of steps in one launch counts every one; a Newton integrator counts each of
+    its solves (TR-BDF2: two a step); solves that converge count nothing."""
+    cloth = tc.Cloth(tc.grid_mesh(10, 10, (0.5, 0.5)), tc.Material(), pinned=[0, 9])
+    short = tc.ImplicitEuler(tolerance=1e-8, max_iterations=3)
+    sim = tc.Simulation(cloth, integrator=short, dt=1 / 60)
+    with pytest.warns(RuntimeWarning, match="max_iterations=3") as caught:
+        ran_out = 0
+        for _ in range(5):
+            sim.step(1)
+            ran_out += short.last_residual > short.tolerance
+            assert short.unconverged_solves == ran_out
+        sim.step(4)
+    assert ran_out == 5 and short.unconverged_solves == 9
+    assert sum(issubclass(w.category, RuntimeWarning) for w in caught) == 1
+    for make, per_step in ((tc.ImplicitMidpoint, 1), (tc.TRBDF2, 2)):
+        newton = make(tolerance=1e-14, most_newton=2)
+        with pytest.warns(RuntimeWarning, match="most_newton=2"):
+            tc.Simulation(cloth, integrator=newton, dt=1 / 60).step(3)
+        assert newton.unconverged_solves == 3 * per_step
+    for enough in (tc.ImplicitEuler(tolerance=1e-8, max_iterations=500), tc.ImplicitMidpoint()):
+        sim = tc.Simulation(cloth, integrator=enough, dt=1 / 120)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", RuntimeWarning)
+            sim.step(5)
+        assert enough.unconverged_solves == 0
 
 
 @pytest.mark.parametrize("integrator", ["implicit_euler", "xpbd"])

@@ -2,6 +2,7 @@
 written once as phases (runtime/plan.py)."""
 
 import math
+import warnings
 from typing import ClassVar
 
 from ..body.modes import stiffest_mode
@@ -105,3 +106,29 @@ class Integrator:
     def __repr__(self) -> str:
         opts = ", ".join(f"{k}={v!r}" for k, v in self.options().items())
         return f"{type(self).__name__}({opts})"
+
+
+def report_unconverged(integrator, stepper, reason: str) -> None:
+    """Count into integrator.unconverged_solves the solves of the steps just taken that
+    stopped at their cap short of their tolerance (`stepper`'s ran_out_pending, summed over
+    its launches by after_launch from the workspace's RAN_OUT, which it clears; `stepper` may
+    be `integrator`), and warn of the first (RuntimeWarning, once per integrator) with
+    `reason`."""
+    new, stepper.ran_out_pending = stepper.ran_out_pending, 0
+    integrator.unconverged_solves += new
+    if new and not integrator.warned_unconverged:
+        integrator.warned_unconverged = True
+        warnings.warn(
+            f"{integrator.name}: {new} of the solves just made ended with {reason}: "
+            "such a step is damped, not the implicit step asked for. Raise the cap or take "
+            f"smaller steps; {type(integrator).__name__}.unconverged_solves counts them (warned "
+            "once)", RuntimeWarning, stacklevel=4)
+
+
+def take_ran_out(work, slot: int) -> int:
+    """The solves a launch left counted in work.iterations[slot] (row 0), cleared for the
+    next launch (a workspace may serve another simulation next: pool.py)."""
+    count = int(work.iterations[slot])
+    if count:
+        work.iterations[slot] = 0
+    return count

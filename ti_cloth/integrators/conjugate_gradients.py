@@ -45,7 +45,7 @@ from . import coarse, implicit_elements
 BLOCK = 64                      # particles per partial sum of a dot product
 TYPICAL_ITERATIONS = 20         # CG iterations a step is assumed to take (sizing launches)
 ALPHA, RZ, RR, BB, BETA, CHANGE = range(6)  # slots of a row of the workspace's scalar field
-CG, NEWTON, CG_TOTAL = range(3)     # slots of a row of its iteration counts
+CG, NEWTON, CG_TOTAL, RAN_OUT = range(4)   # slots of a row of its iteration counts
 ROW = 16                        # slots per row (a worker's row fills its own cache line)
 
 
@@ -358,6 +358,15 @@ def unconverged(ws: ti.template(), now: ti.template(), tolerance: ti.template(),
     row = now.row
     return (ti.f64(ws.scalar[row * ROW + RR]) > ti.f64(tolerance ** 2) * ti.f64(ws.scalar[row * ROW + BB])
             and ws.iterations[row * ROW] < most)
+
+
+@ti.func
+def count_ran_out(ws: ti.template(), now: ti.template(), tolerance: ti.template()):
+    """One more step whose CG stopped at its cap with |r| > tolerance |b| (RAN_OUT counts
+    them in a launch: after_launch takes and clears it)."""
+    row = now.row * ROW
+    if ti.f64(ws.scalar[row + RR]) > ti.f64(tolerance ** 2) * ti.f64(ws.scalar[row + BB]):
+        ws.iterations[row + RAN_OUT] = ws.iterations[row + RAN_OUT] + 1
 
 
 def linearisation(model, forces, ws, start: Loop) -> tuple:

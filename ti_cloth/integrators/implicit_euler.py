@@ -26,12 +26,13 @@ import taichi as ti
 
 from ..inputs import limits
 from ..inputs.validation import count, finite_number, require
-from ..runtime.plan import ITEM, NOW, STATE, Loop, Phase
+from ..runtime.plan import ITEM, NOW, STATE, Loop, Once, Phase
 from ..state import store_particle
 from . import conjugate_gradients, fused
-from .base import Integrator
+from .base import Integrator, report_unconverged, take_ran_out
 from .conjugate_gradients import (
     BB,
+    RAN_OUT,
     RR,
     TYPICAL_ITERATIONS,
     Preconditioner,
@@ -74,8 +75,8 @@ class ImplicitEuler(Integrator):
 
     tolerance: CG stops when |r| <= tolerance |b| (relative residual), in (0, 1).
     max_iterations: CG iterations per step at most, >= 1; a step that needs more keeps its
-        best iterate (still damped, not exact). last_iterations and last_residual report the
-        latest solve.
+        best iterate (still damped, not exact), is counted in unconverged_solves and, the first
+        time, warned of. last_iterations and last_residual report the latest solve.
     preconditioner, aggregate_size: CG's (conjugate_gradients.Preconditioner).
     Order 1. Unconditionally stable for the linearised springs: stiff springs and large steps
     damp out (numerical dissipation grows with h k / m) instead of blowing up.
@@ -93,6 +94,8 @@ class ImplicitEuler(Integrator):
         self.preconditioner = Preconditioner("ImplicitEuler", preconditioner, aggregate_size)
         self.last_iterations = 0
         self.last_residual = 0.0
+        self.unconverged_solves = self.ran_out_pending = 0
+        self.warned_unconverged = False
 
     def options(self):
         return {"tolerance": self.tolerance, "max_iterations": self.max_iterations,
@@ -101,6 +104,9 @@ class ImplicitEuler(Integrator):
     def copy_reports(self, stepper):
         self.last_iterations = stepper.last_iterations
         self.last_residual = stepper.last_residual
+        report_unconverged(self, stepper,
+                           f"CG stopped at max_iterations={self.max_iterations} with its "
+                           f"relative residual above tolerance={self.tolerance:g}")
 
     def workspace(self, model, state):
         return self.preconditioner.workspace(self, model, state)
@@ -115,6 +121,7 @@ class ImplicitEuler(Integrator):
         self.last_iterations = int(work.iterations[0])
         bb = work.scalar[BB]
         self.last_residual = math.sqrt(work.scalar[RR] / bb) if bb > 0 else 0.0
+        self.ran_out_pending += take_ran_out(work, RAN_OUT)
 
     def linearisation(self, model, forces, ws):
         """f_n and the linearisation at x_n, the CG start b = h (f_n + h K v_n) (a part of
@@ -131,5 +138,6 @@ class ImplicitEuler(Integrator):
         step."""
         return (self.linearisation(model, forces, ws)
                 + (conjugate_gradients.solve(model, forces, ws, self.tolerance,
-                                             self.max_iterations),)
+                                             self.max_iterations),
+                   Once(conjugate_gradients.count_ran_out, ws, NOW, float(self.tolerance)))
                 + (Phase(Loop(ws.block_count, _advance_block, model, STATE, ws, ITEM, NOW)),))

@@ -35,12 +35,13 @@ from ..inputs import limits
 from ..inputs.validation import count, finite_number, require
 from ..runtime.plan import ITEM, NOW, STATE, Loop, Once, Phase, Until
 from . import conjugate_gradients, fused
-from .base import Integrator
+from .base import Integrator, report_unconverged, take_ran_out
 from .conjugate_gradients import (
     CG,
     CG_TOTAL,
     CHANGE,
     NEWTON,
+    RAN_OUT,
     ROW,
     TYPICAL_ITERATIONS,
     Preconditioner,
@@ -119,6 +120,15 @@ def _unconverged(ws: ti.template(), now: ti.template(), tolerance: ti.template()
 
 
 @ti.func
+def _count_ran_out(ws: ti.template(), now: ti.template(), tolerance: ti.template()):
+    """One more solve that stopped at most_newton with its last update above `tolerance`
+    (RAN_OUT counts them in a launch: after_launch takes and clears it)."""
+    row = now.row * ROW
+    if ws.scalar[row + CHANGE] > tolerance:
+        ws.iterations[row + RAN_OUT] = ws.iterations[row + RAN_OUT] + 1
+
+
+@ti.func
 def predict(model: ti.template(), state: ti.template(), ws: ti.template(), i,
             now: ti.template()):
     """The explicit predictor of particle i's solve: x = x^ + s v^, v = v^."""
@@ -168,7 +178,8 @@ def solve(settings: NewtonSettings, model, forces, ws) -> tuple:
                     Once(_end_iteration, ws, NOW)))
     return (Once(_begin_newton, ws, NOW),
             Until(_unconverged, *iteration,
-                  args=(ws, NOW, settings.tolerance, settings.most_newton)))
+                  args=(ws, NOW, settings.tolerance, settings.most_newton)),
+            Once(_count_ran_out, ws, NOW, settings.tolerance))
 
 
 class NewtonIntegrator(Integrator):
@@ -177,7 +188,9 @@ class NewtonIntegrator(Integrator):
 
     tolerance, most_newton, cg_tolerance, most_cg, preconditioner, aggregate_size: each
         solve's (NewtonSettings).
-    last_newton and last_cg report the latest solve's Newton and CG iterations.
+    last_newton and last_cg report the latest solve's Newton and CG iterations;
+    unconverged_solves counts the solves (a step has `solves`) that stopped at most_newton
+    with their last update above the tolerance (the first warned of).
     """
 
     step_limited = False
@@ -193,6 +206,8 @@ class NewtonIntegrator(Integrator):
         self.settings = NewtonSettings(type(self).__name__, tolerance, most_newton,
                                        cg_tolerance, most_cg, preconditioner, aggregate_size)
         self.last_newton = self.last_cg = 0
+        self.unconverged_solves = self.ran_out_pending = 0
+        self.warned_unconverged = False
 
     def options(self):
         return self.settings.options()
@@ -210,6 +225,11 @@ class NewtonIntegrator(Integrator):
     def after_launch(self, work):
         self.last_newton = int(work.iterations[NEWTON])
         self.last_cg = int(work.iterations[CG_TOTAL])
+        self.ran_out_pending += take_ran_out(work, RAN_OUT)
 
     def copy_reports(self, stepper):
         self.last_newton, self.last_cg = stepper.last_newton, stepper.last_cg
+        settings = self.settings
+        report_unconverged(self, stepper,
+                           f"Newton stopped at most_newton={settings.most_newton} with its "
+                           f"last update above tolerance={settings.tolerance:g} m")
