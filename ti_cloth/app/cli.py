@@ -14,6 +14,7 @@ from pathlib import Path
 
 from ..errors import OutputError
 from ..inputs import limits
+from . import drape
 
 TEST_FRAMES, TEST_SIZE = 4, (160, 96)
 OUTPUT_FAILED = 74        # sysexits.h's EX_IOERR: a file could not be written
@@ -525,8 +526,10 @@ def build_parser() -> argparse.ArgumentParser:
     fit_parser.add_argument("scan", type=Path, nargs="?",
                             help="a Cusick drape scan (OBJ, PLY, ... in metres) or a top-view "
                                  "silhouette image (PNG, JPEG, ...: with --pixel), with --cusick")
-    fit_parser.add_argument("--seconds", type=float, default=2.0,
-                            help="each simulated drape's settling time [s] (default 2)")
+    fit_parser.add_argument("--seconds", type=float, default=drape.MOST_SECONDS,
+                            help="the longest each simulated drape may take to settle (no "
+                                 "point faster than 0.1 mm/s) [s] (default "
+                                 f"{drape.MOST_SECONDS:g})")
     fit_parser.add_argument("--pixel", type=float,
                             help="a silhouette image's pixel side [m]")
     fit_parser.add_argument("--cusick", action="store_true",
@@ -596,7 +599,6 @@ def fit_drape(args) -> int:
     from tqdm import tqdm
 
     from ..runtime import backend
-    from . import drape
 
     if args.scan is None or not args.cusick:
         print("error: a drape fit needs a scan and --cusick (ti-cloth fit SCAN --cusick "

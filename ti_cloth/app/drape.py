@@ -25,8 +25,11 @@ and drop anisotropy (a silhouette's coefficient and anisotropy), its bending (wa
 G (e^s, e^-s) with s >= 0 (a scan has no grain mark: the warp is taken along the scan's stiffer
 direction), by Gauss-Newton on (log G, s), its Jacobian by forward differences at the start and
 Broyden's secant updates after each step: a settle per iteration (simulate: the disc of `rings`
-rings clamped within the support's radius, settled by implicit Euler under drag), three at the
-start. Derivative-free in the solver's sense: the fold pattern of a drape is a bifurcation of its equilibrium, whose gradient through the implicit solver's
+rings clamped within the support's radius, settled by implicit Euler under drag until no point
+moves faster than SETTLED), three at the start. A drape can snap from one fold pattern to
+another late (a 12-ring disc at 2 s, its anisotropy moving 2 % and its folds from 2 to 4), so a
+settle runs until it is still, not for a fixed time: a drape measured while moving would be
+fitted to a shape no scan of a settled specimen has. Derivative-free in the solver's sense: the fold pattern of a drape is a bifurcation of its equilibrium, whose gradient through the implicit solver's
 Hessian says nothing about which folds appear; the measures fitted, the mean drop of the
 surface outside the support and its second harmonic (the fabric drops less along its stiffer
 direction), are area-weighted means of the points, continuous in them, and change smoothly with
@@ -39,6 +42,7 @@ reported is the change of the parameters that moves the measures by the fit's re
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,6 +59,11 @@ CONVERGED = 2e-3       # the fit stops once a step changes log G and s by less t
 STEP = 0.15            # the finite differences' step in log G and s
 ITERATIONS = 8         # Gauss-Newton steps at most
 START_SPLIT = 0.3      # s at the start: the drop's harmonic is flat in s at 0 (even in s)
+SETTLED = 1e-4         # a drape has settled once no point moves faster than this [m/s]
+SETTLE_CHECK = 0.1     # its speed is read this often [s]
+MOST_SECONDS = 8.0     # a settle stops after this long, still or not (warned of) [s]
+CG_ITERATIONS = 1000   # implicit Euler's CG cap in a settle: its default 200 stopped 96 % of
+                       # a 12-ring disc's solves short of their tolerance
 
 
 def shadow_cover(points: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -238,20 +247,34 @@ def read_scan(path, disc: float = DISC, support: float = SUPPORT):
 
 
 def simulate(fabric, disc: float = DISC, support: float = SUPPORT, rings: int = 12,
-             seconds: float = 2.0, dt: float = 1 / 200, drag: float = 5.0):
+             seconds: float = MOST_SECONDS, dt: float = 1 / 200, drag: float = 5.0):
     """(positions, triangles) of `fabric`'s disc draped on the support: a disc_mesh of
-    `rings` rings clamped within the support's radius, settled for `seconds` by implicit
-    Euler under `drag`."""
+    `rings` rings clamped within the support's radius, settled by implicit Euler under `drag`
+    until no point moves faster than SETTLED (read every SETTLE_CHECK), for `seconds` at most:
+    a drape still moving then is warned of (RuntimeWarning), its measures a moving drape's."""
     from ..body.mesh import disc_mesh
     from ..body.topology import Cloth
+    from ..integrators import ImplicitEuler
     from ..simulation import Simulation
 
+    seconds = finite_number("seconds", seconds, 0.0, strict=True, unit="s")
     mesh = disc_mesh(disc / 2, rings)
     radius = np.hypot(mesh.vertices[:, 0], mesh.vertices[:, 2])
     cloth = Cloth(mesh, fabric, pinned=np.flatnonzero(radius <= support / 2 + 1e-9),
                   warp=(1.0, 0.0, 0.0))
-    sim = Simulation(cloth, integrator="implicit_euler", dt=dt, drag=drag)
-    sim.step(round(seconds / dt))
+    sim = Simulation(cloth, integrator=ImplicitEuler(max_iterations=CG_ITERATIONS), dt=dt,
+                     drag=drag)
+    most, check, taken = max(1, round(seconds / dt)), max(1, round(SETTLE_CHECK / dt)), 0
+    while taken < most:
+        sim.step(min(check, most - taken))
+        taken += min(check, most - taken)
+        speed = float(np.linalg.norm(sim.velocities(), axis=1).max())
+        if speed < SETTLED:
+            return sim.positions(), mesh.triangles
+    warnings.warn(f"the Cusick drape had not settled after seconds={seconds:g} s: a point still "
+                  f"moves at {speed:.2g} m/s (settled: under {SETTLED:g} m/s), so its measures "
+                  "are a moving drape's; give it more seconds (ti-cloth fit --seconds)",
+                  RuntimeWarning, stacklevel=2)
     return sim.positions(), mesh.triangles
 
 
@@ -276,10 +299,11 @@ class DrapeFit:
 
 def fit_cusick(scan: Drape, weight: float, disc: float = DISC, support: float = SUPPORT,
                stretch: float = 1e3, shear: float = 50.0, rings: int = 12,
-               seconds: float = 2.0, iterations: int = ITERATIONS, progress=None) -> DrapeFit:
+               seconds: float = MOST_SECONDS, iterations: int = ITERATIONS,
+               progress=None) -> DrapeFit:
     """The Fabric of `weight` [g/m^2] whose simulated drape has the scan's drop and drop
-    anisotropy (a silhouette's: its coefficient and anisotropy; module doc); `progress(step)`
-    is called after each simulated drape."""
+    anisotropy (a silhouette's: its coefficient and anisotropy; module doc), each drape settled
+    for `seconds` at most (simulate); `progress(step)` is called after each simulated drape."""
     from ..body.fabric import Fabric
 
     density = finite_number("weight", weight, 0.0, strict=True, unit="g/m^2") / 1000.0
