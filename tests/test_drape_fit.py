@@ -34,7 +34,7 @@ def synthetic(tmp_path_factory):
     """KNOWN's drape, simulated as the fit does, turned and moved, written as an OBJ scan."""
     tc.init(arch="cpu", precision="f64")
     with warnings.catch_warnings():
-        warnings.simplefilter("error")          # settled, and every solve converged
+        warnings.simplefilter("error")          # settled
         x, triangles = drape.simulate(KNOWN, rings=RINGS)
     scan, rotation = turned(x, 3)
     path = tmp_path_factory.mktemp("scan") / "drape.obj"
@@ -130,11 +130,12 @@ def settled_for(fabric, *seconds):
     radius = np.hypot(mesh.vertices[:, 0], mesh.vertices[:, 2])
     cloth = tc.Cloth(mesh, fabric, pinned=np.flatnonzero(radius <= drape.SUPPORT / 2 + 1e-9),
                      warp=(1.0, 0.0, 0.0))
-    sim = tc.Simulation(cloth, integrator=tc.ImplicitEuler(max_iterations=drape.CG_ITERATIONS),
-                        dt=1 / 200, drag=5.0)
+    sim = tc.Simulation(cloth, integrator="implicit_euler", dt=1 / 200, drag=5.0)
     measures = []
     for time in seconds:
-        sim.step(round(time * 200) - sim.step_count)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")     # solves stopped at their cap (drape.simulate)
+            sim.step(round(time * 200) - sim.step_count)
         measures.append(drape.measure(sim.positions(), mesh.triangles,
                                       frame=drape.SIMULATED_FRAME))
     return measures

@@ -32,8 +32,6 @@ import math
 import statistics
 import threading
 import time
-import warnings
-from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -42,6 +40,7 @@ import numpy as np
 from ..errors import SimulationDiverged
 from ..inputs import limits
 from ..integrators import INTEGRATORS
+from ..integrators.base import unconverged_unreported
 from ..runtime import backend
 from ..stability import stable_dt
 from . import observables, study_report
@@ -176,16 +175,6 @@ def sample_times(scene, duration: float | None = None) -> np.ndarray:
     return scene.frame_dt * np.arange(1, frames + 1)
 
 
-@contextmanager
-def _solves_unreported():
-    """An implicit run's solves that stop at their cap are not warned of here: the study
-    measures what they cost the run's error (integrators/base.report_unconverged)."""
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", "[^:]*: [0-9]+ of the solves just made ended",
-                                RuntimeWarning)
-        yield
-
-
 def _trajectory(sim, times: np.ndarray, steps_per_frame: int) -> tuple[np.ndarray, np.ndarray, float]:
     """Positions and energies at the sample times, and the wall time spent stepping.
 
@@ -198,7 +187,7 @@ def _trajectory(sim, times: np.ndarray, steps_per_frame: int) -> tuple[np.ndarra
     collecting = gc.isenabled()
     gc.disable()
     try:
-        with _solves_unreported():
+        with unconverged_unreported():
             for target in frame_steps:
                 start = time.perf_counter()
                 sim.step(int(target - done))
@@ -609,7 +598,7 @@ def measure_configuration(task: Configuration) -> list[Run]:
         integrator = configured_integrator(task.integrator, task.iterations, task.solve)
         sim = task.scene.build(integrator=integrator, dt=task.dts[-1])
         try:
-            with _solves_unreported():
+            with unconverged_unreported():
                 sim.step(1)     # compile outside the timing (a step that diverges compiles too)
         except SimulationDiverged:
             pass

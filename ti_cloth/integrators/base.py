@@ -3,6 +3,7 @@ written once as phases (runtime/plan.py)."""
 
 import math
 import warnings
+from contextlib import contextmanager
 from typing import ClassVar
 
 from ..body.modes import stiffest_mode
@@ -123,6 +124,17 @@ def report_unconverged(integrator, stepper, reason: str) -> None:
             "such a step is damped, not the implicit step asked for. Raise the cap or take "
             f"smaller steps; {type(integrator).__name__}.unconverged_solves counts them (warned "
             "once)", RuntimeWarning, stacklevel=4)
+
+
+@contextmanager
+def unconverged_unreported():
+    """Within it, solves that stop at their cap are not warned of (report_unconverged's
+    warning), for callers that measure what the steps did instead (the study's errors, a
+    drape's settled speed); unconverged_solves still counts them."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "[^:]*: [0-9]+ of the solves just made ended",
+                                RuntimeWarning)
+        yield
 
 
 def take_ran_out(work, slot: int) -> int:
