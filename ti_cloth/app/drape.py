@@ -29,14 +29,16 @@ rings clamped within the support's radius, settled by implicit Euler under drag 
 moves faster than SETTLED), three at the start. A drape can snap from one fold pattern to
 another late (a 12-ring disc at 2 s, its anisotropy moving 2 % and its folds from 2 to 4), so a
 settle runs until it is still, not for a fixed time: a drape measured while moving would be
-fitted to a shape no scan of a settled specimen has. Derivative-free in the solver's sense: the fold pattern of a drape is a bifurcation of its equilibrium, whose gradient through the implicit solver's
-Hessian says nothing about which folds appear; the measures fitted, the mean drop of the
-surface outside the support and its second harmonic (the fabric drops less along its stiffer
-direction), are area-weighted means of the points, continuous in them, and change smoothly with
-the parameters between bifurcations (a silhouette's coefficient moves in raster steps of 0.5 mm
-cells; its fit still recovers a synthetic drape's bending, measured 0.1 %). The uncertainty
-reported is the change of the parameters that moves the measures by the fit's residual or by
-1e-3, whichever is larger, through the Jacobian at the best point found.
+fitted to a shape no scan of a settled specimen has. Derivative-free in the solver's sense:
+the fold pattern of a drape is a bifurcation of its equilibrium, whose gradient through the
+implicit solver's Hessian says nothing about which folds appear; the measures fitted, the
+mean drop of the surface outside the support and its second harmonic (the fabric drops less
+along its stiffer direction), are area-weighted means of the points, continuous in them, and
+change smoothly with the parameters between bifurcations (a silhouette's coefficient moves in
+raster steps of 0.5 mm cells; its fit still recovers a synthetic drape's bending, measured
+0.1 %). The uncertainty reported is the change of the parameters that moves the measures by
+the fit's residual or by 1e-3, whichever is larger, through the Jacobian at the best point
+found.
 """
 
 from __future__ import annotations
