@@ -2,8 +2,9 @@
 drape's measures do not depend on where and how the scan lies; on a cone they are the closed
 form (DC) and an independent quadrature (the drop); a synthetic drape of a known fabric, turned
 and moved anywhere, is fitted back within 2 % in bending with its warp found, and so is its
-top-view silhouette image; each drape is settled until still; a corrupted scan (NaN, empty, a disc of the wrong size) or image (a
-blank one, a wrong pixel size) is refused naming what is wrong."""
+top-view silhouette image; each drape is settled until still; a corrupted scan (NaN, empty, a
+disc of the wrong size) or image (a blank one, a wrong pixel size) is refused naming what is
+wrong."""
 
 import math
 import re
@@ -15,6 +16,7 @@ import pytest
 
 import ti_cloth as tc
 from ti_cloth.app import cli, drape
+from ti_cloth.integrators.base import unconverged_unreported
 
 pytestmark = pytest.mark.usefixtures("f64")
 KNOWN = tc.Fabric(density=0.192, stretch=1e3, shear=50.0, bending=(9e-5, 5e-5), damping=1e-3)
@@ -133,8 +135,7 @@ def settled_for(fabric, *seconds):
     sim = tc.Simulation(cloth, integrator="implicit_euler", dt=1 / 200, drag=5.0)
     measures = []
     for time in seconds:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")     # solves stopped at their cap (drape.simulate)
+        with unconverged_unreported():          # as drape.simulate's
             sim.step(round(time * 200) - sim.step_count)
         measures.append(drape.measure(sim.positions(), mesh.triangles,
                                       frame=drape.SIMULATED_FRAME))

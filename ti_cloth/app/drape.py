@@ -269,9 +269,10 @@ def simulate(fabric, disc: float = DISC, support: float = SUPPORT, rings: int = 
     sim = Simulation(cloth, integrator="implicit_euler", dt=dt, drag=drag)
     most, check, taken = max(1, round(seconds / dt)), max(1, round(SETTLE_CHECK / dt)), 0
     while taken < most:
+        steps = min(check, most - taken)
         with unconverged_unreported():
-            sim.step(min(check, most - taken))
-        taken += min(check, most - taken)
+            sim.step(steps)
+        taken += steps
         speed = float(np.linalg.norm(sim.velocities(), axis=1).max())
         if speed < SETTLED:
             return sim.positions(), mesh.triangles
