@@ -3,6 +3,7 @@ drops simulations stays flat in memory, and a reused set gives the bits a fresh 
 
 import gc
 import os
+import warnings
 
 import numpy as np
 import pytest
@@ -89,6 +90,20 @@ PAIRS = {
     "a fused then a position-based integrator": (
         lambda: tc.Simulation(cloth(), dt=1e-3, colliders=[BALL]),
         lambda: tc.Simulation(cloth(), integrator="xpbd", dt=1e-3, colliders=[BALL])),
+    # a solve's tolerances and caps and a position-based step's passes are read at run time
+    # (Integrator.runtime_options): the second runs the first's kernels with its own values
+    "other solve tolerances and caps": (
+        lambda: tc.Simulation(cloth(), integrator=tc.ImplicitEuler(tolerance=1e-3,
+                                                                   max_iterations=4), dt=1e-2),
+        lambda: tc.Simulation(cloth(k=700.0), integrator=tc.ImplicitEuler(tolerance=1e-9),
+                              dt=1e-2)),
+    "other Newton settings": (
+        lambda: tc.Simulation(cloth(), integrator=tc.ImplicitMidpoint(), dt=1e-2),
+        lambda: tc.Simulation(cloth(), integrator=tc.ImplicitMidpoint(
+            **tc.ImplicitMidpoint.presets["loose"]), dt=1e-2)),
+    "other passes": (
+        lambda: tc.Simulation(cloth(), integrator=tc.XPBD(iterations=2), dt=1e-3),
+        lambda: tc.Simulation(cloth(), integrator=tc.XPBD(iterations=9), dt=1e-3)),
     "other damping model": (
         lambda: tc.Simulation(cloth(), dt=1e-3),
         lambda: tc.Simulation(cloth(damping="relative"), dt=1e-3)),
@@ -116,6 +131,46 @@ def test_a_reused_set_gives_the_bits_of_a_fresh_one(f64, pair, monkeypatch):
     assert np.abs(fresh.positions() - fresh.cloth.particle_position).max() > 1e-3, "it moved"
     np.testing.assert_array_equal(reused.positions(), fresh.positions())
     np.testing.assert_array_equal(reused.velocities(), fresh.velocities())
+
+
+RUNTIME_OPTIONS = {   # two sets of each integrator's runtime_options
+    "implicit_euler": (tc.ImplicitEuler, {"tolerance": 1e-2, "max_iterations": 3},
+                       {"tolerance": 1e-9, "max_iterations": 400}),
+    "implicit_midpoint": (tc.ImplicitMidpoint, {"tolerance": 1e-2, "most_newton": 1,
+                                                "cg_tolerance": 0.5, "most_cg": 2}, {}),
+    "tr_bdf2": (tc.TRBDF2, {"most_newton": 2, "most_cg": 5}, {"cg_tolerance": 1e-6}),
+    "xpbd": (tc.XPBD, {"iterations": 1}, {"iterations": 12}),
+    "pbd": (tc.PBD, {"iterations": 1}, {"iterations": 6}),
+}
+
+
+@pytest.mark.parametrize("name", sorted(RUNTIME_OPTIONS))
+def test_a_solves_tolerances_caps_and_passes_compile_nothing(f64, name):
+    """Integrators that differ only in their runtime_options (a solve's tolerances and caps,
+    the passes of a position-based step) run one compiled step (stepping.advance_many's count
+    of distinct template arguments stays 1), each with its own values: the runs differ,
+    the first's values give its bits again after the second's, and each solve reports
+    within its own caps. Before, every set of options compiled the step anew."""
+    cls, first, second = RUNTIME_OPTIONS[name]
+    body = cloth()
+    backend.forget_compilations(stepping.advance_many)
+    runs = []
+    for options in (first, second, first):
+        integrator = cls(**options)
+        sim = tc.Simulation(body, integrator=integrator, dt=1 / 100)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)     # the capped solves' warning
+            sim.step(8)
+        runs.append(sim.positions())
+        if hasattr(integrator, "last_iterations"):
+            assert 0 < integrator.last_iterations <= integrator.max_iterations
+        if hasattr(integrator, "last_newton"):
+            assert 0 < integrator.last_newton <= integrator.settings.most_newton
+        del sim
+        gc.collect()
+    assert backend.compilations(stepping.advance_many) == 1
+    assert np.abs(runs[0] - runs[1]).max() > 1e-6, "the second's options changed its steps"
+    np.testing.assert_array_equal(runs[2], runs[0])
 
 
 def test_live_simulations_never_share_a_set(f64):

@@ -312,6 +312,7 @@ class Simulation:
             many = self._many_per_launch
         else:
             many = plan == "many steps"
+        self._stepper.take_settings(self.integrator)   # its run-time options (pool.py's copy)
         try:
             if many:
                 self._step_many(n)

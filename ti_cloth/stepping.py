@@ -261,7 +261,7 @@ class ManySteps:
         of it (a barrier's cost is per step, the pool's wake-up a small part of a big
         step). Raises TeamStalled if a barrier gave up on a worker (the state is then
         unusable)."""
-        work = integrator.workspace(model, state)
+        work = integrator.loaded_workspace(model, state)
         plan.note_launch(plan.nodes_of(integrator, "phases", model, forces, work), "team")
         for name in STEP_ORDER[1:]:
             for stage in self.stages.running(name):

@@ -6,9 +6,15 @@ import warnings
 from contextlib import contextmanager
 from typing import ClassVar
 
+import numpy as np
+import taichi as ti
+
 from ..body.modes import stiffest_mode
-from ..runtime import backend, plan
+from ..runtime import backend, plan, transfer
 from . import fused
+
+SETTINGS = 4    # run-time settings a workspace holds at most (Integrator.runtime_options)
+PASSES = 0      # the settings' slot of a position-based step's passes (pbd, xpbd)
 
 
 @backend.kernel_argument
@@ -19,7 +25,11 @@ class Integrator:
     whose bodies are ti.funcs, read like a list of physical concerns. plan.run launches them
     phase by phase (GPUs, single steps); stepping.py runs many steps of them in one launch
     shared by a team of CPU workers. Options are keyword-only arguments of the constructor,
-    validated there (they are compile-time constants of the kernels). stable_step() is the
+    validated there. They are compile-time constants of the kernels, except runtime_options:
+    those (a solve's tolerances and caps, a number of passes) a kernel reads from its
+    workspace's settings (settings_values, loaded before each launch by load_settings), so
+    integrators that differ only in them are equal and share their compiled kernels, and a
+    study sweeping them, or a user changing one, compiles nothing. stable_step() is the
     integrator's own stability rule.
 
     A fused integrator needs nothing but the force at the start of the step: it defines the
@@ -37,6 +47,7 @@ class Integrator:
     # named sets of options that trade the solve's accuracy for speed, which the study and the
     # advisor sweep beside the defaults (app/study.py: solves)
     presets: ClassVar[dict[str, dict]] = {}
+    runtime_options: ClassVar[tuple[str, ...]] = ()   # options kernels read at run time
 
     def phases(self, model, forces, work) -> tuple:
         """One step as runtime/plan.py's nodes; `work` is workspace()'s object."""
@@ -47,7 +58,7 @@ class Integrator:
     def step(self, model, state, dt: float, forces, step_index: int) -> None:
         """One step, a launch per phase (plan.run); `step_index` is the step's global index,
         recorded by the divergence guard."""
-        work = self.workspace(model, state)
+        work = self.loaded_workspace(model, state)
         plan.run(self, model, state, forces, work, dt, step_index, not state.prev_valid)
         state.prev_valid = self.records_history
         self.after_launch(work)
@@ -55,6 +66,31 @@ class Integrator:
     def workspace(self, model, state):
         """The working storage the phases read (a kernel argument; the State when none)."""
         return state
+
+    def loaded_workspace(self, model, state):
+        """workspace() with this integrator's settings in it (load_settings): what a launch
+        of the phases gets."""
+        work = self.workspace(model, state)
+        self.load_settings(work)
+        return work
+
+    def settings_values(self) -> tuple[float, ...]:
+        """The runtime_options as the kernels read them from work.settings, in slot order
+        (at most SETTINGS; none by default)."""
+        return ()
+
+    def load_settings(self, work) -> None:
+        """Upload settings_values() into work.settings (add_settings) unless it holds them."""
+        values = self.settings_values()
+        if values and work.loaded != values:
+            transfer.upload(((work.settings, np.array(values, np.float64)),))
+            work.loaded = values
+
+    def take_settings(self, integrator) -> None:
+        """Take the runtime_options of `integrator`, an equal integrator (the simulation's
+        own, whose steps this one, the pool's copy, runs: Simulation.step)."""
+        for name in self.runtime_options:
+            setattr(self, name, getattr(integrator, name))
 
     def step_work(self, model) -> int:
         """A step's work in spring evaluations, for sizing launches (stepping.py)."""
@@ -96,17 +132,29 @@ class Integrator:
         """Constructor options, for reports and repr."""
         return {}
 
+    def compiled_options(self) -> dict:
+        """The options the kernels are compiled for: all but runtime_options."""
+        return {k: v for k, v in self.options().items() if k not in self.runtime_options}
+
     def __eq__(self, other) -> bool:
-        """Integrators of one class with equal options are the same method (and share
-        compiled kernels: pool.py)."""
-        return type(other) is type(self) and other.options() == self.options()
+        """Integrators of one class with equal compiled options run the same kernels (and
+        share them: pool.py); their runtime_options may differ."""
+        return type(other) is type(self) and other.compiled_options() == self.compiled_options()
 
     def __hash__(self) -> int:
-        return hash((type(self), repr(sorted(self.options().items()))))
+        return hash((type(self), repr(sorted(self.compiled_options().items()))))
 
     def __repr__(self) -> str:
         opts = ", ".join(f"{k}={v!r}" for k, v in self.options().items())
         return f"{type(self).__name__}({opts})"
+
+
+def add_settings(work, fields) -> None:
+    """Give a workspace its run-time settings (Integrator.runtime_options): SETTINGS float64
+    values in work.settings, a field of `fields` (a backend.FieldGroup not yet finalised),
+    and the values last loaded into it, work.loaded (None: none yet)."""
+    work.settings = fields.scalar(ti.f64, SETTINGS)
+    work.loaded = None
 
 
 def report_unconverged(integrator, stepper, reason: str) -> None:

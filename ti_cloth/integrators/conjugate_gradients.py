@@ -41,12 +41,16 @@ from ..runtime import backend
 from ..runtime.plan import ITEM, NOW, STATE, Loop, Once, Phase, Until
 from ..runtime.team import MAX_WORKERS
 from . import coarse, implicit_elements
+from .base import add_settings
 
 BLOCK = 64                      # particles per partial sum of a dot product
 TYPICAL_ITERATIONS = 20         # CG iterations a step is assumed to take (sizing launches)
 ALPHA, RZ, RR, BB, BETA, CHANGE = range(6)  # slots of a row of the workspace's scalar field
-CG, NEWTON, CG_TOTAL, RAN_OUT = range(4)   # slots of a row of its iteration counts
+CG, NEWTON, CG_TOTAL, RAN_OUT, STAGE = range(5)   # slots of a row of its counts (STAGE: TR-BDF2)
 ROW = 16                        # slots per row (a worker's row fills its own cache line)
+# slots of the workspace's run-time settings (Integrator.runtime_options): CG's tolerance
+# squared and its cap; a Newton solve's tolerance [m] and cap (newton.py)
+CG_TOLERANCE_SQUARED, MOST_CG, NEWTON_TOLERANCE, MOST_NEWTON = range(4)
 
 
 PRECONDITIONERS = ("two-level", "jacobi")
@@ -120,6 +124,7 @@ class Workspace:
         self.scalar = fields.scalar(real, MAX_WORKERS * ROW)
         self.iterations = fields.scalar(ti.i32, MAX_WORKERS * ROW)
         implicit_elements.add_fields(self, fields, face_count, hinge_count)
+        add_settings(self, fields)
         if newton:      # a Newton solve's start and the step's start (newton.py)
             self.origin_position = fields.vector(3, real, n)
             self.origin_velocity = fields.vector(3, real, n)
@@ -351,21 +356,26 @@ def gather_block(model: ti.template(), state: ti.template(), forces: ti.template
 
 
 @ti.func
-def unconverged(ws: ti.template(), now: ti.template(), tolerance: ti.template(),
-                most: ti.template()):
-    """|r|^2 > tolerance^2 |b|^2 (in float64) and fewer than `most` iterations: CG goes on
-    (b = 0, no load on a free particle: dv = 0 at once)."""
-    row = now.row
-    return (ti.f64(ws.scalar[row * ROW + RR]) > ti.f64(tolerance ** 2) * ti.f64(ws.scalar[row * ROW + BB])
-            and ws.iterations[row * ROW] < most)
+def above_tolerance(ws: ti.template(), row):
+    """|r|^2 > tolerance^2 |b|^2, in float64, on the worker's row (its first slot)."""
+    return (ti.f64(ws.scalar[row + RR])
+            > ws.settings[CG_TOLERANCE_SQUARED] * ti.f64(ws.scalar[row + BB]))
 
 
 @ti.func
-def count_ran_out(ws: ti.template(), now: ti.template(), tolerance: ti.template()):
+def unconverged(ws: ti.template(), now: ti.template()):
+    """|r| > tolerance |b| and fewer than the cap's iterations (the settings: MOST_CG): CG
+    goes on (b = 0, no load on a free particle: dv = 0 at once)."""
+    row = now.row * ROW
+    return above_tolerance(ws, row) and ws.iterations[row] < ti.i32(ws.settings[MOST_CG])
+
+
+@ti.func
+def count_ran_out(ws: ti.template(), now: ti.template()):
     """One more step whose CG stopped at its cap with |r| > tolerance |b| (RAN_OUT counts
     them in a launch: after_launch takes and clears it)."""
     row = now.row * ROW
-    if ti.f64(ws.scalar[row + RR]) > ti.f64(tolerance ** 2) * ti.f64(ws.scalar[row + BB]):
+    if above_tolerance(ws, row):
         ws.iterations[row + RAN_OUT] = ws.iterations[row + RAN_OUT] + 1
 
 
@@ -410,12 +420,12 @@ def system_product(model, forces, ws) -> tuple:
             + (Phase(Loop(ws.block_count, apply_block, model, forces, ws, ITEM, NOW)),) + weld)
 
 
-def solve(model, forces, ws, tolerance: float, most: int) -> Until:
+def solve(model, forces, ws) -> Until:
     """Preconditioned CG from the start `linearisation` left, until |r| <= tolerance |b|
-    or `most` iterations: dv in ws.dv."""
+    or the cap's iterations (ws.settings: CG_TOLERANCE_SQUARED, MOST_CG): dv in ws.dv."""
     iteration = (system_product(model, forces, ws)
                  + (Once(step_length, ws, NOW),
                     Phase(Loop(ws.block_count, update_block, model, ws, ITEM, NOW)),
                     Once(next_direction, ws, NOW),
                     Phase(Loop(ws.block_count, turn_block, model, ws, ITEM, NOW))))
-    return Until(unconverged, *iteration, args=(ws, NOW, float(tolerance), int(most)))
+    return Until(unconverged, *iteration, args=(ws, NOW))

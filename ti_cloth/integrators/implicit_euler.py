@@ -101,6 +101,12 @@ class ImplicitEuler(Integrator):
         return {"tolerance": self.tolerance, "max_iterations": self.max_iterations,
                 **self.preconditioner.options()}
 
+    runtime_options = ("tolerance", "max_iterations")
+
+    def settings_values(self):
+        """conjugate_gradients' slots CG_TOLERANCE_SQUARED and MOST_CG."""
+        return (self.tolerance ** 2, float(self.max_iterations))
+
     def copy_reports(self, stepper):
         self.last_iterations = stepper.last_iterations
         self.last_residual = stepper.last_residual
@@ -137,7 +143,6 @@ class ImplicitEuler(Integrator):
         """The linearisation, preconditioned CG until converged (conjugate_gradients.py), the
         step."""
         return (self.linearisation(model, forces, ws)
-                + (conjugate_gradients.solve(model, forces, ws, self.tolerance,
-                                             self.max_iterations),
-                   Once(conjugate_gradients.count_ran_out, ws, NOW, float(self.tolerance)))
+                + (conjugate_gradients.solve(model, forces, ws),
+                   Once(conjugate_gradients.count_ran_out, ws, NOW))
                 + (Phase(Loop(ws.block_count, _advance_block, model, STATE, ws, ITEM, NOW)),))

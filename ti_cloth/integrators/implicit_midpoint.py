@@ -50,5 +50,5 @@ class ImplicitMidpoint(newton.NewtonIntegrator):
         """The origin and predictor, the half step's Newton solve, the extrapolation."""
         n = model.particle_count
         return substep(0.5, (Phase(Loop(n, _origin, model, STATE, ws, ITEM, NOW)),)
-                       + newton.solve(self.settings, model, forces, ws)
+                       + newton.solve(model, forces, ws)
                        + (Phase(Loop(n, _extrapolate, STATE, ws, ITEM, NOW)),))

@@ -27,6 +27,7 @@ Every sum is over fixed blocks in block order and the largest update a maximum (
 any order): the bits do not depend on the plan or the thread count.
 """
 
+import copy
 from typing import ClassVar
 
 import taichi as ti
@@ -40,7 +41,9 @@ from .conjugate_gradients import (
     CG,
     CG_TOTAL,
     CHANGE,
+    MOST_NEWTON,
     NEWTON,
+    NEWTON_TOLERANCE,
     RAN_OUT,
     ROW,
     TYPICAL_ITERATIONS,
@@ -109,22 +112,28 @@ def _end_iteration(ws: ti.template(), now: ti.template()):
 
 
 @ti.func
-def _unconverged(ws: ti.template(), now: ti.template(), tolerance: ti.template(),
-                 most: ti.template()):
-    """Fewer than LEAST_NEWTON iterations (and `most`), or the last one moved a particle by
-    more than `tolerance` and fewer than `most` have run."""
-    row = now.row * ROW
-    done = ws.iterations[row + NEWTON]
-    return (done < ti.min(LEAST_NEWTON, most)
-            or (ws.scalar[row + CHANGE] > tolerance and done < most))
+def _moved_more(ws: ti.template(), row):
+    """The last iteration moved a particle by more than the tolerance (the settings'
+    NEWTON_TOLERANCE, compared in the working precision: `float` is Taichi's default_fp)."""
+    return ws.scalar[row + CHANGE] > ti.cast(ws.settings[NEWTON_TOLERANCE], float)
 
 
 @ti.func
-def _count_ran_out(ws: ti.template(), now: ti.template(), tolerance: ti.template()):
-    """One more solve that stopped at most_newton with its last update above `tolerance`
+def _unconverged(ws: ti.template(), now: ti.template()):
+    """Fewer than LEAST_NEWTON iterations (and the cap, the settings' MOST_NEWTON), or the
+    last one moved a particle by more than the tolerance and fewer than the cap have run."""
+    row = now.row * ROW
+    done = ws.iterations[row + NEWTON]
+    most = ti.i32(ws.settings[MOST_NEWTON])
+    return done < ti.min(LEAST_NEWTON, most) or (_moved_more(ws, row) and done < most)
+
+
+@ti.func
+def _count_ran_out(ws: ti.template(), now: ti.template()):
+    """One more solve that stopped at most_newton with its last update above the tolerance
     (RAN_OUT counts them in a launch: after_launch takes and clears it)."""
     row = now.row * ROW
-    if ws.scalar[row + CHANGE] > tolerance:
+    if _moved_more(ws, row):
         ws.iterations[row + RAN_OUT] = ws.iterations[row + RAN_OUT] + 1
 
 
@@ -166,20 +175,19 @@ class NewtonSettings:
                 **self.preconditioner.options()}
 
 
-def solve(settings: NewtonSettings, model, forces, ws) -> tuple:
+def solve(model, forces, ws) -> tuple:
     """The nodes of one solve (module doc) from the origin in ws.origin_position and
     origin_velocity, the State holding the predictor; the State ends on the solution. DT and
-    NOW are the sub-step s (wrap in plan.substep)."""
+    NOW are the sub-step s (wrap in plan.substep). Its tolerances and caps are ws's run-time
+    settings (NewtonIntegrator.settings_values)."""
     start = Loop(ws.block_count, _start_block, model, STATE, forces, ws, ITEM, NOW)
     iteration = (conjugate_gradients.linearisation(model, forces, ws, start)
-                 + (conjugate_gradients.solve(model, forces, ws, settings.cg_tolerance,
-                                              settings.most_cg),
+                 + (conjugate_gradients.solve(model, forces, ws),
                     Phase(Loop(ws.block_count, _update_block, model, STATE, ws, ITEM, NOW)),
                     Once(_end_iteration, ws, NOW)))
     return (Once(_begin_newton, ws, NOW),
-            Until(_unconverged, *iteration,
-                  args=(ws, NOW, settings.tolerance, settings.most_newton)),
-            Once(_count_ran_out, ws, NOW, settings.tolerance))
+            Until(_unconverged, *iteration, args=(ws, NOW)),
+            Once(_count_ran_out, ws, NOW))
 
 
 class NewtonIntegrator(Integrator):
@@ -211,6 +219,17 @@ class NewtonIntegrator(Integrator):
 
     def options(self):
         return self.settings.options()
+
+    runtime_options = ("tolerance", "most_newton", "cg_tolerance", "most_cg")
+
+    def settings_values(self):
+        """conjugate_gradients' slots CG_TOLERANCE_SQUARED, MOST_CG, NEWTON_TOLERANCE and
+        MOST_NEWTON."""
+        s = self.settings
+        return (s.cg_tolerance ** 2, float(s.most_cg), s.tolerance, float(s.most_newton))
+
+    def take_settings(self, integrator):
+        self.settings = copy.copy(integrator.settings)
 
     def workspace(self, model, state):
         return self.settings.preconditioner.workspace(self, model, state, newton=True)

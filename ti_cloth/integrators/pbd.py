@@ -13,21 +13,24 @@ from ..inputs.validation import count, finite_number, require
 from ..physics import wind
 from ..physics.forces import gather_force
 from ..runtime import backend
-from ..runtime.plan import ITEM, NOW, STATE, Loop, Phase, Repeat, Sweep
+from ..runtime.plan import ITEM, NOW, STATE, Loop, Phase, Repeat, Setting, Sweep
 from ..state import store_particle
 from . import fused
-from .base import Integrator
+from .base import PASSES, Integrator, add_settings
 from .verlet import verlet_update
 
 
 @backend.kernel_argument
 class SweepOrder:
     """A model's spring and altitude-spring colourings, as one kernel argument (pbd's
-    phases sweep them)."""
+    phases sweep them), and the run-time settings (the passes: Integrator.runtime_options)."""
 
     def __init__(self, model):
         self.colours = model.spring_colouring()
         self.altitude_colours = model.altitude_colouring()
+        fields = backend.FieldGroup()
+        add_settings(self, fields)
+        fields.finalize(self)
 
 
 @ti.func
@@ -109,6 +112,11 @@ class PBD(Integrator):
     def options(self):
         return {"iterations": self.iterations, "damping": self.damping, "stiffness": self.stiffness}
 
+    runtime_options = ("iterations",)
+
+    def settings_values(self):
+        return (float(self.iterations),)
+
     def workspace(self, model, state):
         return self.buffers(state, lambda: SweepOrder(model))
 
@@ -127,5 +135,5 @@ class PBD(Integrator):
         return (wind.phases(model, forces)
                 + (Phase(Loop(model.particle_count, _predict, model, STATE, forces, ITEM, NOW,
                               self)),)
-                + ((Repeat(self.iterations, *passes),) if passes else ())
+                + ((Repeat(Setting(work, PASSES), *passes),) if passes else ())
                 + (Phase(Loop(model.particle_count, velocity_from_positions, STATE, ITEM, NOW)),))

@@ -24,9 +24,10 @@ import math
 
 import taichi as ti
 
-from ..runtime.plan import ITEM, NOW, STATE, Loop, Phase, substep
+from ..runtime.plan import ITEM, NOW, STATE, Loop, Once, Phase, Repeat, substep
 from ..state import store_particle
 from . import newton
+from .conjugate_gradients import ROW, STAGE
 
 GAMMA = 2.0 - math.sqrt(2.0)
 A = 1.0 / (GAMMA * (2.0 - GAMMA))               # BDF2's weights on x_gamma and x_n
@@ -35,26 +36,33 @@ FRACTION = GAMMA / 2.0                           # s / h of both stages
 
 
 @ti.func
-def _first_origin(model: ti.template(), state: ti.template(), ws: ti.template(), i,
-                  now: ti.template()):
-    """Keep (x_n, v_n); the midpoint stage's origin and predictor."""
-    x, v = state.particle_position[i], state.particle_velocity[i]
-    ws.step_position[i] = x
-    ws.step_velocity[i] = v
-    ws.origin_position[i] = x
-    ws.origin_velocity[i] = v
-    newton.predict(model, state, ws, i, now)
+def _first_stage(ws: ti.template(), now: ti.template()):
+    """The step's first stage comes next (STAGE: the stage's index, on the worker's row)."""
+    ws.iterations[now.row * ROW + STAGE] = 0
 
 
 @ti.func
-def _second_origin(model: ti.template(), state: ti.template(), ws: ti.template(), i,
-                   now: ti.template()):
-    """The midpoint stage's end x_gamma = 2 x_mid - x_n, then the BDF2 stage's origin
-    a x_gamma - b x_n = x_n + a (x_gamma - x_n) (a - b = 1; the second form leaves a particle
-    that did not move exactly where it was), likewise for velocities, and its predictor."""
-    x_n, v_n = ws.step_position[i], ws.step_velocity[i]
-    ws.origin_position[i] = x_n + A * 2.0 * (state.particle_position[i] - x_n)
-    ws.origin_velocity[i] = v_n + A * 2.0 * (state.particle_velocity[i] - v_n)
+def _next_stage(ws: ti.template(), now: ti.template()):
+    ws.iterations[now.row * ROW + STAGE] = ws.iterations[now.row * ROW + STAGE] + 1
+
+
+@ti.func
+def _origin(model: ti.template(), state: ti.template(), ws: ti.template(), i,
+            now: ti.template()):
+    """The stage's origin and predictor. The midpoint stage keeps (x_n, v_n) and starts
+    from them; the BDF2 stage takes the midpoint stage's end x_gamma = 2 x_mid - x_n and
+    starts from a x_gamma - b x_n = x_n + a (x_gamma - x_n) (a - b = 1; the second form
+    leaves a particle that did not move exactly where it was), likewise for velocities."""
+    if ws.iterations[now.row * ROW + STAGE] == 0:
+        x, v = state.particle_position[i], state.particle_velocity[i]
+        ws.step_position[i] = x
+        ws.step_velocity[i] = v
+        ws.origin_position[i] = x
+        ws.origin_velocity[i] = v
+    else:
+        x_n, v_n = ws.step_position[i], ws.step_velocity[i]
+        ws.origin_position[i] = x_n + A * 2.0 * (state.particle_position[i] - x_n)
+        ws.origin_velocity[i] = v_n + A * 2.0 * (state.particle_velocity[i] - v_n)
     newton.predict(model, state, ws, i, now)
 
 
@@ -77,12 +85,11 @@ class TRBDF2(newton.NewtonIntegrator):
     solves = 2
 
     def phases(self, model, forces, ws):
-        """The midpoint stage (origin, Newton solve), the BDF2 stage (origin, Newton solve),
-        the guard."""
+        """The midpoint stage, then the BDF2 stage, each its origin and its Newton solve (one
+        solve in the kernel, run twice: the stages' sub-steps are of one length), the
+        guard."""
         n = model.particle_count
-        solve = newton.solve(self.settings, model, forces, ws)
-        return substep(FRACTION, (Phase(Loop(n, _first_origin, model, STATE, ws, ITEM, NOW)),)
-                       + solve
-                       + (Phase(Loop(n, _second_origin, model, STATE, ws, ITEM, NOW)),)
-                       + solve
-                       + (Phase(Loop(n, _finish, STATE, ITEM, NOW)),))
+        stage = ((Phase(Loop(n, _origin, model, STATE, ws, ITEM, NOW)),)
+                 + newton.solve(model, forces, ws) + (Once(_next_stage, ws, NOW),))
+        return substep(FRACTION, (Once(_first_stage, ws, NOW), Repeat(2, *stage),
+                                  Phase(Loop(n, _finish, STATE, ITEM, NOW))))

@@ -13,9 +13,9 @@ from ..inputs.validation import count
 from ..physics import wind
 from ..physics.forces import gather_force
 from ..runtime import backend
-from ..runtime.plan import DT, ITEM, NOW, STATE, Loop, Phase, Repeat, Sweep
+from ..runtime.plan import DT, ITEM, NOW, STATE, Loop, Phase, Repeat, Setting, Sweep
 from . import fused
-from .base import Integrator
+from .base import PASSES, Integrator, add_settings
 from .pbd import velocity_from_positions
 
 
@@ -45,6 +45,7 @@ class _Multipliers:
         self.membrane = fields.vector(3, backend.real(), max(model.face_count, 1))
         self.bending = fields.vector(9 if model.isometric else 3, backend.real(),
                                      max(model.face_count, 1))
+        add_settings(self, fields)      # the passes (Integrator.runtime_options)
         fields.finalize(self)
         self.colours = model.spring_colouring()
         self.altitude_colours = model.altitude_colouring()
@@ -83,6 +84,11 @@ class XPBD(Integrator):
     def options(self):
         return {"iterations": self.iterations}
 
+    runtime_options = ("iterations",)
+
+    def settings_values(self):
+        return (float(self.iterations),)
+
     def workspace(self, model, state):
         return self.buffers(state, lambda: _Multipliers(model))
 
@@ -104,6 +110,6 @@ class XPBD(Integrator):
         return (wind.phases(model, forces)
                 + (Phase(Loop(model.particle_count, xpbd_predict, model, STATE, forces, ITEM, NOW),
                          *clear),)
-                + ((Repeat(self.iterations, *passes),) if passes else ())
+                + ((Repeat(Setting(work, PASSES), *passes),) if passes else ())
                 + (Phase(Loop(model.particle_count, velocity_from_positions, STATE, ITEM, NOW)),)
                 + damping)

@@ -10,11 +10,13 @@ nodes returned by a method (`phases(model, forces, work)`):
     Once(body, *args)                      a scalar computation (a sum of partial sums, a
                                            decision), done by every worker on its own row of
                                            a workspace
-    Repeat(count, nodes...)                the nodes `count` times
+    Repeat(count, nodes...)                the nodes `count` times (an int, or a Setting:
+                                           read at run time)
     Until(test, nodes..., args=())         the nodes while test(*args) holds
 
-(a Repeat or an Until holds leaves (Phase, Sweep, Once) or Repeats and Untils of leaves: two
-levels, as a Newton iteration around a conjugate-gradient loop needs).
+(a Repeat or an Until holds leaves (Phase, Sweep, Once) and Repeats and Untils, three levels
+deep at most: the stages of a step around a Newton iteration around a conjugate-gradient
+loop, as TR-BDF2 needs).
 
 Bodies are ti.funcs that take what they need: a node holds its body and the body's arguments,
 `Loop(count, body, *args)`, and the runner calls body(*args) for each item, with these
@@ -161,11 +163,40 @@ class Once:
         self.body, self.args = body, args
 
 
-class Repeat:
-    """The nodes `count` times (count: a Python int)."""
+class Setting:
+    """A value of `work`'s run-time settings (work.settings[slot], its host copy
+    work.loaded[slot]): an integrator's option that a kernel reads at run time, so that
+    changing it compiles nothing (Integrator.runtime_options)."""
 
-    def __init__(self, count: int, *leaves):
-        self.count, self.leaves = int(count), leaves
+    def __init__(self, work, slot: int):
+        self.work, self.slot = work, slot
+
+    def host(self) -> int:
+        """The value as a count, on the host (the last values loaded: Integrator.load_settings)."""
+        return int(self.work.loaded[self.slot])
+
+
+@ti.func
+def repeats(count: ti.template()):
+    """A Repeat's count in a kernel: a Python int, or a Setting read at run time."""
+    n = 0
+    if ti.static(isinstance(count, Setting)):
+        n = ti.i32(count.work.settings[count.slot])
+    else:
+        n = count
+    return n
+
+
+class Repeat:
+    """The nodes `count` times (count: a Python int, or a Setting read at run time)."""
+
+    def __init__(self, count, *leaves):
+        self.count = count if isinstance(count, Setting) else int(count)
+        self.leaves = leaves
+
+    def host_count(self) -> int:
+        """The count on the host (a launch per phase loops there)."""
+        return self.count.host() if isinstance(self.count, Setting) else self.count
 
 
 class Until:
@@ -178,7 +209,7 @@ class Until:
 
 LEAVES = (Phase, Sweep, Once)
 LOOPS = (Repeat, Until)
-DEPTH = 2          # loops within loops at most
+DEPTH = 3          # loops within loops at most
 
 
 def _check(nodes, depth: int = 0) -> tuple:
@@ -361,7 +392,7 @@ def _run_nodes(args, nodes, container: tuple) -> None:
     while i < len(inner):
         node = inner[i]
         if isinstance(node, Repeat):
-            for _ in range(node.count):
+            for _ in range(node.host_count()):
                 _run_nodes(args, nodes, container + (i,))
         elif isinstance(node, Until):
             while _holds(*args, container + (i,)):
@@ -400,7 +431,7 @@ def _run_leaf(leaf: ti.template(), model: ti.template(), state: ti.template(),
 def _run_inner(nodes: ti.template(), model: ti.template(), state: ti.template(),
                forces: ti.template(), work: ti.template(), stages: ti.template(),
                team: ti.template(), worker, now: ti.template()):
-    """The nodes of a loop of the second level (leaves only)."""
+    """The nodes of a loop of the third level (leaves only)."""
     for leaf in ti.static(nodes):
         _run_leaf(leaf, model, state, forces, work, stages, team, worker, now)
 
@@ -409,16 +440,32 @@ def _run_inner(nodes: ti.template(), model: ti.template(), state: ti.template(),
 def _run_level(nodes: ti.template(), model: ti.template(), state: ti.template(),
                forces: ti.template(), work: ti.template(), stages: ti.template(),
                team: ti.template(), worker, now: ti.template()):
-    """The nodes of a loop of the first level: leaves, and loops of leaves (_run_inner).
-    (Two functions: passing the inner one as a template argument did not compile in
+    """The nodes of a loop of the second level: leaves, and loops of leaves (_run_inner).
+    (A function per level: passing the inner one as a template argument did not compile in
     Taichi 1.7, a parameter reported missing.)"""
     for node in ti.static(nodes):
         if ti.static(isinstance(node, Repeat)):
-            for _ in range(node.count):
+            for _ in range(repeats(node.count)):
                 _run_inner(node.leaves, model, state, forces, work, stages, team, worker, now)
         elif ti.static(isinstance(node, Until)):
             while node.test(*ti.static(bind(node.args, None, state, now, stages))):
                 _run_inner(node.leaves, model, state, forces, work, stages, team, worker, now)
+        else:
+            _run_leaf(node, model, state, forces, work, stages, team, worker, now)
+
+
+@ti.func
+def _run_upper(nodes: ti.template(), model: ti.template(), state: ti.template(),
+               forces: ti.template(), work: ti.template(), stages: ti.template(),
+               team: ti.template(), worker, now: ti.template()):
+    """The nodes of a loop of the first level: leaves, and loops (_run_level)."""
+    for node in ti.static(nodes):
+        if ti.static(isinstance(node, Repeat)):
+            for _ in range(repeats(node.count)):
+                _run_level(node.leaves, model, state, forces, work, stages, team, worker, now)
+        elif ti.static(isinstance(node, Until)):
+            while node.test(*ti.static(bind(node.args, None, state, now, stages))):
+                _run_level(node.leaves, model, state, forces, work, stages, team, worker, now)
         else:
             _run_leaf(node, model, state, forces, work, stages, team, worker, now)
 
@@ -429,13 +476,13 @@ def run_team(nodes: ti.template(), model: ti.template(), state: ti.template(),
              team: ti.template(), worker, now: ti.template()):
     """Worker `worker`'s share of `nodes` (nodes_of) in a team launch (stepping.py), meeting
     the team at every synchronisation point; now.row is the worker. A top-level loop's
-    nodes run as _run_level, which differs from this only in the depth it hands on."""
+    nodes run as _run_upper, which differs from this only in the depth it hands on."""
     for node in ti.static(nodes):
         if ti.static(isinstance(node, Repeat)):
-            for _ in range(node.count):
-                _run_level(node.leaves, model, state, forces, work, stages, team, worker, now)
+            for _ in range(repeats(node.count)):
+                _run_upper(node.leaves, model, state, forces, work, stages, team, worker, now)
         elif ti.static(isinstance(node, Until)):
             while node.test(*ti.static(bind(node.args, None, state, now, stages))):
-                _run_level(node.leaves, model, state, forces, work, stages, team, worker, now)
+                _run_upper(node.leaves, model, state, forces, work, stages, team, worker, now)
         else:
             _run_leaf(node, model, state, forces, work, stages, team, worker, now)
