@@ -85,6 +85,7 @@ class ImplicitEuler(Integrator):
     name = "implicit_euler"
     order = 1
     step_limited = False
+    runtime_options = ("tolerance", "max_iterations")
 
     def __init__(self, *, tolerance: float = 1e-5, max_iterations: int = 200,
                  preconditioner: str = "two-level", aggregate_size: int | None = None):
@@ -100,8 +101,6 @@ class ImplicitEuler(Integrator):
     def options(self):
         return {"tolerance": self.tolerance, "max_iterations": self.max_iterations,
                 **self.preconditioner.options()}
-
-    runtime_options = ("tolerance", "max_iterations")
 
     def settings_values(self):
         """conjugate_gradients' slots CG_TOLERANCE_SQUARED and MOST_CG."""

@@ -203,6 +203,7 @@ class NewtonIntegrator(Integrator):
 
     step_limited = False
     solves: ClassVar[int]
+    runtime_options = ("tolerance", "most_newton", "cg_tolerance", "most_cg")
     # Newton stopped at 0.1 mm and each CG at a tenth of its residual, as
     # benchmarks/trade_vs_newton.py runs them: on issue 53's 32² denim at 1/60 and 1/120 s
     # within 0.1 mm of the converged solves' error (docs/performance.md)
@@ -219,8 +220,6 @@ class NewtonIntegrator(Integrator):
 
     def options(self):
         return self.settings.options()
-
-    runtime_options = ("tolerance", "most_newton", "cg_tolerance", "most_cg")
 
     def settings_values(self):
         """conjugate_gradients' slots CG_TOLERANCE_SQUARED, MOST_CG, NEWTON_TOLERANCE and

@@ -92,6 +92,7 @@ class PBD(Integrator):
     position_based = True
     step_limited = False
     records_history = True
+    runtime_options = ("iterations",)
 
     def __init__(self, *, iterations: int = 2, damping: float = 0.0, stiffness=None):
         self.iterations = count("PBD.iterations", iterations, limits.ITERATIONS)
@@ -111,8 +112,6 @@ class PBD(Integrator):
 
     def options(self):
         return {"iterations": self.iterations, "damping": self.damping, "stiffness": self.stiffness}
-
-    runtime_options = ("iterations",)
 
     def settings_values(self):
         return (float(self.iterations),)

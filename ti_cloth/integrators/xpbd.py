@@ -77,14 +77,13 @@ class XPBD(Integrator):
     order = 1
     position_based = True
     step_limited = False
+    runtime_options = ("iterations",)
 
     def __init__(self, *, iterations: int = 10):
         self.iterations = count("XPBD.iterations", iterations, limits.ITERATIONS)
 
     def options(self):
         return {"iterations": self.iterations}
-
-    runtime_options = ("iterations",)
 
     def settings_values(self):
         return (float(self.iterations),)
