@@ -14,9 +14,8 @@ nodes returned by a method (`phases(model, forces, work)`):
                                            read at run time)
     Until(test, nodes..., args=())         the nodes while test(*args) holds
 
-(a Repeat or an Until holds leaves (Phase, Sweep, Once) and Repeats and Untils, three levels
-deep at most: the stages of a step around a Newton iteration around a conjugate-gradient
-loop, as TR-BDF2 needs).
+(a Repeat or an Until holds leaves (Phase, Sweep, Once) and Repeats and Untils: TR-BDF2's
+stages around a Newton iteration around a conjugate-gradient loop).
 
 Bodies are ti.funcs that take what they need: a node holds its body and the body's arguments,
 `Loop(count, body, *args)`, and the runner calls body(*args) for each item, with these
@@ -209,16 +208,12 @@ class Until:
 
 LEAVES = (Phase, Sweep, Once)
 LOOPS = (Repeat, Until)
-DEPTH = 3          # loops within loops at most
 
 
-def _check(nodes, depth: int = 0) -> tuple:
+def _check(nodes) -> tuple:
     for node in nodes:
         if isinstance(node, LOOPS):
-            if depth >= DEPTH:
-                raise TypeError(f"phases nest Repeat and Until {DEPTH} deep at most, got "
-                                f"{node!r} inside {depth} of them")
-            _check(node.leaves, depth + 1)
+            _check(node.leaves)
         elif not isinstance(node, LEAVES):
             raise TypeError(f"phases may hold Phase, Sweep, Once, Repeat and Until, got {node!r}")
     return tuple(nodes)
@@ -428,61 +423,18 @@ def _run_leaf(leaf: ti.template(), model: ti.template(), state: ti.template(),
 
 
 @ti.func
-def _run_inner(nodes: ti.template(), model: ti.template(), state: ti.template(),
-               forces: ti.template(), work: ti.template(), stages: ti.template(),
-               team: ti.template(), worker, now: ti.template()):
-    """The nodes of a loop of the third level (leaves only)."""
-    for leaf in ti.static(nodes):
-        _run_leaf(leaf, model, state, forces, work, stages, team, worker, now)
-
-
-@ti.func
-def _run_level(nodes: ti.template(), model: ti.template(), state: ti.template(),
-               forces: ti.template(), work: ti.template(), stages: ti.template(),
-               team: ti.template(), worker, now: ti.template()):
-    """The nodes of a loop of the second level: leaves, and loops of leaves (_run_inner).
-    (A function per level: passing the inner one as a template argument did not compile in
-    Taichi 1.7, a parameter reported missing.)"""
-    for node in ti.static(nodes):
-        if ti.static(isinstance(node, Repeat)):
-            for _ in range(repeats(node.count)):
-                _run_inner(node.leaves, model, state, forces, work, stages, team, worker, now)
-        elif ti.static(isinstance(node, Until)):
-            while node.test(*ti.static(bind(node.args, None, state, now, stages))):
-                _run_inner(node.leaves, model, state, forces, work, stages, team, worker, now)
-        else:
-            _run_leaf(node, model, state, forces, work, stages, team, worker, now)
-
-
-@ti.func
-def _run_upper(nodes: ti.template(), model: ti.template(), state: ti.template(),
-               forces: ti.template(), work: ti.template(), stages: ti.template(),
-               team: ti.template(), worker, now: ti.template()):
-    """The nodes of a loop of the first level: leaves, and loops (_run_level)."""
-    for node in ti.static(nodes):
-        if ti.static(isinstance(node, Repeat)):
-            for _ in range(repeats(node.count)):
-                _run_level(node.leaves, model, state, forces, work, stages, team, worker, now)
-        elif ti.static(isinstance(node, Until)):
-            while node.test(*ti.static(bind(node.args, None, state, now, stages))):
-                _run_level(node.leaves, model, state, forces, work, stages, team, worker, now)
-        else:
-            _run_leaf(node, model, state, forces, work, stages, team, worker, now)
-
-
-@ti.func
 def run_team(nodes: ti.template(), model: ti.template(), state: ti.template(),
              forces: ti.template(), work: ti.template(), stages: ti.template(),
              team: ti.template(), worker, now: ti.template()):
     """Worker `worker`'s share of `nodes` (nodes_of) in a team launch (stepping.py), meeting
-    the team at every synchronisation point; now.row is the worker. A top-level loop's
-    nodes run as _run_upper, which differs from this only in the depth it hands on."""
+    the team at every synchronisation point; now.row is the worker. A loop's nodes run as
+    these do (this function inlined into itself at compile time, down to the leaves)."""
     for node in ti.static(nodes):
         if ti.static(isinstance(node, Repeat)):
             for _ in range(repeats(node.count)):
-                _run_upper(node.leaves, model, state, forces, work, stages, team, worker, now)
+                run_team(node.leaves, model, state, forces, work, stages, team, worker, now)
         elif ti.static(isinstance(node, Until)):
             while node.test(*ti.static(bind(node.args, None, state, now, stages))):
-                _run_upper(node.leaves, model, state, forces, work, stages, team, worker, now)
+                run_team(node.leaves, model, state, forces, work, stages, team, worker, now)
         else:
             _run_leaf(node, model, state, forces, work, stages, team, worker, now)
