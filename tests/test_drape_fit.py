@@ -128,15 +128,11 @@ def test_a_synthetic_drape_is_fitted_back(synthetic, capsys):
 def settled_for(fabric, *seconds):
     """The drape simulate makes, by the same steps, measured after each of `seconds` (no check
     of its speed)."""
-    mesh = tc.disc_mesh(drape.DISC / 2, RINGS)
-    radius = np.hypot(mesh.vertices[:, 0], mesh.vertices[:, 2])
-    cloth = tc.Cloth(mesh, fabric, pinned=np.flatnonzero(radius <= drape.SUPPORT / 2 + 1e-9),
-                     warp=(1.0, 0.0, 0.0))
-    sim = tc.Simulation(cloth, integrator="implicit_euler", dt=1 / 200, drag=5.0)
+    sim, mesh = drape.cusick_simulation(fabric, rings=RINGS)
     measures = []
     for time in seconds:
         with unconverged_unreported():          # as drape.simulate's
-            sim.step(round(time * 200) - sim.step_count)
+            sim.step(round(time / sim.dt) - sim.step_count)
         measures.append(drape.measure(sim.positions(), mesh.triangles,
                                       frame=drape.SIMULATED_FRAME))
     return measures

@@ -246,6 +246,22 @@ def read_scan(path, disc: float = DISC, support: float = SUPPORT):
     return x, t
 
 
+def cusick_simulation(fabric, disc: float = DISC, support: float = SUPPORT, rings: int = 12,
+                      dt: float = 1 / 200, drag: float = 5.0):
+    """(the Simulation, the disc's Mesh) of `fabric`'s disc on the support, at rest and flat:
+    a disc_mesh of `rings` rings, its particles within the support's radius pinned, its warp
+    along x, stepped by implicit Euler under `drag` (simulate settles it)."""
+    from ..body.mesh import disc_mesh
+    from ..body.topology import Cloth
+    from ..simulation import Simulation
+
+    mesh = disc_mesh(disc / 2, rings)
+    radius = np.hypot(mesh.vertices[:, 0], mesh.vertices[:, 2])
+    cloth = Cloth(mesh, fabric, pinned=np.flatnonzero(radius <= support / 2 + 1e-9),
+                  warp=(1.0, 0.0, 0.0))
+    return Simulation(cloth, integrator="implicit_euler", dt=dt, drag=drag), mesh
+
+
 def simulate(fabric, disc: float = DISC, support: float = SUPPORT, rings: int = 12,
              seconds: float = MOST_SECONDS, dt: float = 1 / 200, drag: float = 5.0):
     """(positions, triangles) of `fabric`'s disc draped on the support: a disc_mesh of
@@ -256,17 +272,10 @@ def simulate(fabric, disc: float = DISC, support: float = SUPPORT, rings: int = 
     a damped step each) unwarned: the settle is judged by its speed, and a cap of 1,000
     (every solve converged) reached the same drape within 3e-6 m at 2 s, and the same fit at
     16 rings (bending to 1e-8), in 2.1x the time."""
-    from ..body.mesh import disc_mesh
-    from ..body.topology import Cloth
     from ..integrators.base import unconverged_unreported
-    from ..simulation import Simulation
 
     seconds = finite_number("seconds", seconds, 0.0, strict=True, unit="s")
-    mesh = disc_mesh(disc / 2, rings)
-    radius = np.hypot(mesh.vertices[:, 0], mesh.vertices[:, 2])
-    cloth = Cloth(mesh, fabric, pinned=np.flatnonzero(radius <= support / 2 + 1e-9),
-                  warp=(1.0, 0.0, 0.0))
-    sim = Simulation(cloth, integrator="implicit_euler", dt=dt, drag=drag)
+    sim, mesh = cusick_simulation(fabric, disc, support, rings, dt, drag)
     most, check, taken = max(1, round(seconds / dt)), max(1, round(SETTLE_CHECK / dt)), 0
     while taken < most:
         steps = min(check, most - taken)
