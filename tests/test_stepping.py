@@ -13,6 +13,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+import taichi as ti
 
 import ti_cloth as tc
 from ti_cloth import stepping
@@ -59,12 +60,13 @@ def run(sim, plan, steps, monkeypatch, per_launch=100):
     sim.step(steps, plan="many steps")
 
 
-def fabric_sheet(curve=True):
+def fabric_sheet(curve=True, n=9):
     """A denim sheet (membrane and bending elements, gathered per corner), started stretched:
     bent by the preset's BendingCurve (the mid-edge tangents), or without it by the isometric
-    model."""
+    model. 81 particles: two of the implicit solves' blocks (conjugate_gradients.BLOCK), one
+    for each worker of a team."""
     fabric = tc.Fabric.preset("denim") if curve else tc.Fabric.preset("denim", bending_curve=None)
-    cloth = tc.Cloth(tc.grid_mesh(6, 6, (0.3, 0.3)), fabric, pinned=[30, 35])
+    cloth = tc.Cloth(tc.grid_mesh(n, n, (0.3, 0.3)), fabric, pinned=[n * (n - 1), n * n - 1])
     centre = cloth.particle_position.mean(axis=0)
     return cloth, centre + 1.1 * (cloth.particle_position - centre)
 
@@ -234,6 +236,51 @@ def test_a_team_shares_big_launches_and_one_worker_takes_small_ones(threads):
     assert many.steps_per_launch(tc.SymplecticEuler(), big) == 10
     moving = tc.Simulation(cloth, dt=1e-4, colliders=contact_scene()).many_steps
     assert moving.steps_per_launch(tc.SymplecticEuler(), model) == limits.SCHEDULED_STEPS
+
+
+def team_slices(count: int, chunk: int, workers: int) -> list[tuple[int, int]]:
+    """Each worker's slice [begin, end) of a loop of `count` items with `chunk` (team.py)."""
+    @ti.kernel
+    def slices(out: ti.types.ndarray()):
+        for w in range(workers):
+            begin, end = team.chunked_share(count, w, workers, chunk)
+            out[w, 0], out[w, 1] = begin, end
+
+    out = np.zeros((workers, 2), np.int32)
+    slices(out)
+    return [tuple(row) for row in out]
+
+
+def loops_in(nodes) -> list:
+    """Every Loop in `nodes` (runtime/plan.py), inside Repeats and Untils too."""
+    found = []
+    for node in nodes:
+        if isinstance(node, (runtime_plan.Repeat, runtime_plan.Until)):
+            found += loops_in(node.leaves)
+        elif isinstance(node, runtime_plan.Phase):
+            found += list(node.loops)
+    return found
+
+
+def test_a_team_shares_the_implicit_solves_blocks_among_all_its_workers(threads):
+    """The implicit solves' loops over blocks of particles (conjugate_gradients.BLOCK, each
+    block a serial loop: A p, CG's updates, the forces gathered, Newton's) are shared block
+    by block, so a body of a few blocks gives every worker of a team some; sliced at
+    team.CHUNK items, as loops over particles are, 16 blocks (32 x 32 particles) all went to
+    one worker while the other waited at each barrier (CG iterations 1.4x slower)."""
+    cloth, _ = fabric_sheet(n=12)                       # 144 particles: 3 blocks
+    for integrator in (tc.ImplicitEuler(), tc.ImplicitMidpoint(), tc.TRBDF2()):
+        sim = tc.Simulation(cloth, integrator=integrator, dt=1 / 240)
+        work = sim.integrator.loaded_workspace(sim.model, sim.state)
+        nodes = runtime_plan.nodes_of(sim.integrator, "phases", sim.model, sim.forces, work)
+        over_blocks = [loop for loop in loops_in(nodes) if loop.count == work.block_count == 3]
+        assert len(over_blocks) >= 4, integrator           # A p, two CG updates, the gather
+        for loop in over_blocks:
+            slices = team_slices(loop.count, loop.chunk, 2)
+            assert slices[0][0] == 0 and slices[0][1] == slices[1][0] and slices[1][1] == 3
+            assert all(end > begin for begin, end in slices), (loop.body.__name__, slices)
+        # a loop over particles keeps its chunk-aligned slices (team.py's vectorised items)
+        assert team_slices(cloth.particle_count, team.CHUNK, 2) == [(0, 64), (64, 144)]
 
 
 def test_no_step_count_compiles_a_kernel_after_the_first_step(threads):

@@ -154,6 +154,14 @@ def block_range(block, count):
     return block * BLOCK, ti.min((block + 1) * BLOCK, count)
 
 
+def blocks(ws, body, *args) -> Loop:
+    """body(*args) for every block of BLOCK particles (ITEM: the block), a team sharing them
+    block by block (plan.Loop's chunk 1): a block's particles are a serial loop of their own,
+    so a body of a few blocks (16 at 32 x 32) still runs on every worker, where slices of
+    team.CHUNK blocks gave them all to one."""
+    return Loop(ws.block_count, body, *args, chunk=1)
+
+
 @ti.func
 def system_row(model: ti.template(), state: ti.template(), forces: ti.template(),
                ws: ti.template(), i, h):
@@ -389,7 +397,7 @@ def linearisation(model, forces, ws, start: Loop) -> tuple:
         linear += (Loop(model.spring_count, linearise_spring, model, STATE, forces, ws, ITEM),)
     if model.altitude_count:
         linear += (Loop(model.altitude_count, linearise_altitude, model, STATE, ws, ITEM),)
-    gather = Loop(ws.block_count, gather_block, model, STATE, forces, ITEM)
+    gather = blocks(ws, gather_block, model, STATE, forces, ITEM)
     if model.altitude_count:
         begin = (Phase(gather, Loop(model.altitude_count, project_velocity, model, STATE, ws,
                                     ITEM)),
@@ -398,13 +406,13 @@ def linearisation(model, forces, ws, start: Loop) -> tuple:
         begin = (Phase(gather, start),)
     if model.sewn:
         begin += (Phase(Loop(model.weld_count, weld_start, model, ws, ITEM)),
-                  Phase(Loop(ws.block_count, start_sums, model, ws, ITEM)))
+                  Phase(blocks(ws, start_sums, model, ws, ITEM)))
     bending = bending_phases(model, *implicit_elements.bending_loops(model, ws))
     solve_start = (Once(begin_solve, ws, NOW),)
     if ws.two_level:
         solve_start = ((Phase(Loop(1, coarse_level, model, forces, ws, ITEM, NOW)),)
                        + solve_start
-                       + (Phase(Loop(ws.block_count, coarse_start, model, ws, ITEM, NOW)),))
+                       + (Phase(blocks(ws, coarse_start, model, ws, ITEM, NOW)),))
     return (wind.phases(model, forces) + ((Phase(*linear),) if linear else ()) + bending
             + begin + solve_start)
 
@@ -417,7 +425,7 @@ def system_product(model, forces, ws) -> tuple:
     weld = ((Phase(Loop(model.weld_count, weld_product, model, ws, ITEM)),) if model.sewn
             else ())
     return (implicit_elements.product_phases(model, ws, project)
-            + (Phase(Loop(ws.block_count, apply_block, model, forces, ws, ITEM, NOW)),) + weld)
+            + (Phase(blocks(ws, apply_block, model, forces, ws, ITEM, NOW)),) + weld)
 
 
 def solve(model, forces, ws) -> Until:
@@ -425,7 +433,7 @@ def solve(model, forces, ws) -> Until:
     or the cap's iterations (ws.settings: CG_TOLERANCE_SQUARED, MOST_CG): dv in ws.dv."""
     iteration = (system_product(model, forces, ws)
                  + (Once(step_length, ws, NOW),
-                    Phase(Loop(ws.block_count, update_block, model, ws, ITEM, NOW)),
+                    Phase(blocks(ws, update_block, model, ws, ITEM, NOW)),
                     Once(next_direction, ws, NOW),
-                    Phase(Loop(ws.block_count, turn_block, model, ws, ITEM, NOW))))
+                    Phase(blocks(ws, turn_block, model, ws, ITEM, NOW))))
     return Until(unconverged, *iteration, args=(ws, NOW))

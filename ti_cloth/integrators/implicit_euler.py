@@ -26,7 +26,7 @@ import taichi as ti
 
 from ..inputs import limits
 from ..inputs.validation import count, finite_number, require
-from ..runtime.plan import ITEM, NOW, STATE, Loop, Once, Phase
+from ..runtime.plan import ITEM, NOW, STATE, Once, Phase
 from ..state import store_particle
 from . import conjugate_gradients, fused
 from .base import Integrator, report_unconverged, take_ran_out
@@ -37,6 +37,7 @@ from .conjugate_gradients import (
     TYPICAL_ITERATIONS,
     Preconditioner,
     block_range,
+    blocks,
     start_row,
     system_row,
 )
@@ -131,7 +132,7 @@ class ImplicitEuler(Integrator):
     def linearisation(self, model, forces, ws):
         """f_n and the linearisation at x_n, the CG start b = h (f_n + h K v_n) (a part of
         the step plan.run can launch alone: benchmarks/implicit_solver.py)."""
-        start = Loop(ws.block_count, _start_block, model, STATE, forces, ws, ITEM, NOW)
+        start = blocks(ws, _start_block, model, STATE, forces, ws, ITEM, NOW)
         return conjugate_gradients.linearisation(model, forces, ws, start)
 
     def system_product(self, model, forces, ws):
@@ -144,4 +145,4 @@ class ImplicitEuler(Integrator):
         return (self.linearisation(model, forces, ws)
                 + (conjugate_gradients.solve(model, forces, ws),
                    Once(conjugate_gradients.count_ran_out, ws, NOW))
-                + (Phase(Loop(ws.block_count, _advance_block, model, STATE, ws, ITEM, NOW)),))
+                + (Phase(blocks(ws, _advance_block, model, STATE, ws, ITEM, NOW)),))

@@ -34,7 +34,7 @@ import taichi as ti
 
 from ..inputs import limits
 from ..inputs.validation import count, finite_number, require
-from ..runtime.plan import ITEM, NOW, STATE, Loop, Once, Phase, Until
+from ..runtime.plan import ITEM, NOW, STATE, Once, Phase, Until
 from . import conjugate_gradients, fused
 from .base import Integrator, report_unconverged, take_ran_out
 from .conjugate_gradients import (
@@ -49,6 +49,7 @@ from .conjugate_gradients import (
     TYPICAL_ITERATIONS,
     Preconditioner,
     block_range,
+    blocks,
     start_row,
     system_row,
 )
@@ -180,10 +181,10 @@ def solve(model, forces, ws) -> tuple:
     origin_velocity, the State holding the predictor; the State ends on the solution. DT and
     NOW are the sub-step s (wrap in plan.substep). Its tolerances and caps are ws's run-time
     settings (NewtonIntegrator.settings_values)."""
-    start = Loop(ws.block_count, _start_block, model, STATE, forces, ws, ITEM, NOW)
+    start = blocks(ws, _start_block, model, STATE, forces, ws, ITEM, NOW)
     iteration = (conjugate_gradients.linearisation(model, forces, ws, start)
                  + (conjugate_gradients.solve(model, forces, ws),
-                    Phase(Loop(ws.block_count, _update_block, model, STATE, ws, ITEM, NOW)),
+                    Phase(blocks(ws, _update_block, model, STATE, ws, ITEM, NOW)),
                     Once(_end_iteration, ws, NOW)))
     return (Once(_begin_newton, ws, NOW),
             Until(_unconverged, *iteration, args=(ws, NOW)),

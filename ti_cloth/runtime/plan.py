@@ -51,7 +51,7 @@ import taichi as ti
 
 from ..inputs import limits
 from . import backend
-from .team import SOLO
+from .team import CHUNK, SOLO
 
 SERIAL_SPRING_LIMIT = 50_000   # serial launches faster at 24k springs, parallel ones at 97k
 
@@ -104,7 +104,8 @@ def substep(fraction: float, nodes: tuple) -> tuple:
     out = []
     for node in nodes:
         if isinstance(node, Phase):
-            node = Phase(*(Loop(loop.count, loop.body, *scaled(loop.args)) for loop in node.loops))
+            node = Phase(*(Loop(loop.count, loop.body, *scaled(loop.args), chunk=loop.chunk)
+                            for loop in node.loops))
         elif isinstance(node, Sweep):
             copy = Sweep(node.colouring, node.body, *scaled(node.args))
             copy.per_colour = node.per_colour
@@ -121,10 +122,13 @@ def substep(fraction: float, nodes: tuple) -> tuple:
 
 class Loop:
     """body(*args) for every item i in 0 .. count - 1 (count: a Python int, a compile-time
-    constant; ITEM among the args is i)."""
+    constant; ITEM among the args is i). chunk: a team worker's slice starts at a multiple of
+    this many items (team.py: CHUNK, where LLVM may vectorise the loop over items); 1 for a
+    loop over blocks of particles, each block a serial loop of its own, so that a body of a
+    few blocks is still shared (conjugate_gradients.BLOCK)."""
 
-    def __init__(self, count: int, body, *args):
-        self.count, self.body, self.args = int(count), body, args
+    def __init__(self, count: int, body, *args, chunk: int = CHUNK):
+        self.count, self.body, self.args, self.chunk = int(count), body, args, int(chunk)
 
 
 class Phase:
@@ -407,7 +411,7 @@ def _run_leaf(leaf: ti.template(), model: ti.template(), state: ti.template(),
               team: ti.template(), worker, now: ti.template()):
     if ti.static(isinstance(leaf, Phase)):
         for loop in ti.static(leaf.loops):
-            begin, end = team.share(loop.count, worker)
+            begin, end = team.share(loop.count, worker, loop.chunk)
             for i in range(begin, end):
                 loop.body(*ti.static(bind(loop.args, i, state, now, stages)))
         team.meet(worker)

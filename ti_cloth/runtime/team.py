@@ -85,10 +85,10 @@ class Team:
                     ti.atomic_add(self.arrived[None], STALLED)
 
     @ti.func
-    def share(self, count, worker):
+    def share(self, count, worker, chunk: ti.template() = CHUNK):
         """Worker `worker`'s slice [begin, end) of `count` items, starting at a multiple of
-        CHUNK (module doc)."""
-        return chunked_share(count, worker, self.size[None])
+        `chunk` (CHUNK: module doc)."""
+        return chunked_share(count, worker, self.size[None], chunk)
 
     @ti.func
     def share_range(self, begin, end, worker):
@@ -102,13 +102,13 @@ class Team:
 
 
 @ti.func
-def chunked_share(count, part, parts):
+def chunked_share(count, part, parts, chunk: ti.template()):
     """Part `part`'s slice [begin, end) of `count` items cut into `parts` near-equal parts,
-    every cut at a multiple of CHUNK (the last part ends at `count`)."""
-    begin = ti.i32(ti.i64(part) * count // parts) // CHUNK * CHUNK
+    every cut at a multiple of `chunk` (the last part ends at `count`)."""
+    begin = ti.i32(ti.i64(part) * count // parts) // chunk * chunk
     end = count
     if part + 1 < parts:
-        end = ti.i32(ti.i64(part + 1) * count // parts) // CHUNK * CHUNK
+        end = ti.i32(ti.i64(part + 1) * count // parts) // chunk * chunk
     return begin, end
 
 
@@ -124,7 +124,7 @@ class _Solo:
         pass
 
     @ti.func
-    def share(self, count, worker):
+    def share(self, count, worker, chunk: ti.template() = CHUNK):
         return 0, count
 
     @ti.func
