@@ -102,7 +102,7 @@ def test_a_solve_that_runs_out_of_iterations_is_counted_and_warned_once(f64):
     cloth = tc.Cloth(tc.grid_mesh(10, 10, (0.5, 0.5)), tc.Material(), pinned=[0, 9])
     short = tc.ImplicitEuler(tolerance=1e-8, max_iterations=3)
     sim = tc.Simulation(cloth, integrator=short, dt=1 / 60)
-    with pytest.warns(RuntimeWarning, match="max_iterations=3") as caught:
+    with pytest.warns(RuntimeWarning, match="max_iterations=3.*is damped") as caught:
         ran_out = 0
         for _ in range(5):
             sim.step(1)
@@ -113,7 +113,8 @@ def test_a_solve_that_runs_out_of_iterations_is_counted_and_warned_once(f64):
     assert sum(issubclass(w.category, RuntimeWarning) for w in caught) == 1
     for make, per_step in ((tc.ImplicitMidpoint, 1), (tc.TRBDF2, 2)):
         newton = make(tolerance=1e-14, most_newton=2)
-        with pytest.warns(RuntimeWarning, match="most_newton=2"):
+        # not "damped": an unconverged midpoint is doubled, and compression stalls Newton
+        with pytest.warns(RuntimeWarning, match="most_newton=2.*doubles.*compressed"):
             tc.Simulation(cloth, integrator=newton, dt=1 / 60).step(3)
         assert newton.unconverged_solves == 3 * per_step
     for enough in (tc.ImplicitEuler(tolerance=1e-8, max_iterations=500), tc.ImplicitMidpoint()):

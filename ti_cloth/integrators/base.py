@@ -157,20 +157,19 @@ def add_settings(work, fields) -> None:
     work.loaded = None
 
 
-def report_unconverged(integrator, stepper, reason: str) -> None:
+def report_unconverged(integrator, stepper, reason: str, meaning: str) -> None:
     """Count into integrator.unconverged_solves the solves of the steps just taken that
     stopped at their cap short of their tolerance (`stepper`'s ran_out_pending, summed over
     its launches by after_launch from the workspace's RAN_OUT, which it clears; `stepper` may
     be `integrator`), and warn of the first (RuntimeWarning, once per integrator) with
-    `reason`."""
+    `reason` and what it means for such a step, and what to do (`meaning`)."""
     new, stepper.ran_out_pending = stepper.ran_out_pending, 0
     integrator.unconverged_solves += new
     if new and not integrator.warned_unconverged:
         integrator.warned_unconverged = True
         warnings.warn(
             f"{integrator.name}: {new} of the solves just made ended with {reason}: "
-            "such a step is damped, not the implicit step asked for. Raise the cap or take "
-            f"smaller steps; {type(integrator).__name__}.unconverged_solves counts them (warned "
+            f"{meaning}; {type(integrator).__name__}.unconverged_solves counts them (warned "
             "once)", RuntimeWarning, stacklevel=4)
 
 

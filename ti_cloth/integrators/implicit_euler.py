@@ -112,7 +112,9 @@ class ImplicitEuler(Integrator):
         self.last_residual = stepper.last_residual
         report_unconverged(self, stepper,
                            f"CG stopped at max_iterations={self.max_iterations} with its "
-                           f"relative residual above tolerance={self.tolerance:g}")
+                           f"relative residual above tolerance={self.tolerance:g}",
+                           "such a step is damped, not the implicit step asked for. Raise "
+                           "the cap or take smaller steps")
 
     def workspace(self, model, state):
         return self.preconditioner.workspace(self, model, state)

@@ -55,6 +55,12 @@ from .conjugate_gradients import (
 )
 
 TYPICAL_NEWTON = 3         # Newton iterations a solve is assumed to take (sizing launches)
+# what a solve stopped at its cap means, and what to do (the warning: base.report_unconverged)
+UNCONVERGED = ("such a step is not the implicit step asked for, and implicit midpoint's "
+               "doubles its half step's error. Newton stalls whatever the cap where the "
+               "cloth starts a step compressed (a gathered garment, a fold): its triangles "
+               "buckle faster than any step resolves (docs/integrators.md, \"Compressed "
+               "cloth\"): use xpbd there; elsewhere raise most_newton or take smaller steps")
 LEAST_NEWTON = 2           # iterations before the update test can stop a solve (module doc)
 
 
@@ -251,4 +257,5 @@ class NewtonIntegrator(Integrator):
         settings = self.settings
         report_unconverged(self, stepper,
                            f"Newton stopped at most_newton={settings.most_newton} with its "
-                           f"last update above tolerance={settings.tolerance:g} m")
+                           f"last update above tolerance={settings.tolerance:g} m",
+                           UNCONVERGED)
