@@ -55,13 +55,13 @@ from .conjugate_gradients import (
 )
 
 TYPICAL_NEWTON = 3         # Newton iterations a solve is assumed to take (sizing launches)
+LEAST_NEWTON = 2           # iterations before the update test can stop a solve (module doc)
 # what a solve stopped at its cap means, and what to do (the warning: base.report_unconverged)
 UNCONVERGED = ("such a step is not the implicit step asked for, and implicit midpoint's "
                "doubles its half step's error. Newton stalls whatever the cap where the "
                "cloth starts a step compressed (a gathered garment, a fold): its triangles "
-               "buckle faster than any step resolves (docs/integrators.md, \"Compressed "
+               "buckle faster than a large step resolves (docs/integrators.md, \"Compressed "
                "cloth\"): use xpbd there; elsewhere raise most_newton or take smaller steps")
-LEAST_NEWTON = 2           # iterations before the update test can stop a solve (module doc)
 
 
 @ti.func
