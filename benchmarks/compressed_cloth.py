@@ -7,7 +7,8 @@ every triangle 3 % shorter each way) and rippled 1 mm out of its plane, then ste
 TR-BDF2 with the loose solves at --dts. Printed for each run: the share of Newton solves that
 stopped at their cap (most_newton = 8), Newton iterations a solve, and at the end the sheet's
 roughness (the mean length of the second difference of positions along the grid's rows:
-the mesh-scale crumpling) and its extent.
+the mesh-scale crumpling) and its extent. --compressions runs the sheet for each
+Fabric.compression given (1: as stiff pushed as pulled; 0.05: a yarn gives way).
 
 A compressed sheet is a buckling problem: a triangle under a compressive stress sigma has a
 negative geometric stiffness of about sigma A |grad lambda|^2, which on the denim at 3 %
@@ -18,7 +19,7 @@ the stalled half step. The explicit step, stable and small, lets the sheet expan
 before the mesh-scale buckles grow (docs/integrators.md, "Compressed cloth").
 
     python benchmarks/compressed_cloth.py [--size 32] [--scales 1 0.97 0.9]
-        [--dts 0.008333 0.001042] [--duration 0.2]
+        [--dts 0.008333 0.001042] [--duration 0.2] [--compressions 1 0.05]
 """
 
 import argparse
@@ -70,17 +71,19 @@ def main() -> None:
     parser.add_argument("--dts", type=float, nargs="+", default=[1 / 120, 1 / 960])
     parser.add_argument("--duration", type=float, default=0.2)
     parser.add_argument("--precision", choices=("f32", "f64"), default="f32")
+    parser.add_argument("--compressions", type=float, nargs="+", default=[1.0])
     args = parser.parse_args()
     tc.init(arch="cpu", precision=args.precision)
     n = args.size
     mesh = tc.grid_mesh(rows=n, cols=n, size=(0.5, 0.5), plane="xz")
-    cloth = tc.Cloth(mesh, tc.Fabric(**DENIM), pinned=[0, n - 1])
-    explicit = 0.9 * tc.stable_dt(cloth, "symplectic_euler")
     print(f"{n} x {n} denim sheet, {args.precision}, after {args.duration} s; Newton solves "
           "stopped at their cap (8), Newton iterations a solve, roughness (mm), extent (m)\n")
-    print("| scale | run | step [s] | stalled | Newton | roughness [mm] | extent [m] |")
-    print("|---|---|---|---|---|---|---|")
-    for scale in args.scales:
+    print("| compression | scale | run | step [s] | stalled | Newton | roughness [mm] | "
+          "extent [m] |")
+    print("|---|---|---|---|---|---|---|---|")
+    for compression, scale in ((c, s) for c in args.compressions for s in args.scales):
+        cloth = tc.Cloth(mesh, tc.Fabric(**DENIM, compression=compression), pinned=[0, n - 1])
+        explicit = 0.9 * tc.stable_dt(cloth, "symplectic_euler")
         runs = [("symplectic_euler", "symplectic_euler", explicit)]
         for dt in args.dts:
             for make in (tc.ImplicitMidpoint, tc.TRBDF2):
@@ -89,7 +92,7 @@ def main() -> None:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
                 row = run(cloth, n, scale, integrator, dt, args.duration)
-            print(f"| {scale:g} | {label} | {dt:.3g} | {row} |", flush=True)
+            print(f"| {compression:g} | {scale:g} | {label} | {dt:.3g} | {row} |", flush=True)
 
 
 if __name__ == "__main__":

@@ -53,6 +53,7 @@ class Model:
     face_indices, face_gradient (grad lambda_1, grad lambda_2 as x1 y1 x2 y2), face_area,
     face_moduli, face_damping, face_bending (00 11 22 01 02 12), face_hinge: a Fabric's
                           triangles (Cloth's arrays of those names; energies/);
+                          face_compression, with `softened`, Cloth's;
                           face_edge_rest the rest length of each one's edge i (opposite
                           corner i) [m], for tearing
     hinge_indices, hinge_faces, hinge_rest_tangent (tan of half the rest angle, continued as
@@ -80,7 +81,7 @@ class Model:
     Python attributes read at compile time (fixed for the model's life):
     particle_count, spring_count, altitude_count, face_count, hinge_count, relative_damping,
     isometric, sewn (the cloth has seams), weld_count (its groups of particles sewn
-    together), curved (Cloth.curved), curve_count, curve_length.
+    together), curved (Cloth.curved), curve_count, curve_length, softened (Cloth.softened).
     """
 
     def __init__(self, cloth: Cloth, pinned: np.ndarray | None = None, isometric: bool = False):
@@ -98,6 +99,7 @@ class Model:
         weld_start, weld_member = weld_groups(cloth.particle_weld)
         self.weld_count = len(weld_start) - 1
         self.curved = cloth.curved
+        self.softened = cloth.softened
         self.curve_count = len(cloth.bending_curves) if self.curved else 0
         self.curve_length = _curve_length(cloth) if self.curved else 1
         require(not (self.curved and isometric), "isometric", isometric,
@@ -146,6 +148,7 @@ class Model:
         self.bend_other = fields.scalar(ti.i32, max(bends, 1))
         self.bend_stiffness = fields.scalar(real, max(bends, 1))
         self.bend_damping = fields.scalar(real, max(bends, 1))
+        self.face_compression = fields.scalar(real, f1 if self.softened else 1)
         curved_faces = f1 if self.curved else 1
         self.face_components = fields.vector(9, real, curved_faces)
         self.face_curve = fields.scalar(ti.i32, curved_faces)
@@ -178,7 +181,7 @@ class Model:
         digest.update(np.ascontiguousarray(cloth.hinge_indices).tobytes())
         return ("Model", cloth.particle_count, cloth.spring_count, cloth.altitude_count,
                 cloth.face_count, cloth.hinge_count, cloth.damping == "relative",
-                bool(isometric), bool(len(cloth.seam_indices)), cloth.curved,
+                bool(isometric), bool(len(cloth.seam_indices)), cloth.curved, cloth.softened,
                 len(cloth.bending_curves) if cloth.curved else 0,
                 _curve_length(cloth) if cloth.curved else 1,
                 *(len(a) for a in weld_groups(cloth.particle_weld)), digest.hexdigest())
@@ -215,6 +218,8 @@ class Model:
                     *zip((self.bend_other, self.bend_stiffness, self.bend_damping), bends),
                     (self.face_stencil, stencil), (self.face_stencil_weight, weights.reshape(-1, 18)),
                     (self.face_isometric, reduced)))
+        if self.softened:
+            upload(((self.face_compression, cloth.face_compression),))
         if self.curved:
             upload(((self.face_components, cloth.face_components.reshape(-1, 9)),
                     (self.face_curve, cloth.face_curve),

@@ -395,7 +395,7 @@ def _fabric(owner: Table) -> Fabric:
     """`fabric = "denim"`, or a [bodies.fabric] table: `preset` plus any of density [kg/m^2],
     stretch and bending (a number or [warp, weft]; N/m, N m), shear [N/m], twist [N m],
     bending_curve (an inline table of BendingCurve's fields: rigidities sampled at
-    curvatures), poisson, damping [s], hem_mass [kg]."""
+    curvatures), poisson, compression, damping [s], hem_mass [kg]."""
     value = owner.value("fabric")
     if isinstance(value, str):
         if value.lower() not in FABRICS:
@@ -405,12 +405,12 @@ def _fabric(owner: Table) -> Fabric:
     if not isinstance(value, dict):
         owner.bad("fabric", value, f"a table or one of the fabrics {sorted(FABRICS)}")
     table = Table(value, owner.path("fabric"), owner.source)
-    table.allow("preset", "density", "shear", "poisson", "damping", "hem_mass", "stretch",
-                "bending", "twist", "bending_curve")
+    table.allow("preset", "density", "shear", "poisson", "compression", "damping", "hem_mass",
+                "stretch", "bending", "twist", "bending_curve")
     preset = _preset(table, FABRICS) if table.has("preset") else None
     changes = {}
     for key, unit in (("density", "kg/m^2"), ("shear", "N/m"), ("poisson", ""),
-                      ("damping", "s"), ("hem_mass", "kg"), ("twist", "N m")):
+                      ("compression", ""), ("damping", "s"), ("hem_mass", "kg"), ("twist", "N m")):
         if table.has(key):
             changes[key] = table.number(key, unit=unit)
     for key, unit in (("stretch", "N/m"), ("bending", "N m")):

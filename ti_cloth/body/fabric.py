@@ -20,6 +20,15 @@ them into forces that converge as the mesh is refined:
   poisson   nu_12: the weft's contraction per unit strain when stretched along the warp;
             nu_21 = nu_12 E_weft / E_warp (plane-stress orthotropy). Needs
             nu_12 nu_21 < 1 (a positive definite sheet).
+  compression  the sheet's stiffness against being shortened along its warp or weft, as a
+            fraction of its stiffness in tension, in (0, 1]. 1 (the default): a Saint
+            Venant-Kirchhoff sheet, as stiff pushed as pulled. A woven yarn cannot push:
+            it buckles, so real cloth gathers and folds at almost no in-plane stress
+            (Choi & Ko 2002 model the same buckling on springs); a mesh whose triangles
+            are larger than those folds sees the sheet refuse to shorten instead
+            (energies/membrane.py). Shear is unchanged. 0.05 lets garments gather into
+            folds, and lets the implicit solvers' large steps converge on gathered cloth
+            (docs/integrators.md, "Compressed cloth").
   damping   stiffness-proportional (Rayleigh) damping time beta [s]: the stress
             C (strain + beta d(strain)/dt), the same for bending; rigid motions are not
             damped, and beta is the same at every resolution.
@@ -41,6 +50,7 @@ from ..inputs.validation import finite_number, in_range, keyword_only, require
 STRETCH = limits.Range(1e-3, 1e9, "N/m", "fabric stretch and shear moduli")
 BENDING = limits.Range(0.0, 1e2, "N m", "fabric flexural rigidity (0 allowed: no bending)")
 DAMPING_TIME = limits.Range(0.0, 1.0, "s", "fabric damping time beta")
+COMPRESSION = limits.Range(1e-4, 1.0, "", "fabric compressive stiffness as a fraction of the tensile")
 _DEFAULT_BENDING = (1e-5, 1e-5)
 STANDARD_GRAVITY = 9.80665      # m/s^2: a swatch's weight per area W = density x this
 
@@ -68,6 +78,7 @@ class Fabric:
     twist: float | None = None
     bending_curve: BendingCurve | None = None
     poisson: float = 0.0
+    compression: float = 1.0
     damping: float = 1e-4
     hem_mass: float = 0.0
 
@@ -87,6 +98,7 @@ class Fabric:
                 f"below sqrt(stretch warp / weft) = {(warp / weft) ** 0.5:.4g} (nu_12 nu_21 < 1: "
                 "a sheet that resists every stretch)")
         set_(self, "poisson", poisson)
+        set_(self, "compression", in_range("Fabric.compression", self.compression, COMPRESSION))
         set_(self, "damping", in_range("Fabric.damping", self.damping, DAMPING_TIME))
         hem_mass = finite_number("Fabric.hem_mass", self.hem_mass, 0.0, unit="kg")
         set_(self, "hem_mass", hem_mass and in_range("Fabric.hem_mass", hem_mass, limits.MASS))
@@ -142,8 +154,8 @@ class Fabric:
     @classmethod
     def from_measurements(cls, *, weight: float, bending_length=None, rigidity=None,
                           stretch=None, strip_test=None, shear: float = 50.0,
-                          poisson: float = 0.0, damping: float = 1e-4,
-                          hem_mass: float = 0.0) -> "Fabric":
+                          poisson: float = 0.0, compression: float = 1.0,
+                          damping: float = 1e-4, hem_mass: float = 0.0) -> "Fabric":
         """The Fabric of a swatch's lab numbers, each by its closed form (exact):
 
         weight         [g/m^2]: density = weight / 1000 kg/m^2.
@@ -155,7 +167,7 @@ class Fabric:
         stretch        2-D moduli E h [N/m], a number or (warp, weft); or
         strip_test     (tension per width [N/m], warp strain, weft strain) of a strip test in
                        its linear range: stretch = tension / strain.
-        shear, poisson, damping, hem_mass as Fabric's."""
+        shear, poisson, compression, damping, hem_mass as Fabric's."""
         density = finite_number("weight", weight, 0.0, strict=True, unit="g/m^2") / 1000.0
         in_range("weight", density * 1000.0, limits.Range(limits.DENSITY.low * 1000,
                                                           limits.DENSITY.high * 1000, "g/m^2",
@@ -189,7 +201,7 @@ class Fabric:
                                                     0.0, strict=True) for k in (1, 2))
         return cls(density=density, stretch=stretch, shear=shear,
                    bending=(rigidities[0], rigidities[1]), twist=twist, poisson=poisson,
-                   damping=damping, hem_mass=hem_mass)
+                   compression=compression, damping=damping, hem_mass=hem_mass)
 
     def table(self) -> str:
         """This fabric as a scene file's [bodies.fabric] table (every field, to paste)."""
@@ -207,8 +219,10 @@ class Fabric:
             rows[-1] = f"bending_curve = {self.bending_curve.table()}   # 1/m, N m"
         elif self.twist is not None:
             rows.append(f"twist = {number(self.twist)}                # N m")
-        rows += [f"poisson = {number(self.poisson)}",
-                 f"damping = {number(self.damping)}                # s"]
+        rows.append(f"poisson = {number(self.poisson)}")
+        if self.compression != 1.0:
+            rows.append(f"compression = {number(self.compression)}")
+        rows.append(f"damping = {number(self.damping)}                # s")
         if self.hem_mass:
             rows.append(f"hem_mass = {number(self.hem_mass)}                # kg")
         return "\n".join(rows)

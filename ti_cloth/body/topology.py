@@ -178,6 +178,8 @@ class Cloth:
       face_area          (F,) rest areas [m^2]
       face_moduli        (F, 4): (C11, C12, C22, C33) [N/m] (Fabric.membrane)
       face_damping       (F,) Rayleigh damping time [s] (Fabric.damping)
+      face_compression   (F,) the compressive stiffness's fraction of the tensile
+                         (Fabric.compression)
       face_bending       (F, 3, 3): B of the bending energy 1/2 dt^T B dt [N m] (at zero
                          curvature, for a Fabric with a bending_curve)
       face_components    (F, 3, 3): b[f, d, i], each hinge tangent's share of the change of
@@ -302,9 +304,10 @@ class Cloth:
         if fabric is not None:
             triangles = self.mesh.triangles
             moduli, flexural, damping = fabric.membrane, fabric.flexural, fabric.damping
+            compression = fabric.compression
         else:
             triangles = np.zeros((0, 3), np.int64)
-            moduli, flexural, damping = (0.0,) * 4, (0.0,) * 3, 0.0
+            moduli, flexural, damping, compression = (0.0,) * 4, (0.0,) * 3, 0.0, 1.0
         count = len(triangles)
         x = self.rest_position
         self.triangle_face = (np.arange(count) if fabric is not None
@@ -316,6 +319,7 @@ class Cloth:
         self.face_gradient, self.face_area = material_frames(x, triangles, direction)
         self.face_moduli = np.tile(moduli, (count, 1))
         self.face_damping = np.full(count, damping)
+        self.face_compression = np.full(count, compression)
         (self.hinge_indices, self.hinge_faces, self.face_hinge,
          face_sign) = hinges(triangles, self.particle_weld)
         self.face_components = curvature_components(self.face_gradient, face_sign)
@@ -328,8 +332,8 @@ class Cloth:
         self.hinge_rest_angle = np.where(across, 0.0, dihedral_angles(x, self.hinge_indices))
 
     ELEMENT_ARRAYS = ("face_indices", "face_gradient", "face_area", "face_moduli", "face_damping",
-                      "face_bending", "face_components", "face_curve", "face_hinge", "hinge_indices", "hinge_faces",
-                      "hinge_rest_angle")
+                      "face_compression", "face_bending", "face_components", "face_curve",
+                      "face_hinge", "hinge_indices", "hinge_faces", "hinge_rest_angle")
 
     def _freeze(self) -> None:
         for name in ("rest_position", "particle_mass", "particle_body", "pinned", "hem", "ghost",
@@ -381,8 +385,8 @@ class Cloth:
         body.altitude_indices = joined("altitude_indices", particle_offsets)
         body.seam_indices = joined("seam_indices", particle_offsets)
         for name in ("altitude_rest_length", "altitude_stiffness", "altitude_damping",
-                     "face_gradient", "face_area", "face_moduli", "face_damping", "face_bending",
-                     "face_components", "hinge_rest_angle"):
+                     "face_gradient", "face_area", "face_moduli", "face_damping",
+                     "face_compression", "face_bending", "face_components", "hinge_rest_angle"):
             setattr(body, name, joined(name))
         body.bending_curves = tuple(c for b in bodies for c in b.bending_curves)
         body.face_curve = joined("face_curve", np.cumsum([0] + [len(b.bending_curves)
@@ -464,6 +468,11 @@ class Cloth:
     def fabric(self) -> bool:
         """Whether the body has elements (a Fabric's) rather than springs only."""
         return self.face_count > 0
+
+    @property
+    def softened(self) -> bool:
+        """Whether some triangle resists compression less than tension (Fabric.compression)."""
+        return bool((self.face_compression < 1.0).any())
 
     @property
     def curved(self) -> bool:

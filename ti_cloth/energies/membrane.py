@@ -21,6 +21,21 @@ TOG 28(4), 2009, sec. 3). Everything each solver needs of it, together:
   corner_diagonal), and its blocks between sets of corners moved as one (face_block: a coarse
   level's, integrators/coarse.py);
 - projection: XPBD on the strain e with compliance (A C)^-1 (xpbd_membrane; faces.py).
+
+A Fabric whose compression is kappa < 1 resists shortening along its warp or weft by kappa of
+its stiffness in tension: a yarn buckles rather than push (Fabric.compression; Marvelous
+Designer's buckling ratio, Vellum's compression stiffness). The energy is A/2 u^T C u + the
+shear's, with u = (phi(E11), phi(E22)) and
+
+    phi(E) = E (E >= 0),   phi(E) = r E + (1 - r) b (exp(E / b) - 1) (E < 0),
+
+r = sqrt(kappa) and b = BUCKLING: the stiffness a warp or weft had in tension fades to kappa of
+it over a few b of compressive strain (phi' goes from 1 to r), so the stress is continuous
+(Poisson coupling included) and Newton meets no kink. The stress is S = D C (u + beta D de/dt)
+with D = diag(phi'(E11), phi'(E22)); every Hessian above uses D C D for C (moduli), leaving
+out phi''(E) (C u)_i, which is <= 0 in compression (the projection drops it); XPBD projects
+the constraints phi(E). Shear (C33) is never scaled: a woven sheet's shear is its yarns
+turning at their crossings, not a yarn pushed.
 """
 
 import numpy as np
@@ -28,6 +43,8 @@ import taichi as ti
 
 from ..runtime.plan import DT, ITEM, STATE, Loop, Sweep
 from .faces import face_columns, face_intact, multiplier_step, store_corners
+
+BUCKLING = 1e-3     # b: the compressive strain over which a softened warp or weft gives way
 
 
 def material_frames(positions: np.ndarray, triangles: np.ndarray, warp) -> tuple:
@@ -69,35 +86,85 @@ def green_strains(positions, triangles, gradients) -> np.ndarray:
                      np.sum(a * b, 1)], 1)
 
 
+def give_way(strain: np.ndarray, root: np.ndarray) -> np.ndarray:
+    """phi of the module doc, in float64: r E + (1 - r) b (exp(E / b) - 1) where E < 0."""
+    short = np.minimum(strain, 0.0)
+    return np.where(strain < 0, root * short + (1 - root) * BUCKLING * np.expm1(short / BUCKLING),
+                    strain)
+
+
 def membrane_energy(cloth, positions: np.ndarray, alive: np.ndarray | None = None) -> float:
-    """sum over triangles (those `alive`, (F,) bool, when given: not torn) of A/2 e^T C e [J]
-    (module doc)."""
+    """sum over triangles (those `alive`, (F,) bool, when given: not torn) of A/2 u^T C u +
+    A/2 C33 (2 E12)^2 [J] (module doc; u = e without softened compression)."""
     if not cloth.face_count:
         return 0.0
     e = green_strains(positions, cloth.face_indices, cloth.face_gradient)
     c11, c12, c22, c33 = cloth.face_moduli.T
-    density = 0.5 * (c11 * e[:, 0] ** 2 + 2 * c12 * e[:, 0] * e[:, 1] + c22 * e[:, 1] ** 2
-                     + c33 * e[:, 2] ** 2)
+    root = np.sqrt(cloth.face_compression)
+    u1, u2 = give_way(e[:, 0], root), give_way(e[:, 1], root)
+    density = 0.5 * (c11 * u1 ** 2 + 2 * c12 * u1 * u2 + c22 * u2 ** 2 + c33 * e[:, 2] ** 2)
     if alive is not None:
         density = density * alive
     return float(np.sum(cloth.face_area * density))
 
 
 @ti.func
+def gauge(model: ti.template(), f, warp, weft):
+    """(phi(E11), phi'(E11), phi(E22), phi'(E22)) of triangle f where F's columns are (warp,
+    weft) (module doc): (E11, 1, E22, 1) for a sheet that resists compression as tension."""
+    e11 = 0.5 * (warp.dot(warp) - 1.0)
+    e22 = 0.5 * (weft.dot(weft) - 1.0)
+    result = ti.Vector([e11, 1.0, e22, 1.0])
+    if ti.static(model.softened):
+        root = ti.sqrt(model.face_compression[f])
+        for k in ti.static(range(2)):
+            strain = result[2 * k]
+            if strain < 0:
+                fade = ti.exp(strain / BUCKLING)
+                result[2 * k] = root * strain + (1.0 - root) * BUCKLING * (fade - 1.0)
+                result[2 * k + 1] = root + (1.0 - root) * fade
+    return result
+
+
+@ti.func
+def gauged_moduli(c, g):
+    """D C D (module doc) of (C11, C12, C22, C33) and a gauge's D."""
+    return ti.Vector([g[1] * g[1] * c[0], g[1] * g[3] * c[1], g[3] * g[3] * c[2], c[3]])
+
+
+@ti.func
+def moduli(model: ti.template(), f, warp, weft):
+    """Triangle f's moduli for the Hessian where F's columns are (warp, weft): D C D (module
+    doc), Fabric.membrane's C for a sheet that resists compression as tension."""
+    c = model.face_moduli[f]
+    if ti.static(model.softened):
+        c = gauged_moduli(c, gauge(model, f, warp, weft))
+    return c
+
+
+@ti.func
 def membrane_forces(model: ti.template(), state: ti.template(), forces: ti.template(), f):
     """face_force[3 f + c] = force of triangle f's membrane on its corner c:
     -A (F S) grad lambda_c, S = C (e + beta de/dt) with e = (E11, E22, 2 E12) the Green strain
-    in the warp/weft frame (module doc; Bonet & Wood eq. 6.11, 7.13) and beta the
-    Rayleigh damping time."""
+    in the warp/weft frame (module doc; Bonet & Wood eq. 6.11, 7.13) and beta the Rayleigh
+    damping time; softened, S = D C (u + beta D de/dt) on the warp and weft (module doc)."""
     warp, weft = face_columns(model, state.particle_position, f)
     warp_rate, weft_rate = face_columns(model, state.particle_velocity, f)
     beta = model.face_damping[f]
-    e11 = 0.5 * (warp.dot(warp) - 1.0) + beta * warp.dot(warp_rate)
-    e22 = 0.5 * (weft.dot(weft) - 1.0) + beta * weft.dot(weft_rate)
     shear = warp.dot(weft) + beta * (warp.dot(weft_rate) + weft.dot(warp_rate))
     c = model.face_moduli[f]
-    s11 = c[0] * e11 + c[1] * e22
-    s22 = c[1] * e11 + c[2] * e22
+    s11, s22 = 0.0, 0.0
+    if ti.static(model.softened):
+        g = gauge(model, f, warp, weft)
+        u1 = g[0] + beta * g[1] * warp.dot(warp_rate)
+        u2 = g[2] + beta * g[3] * weft.dot(weft_rate)
+        s11 = g[1] * (c[0] * u1 + c[1] * u2)
+        s22 = g[3] * (c[1] * u1 + c[2] * u2)
+    else:
+        e11 = 0.5 * (warp.dot(warp) - 1.0) + beta * warp.dot(warp_rate)
+        e22 = 0.5 * (weft.dot(weft) - 1.0) + beta * weft.dot(weft_rate)
+        s11 = c[0] * e11 + c[1] * e22
+        s22 = c[1] * e11 + c[2] * e22
     s12 = c[3] * shear
     area = model.face_area[f]
     if ti.static(forces.tearable):
@@ -137,7 +204,7 @@ def face_product(model: ti.template(), ws: ti.template(), f, vectors: ti.templat
     c, u = vectors."""
     dwarp, dweft = face_columns(model, vectors, f)
     warp, weft, s = ws.face_warp[f], ws.face_weft[f], ws.face_stress[f]
-    c = model.face_moduli[f]
+    c = moduli(model, f, warp, weft)
     d11 = warp.dot(dwarp)
     d22 = weft.dot(dweft)
     ds11 = c[0] * d11 + c[1] * d22
@@ -158,7 +225,7 @@ def face_block(model: ti.template(), ws: ti.template(), f, alpha_i, beta_i, alph
     (alpha along the warp, beta along the weft: faces.corner_coefficients); the row set i,
     the column set j."""
     warp, weft, s = ws.face_warp[f], ws.face_weft[f], ws.face_stress[f]
-    c = model.face_moduli[f]
+    c = moduli(model, f, warp, weft)
     ww = c[0] * alpha_i * alpha_j + c[3] * beta_i * beta_j
     wf = c[1] * alpha_i * beta_j + c[3] * beta_i * alpha_j
     fw = c[3] * alpha_i * beta_j + c[1] * beta_i * alpha_j
@@ -188,10 +255,11 @@ def linearise_face(model: ti.template(), state: ti.template(), forces: ti.templa
     (face_product, for the right-hand side) and the diagonal of its blocks of A."""
     warp, weft = face_columns(model, state.particle_position, f)
     c = model.face_moduli[f]
-    e11 = 0.5 * (warp.dot(warp) - 1.0)
-    e22 = 0.5 * (weft.dot(weft) - 1.0)
-    s = projected_stress(c[0] * e11 + c[1] * e22, c[1] * e11 + c[2] * e22,
-                          c[3] * warp.dot(weft))
+    u = gauge(model, f, warp, weft)
+    s = projected_stress(u[1] * (c[0] * u[0] + c[1] * u[2]), u[3] * (c[1] * u[0] + c[2] * u[2]),
+                         c[3] * warp.dot(weft))
+    if ti.static(model.softened):
+        c = gauged_moduli(c, u)
     if ti.static(forces.tearable):
         if state.face_alive[f] == 0:         # torn: no stiffness (F = 0 zeroes J and S)
             warp, weft = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
@@ -221,7 +289,8 @@ def moduli_matrix(c):
 @ti.func
 def xpbd_membrane(model: ti.template(), state: ti.template(), f, multiplier: ti.template(), dt,
                   tearable: ti.template()):
-    """XPBD for triangle f's strain, its multipliers in multiplier[f]. The strain's gradient
+    """XPBD for triangle f's strain (softened: phi of its warp and weft strains, module doc),
+    its multipliers in multiplier[f]. The strain's gradient
     on corner c with grad lambda_c = (g0, g1) has rows g0 F1, g1 F2, g1 F1 + g0 F2 (F1, F2
     F's columns), so J W J^T needs only sums of w_c g_c g_c^T. A torn triangle is no
     constraint."""
@@ -251,10 +320,19 @@ def membrane_constraint(model: ti.template(), state: ti.template(), f, multiplie
                           [s01 * a + s00 * m, s11 * m + s01 * b, s11 * a + 2.0 * s01 * m + s00 * b]])
     strain = ti.Vector([0.5 * (a - 1.0), 0.5 * (b - 1.0), m])
     motion = ti.Vector([warp.dot(dwarp), weft.dot(dweft), warp.dot(dweft) + weft.dot(dwarp)])
+    scale = ti.Vector([1.0, 1.0, 1.0])
+    if ti.static(model.softened):         # the constraints phi(E): gradients D grad E
+        g = gauge(model, f, warp, weft)
+        scale = ti.Vector([g[1], g[3], 1.0])
+        strain = ti.Vector([g[0], g[2], m])
+        motion = scale * motion
+        coupling = coupling * scale.outer_product(scale)
     gamma = model.face_damping[f] / dt
     stiffness = (dt * dt * model.face_area[f]) * moduli_matrix(model.face_moduli[f])
     step = multiplier_step(stiffness, coupling, strain + gamma * motion, multiplier[f], gamma)
     multiplier[f] = multiplier[f] + step
+    if ti.static(model.softened):
+        step = scale * step
     along_warp = step[0] * warp + step[2] * weft
     along_weft = step[2] * warp + step[1] * weft
     for c in ti.static(range(3)):
