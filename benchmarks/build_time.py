@@ -5,10 +5,15 @@ same process, a second simulation of the same body whose integrator differs only
 run-time options (a looser solve, other passes: Integrator.runtime_options), which must
 compile nothing, and one step of each.
 
-Each row is min / median / max over --processes fresh processes.
+Each row is min / median / max over --processes fresh processes, with no offline cache, or
+with `--warm` from a warm one (a scene run again: Taichi's offline cache skips the compile
+but still runs its Python front end; a process of each row warms it, unmeasured). With
+`--compare-memo` each process runs twice, alternated: as ti_cloth does, with Taichi's front
+end memoised (runtime/frontend.py), and with TI_CLOTH_TAICHI_MEMO=0, Taichi as it is; the
+last column is the median of (build + first step) as it is over the memoised one.
 
-    python benchmarks/build_time.py [--processes 3] [--precision f32]
-        [--integrators NAME ...] [--scenes demos/cape.toml ...]
+    python benchmarks/build_time.py [--processes 3] [--precision f32] [--warm]
+        [--compare-memo] [--integrators NAME ...] [--scenes demos/cape.toml ...]
 """
 
 import argparse
@@ -17,6 +22,7 @@ import os
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 import warnings
 from pathlib import Path
@@ -81,28 +87,57 @@ def main(argv=None) -> int:
     parser.add_argument("--precision", default="f32", choices=("f32", "f64"))
     parser.add_argument("--integrators", nargs="*", default=list(INTEGRATORS))
     parser.add_argument("--scenes", nargs="*", default=list(SCENES))
+    parser.add_argument("--warm", action="store_true",
+                        help="from a warm offline cache (module doc)")
+    parser.add_argument("--compare-memo", action="store_true",
+                        help="also with Taichi's front end as it is, alternated (module doc)")
     parser.add_argument("--child", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.child:
         print(json.dumps(child(args.child, args.precision)))
         return 0
-    environment = dict(os.environ, TI_OFFLINE_CACHE="0", ENABLE_TAICHI_HEADER_PRINT="False")
-    print(f"seconds, min / median / max over {args.processes} fresh processes "
-          f"({args.precision}, no offline cache)\n")
-    print("| what | build | first step | then: other run-time options, build and step |")
-    print("|---|---|---|---|")
-    for what in [*args.integrators, *args.scenes]:
-        runs = []
-        for _ in range(args.processes):
-            out = subprocess.run([sys.executable, __file__, "--precision", args.precision,
-                                  "--child", what], capture_output=True, text=True,
-                                 check=True, env=environment)
-            runs.append(json.loads(out.stdout.strip().splitlines()[-1]))
-        other = (cells([r["other options"] for r in runs]) if "other options" in runs[0]
-                 else "")
-        print(f"| {what} | {cells([r['build'] for r in runs])} | "
-              f"{cells([r['first step'] for r in runs])} | {other} |", flush=True)
+    with tempfile.TemporaryDirectory(prefix="build_time_cache_") as cache:
+        environment = dict(os.environ, ENABLE_TAICHI_HEADER_PRINT="False",
+                           **({"TI_OFFLINE_CACHE_FILE_PATH": cache} if args.warm
+                              else {"TI_OFFLINE_CACHE": "0"}))
+        table(args, environment)
     return 0
+
+
+def table(args, environment: dict) -> None:
+    """Print the table (module doc), the processes run with `environment`."""
+    memos = ("1", "0") if args.compare_memo else ("1",)
+
+    def run(what, memo):
+        out = subprocess.run([sys.executable, __file__, "--precision", args.precision,
+                              "--child", what], capture_output=True, text=True, check=True,
+                             env=dict(environment, TI_CLOTH_TAICHI_MEMO=memo))
+        return json.loads(out.stdout.strip().splitlines()[-1])
+
+    cache = "a warm offline cache" if args.warm else "no offline cache"
+    print(f"seconds, min / median / max over {args.processes} fresh processes "
+          f"({args.precision}, {cache})\n")
+    head = ("| what | front end | build | first step "
+            "| then: other run-time options, build and step |")
+    print(head + (" as it is / memoised |" if args.compare_memo else ""))
+    print("|---" * (head.count("|") - 1 + args.compare_memo) + "|")
+    for what in [*args.integrators, *args.scenes]:
+        if args.warm:
+            run(what, "1")                      # fills the cache, unmeasured
+        runs = {memo: [] for memo in memos}
+        for _ in range(args.processes):
+            for memo in memos:
+                runs[memo].append(run(what, memo))
+        total = {memo: statistics.median(r["build"] + r["first step"] for r in rows)
+                 for memo, rows in runs.items()}
+        for memo, rows in runs.items():
+            other = (cells([r["other options"] for r in rows]) if "other options" in rows[0]
+                     else "")
+            ratio = (f" {total['0'] / total['1']:.2f}x |" if args.compare_memo and memo == "0"
+                     else " |" if args.compare_memo else "")
+            print(f"| {what} | {'memoised' if memo == '1' else 'as it is'} | "
+                  f"{cells([r['build'] for r in rows])} | "
+                  f"{cells([r['first step'] for r in rows])} | {other} |{ratio}", flush=True)
 
 
 if __name__ == "__main__":

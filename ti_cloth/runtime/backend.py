@@ -28,6 +28,7 @@ import taichi as ti
 
 from ..inputs import limits
 from ..inputs.validation import count
+from . import frontend
 
 ARCHS = {name: name for name in limits.ARCH_NAMES}          # ti.<value>
 PRECISIONS = dict(zip(limits.PRECISION_NAMES, (ti.f32, ti.f64)))
@@ -83,6 +84,7 @@ def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None,
     # 4.1 s without) for no measured change in steps/s (docs/performance.md)
     if arch == "gpu":
         arch = gpu_arch()
+    frontend.install()      # Taichi's front end, memoised (a warm build of the cape: 1.7x)
     options = dict(arch=getattr(ti, ARCHS[arch]), default_fp=PRECISIONS[precision],
                    default_ip=ti.i32, random_seed=0, debug=debug, log_level=ti.WARN,
                    fast_math=False, cfg_optimization=False)
