@@ -153,14 +153,21 @@ def private_reaches(source: str) -> list[str]:
             and not n.attr.startswith("__") and n.attr not in own]
 
 
+# the one reach into Taichi's internals, deliberate (docs/design.md: its front end memoised),
+# and the test that compares it with Taichi's own
+TAICHI_FRONT_END = {"ti_cloth/runtime/frontend.py": ["taichi.lang"],
+                    "tests/test_frontend.py": ["taichi.lang"]}
+
+
 def test_no_source_reaches_a_private_name_of_another_module():
     """In the package, the tests, the benchmarks, the demos and the tools; and none reads
-    Taichi's internals (the runtime counts its own compilations: backend.compilations)."""
+    Taichi's internals (the runtime counts its own compilations: backend.compilations) but
+    runtime/frontend.py, which memoises Taichi's front end, and its test."""
     bad = {str(p.relative_to(ROOT)): private_reaches(p.read_text()) for p in SOURCES}
     assert {k: v for k, v in bad.items() if v} == {}
     internals = {str(p.relative_to(ROOT)): [w for w in TAICHI_INTERNALS if w in p.read_text()]
                  for p in SOURCES if p.name != "test_layers.py"}
-    assert {k: v for k, v in internals.items() if v} == {}
+    assert {k: v for k, v in internals.items() if v} == TAICHI_FRONT_END
 
 
 def test_the_private_reach_checker_can_fail():
