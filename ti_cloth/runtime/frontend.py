@@ -32,6 +32,7 @@ import weakref
 
 SWITCH = "TI_CLOTH_TAICHI_MEMO"      # "0": leave Taichi's front end as it is
 MULTILINE = ("For", "While", "FunctionDef", "If")   # get_pos_info quotes their head only
+MOST_LOCATIONS = 200_000    # memoised locations kept at most (ti_cloth's step: about 10,000)
 
 _installed = False
 _originals: dict = {}
@@ -107,5 +108,7 @@ def _location(context, node):
            tuple(context.src[node.lineno - 1:max(end, node.lineno)]))
     found = _locations.get(key)
     if found is None:
+        if len(_locations) >= MOST_LOCATIONS:   # kernels defined again and again (a notebook)
+            _locations.clear()
         found = _locations[key] = _originals["get_pos_info"](context, node)
     return found
