@@ -69,6 +69,18 @@ def stretched_energy_ratios(sim, steps=30):
     return np.array(energy[1:]) / np.array(energy[:-1])
 
 
+def central_gradient(energy, x: np.ndarray, h: float) -> np.ndarray:
+    """The gradient of energy(positions) at x by central differences of step h, coordinate by
+    coordinate (an independent check of the kernels' forces)."""
+    gradient = np.zeros_like(x)
+    for i in range(len(x)):
+        for c in range(3):
+            step = np.zeros_like(x)
+            step[i, c] = h
+            gradient[i, c] = (energy(x + step) - energy(x - step)) / (2 * h)
+    return gradient
+
+
 def report(label, got, expected):
     """Print got vs expected so a failure (and -s runs) show both."""
     print(f"{label}: got {got!r}, expected {expected!r}")

@@ -7,6 +7,7 @@ import warnings
 
 import numpy as np
 import pytest
+from helpers import central_gradient
 from scipy.optimize import brentq
 
 import ti_cloth as tc
@@ -50,12 +51,7 @@ def test_the_softened_forces_are_the_gradient_of_their_energy(f64):
     def energy(y):
         return energies(cloth, y, np.zeros_like(y), (0.0, 0.0, 0.0))["membrane"]
 
-    gradient = np.zeros_like(x)
-    for i in range(len(x)):
-        for c in range(3):
-            step = np.zeros_like(x)
-            step[i, c] = h
-            gradient[i, c] = (energy(x + step) - energy(x - step)) / (2 * h)
+    gradient = central_gradient(energy, x, h)
     force = forces_at(cloth, x)
     np.testing.assert_allclose(force, -gradient, atol=1e-6 * np.abs(gradient).max())
     stiff = forces_at(tc.Cloth(mesh, tc.Fabric(stretch=(100.0, 300.0), shear=20.0, bending=0.0,

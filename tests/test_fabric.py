@@ -9,6 +9,7 @@ equilibrium; reruns give the same bits."""
 
 import numpy as np
 import pytest
+from helpers import central_gradient
 from scipy.integrate import solve_bvp
 
 import ti_cloth as tc
@@ -73,12 +74,7 @@ def test_element_forces_are_the_gradient_of_their_energy(rest):
         return e["membrane"] + e["bending"]
 
     h = 1e-6
-    gradient = np.zeros_like(x)
-    for i in range(len(x)):
-        for c in range(3):
-            step = np.zeros_like(x)
-            step[i, c] = h
-            gradient[i, c] = (energy(x + step) - energy(x - step)) / (2 * h)
+    gradient = central_gradient(energy, x, h)
     assert np.abs(gradient).max() > 10.0
     np.testing.assert_allclose(force, -gradient, atol=1e-6 * np.abs(gradient).max())
 
