@@ -21,14 +21,15 @@ them into forces that converge as the mesh is refined:
             nu_21 = nu_12 E_weft / E_warp (plane-stress orthotropy). Needs
             nu_12 nu_21 < 1 (a positive definite sheet).
   compression  the sheet's stiffness against being shortened along its warp or weft, as a
-            fraction of its stiffness in tension, in (0, 1]. 1 (the default): a Saint
+            fraction of its stiffness in tension, in [0.0001, 1]. 1 (the default): a Saint
             Venant-Kirchhoff sheet, as stiff pushed as pulled. A woven yarn cannot push:
             it buckles, so real cloth gathers and folds at almost no in-plane stress
             (Choi & Ko 2002 model the same buckling on springs); a mesh whose triangles
             are larger than those folds sees the sheet refuse to shorten instead
-            (energies/membrane.py). Shear is unchanged. 0.05 lets garments gather into
-            folds, and lets the implicit solvers' large steps converge on gathered cloth
-            (docs/integrators.md, "Compressed cloth").
+            (energies/membrane.py). Shear is unchanged. 0.05 lets the implicit solvers'
+            large steps converge on mildly compressed cloth (a sheet a few percent short),
+            not yet on garments, whose triangles start sheared as well (docs/integrators.md,
+            "Compressed cloth").
   damping   stiffness-proportional (Rayleigh) damping time beta [s]: the stress
             C (strain + beta d(strain)/dt), the same for bending; rigid motions are not
             damped, and beta is the same at every resolution.
