@@ -168,8 +168,9 @@ FEATURES = {"none": {}, "tearing": dict(tearing=0.2),
                             # implicit solves' Hessian
                             ("xpbd", "softened flat fabric", "none"),
                             # the curved fabric (BendingCurve) in the force and implicit
-                            # paths; XPBD's triangles read it the same way, coloured
-                            ("implicit_euler", "fabric", "none"),
+                            # paths; XPBD's triangles read it the same way, coloured, each
+                            # swept in the passes it needs (XPBD.bending_tolerance)
+                            ("implicit_euler", "fabric", "none"), ("xpbd", "fabric", "none"),
                             # implicit midpoint and TR-BDF2 share newton.py's phases
                             ("implicit_midpoint", "softened fabric", "none"),
                             ("tr_bdf2", "sheet", "everything"), ("tr_bdf2", "garment", "attached"),

@@ -42,7 +42,8 @@ Everything each solver needs of it, together:
   blocks without the cross terms between a triangle's hinges (hinge_weight);
 - projection: XPBD on a triangle's three hinge tangents with compliance B^-1 (xpbd_bending;
   a hinge missing from a triangle has c = 0 and no gradient, so its row leaves the others'
-  equations alone).
+  equations alone), each triangle swept only in the passes its stiffness at the step needs
+  (faces.passes_needed).
 """
 
 import numpy as np
@@ -50,7 +51,15 @@ import taichi as ti
 
 from ..runtime.plan import DT, ITEM, STATE, Loop, Phase, Sweep
 from .bending_law import face_matrix
-from .faces import face_intact, motion_in_step, multiplier_step
+from .faces import (
+    clear_passes,
+    count_pass,
+    face_intact,
+    motion_in_step,
+    multiplier_step,
+    needs_pass,
+    stiffness_ratio,
+)
 
 # |theta / 2| past which t = tan(theta / 2) continues along its tangent line (a crease folded
 # flat, theta -> pi, would make t and its slope unbounded)
@@ -521,9 +530,12 @@ def xpbd_bending(model: ti.template(), state: ti.template(), f, multiplier: ti.t
                  tearable: ti.template()):
     """XPBD for triangle f's bending, its multipliers in multiplier[f]: the constraint is the
     tangents of the hinges across its three edges (0 and no gradient across a boundary or,
-    tearing, beside a torn triangle)."""
+    tearing, beside a torn triangle). Returns the update's stiffness ratio
+    (faces.stiffness_ratio; 0 for a torn triangle)."""
+    ratio = 0.0
     if face_intact(state, f, tearable):
-        bending_constraint(model, state, f, multiplier, dt, tearable)
+        ratio = bending_constraint(model, state, f, multiplier, dt, tearable)
+    return ratio
 
 
 @ti.func
@@ -551,7 +563,8 @@ def bending_constraint(model: ti.template(), state: ti.template(), f, multiplier
     bending = ti.Matrix([[b[0], b[3], b[4]], [b[3], b[1], b[5]], [b[4], b[5], b[2]]])
     gamma = model.face_damping[f] / dt
     residual = ti.Vector([t0, t1, t2]) + gamma * ti.Vector([m0, m1, m2])
-    step = multiplier_step((dt * dt) * bending, coupling, residual, multiplier[f], gamma)
+    stiffness = (dt * dt) * bending
+    step = multiplier_step(stiffness, coupling, residual, multiplier[f], gamma)
     multiplier[f] = multiplier[f] + step
     moves = [w0 * (step[0] * g0s[0] + step[1] * g0s[1] + step[2] * g0s[2]),
              w1 * (step[0] * g1s[0] + step[1] * g1s[1] + step[2] * g1s[2]),
@@ -563,19 +576,24 @@ def bending_constraint(model: ti.template(), state: ti.template(), f, multiplier
             p = others[i]
             state.particle_position[p] = (state.particle_position[p]
                                           + model.particle_inv_mass[p] * step[i] * other_grads[i])
+    return stiffness_ratio(stiffness, coupling, gamma)
 
 
 @ti.func
 def clear_multipliers(work: ti.template(), f):
+    """Triangle f's multipliers 0 and no pass yet."""
     work.bending[f] = 0.0 * work.bending[f]
+    clear_passes(work, f)
 
 
 @ti.func
 def xpbd_at(model: ti.template(), state: ti.template(), forces: ti.template(),
             work: ti.template(), t, dt):
-    """XPBD for the triangle at position t of its colouring."""
-    xpbd_bending(model, state, work.bending_colours.order[t], work.bending, dt,
-                 forces.tearable)
+    """XPBD for the triangle at position t of its colouring, in the passes it needs
+    (faces.passes_needed)."""
+    f = work.bending_colours.order[t]
+    if needs_pass(work, f):
+        count_pass(work, f, xpbd_bending(model, state, f, work.bending, dt, forces.tearable))
 
 
 def xpbd_nodes(model, forces, work) -> tuple:

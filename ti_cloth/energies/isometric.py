@@ -24,7 +24,14 @@ import taichi as ti
 
 from ..runtime.plan import DT, ITEM, STATE, Loop, Sweep
 from .bending import bending_stencils, hinges, intact_hinges, second_edge
-from .faces import motion_in_step, multiplier_step
+from .faces import (
+    clear_passes,
+    count_pass,
+    motion_in_step,
+    multiplier_step,
+    needs_pass,
+    stiffness_ratio,
+)
 
 # A flat rest sheet's bending needs no angle: the isometric model (module doc). Rest angles
 # below this [rad] (a planar mesh's rounding) count as flat.
@@ -218,7 +225,7 @@ def xpbd_isometric(model: ti.template(), state: ti.template(), f, multiplier: ti
     is w_i = sum_s J_is x_s over its stencil s (Model.face_stencil_weight), linear and the same
     on each axis, with compliance B'^-1. Its gradients do not change within the step, so,
     converged, this is the backward Euler step of the energy (what XPBD leaves out of the
-    other elements is zero here)."""
+    other elements is zero here). Returns its stiffness ratio (faces.stiffness_ratio)."""
     stencil = model.face_stencil[f]
     weight = model.face_stencil_weight[f]
     coupling = ti.Matrix.zero(float, 3, 3)
@@ -240,7 +247,8 @@ def xpbd_isometric(model: ti.template(), state: ti.template(), f, multiplier: ti
     gamma = model.face_damping[f] / dt
     m = multiplier[f]
     held = ti.Matrix([[m[0], m[1], m[2]], [m[3], m[4], m[5]], [m[6], m[7], m[8]]])
-    step = multiplier_step((dt * dt) * bending, coupling, value + gamma * motion, held, gamma)
+    stiffness = (dt * dt) * bending
+    step = multiplier_step(stiffness, coupling, value + gamma * motion, held, gamma)
     for i in ti.static(range(3)):
         for a in ti.static(range(3)):
             m[3 * i + a] += step[i, a]
@@ -251,17 +259,23 @@ def xpbd_isometric(model: ti.template(), state: ti.template(), f, multiplier: ti
         for i in ti.static(range(3)):
             move += weight[6 * i + s] * ti.Vector([step[i, 0], step[i, 1], step[i, 2]])
         state.particle_position[p] = state.particle_position[p] + model.particle_inv_mass[p] * move
+    return stiffness_ratio(stiffness, coupling, gamma)
 
 
 @ti.func
 def clear_multipliers(work: ti.template(), f):
+    """Triangle f's multipliers 0 and no pass yet."""
     work.bending[f] = 0.0 * work.bending[f]
+    clear_passes(work, f)
 
 
 @ti.func
 def xpbd_at(model: ti.template(), state: ti.template(), work: ti.template(), t, dt):
-    """XPBD for the triangle at position t of its colouring."""
-    xpbd_isometric(model, state, work.bending_colours.order[t], work.bending, dt)
+    """XPBD for the triangle at position t of its colouring, in the passes it needs
+    (faces.passes_needed)."""
+    f = work.bending_colours.order[t]
+    if needs_pass(work, f):
+        count_pass(work, f, xpbd_isometric(model, state, f, work.bending, dt))
 
 
 def xpbd_nodes(model, forces, work) -> tuple:

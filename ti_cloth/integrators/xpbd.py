@@ -7,9 +7,10 @@ triangles as strain and bending constraints with compliance from its moduli
 import taichi as ti
 
 from ..energies import PROJECTIONS
+from ..energies.faces import XPBD_BENDING_TOLERANCE
 from ..energies.springs import damp
 from ..inputs import limits
-from ..inputs.validation import count
+from ..inputs.validation import count, finite_number, require
 from ..physics import wind
 from ..physics.forces import gather_force
 from ..runtime import backend
@@ -36,7 +37,8 @@ class _Multipliers:
     """One Lagrange multiplier per spring (in colour order) and per altitude spring [N s^2],
     three per triangle for its strain and three for its bending (a Fabric's; nine for the
     isometric bending of a flat sheet, a hinge's on each axis), reset every
-    step, and the model's colourings (read by the phases)."""
+    step; each triangle's passes of its bending swept so far in the step and needed
+    (energies/faces.py passes_needed); the model's colourings (read by the phases)."""
 
     def __init__(self, model):
         fields = backend.FieldGroup()
@@ -45,6 +47,8 @@ class _Multipliers:
         self.membrane = fields.vector(3, backend.real(), max(model.face_count, 1))
         self.bending = fields.vector(9 if model.isometric else 3, backend.real(),
                                      max(model.face_count, 1))
+        self.bending_swept = fields.scalar(ti.i32, max(model.face_count, 1))
+        self.bending_needed = fields.scalar(ti.i32, max(model.face_count, 1))
         add_settings(self, fields)      # the passes (Integrator.runtime_options)
         fields.finalize(self)
         self.colours = model.spring_colouring()
@@ -69,7 +73,18 @@ class XPBD(Integrator):
     damping (Mueller et al. 2007), and the next prediction starts from the damped
     velocities. Unconverged (few iterations, stiff springs, large h), the cloth is softer
     than its material. The terms it sweeps, and their order: energies.PROJECTIONS.
+
+    A Fabric's bending is swept in the passes it needs, triangle by triangle: its constraints
+    are compliant against the membrane's at the steps cloth takes, so each pass settles most
+    of what is left of them, and after the passes its stiffness at the step asks
+    (energies/faces.py passes_needed: about r^k <= bending_tolerance, r = a / (1 + a), a the
+    triangle's tr(h^2 B JWJ)) a triangle is left to the next step (docs/integrators.md,
+    "XPBD's bending passes"); a stiff bending (a leather, a large step) is swept in every
+    pass, as before.
+
     iterations: Gauss-Seidel passes per step, >= 1.
+    bending_tolerance: the part of a triangle's bending residual its passes may leave, in
+        [0, 1); 0 sweeps every triangle's bending in every pass.
     Order 1. No step-size stability limit.
     """
 
@@ -77,16 +92,23 @@ class XPBD(Integrator):
     order = 1
     position_based = True
     step_limited = False
-    runtime_options = ("iterations",)
+    runtime_options = ("iterations", "bending_tolerance")
 
-    def __init__(self, *, iterations: int = 10):
+    def __init__(self, *, iterations: int = 10, bending_tolerance: float = 0.1):
         self.iterations = count("XPBD.iterations", iterations, limits.ITERATIONS)
+        self.bending_tolerance = finite_number("XPBD.bending_tolerance", bending_tolerance, 0.0)
+        require(self.bending_tolerance < 1.0, "XPBD.bending_tolerance", bending_tolerance,
+                "a fraction in [0, 1) (0: every pass)")
 
     def options(self):
-        return {"iterations": self.iterations}
+        return {"iterations": self.iterations, "bending_tolerance": self.bending_tolerance}
 
     def settings_values(self):
-        return (float(self.iterations),)
+        """The slots PASSES and energies/faces.XPBD_BENDING_TOLERANCE."""
+        values = [0.0] * (XPBD_BENDING_TOLERANCE + 1)
+        values[PASSES] = float(self.iterations)
+        values[XPBD_BENDING_TOLERANCE] = self.bending_tolerance
+        return tuple(values)
 
     def workspace(self, model, state):
         return self.buffers(state, lambda: _Multipliers(model))
