@@ -6,13 +6,16 @@ bending rests; a stiff one is swept in every pass, bit for bit as before; the to
 read at run time; bad values are refused by name."""
 
 import gc
+import math
 
 import numpy as np
 import pytest
+import taichi as ti
 
 import ti_cloth as tc
 from ti_cloth import stepping
 from ti_cloth.app.scene import load_scene
+from ti_cloth.energies import faces
 from ti_cloth.inputs.scene_file import SceneError
 from ti_cloth.runtime import backend
 
@@ -108,6 +111,37 @@ def test_the_tolerance_is_read_at_run_time(f64):
     assert backend.compilations(stepping.advance_many) == 1
     assert largest(runs[0], runs[1]) > 0.0
     np.testing.assert_array_equal(runs[2], runs[0])
+
+
+@ti.kernel
+def _passes(ratios: ti.types.ndarray(), tolerances: ti.types.ndarray(),
+            out: ti.types.ndarray()):
+    for i in range(ratios.shape[0]):
+        out[i] = faces.passes_needed(ratios[i], tolerances[i])
+
+
+def test_the_passes_needed_are_the_least_k_with_r_to_the_k_within_the_tolerance(f64):
+    """k = the least k >= 1 with (a / (1 + a))^k <= tolerance, against the closed form; every
+    pass for a tolerance of 0, and for ratios so large that r is 1 or within 1e-16 of it (the
+    count clamped before its cast: 1e16 passes would wrap round to a negative count and
+    sweep nothing)."""
+    cases = [(0.0, 0.1), (0.05, 0.1), (0.3, 0.1), (0.3, 0.05), (3.0, 0.1), (30.0, 0.1),
+             (0.3, 0.0), (1e15, 0.1), (1e300, 0.1)]
+    ratios, tolerances = (np.array(c, np.float64) for c in zip(*cases))
+    out = np.zeros(len(cases), np.int32)
+    _passes(ratios, tolerances, out)
+    for (a, tolerance), got in zip(cases, out):
+        r = a / (1 + a)
+        if tolerance == 0 or r >= 1:
+            expected = faces.EVERY_PASS
+        elif r <= tolerance:
+            expected = 1
+        else:
+            expected = min(math.ceil(math.log(tolerance) / math.log(r)), faces.EVERY_PASS)
+        assert got == expected, (a, tolerance, got, expected)
+        if 0 < tolerance and expected < faces.EVERY_PASS:      # the least such k
+            assert r ** expected <= tolerance * (1 + 1e-12)
+            assert expected == 1 or r ** (expected - 1) > tolerance
 
 
 @pytest.mark.parametrize("value", [-0.1, 1.0, 2.0, float("nan"), "some"])

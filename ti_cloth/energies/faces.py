@@ -160,8 +160,9 @@ def passes_needed(ratio, tolerance):
     needed = EVERY_PASS
     if tolerance > 0.0 and r < 1.0:
         needed = 1
-        if r > tolerance:
-            needed = ti.min(ti.cast(ti.ceil(ti.log(tolerance) / ti.log(r)), ti.i32), EVERY_PASS)
+        if r > tolerance:      # clamped before the cast: r within 1e-16 of 1 asks ~1e16
+            passes = ti.min(ti.ceil(ti.log(tolerance) / ti.log(r)), float(EVERY_PASS))
+            needed = ti.cast(passes, ti.i32)
     return needed
 
 
