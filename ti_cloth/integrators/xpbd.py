@@ -80,7 +80,9 @@ class XPBD(Integrator):
     (energies/faces.py passes_needed: about r^k <= bending_tolerance, r = a / (1 + a), a the
     triangle's tr(h^2 B JWJ)) a triangle is left to the next step (docs/integrators.md,
     "XPBD's bending passes"); a stiff bending (a leather, a large step) is swept in every
-    pass, as before.
+    pass, as before. So the converged step above is the one of bending_tolerance=0: with a
+    tolerance, what the membrane's later passes change in a bending waits a step (on a
+    denim sheet 0.2-0.3 % of what 10 passes miss).
 
     iterations: Gauss-Seidel passes per step, >= 1.
     bending_tolerance: the part of a triangle's bending residual its passes may leave, in
