@@ -56,13 +56,13 @@ def largest(a: np.ndarray, b: np.ndarray) -> float:
 @pytest.mark.parametrize("curve", [True, False], ids=["mid-edge", "isometric"])
 def test_soft_bending_left_early_moves_a_small_part_of_what_the_passes_miss(f64, curve):
     """At 1/240 s the denim's bending is compliant against the step (its stiffness ratio
-    a = h^2 tr(B JWJ) about 0.2-0.4: a pass settles three quarters of what is left), so
-    most triangles need 2-3 of the 10 passes. The sheet at t = 0.3 s then moves from the
+    a = tr(h^2 B JWJ), a bound, about 0.5-0.9: a pass settles half or more of what is left),
+    so its triangles need 2-5 of the 10 passes, 3 in the median (measured). The sheet at t = 0.3 s then moves from the
     every-pass run by 0.6-0.7 % of that run's own distance from 100 passes (0.21 and 0.27
-    against 36 mm, mid-edge and isometric, measured): asserted below 2 %. It does move (some passes were skipped: a skipped
-    sweep is the only thing that changes a bit), and a fixed count instead (bending in the
-    first two passes for every triangle) moved a 1e-2 N m sheet by 28 % of its passes'
-    distance (docs/integrators.md), which the stiff test below rules out."""
+    against 36 mm, mid-edge and isometric, measured): asserted below 2 %. It does move (a
+    skipped sweep is the only thing that changes a bit), and a fixed count instead (bending
+    in the first two passes for every triangle) moved a 1e-2 N m sheet by 28 % of its
+    passes' distance (docs/integrators.md), which the stiff test below rules out."""
     cloth = denim_sheet(curve)
     converged = run(cloth, 100, 0.0, 72)
     every = run(cloth, 10, 0.0, 72)
