@@ -175,6 +175,9 @@ def configurations(cloth: tc.Cloth, n: int, newton: bool, only: tuple = ("",)) -
     runs += [(f"implicit_euler 1/{r}", tc.ImplicitEuler(tolerance=1e-3), 1 / r) for r in (60, 240, 960)]
     runs += [(f"xpbd {it} it 1/{r}", tc.XPBD(iterations=it), 1 / r)
              for it, r in ((2, 60), (10, 240), (4, 3840))]
+    # its bending swept in every pass (as before XPBD.bending_tolerance): the trade it makes
+    runs += [(f"xpbd every pass {it} it 1/{r}", tc.XPBD(iterations=it, bending_tolerance=0.0),
+              1 / r) for it, r in ((2, 60), (10, 240), (4, 3840))]
     for name, cls in (("implicit_midpoint", tc.ImplicitMidpoint), ("tr_bdf2", tc.TRBDF2)):
         runs += [(f"{name} 1/{r}", cls(tolerance=1e-4, cg_tolerance=1e-1), 1 / r)
                  for r in (60, 120, 240)]
