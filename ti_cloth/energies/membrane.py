@@ -20,7 +20,9 @@ TOG 28(4), 2009, sec. 3). Everything each solver needs of it, together:
   Euler's linearisation, product and 3x3 diagonal (linearise_face, face_product,
   corner_diagonal), and its blocks between sets of corners moved as one (face_block: a coarse
   level's, integrators/coarse.py);
-- projection: XPBD on the strain e with compliance (A C)^-1 (xpbd_membrane; faces.py).
+- projection: XPBD on the strain e with compliance (A C)^-1 (xpbd_membrane; faces.py), each
+  update optionally over-relaxed (XPBD(membrane_relaxation=omega): successive
+  over-relaxation of the Gauss-Seidel passes, the same converged step).
 
 A Fabric whose compression is kappa < 1 resists shortening along its warp or weft by kappa of
 its stiffness in tension: a yarn buckles rather than push (Fabric.compression; Marvelous
@@ -45,6 +47,8 @@ from ..runtime.plan import DT, ITEM, STATE, Loop, Sweep
 from .faces import face_columns, face_intact, multiplier_step, store_corners
 
 BUCKLING = 1e-3     # b: the compressive strain over which a softened warp or weft gives way
+# the slot of XPBD's run-time settings (integrators/xpbd.py) holding its membrane_relaxation
+XPBD_MEMBRANE_RELAXATION = 2
 
 
 def material_frames(positions: np.ndarray, triangles: np.ndarray, warp) -> tuple:
@@ -288,19 +292,21 @@ def moduli_matrix(c):
 
 @ti.func
 def xpbd_membrane(model: ti.template(), state: ti.template(), f, multiplier: ti.template(), dt,
-                  tearable: ti.template()):
+                  tearable: ti.template(), relaxation):
     """XPBD for triangle f's strain (softened: phi of its warp and weft strains, module doc),
-    its multipliers in multiplier[f]. The strain's gradient
+    its multipliers in multiplier[f], the update scaled by `relaxation` (omega: 1 is
+    Gauss-Seidel; SOR converges to the same step for 0 < omega < 2 on the linearised step,
+    Ostrowski-Reich, and gets there in fewer passes). The strain's gradient
     on corner c with grad lambda_c = (g0, g1) has rows g0 F1, g1 F2, g1 F1 + g0 F2 (F1, F2
     F's columns), so J W J^T needs only sums of w_c g_c g_c^T. A torn triangle is no
     constraint."""
     if face_intact(state, f, tearable):
-        membrane_constraint(model, state, f, multiplier, dt)
+        membrane_constraint(model, state, f, multiplier, dt, relaxation)
 
 
 @ti.func
 def membrane_constraint(model: ti.template(), state: ti.template(), f, multiplier: ti.template(),
-                        dt):
+                        dt, relaxation):
     corner = model.face_indices[f]
     g = model.face_gradient[f]
     warp, weft = face_columns(model, state.particle_position, f)
@@ -329,7 +335,8 @@ def membrane_constraint(model: ti.template(), state: ti.template(), f, multiplie
         coupling = coupling * scale.outer_product(scale)
     gamma = model.face_damping[f] / dt
     stiffness = (dt * dt * model.face_area[f]) * moduli_matrix(model.face_moduli[f])
-    step = multiplier_step(stiffness, coupling, strain + gamma * motion, multiplier[f], gamma)
+    step = relaxation * multiplier_step(stiffness, coupling, strain + gamma * motion,
+                                        multiplier[f], gamma)
     multiplier[f] = multiplier[f] + step
     if ti.static(model.softened):
         step = scale * step
@@ -352,7 +359,7 @@ def xpbd_at(model: ti.template(), state: ti.template(), forces: ti.template(),
             work: ti.template(), t, dt):
     """XPBD for the triangle at position t of its colouring."""
     xpbd_membrane(model, state, work.membrane_colours.order[t], work.membrane, dt,
-                  forces.tearable)
+                  forces.tearable, ti.cast(work.settings[XPBD_MEMBRANE_RELAXATION], float))
 
 
 def xpbd_nodes(model, forces, work) -> tuple:
