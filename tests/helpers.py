@@ -8,6 +8,7 @@ from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
+import pytest
 
 import ti_cloth as tc
 from ti_cloth.render import write_png
@@ -85,6 +86,40 @@ def report(label, got, expected):
     """Print got vs expected so a failure (and -s runs) show both."""
     print(f"{label}: got {got!r}, expected {expected!r}")
 
+
+
+
+def xpbd_positions(cloth, steps: int, **options) -> np.ndarray:
+    """The positions of `cloth` after `steps` xpbd steps of 1/240 s, tc.XPBD(**options)."""
+    sim = tc.Simulation(cloth, integrator=tc.XPBD(**options), dt=1 / 240)
+    sim.step(steps)
+    return sim.positions()
+
+
+def largest_distance(a: np.ndarray, b: np.ndarray) -> float:
+    """The largest distance between the rows of two (N, 3) position arrays."""
+    return float(np.linalg.norm(a - b, axis=1).max())
+
+def check_xpbd_scene_option(tmp_path, option: str, good: float, bad: float) -> None:
+    """A scene file's `integrator = { name = "xpbd", ... }` table sets `option` to `good`, and
+    one with `bad` is refused naming XPBD.<option> and the value."""
+    from ti_cloth.app.scene import load_scene
+    from ti_cloth.inputs.scene_file import SceneError
+    path = tmp_path / "scene.toml"
+    for value in (good, bad):
+        path.write_text(f"""
+[simulation]
+integrator = {{ name = "xpbd", iterations = 4, {option} = {value!r} }}
+
+[[bodies]]
+type = "grid"
+rows = 4
+cols = 4
+""")
+        if value == good:
+            assert getattr(load_scene(path).integrator, option) == good
+    with pytest.raises(SceneError, match=rf"XPBD\.{option}.*{re.escape(repr(bad))}"):
+        load_scene(path)
 
 GOLDEN = Path(__file__).parent / "golden"
 GOLDEN_PIXEL_TOLERANCE = 2 / 255     # 8-bit rounding of a shaded colour, either way

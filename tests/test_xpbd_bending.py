@@ -11,12 +11,11 @@ import math
 import numpy as np
 import pytest
 import taichi as ti
+from helpers import check_xpbd_scene_option, largest_distance, xpbd_positions
 
 import ti_cloth as tc
 from ti_cloth import stepping
-from ti_cloth.app.scene import load_scene
 from ti_cloth.energies import faces
-from ti_cloth.inputs.scene_file import SceneError
 from ti_cloth.runtime import backend
 
 N = 16
@@ -43,14 +42,7 @@ def stiff_sheet(bending: float, curved: bool) -> tc.Cloth:
 
 
 def run(cloth, iterations: int, tolerance: float, steps: int) -> np.ndarray:
-    sim = tc.Simulation(cloth, integrator=tc.XPBD(iterations=iterations,
-                                                  bending_tolerance=tolerance), dt=1 / 240)
-    sim.step(steps)
-    return sim.positions()
-
-
-def largest(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.linalg.norm(a - b, axis=1).max())
+    return xpbd_positions(cloth, steps, iterations=iterations, bending_tolerance=tolerance)
 
 
 @pytest.mark.parametrize("curve", [True, False], ids=["mid-edge", "isometric"])
@@ -67,9 +59,9 @@ def test_soft_bending_left_early_moves_a_small_part_of_what_the_passes_miss(f64,
     converged = run(cloth, 100, 0.0, 72)
     every = run(cloth, 10, 0.0, 72)
     adaptive = run(cloth, 10, 0.1, 72)
-    missed = largest(every, converged)
+    missed = largest_distance(every, converged)
     assert missed > 0.01, "10 passes are far from converged on this sheet (what XPBD misses)"
-    assert 0.0 < largest(adaptive, every) < 0.02 * missed
+    assert 0.0 < largest_distance(adaptive, every) < 0.02 * missed
 
 
 @pytest.mark.parametrize("curve", [True, False], ids=["mid-edge", "isometric"])
@@ -82,7 +74,7 @@ def test_a_soft_bending_rests_where_every_pass_rests(f64, curve):
     every = run(cloth, 10, 0.0, 720)
     one_more = run(cloth, 11, 0.0, 720)
     adaptive = run(cloth, 10, 0.1, 720)
-    assert largest(adaptive, every) < 0.5 * largest(one_more, every)
+    assert largest_distance(adaptive, every) < 0.5 * largest_distance(one_more, every)
 
 
 @pytest.mark.parametrize("curved", [True, False], ids=["mid-edge", "isometric"])
@@ -109,7 +101,7 @@ def test_the_tolerance_is_read_at_run_time(f64):
         del sim
         gc.collect()
     assert backend.compilations(stepping.advance_many) == 1
-    assert largest(runs[0], runs[1]) > 0.0
+    assert largest_distance(runs[0], runs[1]) > 0.0
     np.testing.assert_array_equal(runs[2], runs[0])
 
 
@@ -151,18 +143,4 @@ def test_a_bad_tolerance_is_refused_by_name(value):
 
 
 def test_a_scene_file_sets_the_tolerance(tmp_path):
-    scene = """
-[simulation]
-integrator = { name = "xpbd", iterations = 4, bending_tolerance = BENDING }
-
-[[bodies]]
-type = "grid"
-rows = 4
-cols = 4
-"""
-    path = tmp_path / "scene.toml"
-    path.write_text(scene.replace("BENDING", "0.3"))
-    assert load_scene(path).integrator.bending_tolerance == 0.3
-    path.write_text(scene.replace("BENDING", "1.5"))
-    with pytest.raises(SceneError, match=r"XPBD\.bending_tolerance.*1\.5"):
-        load_scene(path)
+    check_xpbd_scene_option(tmp_path, "bending_tolerance", 0.3, 1.5)

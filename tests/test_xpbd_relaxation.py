@@ -8,11 +8,10 @@ import gc
 
 import numpy as np
 import pytest
+from helpers import check_xpbd_scene_option, largest_distance, xpbd_positions
 
 import ti_cloth as tc
 from ti_cloth import stepping
-from ti_cloth.app.scene import load_scene
-from ti_cloth.inputs.scene_file import SceneError
 from ti_cloth.runtime import backend
 
 N = 24
@@ -26,15 +25,8 @@ def denim_sheet() -> tc.Cloth:
     return tc.Cloth(mesh, fabric, pinned=[N * (N - 1), N * N - 1])
 
 
-def run(cloth, iterations: int, relaxation: float, steps: int = 72) -> np.ndarray:
-    sim = tc.Simulation(cloth, integrator=tc.XPBD(iterations=iterations,
-                                                  membrane_relaxation=relaxation), dt=1 / 240)
-    sim.step(steps)
-    return sim.positions()
-
-
-def largest(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.linalg.norm(a - b, axis=1).max())
+def run(cloth, iterations: int, relaxation: float) -> np.ndarray:
+    return xpbd_positions(cloth, 72, iterations=iterations, membrane_relaxation=relaxation)
 
 
 def test_over_relaxed_passes_come_nearer_the_converged_step(f64):
@@ -47,8 +39,8 @@ def test_over_relaxed_passes_come_nearer_the_converged_step(f64):
     converged = run(cloth, 200, 1.0)
     plain, relaxed = run(cloth, 10, 1.0), run(cloth, 10, 1.5)
     also_converged = run(cloth, 200, 1.5)
-    miss, relaxed_miss = largest(plain, converged), largest(relaxed, converged)
-    apart = largest(also_converged, converged)
+    miss, relaxed_miss = largest_distance(plain, converged), largest_distance(relaxed, converged)
+    apart = largest_distance(also_converged, converged)
     print(f"10 passes from 200: {miss * 1e3:.1f} mm at omega 1, {relaxed_miss * 1e3:.1f} mm at "
           f"1.5; 200 passes at 1.5 from 200 at 1: {apart * 1e3:.2f} mm")
     assert miss > 5e-3, "plain passes miss the converged step (else nothing to show)"
@@ -70,7 +62,7 @@ def test_relaxation_is_read_at_run_time_and_1_is_gauss_seidel(f64):
         del sim
         gc.collect()
     assert backend.compilations(stepping.advance_many) == 1
-    assert largest(runs[0], runs[1]) > 0.0
+    assert largest_distance(runs[0], runs[1]) > 0.0
     np.testing.assert_array_equal(runs[2], runs[0])
 
 
@@ -81,18 +73,4 @@ def test_a_bad_relaxation_is_refused_by_name(value):
 
 
 def test_a_scene_file_sets_the_relaxation(tmp_path):
-    scene = """
-[simulation]
-integrator = { name = "xpbd", iterations = 4, membrane_relaxation = OMEGA }
-
-[[bodies]]
-type = "grid"
-rows = 4
-cols = 4
-"""
-    path = tmp_path / "scene.toml"
-    path.write_text(scene.replace("OMEGA", "1.5"))
-    assert load_scene(path).integrator.membrane_relaxation == 1.5
-    path.write_text(scene.replace("OMEGA", "2.0"))
-    with pytest.raises(SceneError, match=r"XPBD\.membrane_relaxation.*2\.0"):
-        load_scene(path)
+    check_xpbd_scene_option(tmp_path, "membrane_relaxation", 1.5, 2.0)
