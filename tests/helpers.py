@@ -1,5 +1,6 @@
 """Helpers the tests share (imported as `from helpers import ...`; fixtures live in conftest.py)."""
 
+import gc
 import os
 import re
 import sys
@@ -99,6 +100,22 @@ def xpbd_positions(cloth, steps: int, **options) -> np.ndarray:
 def largest_distance(a: np.ndarray, b: np.ndarray) -> float:
     """The largest distance between the rows of two (N, 3) position arrays."""
     return float(np.linalg.norm(a - b, axis=1).max())
+
+
+def check_xpbd_option_read_at_run_time(cloth, option: str, values) -> None:
+    """Three XPBDs (6 passes) that differ only in `option`, the first and third with the same
+    value, step `cloth` 12 times each through one compiled step: the first two runs differ,
+    the third gives the first's bits again (values of None: the option not named)."""
+    from ti_cloth import stepping
+    backend.forget_compilations(stepping.advance_many)
+    runs = []
+    for value in values:
+        options = {} if value is None else {option: value}
+        runs.append(xpbd_positions(cloth, 12, iterations=6, **options))
+        gc.collect()                    # the simulation's fields, as a run of many would
+    assert backend.compilations(stepping.advance_many) == 1
+    assert largest_distance(runs[0], runs[1]) > 0.0
+    np.testing.assert_array_equal(runs[2], runs[0])
 
 def check_xpbd_scene_option(tmp_path, option: str, good: float, bad: float) -> None:
     """A scene file's `integrator = { name = "xpbd", ... }` table sets `option` to `good`, and
