@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import ti_cloth as tc
+from ti_cloth import stepping
 from ti_cloth.render import write_png
 from ti_cloth.runtime import backend
 
@@ -88,8 +89,6 @@ def report(label, got, expected):
     print(f"{label}: got {got!r}, expected {expected!r}")
 
 
-
-
 def xpbd_positions(cloth, steps: int, **options) -> np.ndarray:
     """The positions of `cloth` after `steps` xpbd steps of 1/240 s, tc.XPBD(**options)."""
     sim = tc.Simulation(cloth, integrator=tc.XPBD(**options), dt=1 / 240)
@@ -106,7 +105,6 @@ def check_xpbd_option_read_at_run_time(cloth, option: str, values) -> None:
     """Three XPBDs (6 passes) that differ only in `option`, the first and third with the same
     value, step `cloth` 12 times each through one compiled step: the first two runs differ,
     the third gives the first's bits again (values of None: the option not named)."""
-    from ti_cloth import stepping
     backend.forget_compilations(stepping.advance_many)
     runs = []
     for value in values:
@@ -116,6 +114,7 @@ def check_xpbd_option_read_at_run_time(cloth, option: str, values) -> None:
     assert backend.compilations(stepping.advance_many) == 1
     assert largest_distance(runs[0], runs[1]) > 0.0
     np.testing.assert_array_equal(runs[2], runs[0])
+
 
 def check_xpbd_scene_option(tmp_path, option: str, good: float, bad: float) -> None:
     """A scene file's `integrator = { name = "xpbd", ... }` table sets `option` to `good`, and
@@ -137,6 +136,7 @@ cols = 4
             assert getattr(load_scene(path).integrator, option) == good
     with pytest.raises(SceneError, match=rf"XPBD\.{option}.*{re.escape(repr(bad))}"):
         load_scene(path)
+
 
 GOLDEN = Path(__file__).parent / "golden"
 GOLDEN_PIXEL_TOLERANCE = 2 / 255     # 8-bit rounding of a shaded colour, either way

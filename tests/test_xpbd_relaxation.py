@@ -4,7 +4,6 @@ passes. Unconverged passes come nearer the converged step, the converged step is
 1 is plain Gauss-Seidel bit for bit, omega is read at run time, and bad values are refused by
 name."""
 
-
 import numpy as np
 import pytest
 from helpers import (
