@@ -241,13 +241,16 @@ class Simulation:
     def save_state(self, path) -> Path:
         """Write everything this simulation needs to continue bit for bit from here to `path`
         (an npz, written atomically): positions, velocities, previous positions, forces of
-        the last evaluation, spring alive flags and tear steps, the step count and
-        self-collision's candidate list. Handles, colliders and the wind follow from the time.
+        the last evaluation, spring alive flags and tear steps, the step count, what the
+        integrator keeps of the steps before (XPBD's BDF2 history) and self-collision's
+        candidate list. Handles, colliders and the wind follow from the time.
         Returns the path."""
         self._check_runtime()
         require(self._diverged is None, "simulation", "diverged",
                 "a simulation that has not diverged (its state is not finite)")
         arrays = {f"state.{k}": v for k, v in self.state.saved().items()}
+        arrays.update({f"integrator.{k}": v for k, v
+                       in self.integrator.saved_history(self.model, self.state).items()})
         if self.self_collision is not None:    # "self_contact.": the key of saved states
             arrays.update({f"self_contact.{k}": v
                            for k, v in self.self_collision.saved().items()})
@@ -261,6 +264,8 @@ class Simulation:
         self._check_runtime()
         header, arrays = saved_state.read(path, self.fingerprint())
         expected = {f"state.{k}": v for k, v in self.state.saved().items()}
+        history = self.integrator.saved_history(self.model, self.state)
+        expected.update({f"integrator.{k}": v for k, v in history.items()})
         saved_state.check_arrays(path, arrays, expected, float(self.state.limit))
         steps = header.get("step_count")
         if not (isinstance(steps, int) and not isinstance(steps, bool)
@@ -271,6 +276,7 @@ class Simulation:
         if self.self_collision is not None:
             self.self_collision.check_saved(path, contact, float(self.state.limit))
         self.state.restore(_prefixed(arrays, "state."))
+        self.integrator.restore_history(self.model, self.state, _prefixed(arrays, "integrator."))
         if self.self_collision is not None:
             self.self_collision.restore(contact)
         self.step_count = int(header["step_count"])

@@ -96,6 +96,14 @@ class Integrator:
         """A step's work in spring evaluations, for sizing launches (stepping.py)."""
         return fused.spring_work(model)
 
+    def saved_history(self, model, state) -> dict:
+        """What this integrator keeps of the steps before, beyond the State's fields, as
+        numpy arrays for a saved state (Simulation.save_state); none by default."""
+        return {}
+
+    def restore_history(self, model, state, arrays: dict) -> None:
+        """Load what saved_history returned (arrays of its shapes and types)."""
+
     def after_launch(self, work) -> None:
         """Read back what a launch left for reports (the last solve's figures)."""
 

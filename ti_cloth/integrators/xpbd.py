@@ -1,7 +1,29 @@
 """Extended position-based dynamics (Macklin, Mueller & Chentanez 2016): springs as compliant
 constraints with compliance 1 / k, so the cloth has its material stiffness in N/m; a Fabric's
 triangles as strain and bending constraints with compliance from its moduli
-(energies/)."""
+(energies/). Its passes solve a backward Euler step, or BDF2's (XPBD.scheme).
+
+BDF2 (Curtiss & Hirschfelder 1952; for cloth, Choi & Ko, "Stable but responsive cloth", 2002,
+eq. 9-10) on x' = v, v' = a(x, v):
+
+    x_{n+1} - 4/3 x_n + 1/3 x_{n-1} = 2/3 h v_{n+1},
+    v_{n+1} - 4/3 v_n + 1/3 v_{n-1} = 2/3 h a(x_{n+1}, v_{n+1}).
+
+With h^ = 2/3 h, x^ = (4 x_n - x_{n-1}) / 3 and v^ = (4 v_n - v_{n-1}) / 3 that is
+x_{n+1} = x^ + h^ v^ + h^2 a(x_{n+1}, v_{n+1}), v_{n+1} = (x_{n+1} - x^) / h^: a backward Euler
+step of h^ from (x^, v^), which the passes solve as they solve backward Euler's (compliance
+alpha / h^2, the damping's rates against x^). Second order, A- and L-stable: a mode of
+frequency w keeps its amplitude to O((h w)^4) a step where backward Euler loses (h w)^2 / 2,
+and the modes a step cannot follow die out (Hairer & Wanner, Solving ODEs II, sec. V.1). The
+history (x_{n-1}, v_{n-1}) is kept per particle, with what the step left (x_{n+1}, v_{n+1}):
+a particle that a later stage of the step moved (a collider, self-contact, a handle, a seam),
+or that the user set, or the first step of a run, starts again from the past its external
+loads alone give it, x_{n-1} = x_n - h v_n + h^2 a / 2, v_{n-1} = v_n - h a (a = M^-1 f_ext:
+the start stays second order where the internal forces start at rest, as a cloth at its rest
+shape does; a constant velocity behind made it first order, the error halving with h). An
+old velocity against a contact's new one would throw the particle back: a landing at -1 m/s,
+stopped, would leave at +1/3 m/s.
+"""
 
 
 import taichi as ti
@@ -15,7 +37,8 @@ from ..inputs.validation import count, finite_number, require
 from ..physics import wind
 from ..physics.forces import gather_force
 from ..runtime import backend
-from ..runtime.plan import DT, ITEM, NOW, STATE, Loop, Phase, Repeat, Setting, Sweep
+from ..runtime.plan import DT, ITEM, NOW, STATE, Loop, Phase, Repeat, Setting, Sweep, substep
+from ..state import store_particle
 from . import fused
 from .base import PASSES, Integrator, add_settings
 from .pbd import velocity_from_positions
@@ -33,15 +56,66 @@ def xpbd_predict(model: ti.template(), state: ti.template(), forces: ti.template
     state.particle_position[i] = x + now.dt * v
 
 
+SCHEMES = ("backward_euler", "bdf2")     # the step the passes solve (XPBD.scheme)
+
+
+@ti.func
+def _bdf2_predict(model: ti.template(), state: ti.template(), forces: ti.template(),
+                  work: ti.template(), i, now: ti.template()):
+    """x~ = x^ + h^ (v^ + h^ M^-1 f_ext) for particle i (module doc; now.dt is h^ = 2/3 h),
+    its history taken and replaced by (x_n, v_n); x^ goes in particle_prev_position, where
+    the passes' damping and the velocity read the step's origin."""
+    hat = now.dt
+    h = 1.5 * hat
+    f = gather_force(model, state, forces, i, False)
+    state.particle_force[i] = f
+    a = model.particle_inv_mass[i] * f
+    x = state.particle_position[i]
+    v = state.particle_velocity[i]
+    x_old, v_old = x - h * v + 0.5 * h * h * a, v - h * a     # no history (module doc)
+    if now.start == 0 and (x == work.solved_position[i]).all() \
+            and (v == work.solved_velocity[i]).all():
+        x_old, v_old = work.history_position[i], work.history_velocity[i]
+    work.history_position[i] = x
+    work.history_velocity[i] = v
+    origin = (4.0 * x - x_old) / 3.0
+    state.particle_prev_position[i] = origin
+    state.particle_position[i] = origin + hat * ((4.0 * v - v_old) / 3.0 + hat * a)
+
+
+@ti.func
+def _bdf2_velocity(state: ti.template(), work: ti.template(), i, now: ti.template(),
+                   record: ti.template()):
+    """v_{n+1} = (x_{n+1} - x^) / h^, x_n back in particle_prev_position (as backward Euler's
+    step leaves it); with `record`, what the step left is noted (_bdf2_record)."""
+    x = state.particle_position[i]
+    store_particle(state, i, x, (x - state.particle_prev_position[i]) / now.dt, now.step)
+    state.particle_prev_position[i] = work.history_position[i]
+    if ti.static(record):
+        _bdf2_record(state, work, i)
+
+
+@ti.func
+def _bdf2_record(state: ti.template(), work: ti.template(), i):
+    """What the step left of particle i: the next step keeps its history only if it finds the
+    particle there (module doc)."""
+    work.solved_position[i] = state.particle_position[i]
+    work.solved_velocity[i] = state.particle_velocity[i]
+
+
 @backend.kernel_argument
 class _Multipliers:
     """One Lagrange multiplier per spring (in colour order) and per altitude spring [N s^2],
     three per triangle for its strain and three for its bending (a Fabric's; nine for the
     isometric bending of a flat sheet, a hinge's on each axis), reset every
     step; each triangle's passes of its bending swept so far in the step and needed
-    (energies/faces.py passes_needed); the model's colourings (read by the phases)."""
+    (energies/faces.py passes_needed); the model's colourings (read by the phases); with
+    `history` (BDF2), each particle's (x_{n-1}, v_{n-1}) and what the last step left of it
+    (module doc)."""
 
-    def __init__(self, model):
+    HISTORY = ("history_position", "history_velocity", "solved_position", "solved_velocity")
+
+    def __init__(self, model, history: bool):
         fields = backend.FieldGroup()
         self.value = fields.scalar(backend.real(), max(model.spring_count, 1))
         self.altitude = fields.scalar(backend.real(), max(model.altitude_count, 1))
@@ -50,6 +124,8 @@ class _Multipliers:
                                      max(model.face_count, 1))
         self.bending_swept = fields.scalar(ti.i32, max(model.face_count, 1))
         self.bending_needed = fields.scalar(ti.i32, max(model.face_count, 1))
+        for name in self.HISTORY if history else ():
+            setattr(self, name, fields.vector(3, backend.real(), model.particle_count))
         add_settings(self, fields)      # the passes (Integrator.runtime_options)
         fields.finalize(self)
         self.colours = model.spring_colouring()
@@ -96,7 +172,14 @@ class XPBD(Integrator):
         less than the linear theory's 2 (that sheet diverged at 1.9), and where contacts push
         back every step (self-collision, an animated body) a large omega may fight them
         (docs/integrators.md, "Over-relaxing the membrane's passes").
-    Order 1. No step-size stability limit.
+    scheme: the step the passes solve: "backward_euler" (XPBD as published, the default) or
+        "bdf2" (module doc: second order, the same passes on a step of 2/3 h from an origin
+        the last step's history extrapolates; each particle keeps two more positions and
+        velocities, and a saved state holds them). Backward Euler damps a mode of frequency
+        w by about (h w)^2 / 2 a step, which is the stiff, slow "cardboard" look of cloth at
+        a garment's steps; BDF2 keeps the modes the step resolves (docs/integrators.md,
+        "XPBD's BDF2 step").
+    Order 1, 2 with scheme="bdf2" (the passes converged). No step-size stability limit.
     """
 
     name = "xpbd"
@@ -106,7 +189,7 @@ class XPBD(Integrator):
     runtime_options = ("iterations", "bending_tolerance", "membrane_relaxation")
 
     def __init__(self, *, iterations: int = 10, bending_tolerance: float = 0.1,
-                 membrane_relaxation: float = 1.0):
+                 membrane_relaxation: float = 1.0, scheme: str = "backward_euler"):
         self.iterations = count("XPBD.iterations", iterations, limits.ITERATIONS)
         self.bending_tolerance = finite_number("XPBD.bending_tolerance", bending_tolerance, 0.0)
         require(self.bending_tolerance < 1.0, "XPBD.bending_tolerance", bending_tolerance,
@@ -115,10 +198,15 @@ class XPBD(Integrator):
                                                  membrane_relaxation, 0.0, strict=True)
         require(self.membrane_relaxation < 2.0, "XPBD.membrane_relaxation", membrane_relaxation,
                 "in (0, 2) (1: Gauss-Seidel; over-relaxed above 1)")
+        require(scheme in SCHEMES, "XPBD.scheme", scheme,
+                f"one of {', '.join(map(repr, SCHEMES))}")
+        self.scheme = scheme
+        self.order = 2 if scheme == "bdf2" else 1
+        self.records_history = scheme == "bdf2"    # the start of a run has no history
 
     def options(self):
         return {"iterations": self.iterations, "bending_tolerance": self.bending_tolerance,
-                "membrane_relaxation": self.membrane_relaxation}
+                "membrane_relaxation": self.membrane_relaxation, "scheme": self.scheme}
 
     def settings_values(self):
         """The slots PASSES, energies/faces.XPBD_BENDING_TOLERANCE and
@@ -130,7 +218,24 @@ class XPBD(Integrator):
         return tuple(values)
 
     def workspace(self, model, state):
-        return self.buffers(state, lambda: _Multipliers(model))
+        return self.buffers(state, lambda: _Multipliers(model, self.scheme == "bdf2"))
+
+    def buffer_key(self):
+        return (type(self), self.scheme)
+
+    def saved_history(self, model, state) -> dict:
+        """BDF2's per-particle history (module doc), for a saved state."""
+        if self.scheme != "bdf2":
+            return {}
+        work = self.workspace(model, state)
+        return {name: getattr(work, name).to_numpy() for name in _Multipliers.HISTORY}
+
+    def restore_history(self, model, state, arrays: dict) -> None:
+        """Load what saved_history returned."""
+        if self.scheme == "bdf2":
+            work = self.workspace(model, state)
+            for name in _Multipliers.HISTORY:
+                getattr(work, name).from_numpy(arrays[name])
 
     def step_work(self, model):
         return (self.iterations + 2) * fused.spring_work(model)
@@ -138,7 +243,8 @@ class XPBD(Integrator):
     def phases(self, model, forces, work):
         """Predict under the external loads (and the wind) with the multipliers cleared,
         `iterations` passes colour by colour (work: the _Multipliers), velocities from
-        positions, and on a relative-damped body one pass of implicit damping."""
+        positions, and on a relative-damped body one pass of implicit damping; with BDF2, on
+        a step of 2/3 h from its origin."""
         clear, passes = (), ()
         for term in PROJECTIONS:         # energies.PROJECTIONS, in that order
             clears, sweeps = term.xpbd_nodes(model, forces, work)
@@ -147,9 +253,19 @@ class XPBD(Integrator):
         if model.spring_count and model.relative_damping:
             damping = (Sweep(work.colours, damp, model, STATE, work.colours, ITEM, DT,
                              forces.tearable),)
-        return (wind.phases(model, forces)
-                + (Phase(Loop(model.particle_count, xpbd_predict, model, STATE, forces, ITEM, NOW),
-                         *clear),)
-                + ((Repeat(Setting(work, PASSES), *passes),) if passes else ())
-                + (Phase(Loop(model.particle_count, velocity_from_positions, STATE, ITEM, NOW)),)
-                + damping)
+        n = model.particle_count
+        if self.scheme == "backward_euler":
+            return (wind.phases(model, forces)
+                    + (Phase(Loop(n, xpbd_predict, model, STATE, forces, ITEM, NOW), *clear),)
+                    + ((Repeat(Setting(work, PASSES), *passes),) if passes else ())
+                    + (Phase(Loop(n, velocity_from_positions, STATE, ITEM, NOW)),)
+                    + damping)
+        # BDF2: the same phases on a step of 2/3 h from its origin (module doc), then what the
+        # step left noted (after the damping, which changes the velocities)
+        record = (Phase(Loop(n, _bdf2_record, STATE, work, ITEM)),) if damping else ()
+        return substep(2.0 / 3.0, wind.phases(model, forces)
+                       + (Phase(Loop(n, _bdf2_predict, model, STATE, forces, work, ITEM, NOW),
+                                *clear),)
+                       + ((Repeat(Setting(work, PASSES), *passes),) if passes else ())
+                       + (Phase(Loop(n, _bdf2_velocity, STATE, work, ITEM, NOW, not damping)),)
+                       + damping) + record
