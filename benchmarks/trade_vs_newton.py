@@ -181,6 +181,12 @@ def configurations(cloth: tc.Cloth, n: int, newton: bool, only: tuple = ("",)) -
     # its membrane passes over-relaxed (XPBD.membrane_relaxation)
     runs += [(f"xpbd relaxed 1.5 {it} it 1/{r}", tc.XPBD(iterations=it, membrane_relaxation=1.5),
               1 / r) for it, r in ((2, 60), (10, 240), (4, 3840))]
+    # its passes on BDF2's step (XPBD.scheme), plain and over-relaxed
+    runs += [(f"xpbd bdf2 {it} it 1/{r}", tc.XPBD(iterations=it, scheme="bdf2"), 1 / r)
+             for it, r in ((2, 60), (10, 240), (4, 3840))]
+    runs += [(f"xpbd bdf2 relaxed 1.5 {it} it 1/{r}", tc.XPBD(
+        iterations=it, membrane_relaxation=1.5, scheme="bdf2"), 1 / r)
+        for it, r in ((2, 60), (10, 240), (4, 3840))]
     for name, cls in (("implicit_midpoint", tc.ImplicitMidpoint), ("tr_bdf2", tc.TRBDF2)):
         runs += [(f"{name} 1/{r}", cls(tolerance=1e-4, cg_tolerance=1e-1), 1 / r)
                  for r in (60, 120, 240)]

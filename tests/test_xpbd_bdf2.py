@@ -7,7 +7,7 @@ state resumed: test_resume.py."""
 
 import numpy as np
 import pytest
-from helpers import check_xpbd_scene_option, report
+from helpers import SWINGING_STRING, check_xpbd_scene_option, report
 
 import ti_cloth as tc
 
@@ -125,3 +125,32 @@ def test_a_bad_scheme_is_refused_by_name(value):
 
 def test_a_scene_file_sets_the_scheme(tmp_path):
     check_xpbd_scene_option(tmp_path, "scheme", "bdf2", "midpoint")
+
+
+def test_the_study_weighs_the_bdf2_step_when_asked(f64, tmp_path):
+    """`solves=("bdf2",)` (XPBD.presets) runs xpbd's BDF2 step beside its default in a study:
+    on the swinging string at half a frame's step its error against the converged reference
+    is a fraction of backward Euler's (measured: 0.0055 against 0.037 of the string's size),
+    and advice choosing it writes a [simulation] block that, pasted into the scene file,
+    loads that integrator."""
+    from ti_cloth.app import advisor, study
+    path = tmp_path / "string.toml"
+    path.write_text(SWINGING_STRING)
+    scene = tc.load_scene(path)
+    result = study.run_study(scene, integrators=["xpbd"], dts=[scene.frame_dt / 2],
+                             precisions=["f64"], iterations=(8,), solves=["bdf2"],
+                             progress=False)
+    default, bdf2 = result.runs
+    assert (default.solve, bdf2.solve) == (None, "bdf2")
+    assert bdf2.method == "xpbd (8 it) (bdf2 step)"
+    report("max error, bdf2 / backward Euler", (bdf2.max_error, default.max_error), "")
+    assert bdf2.max_error < 0.5 * default.max_error
+    advice = advisor.Advice(scene.name, 1.0, "max_error", result.reference.times[-1], bdf2,
+                            bdf2, result)
+    text = path.read_text()
+    start = text.index("[simulation]")
+    end = text.index("\n[", start + 1)
+    pasted = tmp_path / "pasted.toml"
+    pasted.write_text(text[:start] + advice.simulation_block(scene.frame_dt) + text[end:])
+    integrator = tc.load_scene(pasted).integrator
+    assert (integrator.scheme, integrator.iterations) == ("bdf2", 8)

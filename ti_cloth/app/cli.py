@@ -408,9 +408,10 @@ def main(argv=None) -> int:
 
 def _solves_argument(parser) -> None:
     parser.add_argument("--solves", nargs="*", metavar="PRESET",
-                        help="presets of the solvers' accuracy to sweep beside each one's "
-                             "defaults (default: loose, the Newton-solved integrators' 0.1 mm "
-                             "and a tenth of CG's residual); none: --solves alone")
+                        help="presets of the solvers to sweep beside each one's defaults "
+                             "(default: loose, the Newton-solved integrators' 0.1 mm and a "
+                             "tenth of CG's residual; bdf2: xpbd's second-order step); none: "
+                             "--solves alone")
 
 
 def _resolution_argument(parser) -> None:

@@ -163,10 +163,11 @@ class Run:
 
     @property
     def method(self) -> str:
-        """The integrator and its passes or solves in words: "xpbd (16 it)",
-        "implicit_midpoint (loose solves)"."""
+        """The integrator and its passes or preset in words: "xpbd (16 it)",
+        "implicit_midpoint (loose solves)", "xpbd (10 it) (bdf2 step)"."""
+        noun = INTEGRATORS[self.integrator].preset_noun
         return (self.integrator + ("" if self.iterations is None else f" ({self.iterations} it)")
-                + ("" if self.solve is None else f" ({self.solve} solves)"))
+                + ("" if self.solve is None else f" ({self.solve} {noun})"))
 
 
 def sample_times(scene, duration: float | None = None) -> np.ndarray:
@@ -513,17 +514,13 @@ def left_out(scene, integrators) -> dict[str, str]:
 
 def _configurations(integrators, iterations, solves):
     """(name, iterations or None, solve or None) of every configuration of the sweep, in
-    order: a position-based integrator at each pass count, any other at its defaults, then
-    with each of `solves` that is one of its presets."""
+    order: each integrator at its defaults, then with each of `solves` that is one of its
+    presets, a position-based one at each pass count."""
     for name in integrators:
-        if INTEGRATORS[name].position_based:
-            for count in iterations:
-                yield name, count, None
-        else:
-            yield name, None, None
-            for solve in solves:
-                if solve in INTEGRATORS[name].presets:
-                    yield name, None, solve
+        counts = iterations if INTEGRATORS[name].position_based else (None,)
+        for solve in (None,) + tuple(s for s in solves if s in INTEGRATORS[name].presets):
+            for count in counts:
+                yield name, count, solve
 
 
 def _check_solves(solves) -> tuple[str, ...]:

@@ -47,6 +47,7 @@ class Integrator:
     # named sets of options that trade the solve's accuracy for speed, which the study and the
     # advisor sweep beside the defaults (app/study.py: solves)
     presets: ClassVar[dict[str, dict]] = {}
+    preset_noun: ClassVar[str] = "solves"   # what a preset names, in reports: "loose solves"
     runtime_options: ClassVar[tuple[str, ...]] = ()   # options kernels read at run time
 
     def phases(self, model, forces, work) -> tuple:
