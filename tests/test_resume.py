@@ -185,6 +185,39 @@ def test_a_state_of_another_simulation_or_format_is_refused(f64, tmp_path):
     assert sim.step_count == 3
 
 
+class LaterXPBD(tc.XPBD):
+    """XPBD as a later version might have it: an option more, whose default keeps the motion."""
+
+    def __init__(self, *, later: float = 0.0, **options):
+        super().__init__(**options)
+        self.later = later
+
+    def options(self):
+        return super().options() | {"later": self.later}
+
+
+def test_a_state_saved_before_an_option_was_added_still_loads(f64, tmp_path):
+    """The fingerprint holds the integrator's options that were given away from their
+    defaults (Integrator.changed_options): a state saved by XPBD loads into a simulation of
+    an XPBD with an option more at its default (and one that names an existing option at its
+    default), and is refused by one whose new option is not at its default, or whose passes
+    differ. Fed every option, as before, each new option refused every xpbd state saved
+    before it (membrane_relaxation, scheme)."""
+    def sim(integrator):
+        return tc.Simulation(tc.Cloth(tc.grid_mesh(4, 4), tc.Material(), pinned=[0]),
+                             integrator=integrator, dt=1e-3)
+    first = sim(tc.XPBD())
+    first.step(3)
+    path = first.save_state(tmp_path / "state.npz")
+    for same in (LaterXPBD(), tc.XPBD(membrane_relaxation=1.0, scheme="backward_euler")):
+        loaded = sim(same)
+        loaded.load_state(path)
+        assert loaded.step_count == 3
+    for other in (LaterXPBD(later=1.0), tc.XPBD(iterations=4)):
+        with pytest.raises(StateMismatch, match="different simulation"):
+            sim(other).load_state(path)
+
+
 def test_an_exporter_resumes_only_on_a_journal_that_holds_the_frames(f64, tmp_path):
     cloth = tc.Cloth(tc.grid_mesh(3, 3), tc.Material(), pinned=[0])
     sim = tc.Simulation(cloth, dt=1e-3)

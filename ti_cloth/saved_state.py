@@ -4,7 +4,8 @@ simulation a state belongs to.
 A state file is an npz holding the arrays a simulation needs to continue bit for bit and a
 JSON header: the state format, the fingerprint and the counters. The fingerprint is a hash of
 everything that decides the motion: the bodies (every array of the Cloth), the integrator and
-its options, dt, gravity, drag, wind, tearing, strain limiting, self-collision, handles,
+the options it was given away from their defaults (so that an option added at a default that
+keeps the motion leaves older states loadable), dt, gravity, drag, wind, tearing, strain limiting, self-collision, handles,
 colliders (meshes included) and the precision. A path given as a Python function counts by its
 name and code (not the values its closure captured).
 """

@@ -234,9 +234,12 @@ class Simulation:
 
     def fingerprint(self) -> str:
         """Hex digest of everything that decides this simulation's motion (saved_state.py):
-        a saved state is loaded only into a simulation with the same fingerprint."""
+        a saved state is loaded only into a simulation with the same fingerprint. Of the
+        integrator, its name and the options it was given away from their defaults
+        (Integrator.changed_options)."""
         return saved_state.fingerprint(backend.config().precision, self.integrator.name,
-                                       self.integrator.options(), self.dt, *self._inputs)
+                                       self.integrator.changed_options(), self.dt,
+                                       *self._inputs)
 
     def save_state(self, path) -> Path:
         """Write everything this simulation needs to continue bit for bit from here to `path`

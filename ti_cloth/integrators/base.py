@@ -1,6 +1,7 @@
 """What every integrator offers: a name, its order of accuracy, its stability rule and its step,
 written once as phases (runtime/plan.py)."""
 
+import inspect
 import math
 import warnings
 from contextlib import contextmanager
@@ -140,6 +141,19 @@ class Integrator:
     def options(self) -> dict:
         """Constructor options, for reports and repr."""
         return {}
+
+    def changed_options(self) -> dict:
+        """The options() not at their constructor's defaults: what a saved state's fingerprint
+        holds of the integrator, so that an option a later version adds, at the default
+        that keeps the motion as it was, leaves the states saved before it loadable."""
+        defaults = {}
+        for cls in reversed(type(self).__mro__):       # a subclass's defaults over its base's
+            if "__init__" in vars(cls):
+                defaults |= {name: p.default for name, p
+                             in inspect.signature(cls.__init__).parameters.items()
+                             if p.default is not inspect.Parameter.empty}
+        return {k: v for k, v in self.options().items()
+                if not (k in defaults and defaults[k] == v)}
 
     def compiled_options(self) -> dict:
         """The options the kernels are compiled for: all but runtime_options."""
