@@ -410,8 +410,8 @@ def _solves_argument(parser) -> None:
     parser.add_argument("--solves", nargs="*", metavar="PRESET",
                         help="presets of the solvers to sweep beside each one's defaults "
                              "(default: loose, the Newton-solved integrators' 0.1 mm and a "
-                             "tenth of CG's residual; bdf2: xpbd's second-order step); none: "
-                             "--solves alone")
+                             "tenth of CG's residual, and bdf2, xpbd's second-order step); "
+                             "none: --solves alone")
 
 
 def _resolution_argument(parser) -> None:

@@ -187,7 +187,7 @@ class XPBD(Integrator):
     position_based = True
     step_limited = False
     runtime_options = ("iterations", "bending_tolerance", "membrane_relaxation")
-    # the study and the advisor weigh BDF2's step beside the default when asked (--solves bdf2)
+    # the study and the advisor weigh BDF2's step beside the default (study.DEFAULT_SOLVES)
     presets = {"bdf2": {"scheme": "bdf2"}}
     preset_noun = "step"
 
