@@ -39,8 +39,9 @@ as SelfCollision asks of a mesh)
                                             [--every 4] [--repeats 3] [--arch cpu]
                                             [--progress 0]
 
-Every scene but the demos steps with --integrator (xpbd: 10 iterations; any other integrator
-by its name, with its defaults) at --dt (1/240 s). --scenes defaults to all but the demos.
+Every scene but the demos steps with --integrator (xpbd: 10 iterations; xpbd_bdf2: the same
+on BDF2's step; any other integrator by its name, with its defaults) at --dt (1/240 s).
+--scenes defaults to all but the demos.
 """
 
 import argparse
@@ -135,7 +136,8 @@ def made(scene, thickness: float):
         body, options, seconds = scene(n, layers)
         held = np.concatenate([h.particles for h in options.get("handles", ())]
                               or [[]]).astype(int)
-        chosen = tc.XPBD(iterations=10) if integrator == "xpbd" else integrator
+        chosen = {"xpbd": tc.XPBD(iterations=10),
+                  "xpbd_bdf2": tc.XPBD(iterations=10, scheme="bdf2")}.get(integrator, integrator)
         kept = thickness
         if scene is not press:
             kept = min(kept, 0.5 * float(np.mean(rest_edges(body))))
