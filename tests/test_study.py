@@ -104,7 +104,8 @@ def test_study_orders_stability_and_outputs(tmp_path):
     stable = tc.stable_dt(scene.cloth, "explicit_euler", scene.drag)
     dts = [scene.frame_dt / n for n in (1, 8, 16, 32)]
     result = study.run_study(scene, integrators=["explicit_euler", "symplectic_euler", "rk4", "xpbd"],
-                             dts=dts, precisions=["f64", "f32"], iterations=[8], progress=False)
+                             dts=dts, precisions=["f64", "f32"], iterations=[8], solves=(),
+                             progress=False)
     assert len(result.runs) == 2 * 4 * len(dts)
     runs = {(r.integrator, r.precision, r.dt): r for r in result.runs}
     # explicit Euler beyond its stable step diverges, and the study says at which step
