@@ -151,6 +151,8 @@ def test_the_study_weighs_the_bdf2_step_when_asked(f64, tmp_path):
     start = text.index("[simulation]")
     end = text.index("\n[", start + 1)
     pasted = tmp_path / "pasted.toml"
-    pasted.write_text(text[:start] + advice.simulation_block(scene.frame_dt) + text[end:])
+    block = advice.simulation_block(scene.frame_dt)
+    assert 'integrator = { name = "xpbd", iterations = 8, scheme = "bdf2" }' in block
+    pasted.write_text(text[:start] + block + text[end:])
     integrator = tc.load_scene(pasted).integrator
     assert (integrator.scheme, integrator.iterations) == ("bdf2", 8)

@@ -141,7 +141,7 @@ class Advice:
         options = integrator_options(c.integrator, c.iterations, c.solve)
         integrator = (f'"{c.integrator}"' if not options else
                       f'{{ name = "{c.integrator}", '
-                      + ", ".join(f"{k} = {v!r}" for k, v in options.items()) + " }")
+                      + ", ".join(f"{k} = {_toml(v)}" for k, v in options.items()) + " }")
         return ("[simulation]\n"
                 f"integrator = {integrator}\n"
                 f"substeps = {round(frame_dt / c.dt)}             # dt = {c.dt:.6g} s\n"
@@ -340,3 +340,9 @@ def _read_cache(path: Path, key: str) -> dict | None:
     except (OSError, ValueError):
         return None
     return cached if isinstance(cached, dict) and cached.get("key") == key else None
+
+
+def _toml(value) -> str:
+    """A scalar option as the scene file writes it: a string in double quotes, a number as
+    Python's repr (which TOML reads)."""
+    return f'"{value}"' if isinstance(value, str) else repr(value)
