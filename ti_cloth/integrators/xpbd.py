@@ -258,17 +258,17 @@ class XPBD(Integrator):
                              forces.tearable),)
         n = model.particle_count
         if self.scheme == "backward_euler":
-            return (wind.phases(model, forces)
-                    + (Phase(Loop(n, xpbd_predict, model, STATE, forces, ITEM, NOW), *clear),)
-                    + ((Repeat(Setting(work, PASSES), *passes),) if passes else ())
-                    + (Phase(Loop(n, velocity_from_positions, STATE, ITEM, NOW)),)
-                    + damping)
+            predict = Loop(n, xpbd_predict, model, STATE, forces, ITEM, NOW)
+            velocity = Loop(n, velocity_from_positions, STATE, ITEM, NOW)
+        else:
+            predict = Loop(n, _bdf2_predict, model, STATE, forces, work, ITEM, NOW)
+            velocity = Loop(n, _bdf2_velocity, STATE, work, ITEM, NOW, not damping)
+        step = (wind.phases(model, forces) + (Phase(predict, *clear),)
+                + ((Repeat(Setting(work, PASSES), *passes),) if passes else ())
+                + (Phase(velocity),) + damping)
+        if self.scheme == "backward_euler":
+            return step
         # BDF2: the same phases on a step of 2/3 h from its origin (module doc), then what the
         # step left noted (after the damping, which changes the velocities)
         record = (Phase(Loop(n, _bdf2_record, STATE, work, ITEM)),) if damping else ()
-        return substep(2.0 / 3.0, wind.phases(model, forces)
-                       + (Phase(Loop(n, _bdf2_predict, model, STATE, forces, work, ITEM, NOW),
-                                *clear),)
-                       + ((Repeat(Setting(work, PASSES), *passes),) if passes else ())
-                       + (Phase(Loop(n, _bdf2_velocity, STATE, work, ITEM, NOW, not damping)),)
-                       + damping) + record
+        return substep(2.0 / 3.0, step) + record
