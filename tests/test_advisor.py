@@ -179,8 +179,9 @@ def test_any_executor_serves_and_the_rows_keep_configuration_order(f64, scene_pa
     with ThreadPoolExecutor(2) as pool:
         pooled = study.run_study(scene, reference=serial.reference, executor=pool, **options)
     strip = lambda runs: [(r.label, r.dt, r.max_error, r.rms_error, r.steps) for r in runs]
-    # symplectic Euler, rk4 and xpbd, the last at its default and BDF2's step (DEFAULT_SOLVES)
-    assert strip(pooled.runs) == strip(serial.runs) and len(serial.runs) == 2 * 4
+    # symplectic Euler, rk4 and xpbd, the last at its default, BDF2's step and that step
+    # tethered (DEFAULT_SOLVES)
+    assert strip(pooled.runs) == strip(serial.runs) and len(serial.runs) == 2 * 5
     assert pooled.timing == "ThreadPoolExecutor, tasks at once" and serial.timing == "serial"
     assert "other runs at once" in pooled.markdown()
     with pytest.raises(TypeError, match="executor must be"):
@@ -321,7 +322,7 @@ def test_a_loose_run_is_its_preset_solver_and_its_advice_builds_it(f64, tmp_path
     pasted.write_text(text[:start] + block + text[end:])
     assert tc.load_scene(pasted).integrator == tc.TRBDF2(**tc.TRBDF2.presets["loose"])
     with pytest.raises(ValueError,
-                       match=r"solves: 'tight' is not a preset.*\['bdf2', 'loose'\]"):
+                       match=r"solves: 'tight' is not a preset.*\['bdf2', 'loose', 'tethered'\]"):
         study.run_study(scene, integrators=["tr_bdf2"], solves=["tight"], progress=False)
     with pytest.raises(ValueError, match="solves: None is not a list of preset names"):
         study.run_study(scene, integrators=["tr_bdf2"], solves=None, progress=False)

@@ -9,12 +9,15 @@ from helpers import report
 
 import ti_cloth as tc
 
-ALL = list(tc.INTEGRATORS) + ["xpbd bdf2"]     # and xpbd on BDF2's step (XPBD.scheme)
+# and xpbd on BDF2's step (XPBD.scheme), and that step with tethers (XPBD.tethers)
+ALL = list(tc.INTEGRATORS) + ["xpbd bdf2", "xpbd tethered"]
 
 
 def made(name: str):
     """The integrator a name of ALL stands for."""
-    return tc.XPBD(scheme="bdf2") if name == "xpbd bdf2" else name
+    return {"xpbd bdf2": lambda: tc.XPBD(scheme="bdf2"),
+            "xpbd tethered": lambda: tc.XPBD(**tc.XPBD.presets["tethered"])}.get(
+        name, lambda: name)()
 
 
 def hanging_sheet(k=800.0, density=0.15, kd=0.0):
@@ -80,6 +83,11 @@ def test_zero_length_rest_spring_is_an_isotropic_oscillator(f64, integrator):
     assert np.all(sim.positions() == 0), "started on the pin: stays there"
     if integrator == "pbd":
         return   # pbd's constraint is a rigid zero-length rod: with it off nothing moves either
+    if integrator == "xpbd tethered":      # a tether of rest length 0 holds it at the pin
+        sim.set_positions(np.array([[0, 0, 0], [0.03, -0.04, 0.02]]))
+        sim.step(1)
+        assert np.all(sim.positions() == 0)
+        return
     start = np.array([[0, 0, 0], [0.03, -0.04, 0.02]])
     sim.set_positions(start)
     sim.step(400)

@@ -55,8 +55,9 @@ def assert_same_bits(a: dict, b: dict) -> None:
         np.testing.assert_array_equal(a[key], b[key], err_msg=key)
 
 
-@pytest.mark.parametrize("integrator", ["xpbd", "pbd", "tr_bdf2", tc.XPBD(scheme="bdf2")],
-                         ids=["xpbd", "pbd", "tr_bdf2", "xpbd bdf2"])
+@pytest.mark.parametrize("integrator", ["xpbd", "pbd", "tr_bdf2", tc.XPBD(scheme="bdf2"),
+                                        tc.XPBD(scheme="bdf2", tethers=1e-3)],
+                         ids=["xpbd", "pbd", "tr_bdf2", "xpbd bdf2", "xpbd tethered"])
 def test_a_loaded_state_continues_with_the_same_bits(f64, tmp_path, integrator):
     """Saved at step 40 (the sheets in contact, the handle let go), loaded into a new
     simulation and stepped to 80: positions, velocities, tear steps and pins equal those of

@@ -177,7 +177,11 @@ FEATURES = {"none": {}, "tearing": dict(tearing=0.2),
                             ("xpbd", "braced strands", "none"),
                             # XPBD's BDF2 step: its history across steps and launches, with
                             # every stage moving particles it then restarts (xpbd.py)
-                            ("xpbd bdf2", "sheet", "everything")])
+                            ("xpbd bdf2", "sheet", "everything"),
+                            # tethers (strain 0: they act on the stretched start) to the
+                            # pins, a handle's let go, and across a seam (energies/tethers.py)
+                            ("xpbd tethers", "sheet", "everything"),
+                            ("xpbd tethers", "garment", "attached")])
 def test_every_launch_plan_takes_the_same_steps(threads, integrator, feature, body, monkeypatch):
     """The same bits in a launch per phase, in small launches on the launching thread and in
     big launches on one worker and on a team of two, for a sheet and for strands whose
@@ -195,7 +199,9 @@ def test_every_launch_plan_takes_the_same_steps(threads, integrator, feature, bo
     dt = (1 / 480 if position_based else 2e-5 if body == "sheet"
           else 0.5 * tc.stable_dt(cloth, integrator, 0.3))   # strands and fabric: its own
     steps = 2 * 100 + 7 if not position_based else 2 * 20 + 7
-    sim = tc.Simulation(cloth, integrator=tc.XPBD(scheme="bdf2") if integrator == "xpbd bdf2"
+    made = {"xpbd bdf2": lambda: tc.XPBD(scheme="bdf2"),
+            "xpbd tethers": lambda: tc.XPBD(scheme="bdf2", tethers=0.0)}
+    sim = tc.Simulation(cloth, integrator=made[integrator]() if integrator in made
                         else integrator, dt=dt, drag=0.3, **kwargs)
     assert sim.many_steps is not None
     assert sim.many_steps.stages.collides_on_move == (

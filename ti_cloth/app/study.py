@@ -54,8 +54,9 @@ REFERENCE_BUDGET = 3e8         # particle-steps a reference may take in all (rk4
 DEFAULT_INTEGRATORS = ("explicit_euler", "symplectic_euler", "verlet", "rk4", "implicit_euler",
                        "implicit_midpoint", "tr_bdf2", "pbd", "xpbd")
 DEFAULT_ITERATIONS = (4, 16)   # passes per step of the position-based integrators
-DEFAULT_SOLVES = ("loose", "bdf2")   # presets (Integrator.presets) swept beside each one's
-                                     # defaults: the Newton solves' loose, xpbd's BDF2 step
+DEFAULT_SOLVES = ("loose", "bdf2", "tethered")   # presets (Integrator.presets) swept beside
+                                     # each one's defaults: the Newton solves' loose, xpbd's
+                                     # BDF2 step, and that step with tethers
 STABLE_FRACTION = 0.9          # limit_dt: a step-limited integrator's step at most this x its
                                # predicted stable step (0.95 runs in trade_vs_newton.py)
 ENERGY_BLOWUP = 1.0            # a run is diverged once its energy is off the reference's by more

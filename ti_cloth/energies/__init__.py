@@ -10,6 +10,8 @@ equations cited once.
     isometric.py   a flat Fabric sheet's bending: Bergou et al. 2006's isometric model
     faces.py       what the triangle terms share: deformation gradients, per-corner slots
                    and their gather, XPBD's update of a vector constraint
+    tethers.py     Kim et al. 2012's long-range attachments: XPBD's limits on how far a
+                   particle strays from its pins (not an energy: XPBD.tethers)
 
 Forces are evaluated once per element into per-element or per-corner slots (each term's
 force_loops: the loops of a force evaluation's first phase, none for a model without the
@@ -22,7 +24,7 @@ sits below body/ (which builds a Cloth's rest data with it) and imports only geo
 inputs/ and runtime/.
 """
 
-from . import altitude, bending, faces, isometric, membrane, springs
+from . import altitude, bending, faces, isometric, membrane, springs, tethers
 
 # the terms a force evaluation visits, in this order (their force_loops)
 TERMS = (springs, altitude, membrane, isometric, bending)
@@ -34,5 +36,5 @@ SLOTS = (springs, altitude, faces)
 # the isometric bending's
 ROWS = (springs, altitude, faces, isometric)
 # the terms XPBD sweeps, in this order (their xpbd_nodes: loops clearing their multipliers,
-# sweeps colour by colour)
-PROJECTIONS = (springs, altitude, membrane, bending, isometric)
+# sweeps colour by colour); the tethers last, where XPBD has them
+PROJECTIONS = (springs, altitude, membrane, bending, isometric, tethers)

@@ -28,15 +28,17 @@ stopped, would leave at +1/3 m/s.
 
 import taichi as ti
 
+from ..body.material import SpringKind
 from ..energies import PROJECTIONS
 from ..energies.faces import XPBD_BENDING_TOLERANCE
 from ..energies.membrane import XPBD_MEMBRANE_RELAXATION
 from ..energies.springs import damp
+from ..energies.tethers import TETHERS, XPBD_TETHER_STRAIN, tether_table
 from ..inputs import limits
 from ..inputs.validation import count, finite_number, require
 from ..physics import wind
 from ..physics.forces import gather_force
-from ..runtime import backend
+from ..runtime import backend, transfer
 from ..runtime.plan import DT, ITEM, NOW, STATE, Loop, Phase, Repeat, Setting, Sweep, substep
 from ..state import store_particle
 from . import fused
@@ -111,11 +113,13 @@ class _Multipliers:
     step; each triangle's passes of its bending swept so far in the step and needed
     (energies/faces.py passes_needed); the model's colourings (read by the phases); with
     `history` (BDF2), each particle's (x_{n-1}, v_{n-1}) and what the last step left of it
-    (module doc)."""
+    (module doc); with `tethered`, each particle's anchors and rest lengths
+    (energies/tethers.py), made for the body and pins of `tethered_for` (XPBD.loaded_workspace).
+    """
 
     HISTORY = ("history_position", "history_velocity", "solved_position", "solved_velocity")
 
-    def __init__(self, model, history: bool):
+    def __init__(self, model, history: bool, tethered: bool):
         fields = backend.FieldGroup()
         self.value = fields.scalar(backend.real(), max(model.spring_count, 1))
         self.altitude = fields.scalar(backend.real(), max(model.altitude_count, 1))
@@ -126,6 +130,10 @@ class _Multipliers:
         self.bending_needed = fields.scalar(ti.i32, max(model.face_count, 1))
         for name in self.HISTORY if history else ():
             setattr(self, name, fields.vector(3, backend.real(), model.particle_count))
+        self.tethered, self.tethered_for = tethered, None
+        if tethered:
+            self.tether_anchor = fields.vector(TETHERS, ti.i32, model.particle_count)
+            self.tether_length = fields.vector(TETHERS, backend.real(), model.particle_count)
         add_settings(self, fields)      # the passes (Integrator.runtime_options)
         fields.finalize(self)
         self.colours = model.spring_colouring()
@@ -172,6 +180,19 @@ class XPBD(Integrator):
         less than the linear theory's 2 (that sheet diverged at 1.9), and where contacts push
         back every step (self-collision, an animated body) a large omega may fight them
         (docs/integrators.md, "Over-relaxing the membrane's passes").
+    tethers: None (the default), or the strain s >= 0 a particle may stretch from each of its
+        nearest pins (long-range attachments, Kim et al. 2012: energies/tethers.py): at the end
+        of every pass a particle farther than (1 + s) x its rest geodesic distance from one of
+        its TETHERS nearest pinned particles is moved back onto that sphere. The passes carry a
+        pin's hold one ring of triangles a pass, so a stiff fabric's unconverged passes leave
+        it hanging long and rubbery; the tethers take that back at once (issue 53's 32² denim
+        sheet, BDF2 step at 1/240 s, 10 passes over-relaxed: 41 mm from the elastic sheet
+        without, 7.6 mm with s = 0.001; at 64², 156 and 18 mm). A cloth that stretches more
+        than s between a pin and a particle is held short there: s is a model choice, the
+        strain the fabric is not expected to pass (docs/integrators.md, "Tethers"). Anchors
+        are the particles pinned when the table is made (the first step, and again when the
+        body or its pins change); paths run along the triangles' edges (a string's, its
+        stretch springs).
     scheme: the step the passes solve: "backward_euler" (XPBD as published, the default) or
         "bdf2" (module doc: second order, the same passes on a step of 2/3 h from an origin
         the last step's history extrapolates; each particle keeps two more positions and
@@ -186,13 +207,15 @@ class XPBD(Integrator):
     order = 1
     position_based = True
     step_limited = False
-    runtime_options = ("iterations", "bending_tolerance", "membrane_relaxation")
-    # the study and the advisor weigh BDF2's step beside the default (study.DEFAULT_SOLVES)
-    presets = {"bdf2": {"scheme": "bdf2"}}
+    runtime_options = ("iterations", "bending_tolerance", "membrane_relaxation", "tethers")
+    # the study and the advisor weigh BDF2's step beside the default (study.DEFAULT_SOLVES),
+    # and with tethers at 0.1 % (a stiff woven fabric's: docs/integrators.md, "Tethers")
+    presets = {"bdf2": {"scheme": "bdf2"}, "tethered": {"scheme": "bdf2", "tethers": 1e-3}}
     preset_noun = "step"
 
     def __init__(self, *, iterations: int = 10, bending_tolerance: float = 0.1,
-                 membrane_relaxation: float = 1.0, scheme: str = "backward_euler"):
+                 membrane_relaxation: float = 1.0, scheme: str = "backward_euler",
+                 tethers: float | None = None):
         self.iterations = count("XPBD.iterations", iterations, limits.ITERATIONS)
         self.bending_tolerance = finite_number("XPBD.bending_tolerance", bending_tolerance, 0.0)
         require(self.bending_tolerance < 1.0, "XPBD.bending_tolerance", bending_tolerance,
@@ -204,27 +227,56 @@ class XPBD(Integrator):
         require(scheme in SCHEMES, "XPBD.scheme", scheme,
                 f"one of {', '.join(map(repr, SCHEMES))}")
         self.scheme = scheme
+        if tethers is not None:
+            tethers = finite_number("XPBD.tethers", tethers, 0.0)
+            require(tethers <= 1.0, "XPBD.tethers", tethers,
+                    "None (no tethers) or a strain in [0, 1]")
+        self.tethers = tethers
         self.order = 2 if scheme == "bdf2" else 1
         self.records_history = scheme == "bdf2"    # the start of a run has no history
 
     def options(self):
         return {"iterations": self.iterations, "bending_tolerance": self.bending_tolerance,
-                "membrane_relaxation": self.membrane_relaxation, "scheme": self.scheme}
+                "membrane_relaxation": self.membrane_relaxation, "scheme": self.scheme,
+                "tethers": self.tethers}
+
+    def compiled_options(self):
+        """Whether there are tethers is compiled; their strain is read at run time."""
+        return super().compiled_options() | {"tethered": self.tethers is not None}
 
     def settings_values(self):
-        """The slots PASSES, energies/faces.XPBD_BENDING_TOLERANCE and
-        energies/membrane.XPBD_MEMBRANE_RELAXATION."""
-        values = [0.0] * (max(XPBD_BENDING_TOLERANCE, XPBD_MEMBRANE_RELAXATION) + 1)
+        """The slots PASSES, energies/faces.XPBD_BENDING_TOLERANCE,
+        energies/membrane.XPBD_MEMBRANE_RELAXATION and energies/tethers.XPBD_TETHER_STRAIN."""
+        values = [0.0] * (max(XPBD_BENDING_TOLERANCE, XPBD_MEMBRANE_RELAXATION,
+                              XPBD_TETHER_STRAIN) + 1)
         values[PASSES] = float(self.iterations)
         values[XPBD_BENDING_TOLERANCE] = self.bending_tolerance
         values[XPBD_MEMBRANE_RELAXATION] = self.membrane_relaxation
+        values[XPBD_TETHER_STRAIN] = self.tethers or 0.0
         return tuple(values)
 
     def workspace(self, model, state):
-        return self.buffers(state, lambda: _Multipliers(model, self.scheme == "bdf2"))
+        return self.buffers(state, lambda: _Multipliers(model, self.scheme == "bdf2",
+                                                        self.tethers is not None))
 
     def buffer_key(self):
-        return (type(self), self.scheme)
+        return (type(self), self.scheme, self.tethers is not None)
+
+    def loaded_workspace(self, model, state):
+        """The workspace with its settings and, with tethers, their table made for this body
+        and its pins (energies/tethers.py), again where either changed since it was made (a
+        handle letting go, a pool's later simulation)."""
+        work = super().loaded_workspace(model, state)
+        if work.tethered:
+            key = (id(model.cloth), model.pinned.tobytes())
+            if work.tethered_for != key:
+                cloth = model.cloth
+                chain = cloth.spring_indices[cloth.spring_kind == SpringKind.STRETCH]
+                anchors, lengths = tether_table(cloth.rest_position, cloth.mesh.triangles, chain,
+                                                cloth.seam_indices, model.pinned)
+                transfer.upload(((work.tether_anchor, anchors), (work.tether_length, lengths)))
+                work.tethered_for = key
+        return work
 
     def saved_history(self, model, state) -> dict:
         """BDF2's per-particle history (module doc), for a saved state."""
