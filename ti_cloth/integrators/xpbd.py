@@ -187,7 +187,7 @@ class XPBD(Integrator):
         pin's hold one ring of triangles a pass, so a stiff fabric's unconverged passes leave
         it hanging long and rubbery; the tethers take that back at once (issue 53's 32² denim
         sheet, BDF2 step at 1/240 s, 10 passes over-relaxed: 41 mm from the elastic sheet
-        without, 7.6 mm with s = 0.001; at 64², 156 and 18 mm). A cloth that stretches more
+        without, 8.5 mm with s = 0.001; at 64², 156 and 18 mm). A cloth that stretches more
         than s between a pin and a particle is held short there: s is a model choice, the
         strain the fabric is not expected to pass (docs/integrators.md, "Tethers"). Anchors
         are the particles pinned when the table is made (the first step, and again when the
