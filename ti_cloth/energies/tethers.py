@@ -29,8 +29,8 @@ Cloth.seam_indices; a body without triangles, a string or hair, along its stretc
 least the geodesic, and exact where the rest shape is flat and the straight line to the anchor
 stays inside the mesh (no boundary edge crossed): a garment's pattern (Cloth(rest="uv")), a
 flat sheet. Each particle keeps its TETHERS nearest anchors by
-that distance. An anchor a handle lets go is skipped (its inverse mass is read in the pass);
-the table is made again when the body or its pins change (integrators/xpbd.py).
+that distance. An anchor a handle lets go is skipped (its inverse mass is read in the pass),
+and the table made again without it (integrators/xpbd.py XPBD.loaded_workspace).
 """
 
 import heapq

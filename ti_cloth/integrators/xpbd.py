@@ -114,7 +114,8 @@ class _Multipliers:
     (energies/faces.py passes_needed); the model's colourings (read by the phases); with
     `history` (BDF2), each particle's (x_{n-1}, v_{n-1}) and what the last step left of it
     (module doc); with `tethered`, each particle's anchors and rest lengths
-    (energies/tethers.py), made for the body and pins of `tethered_for` (XPBD.loaded_workspace).
+    (energies/tethers.py), made for the body and pins of `tethered_for` (XPBD.loaded_workspace:
+    (the Cloth, its pins then)).
     """
 
     HISTORY = ("history_position", "history_velocity", "solved_position", "solved_velocity")
@@ -190,9 +191,9 @@ class XPBD(Integrator):
         without, 8.5 mm with s = 0.001; at 64², 156 and 18 mm). A cloth that stretches more
         than s between a pin and a particle is held short there: s is a model choice, the
         strain the fabric is not expected to pass (docs/integrators.md, "Tethers"). Anchors
-        are the particles pinned when the table is made (the first step, and again when the
-        body or its pins change); paths run along the triangles' edges (a string's, its
-        stretch springs).
+        are the particles pinned when the table is made (the first step; again for another
+        body, or once an anchor is let go); paths run along the triangles' edges (a
+        string's, its stretch springs).
     scheme: the step the passes solve: "backward_euler" (XPBD as published, the default) or
         "bdf2" (module doc: second order, the same passes on a step of 2/3 h from an origin
         the last step's history extrapolates; each particle keeps two more positions and
@@ -264,18 +265,20 @@ class XPBD(Integrator):
 
     def loaded_workspace(self, model, state):
         """The workspace with its settings and, with tethers, their table made for this body
-        and its pins (energies/tethers.py), again where either changed since it was made (a
-        handle letting go, a pool's later simulation)."""
+        and its pins (energies/tethers.py), again for another body or once an anchor is let
+        go (a handle's release: the particles it anchored take the pins that remain). Pins
+        added since (a particle grabbed in the viewer) are no anchors: a grab makes no table
+        (0.2-0.6 s on a garment)."""
         work = super().loaded_workspace(model, state)
         if work.tethered:
-            key = (id(model.cloth), model.pinned.tobytes())
-            if work.tethered_for != key:
+            made = work.tethered_for
+            if made is None or made[0] is not model.cloth or (made[1] & ~model.pinned).any():
                 cloth = model.cloth
                 chain = cloth.spring_indices[cloth.spring_kind == SpringKind.STRETCH]
                 anchors, lengths = tether_table(cloth.rest_position, cloth.mesh.triangles, chain,
                                                 cloth.seam_indices, model.pinned)
                 transfer.upload(((work.tether_anchor, anchors), (work.tether_length, lengths)))
-                work.tethered_for = key
+                work.tethered_for = (model.cloth, model.pinned.copy())   # held: no id reused
         return work
 
     def saved_history(self, model, state) -> dict:
