@@ -67,6 +67,25 @@ def test_an_l_shapes_tethers_go_round_its_inner_corner():
     assert lengths[seen, 0] == pytest.approx(np.linalg.norm(x[seen] - x[pin]), rel=1e-12)
 
 
+def test_a_body_placed_farther_than_its_rest_keeps_that_distance():
+    """A sheet placed 10 % larger than its rest shape about a pinned corner (a garment starts
+    gathered and wrapped, up to 1.4x its pattern's geodesic from its pins): its tethers are
+    the placed distances, so the first step snaps nothing into place; placed at rest, the
+    rest distances."""
+    mesh = tc.grid_mesh(rows=6, cols=6, size=(0.5, 0.5), plane="xz")
+    placed = tc.Mesh(mesh.vertices * 1.1, mesh.triangles)
+    cloth = tc.Cloth(placed, tc.Material(), rest=mesh, pinned=[0])
+    anchors, lengths = tether_table(cloth.rest_position, cloth.mesh.triangles, np.zeros((0, 2)),
+                                    cloth.seam_indices, cloth.pinned, cloth.particle_position)
+    free = ~cloth.pinned
+    assert (anchors[free, 0] == 0).all()
+    x = cloth.particle_position
+    np.testing.assert_allclose(lengths[free, 0], np.linalg.norm(x[free] - x[0], axis=1),
+                               rtol=1e-12)
+    _, at_rest = table(cloth)
+    np.testing.assert_allclose(lengths[free, 0], 1.1 * at_rest[free, 0], rtol=1e-12)
+
+
 def far_side(sim, cloth) -> float:
     """The largest distance / rest straight distance, over the particles and both pins."""
     x, rest = sim.positions(), cloth.rest_position

@@ -28,8 +28,9 @@ The rest geodesic distance: Dijkstra over the rest mesh's edges (seams joined at
 Cloth.seam_indices; a body without triangles, a string or hair, along its stretch springs), at
 least the geodesic, and exact where the rest shape is flat and the straight line to the anchor
 stays inside the mesh (no boundary edge crossed): a garment's pattern (Cloth(rest="uv")), a
-flat sheet. Each particle keeps its TETHERS nearest anchors by
-that distance. An anchor a handle lets go is skipped (its inverse mass is read in the pass),
+flat sheet; and never shorter than where the body was placed (a garment starts gathered and
+wrapped, farther from its pins than its pattern says). Each particle keeps its TETHERS
+nearest anchors by that distance. An anchor a handle lets go is skipped (its inverse mass is read in the pass),
 and the table made again without it (integrators/xpbd.py XPBD.loaded_workspace).
 """
 
@@ -47,12 +48,16 @@ ACCEPTED = 1e-9         # a point this far (relative) past a ball's radius is in
 
 
 def tether_table(rest: np.ndarray, triangles: np.ndarray, chain: np.ndarray, seams: np.ndarray,
-                 pinned: np.ndarray, count: int = TETHERS) -> tuple[np.ndarray, np.ndarray]:
+                 pinned: np.ndarray, start: np.ndarray | None = None,
+                 count: int = TETHERS) -> tuple[np.ndarray, np.ndarray]:
     """(anchors (N, count) int32, -1 where none; rest lengths (N, count) [m]) of a body's
     particles at `rest` (N, 3) to their `count` nearest anchors among the `pinned` (N,) bool
     (module doc), nearest first: paths along its `triangles`' edges (T, 3), or without triangles along
-    `chain` (C, 2) (a string's stretch springs), joined across `seams` (S, 2). A particle no
-    anchor reaches, an anchor itself, and every particle of a body with neither, has none."""
+    `chain` (C, 2) (a string's stretch springs), joined across `seams` (S, 2); no tether
+    shorter than the straight distance at `start` (N, 3), where the body is placed (a garment
+    placed gathered and wrapped lies up to 1.4x its pattern's geodesic from its pins: tethers
+    shorter than that would snap it at its first step). A particle no anchor reaches, an
+    anchor itself, and every particle of a body with neither, has none."""
     n = len(rest)
     anchors = np.full((n, count), -1, np.int32)
     lengths = np.zeros((n, count))
@@ -72,12 +77,15 @@ def tether_table(rest: np.ndarray, triangles: np.ndarray, chain: np.ndarray, sea
         if not pinned[i]:
             for k, (source, length) in enumerate(row):
                 anchors[i, k], lengths[i, k] = source, length
-    if not len(triangles):          # a string's chord is shorter than its path
-        return anchors, lengths
-    straight = straight_inside(rest, triangles, anchors)
     taken = anchors >= 0
-    direct = np.linalg.norm(rest[:, None, :] - rest[np.maximum(anchors, 0)], axis=2)
-    lengths = np.where(taken & straight, np.minimum(direct, lengths), lengths)
+    if len(triangles):              # (a string's chord is shorter than its path)
+        straight = straight_inside(rest, triangles, anchors)
+        direct = np.linalg.norm(rest[:, None, :] - rest[np.maximum(anchors, 0)], axis=2)
+        lengths = np.where(taken & straight, np.minimum(direct, lengths), lengths)
+    if start is not None:
+        start = np.asarray(start, np.float64)
+        placed = np.linalg.norm(start[:, None, :] - start[np.maximum(anchors, 0)], axis=2)
+        lengths = np.where(taken, np.maximum(lengths, placed), lengths)
     order = np.argsort(np.where(taken, lengths, np.inf), axis=1, kind="stable")  # nearest first
     return (np.take_along_axis(anchors, order, axis=1),
             np.take_along_axis(lengths, order, axis=1))

@@ -276,7 +276,8 @@ class XPBD(Integrator):
                 cloth = model.cloth
                 chain = cloth.spring_indices[cloth.spring_kind == SpringKind.STRETCH]
                 anchors, lengths = tether_table(cloth.rest_position, cloth.mesh.triangles, chain,
-                                                cloth.seam_indices, model.pinned)
+                                                cloth.seam_indices, model.pinned,
+                                                cloth.particle_position)
                 transfer.upload(((work.tether_anchor, anchors), (work.tether_length, lengths)))
                 work.tethered_for = (model.cloth, model.pinned.copy())   # held: no id reused
         return work
