@@ -187,11 +187,11 @@ def configurations(cloth: tc.Cloth, n: int, newton: bool, only: tuple = ("",)) -
     runs += [(f"xpbd bdf2 relaxed 1.5 {it} it 1/{r}", tc.XPBD(
         iterations=it, membrane_relaxation=1.5, scheme="bdf2"), 1 / r)
         for it, r in ((2, 60), (10, 240), (4, 3840))]
-    # and tethered to the pins (XPBD.tethers: strain 0.1 %, and 0 and 0.3 % beside it)
-    runs += [(f"xpbd tethered {s:g} {it} it 1/{r}", tc.XPBD(
+    # and tethered to the pins (XPBD.tethers: strain 0.1 %, and 0, 0.3 % and the body's beside)
+    runs += [(f"xpbd tethered {s} {it} it 1/{r}", tc.XPBD(
         iterations=it, membrane_relaxation=1.5, scheme="bdf2", tethers=s), 1 / r)
         for s, it, r in ((1e-3, 4, 120), (1e-3, 10, 120), (1e-3, 6, 240), (1e-3, 10, 240),
-                         (1e-3, 20, 240), (0.0, 10, 240), (3e-3, 10, 240))]
+                         (1e-3, 20, 240), (0.0, 10, 240), (3e-3, 10, 240), ("auto", 10, 240))]
     for name, cls in (("implicit_midpoint", tc.ImplicitMidpoint), ("tr_bdf2", tc.TRBDF2)):
         runs += [(f"{name} 1/{r}", cls(tolerance=1e-4, cg_tolerance=1e-1), 1 / r)
                  for r in (60, 120, 240)]

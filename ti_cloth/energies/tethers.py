@@ -30,8 +30,9 @@ least the geodesic, and exact where the rest shape is flat and the straight line
 stays inside the mesh (no boundary edge crossed): a garment's pattern (Cloth(rest="uv")), a
 flat sheet; and never shorter than where the body was placed (a garment starts gathered and
 wrapped, farther from its pins than its pattern says). Each particle keeps its TETHERS
-nearest anchors by that distance. An anchor a handle lets go is skipped (its inverse mass is read in the pass),
-and the table made again without it (integrators/xpbd.py XPBD.loaded_workspace).
+nearest anchors by that distance. An anchor a handle lets go is skipped (its inverse mass
+is read in the pass), and the table made again without it (integrators/xpbd.py
+XPBD.loaded_workspace). XPBD(tethers="auto") takes s from the body (expected_strain).
 """
 
 import heapq
@@ -44,6 +45,8 @@ from ..runtime.plan import ITEM, STATE, Loop, Phase
 TETHERS = 2             # anchors per particle, at most (tether_at projects onto both)
 XPBD_TETHER_STRAIN = 3  # the settings' slot of s (integrators/base.py SETTINGS)
 FLAT = 1e-9             # a rest shape within this x its extent of a plane is flat
+SWING = 2.5             # a uniform strip swung down from level pulls its pin with 2.5x its weight
+GRAVITY = 9.81          # [m/s^2]: expected_strain's load
 ACCEPTED = 1e-9         # a point this far (relative) past a ball's radius is in it (rounding)
 
 
@@ -52,12 +55,12 @@ def tether_table(rest: np.ndarray, triangles: np.ndarray, chain: np.ndarray, sea
                  count: int = TETHERS) -> tuple[np.ndarray, np.ndarray]:
     """(anchors (N, count) int32, -1 where none; rest lengths (N, count) [m]) of a body's
     particles at `rest` (N, 3) to their `count` nearest anchors among the `pinned` (N,) bool
-    (module doc), nearest first: paths along its `triangles`' edges (T, 3), or without triangles along
-    `chain` (C, 2) (a string's stretch springs), joined across `seams` (S, 2); no tether
-    shorter than the straight distance at `start` (N, 3), where the body is placed (a garment
-    placed gathered and wrapped lies up to 1.4x its pattern's geodesic from its pins: tethers
-    shorter than that would snap it at its first step). A particle no anchor reaches, an
-    anchor itself, and every particle of a body with neither, has none."""
+    (module doc), nearest first: paths along its `triangles`' edges (T, 3), or without
+    triangles along `chain` (C, 2) (a string's stretch springs), joined across `seams`
+    (S, 2); no tether shorter than the straight distance at `start` (N, 3), where the body is
+    placed (a garment placed gathered and wrapped lies up to 1.4x its pattern's geodesic from
+    its pins: tethers shorter than that would snap it at its first step). A particle no
+    anchor reaches, an anchor itself, and every particle of a body with neither, has none."""
     n = len(rest)
     anchors = np.full((n, count), -1, np.int32)
     lengths = np.zeros((n, count))
@@ -89,6 +92,21 @@ def tether_table(rest: np.ndarray, triangles: np.ndarray, chain: np.ndarray, sea
     order = np.argsort(np.where(taken, lengths, np.inf), axis=1, kind="stable")  # nearest first
     return (np.take_along_axis(anchors, order, axis=1),
             np.take_along_axis(lengths, order, axis=1))
+
+
+def expected_strain(mass: float, extent: float, modulus: float, longest: float) -> float:
+    """XPBD(tethers="auto")'s s: the strain at the pin of a strip of the body as long as its
+    longest tether [m], swung down from level under gravity: SWING g rho L / E, the tension
+    of a uniform rod at the bottom of that swing (2.5 m g) over the strip's width, with rho =
+    mass [kg] / extent (its rest area [m^2]; a string's rest length [m]) and E = modulus, its
+    weakest in-plane stretch modulus [N/m] (a string's springs' k l [N]). On issue 53's denim
+    sheet 0.11 % (about the best measured: docs/integrators.md, "Tethers"); on the interlock
+    knit of demos/study_fabric.toml 23 %, where tethers at 0.1 % held it short, 4x farther
+    from the elastic flap than BDF2's passes alone. 0 where nothing is known (no extent, no
+    stiffness)."""
+    if extent <= 0.0 or modulus <= 0.0 or longest <= 0.0:
+        return 0.0
+    return SWING * GRAVITY * mass / extent * longest / modulus
 
 
 def nearest_sources(n: int, ends: np.ndarray, weights: np.ndarray, sources, count: int) -> list:

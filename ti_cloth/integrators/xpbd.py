@@ -26,6 +26,7 @@ stopped, would leave at +1/3 m/s.
 """
 
 
+import numpy as np
 import taichi as ti
 
 from ..body.material import SpringKind
@@ -33,7 +34,7 @@ from ..energies import PROJECTIONS
 from ..energies.faces import XPBD_BENDING_TOLERANCE
 from ..energies.membrane import XPBD_MEMBRANE_RELAXATION
 from ..energies.springs import damp
-from ..energies.tethers import TETHERS, XPBD_TETHER_STRAIN, tether_table
+from ..energies.tethers import TETHERS, XPBD_TETHER_STRAIN, expected_strain, tether_table
 from ..inputs import limits
 from ..inputs.validation import count, finite_number, require
 from ..physics import wind
@@ -131,7 +132,7 @@ class _Multipliers:
         self.bending_needed = fields.scalar(ti.i32, max(model.face_count, 1))
         for name in self.HISTORY if history else ():
             setattr(self, name, fields.vector(3, backend.real(), model.particle_count))
-        self.tethered, self.tethered_for = tethered, None
+        self.tethered, self.tethered_for, self.expected_strain = tethered, None, 0.0
         if tethered:
             self.tether_anchor = fields.vector(TETHERS, ti.i32, model.particle_count)
             self.tether_length = fields.vector(TETHERS, backend.real(), model.particle_count)
@@ -141,6 +142,24 @@ class _Multipliers:
         self.altitude_colours = model.altitude_colouring()
         if model.face_count:
             self.membrane_colours, self.bending_colours = model.element_colourings()
+
+
+def _expected_strain(cloth, lengths) -> float:
+    """energies/tethers.expected_strain of `cloth` with its tethers' rest `lengths`: its mass
+    over its rest area and its weakest stretch modulus (a Fabric's warp or weft, a Material's
+    stretch springs' k), or a string's over its rest length and k l."""
+    stretch = cloth.spring_kind == SpringKind.STRETCH
+    k, rest = cloth.spring_stiffness[stretch], cloth.spring_rest_length[stretch]
+    mass = float(cloth.particle_mass.sum())
+    if len(cloth.mesh.triangles):
+        corners = cloth.rest_position[cloth.mesh.triangles]
+        area = 0.5 * float(np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
+                                                   corners[:, 2] - corners[:, 0]), axis=1).sum())
+        moduli = cloth.face_moduli[:, [0, 2]] if cloth.face_count else k
+        return expected_strain(mass, area, float(np.min(moduli, initial=np.inf)),
+                               float(lengths.max()))
+    return expected_strain(mass, float(rest.sum()), float(np.min(k * rest, initial=np.inf)),
+                           float(lengths.max()))
 
 
 class XPBD(Integrator):
@@ -190,7 +209,10 @@ class XPBD(Integrator):
         sheet, BDF2 step at 1/240 s, 10 passes over-relaxed: 41 mm from the elastic sheet
         without, 8.5 mm with s = 0.001; at 64², 156 and 18 mm). A cloth that stretches more
         than s between a pin and a particle is held short there: s is a model choice, the
-        strain the fabric is not expected to pass (docs/integrators.md, "Tethers"). Anchors
+        strain the fabric is not expected to pass (docs/integrators.md, "Tethers"); "auto"
+        takes it from the body: the strain at a pin of a strip as long as its longest tether,
+        swung down from level (energies/tethers.expected_strain: 0.11 % on issue 53's denim,
+        17 % on an interlock knit), read back as `strain` after a step. Anchors
         are the particles pinned when the table is made (the first step; again for another
         body, or once an anchor is let go); paths run along the triangles' edges (a
         string's, its stretch springs).
@@ -210,8 +232,8 @@ class XPBD(Integrator):
     step_limited = False
     runtime_options = ("iterations", "bending_tolerance", "membrane_relaxation", "tethers")
     # the study and the advisor weigh BDF2's step beside the default (study.DEFAULT_SOLVES),
-    # and with tethers at 0.1 % (a stiff woven fabric's: docs/integrators.md, "Tethers")
-    presets = {"bdf2": {"scheme": "bdf2"}, "tethered": {"scheme": "bdf2", "tethers": 1e-3}}
+    # and that step tethered at the strain the body expects (energies/tethers.expected_strain)
+    presets = {"bdf2": {"scheme": "bdf2"}, "tethered": {"scheme": "bdf2", "tethers": "auto"}}
     preset_noun = "step"
 
     def __init__(self, *, iterations: int = 10, bending_tolerance: float = 0.1,
@@ -228,11 +250,13 @@ class XPBD(Integrator):
         require(scheme in SCHEMES, "XPBD.scheme", scheme,
                 f"one of {', '.join(map(repr, SCHEMES))}")
         self.scheme = scheme
-        if tethers is not None:
+        if tethers is not None and tethers != "auto":
+            allowed = 'None (no tethers), "auto" or a strain in [0, 1]'
+            require(not isinstance(tethers, str), "XPBD.tethers", tethers, allowed)
             tethers = finite_number("XPBD.tethers", tethers, 0.0)
-            require(tethers <= 1.0, "XPBD.tethers", tethers,
-                    "None (no tethers) or a strain in [0, 1]")
+            require(tethers <= 1.0, "XPBD.tethers", tethers, allowed)
         self.tethers = tethers
+        self.strain = None if tethers == "auto" else tethers   # "auto": the body's (below)
         self.order = 2 if scheme == "bdf2" else 1
         self.records_history = scheme == "bdf2"    # the start of a run has no history
 
@@ -253,7 +277,7 @@ class XPBD(Integrator):
         values[PASSES] = float(self.iterations)
         values[XPBD_BENDING_TOLERANCE] = self.bending_tolerance
         values[XPBD_MEMBRANE_RELAXATION] = self.membrane_relaxation
-        values[XPBD_TETHER_STRAIN] = self.tethers or 0.0
+        values[XPBD_TETHER_STRAIN] = self.strain or 0.0
         return tuple(values)
 
     def workspace(self, model, state):
@@ -269,18 +293,25 @@ class XPBD(Integrator):
         go (a handle's release: the particles it anchored take the pins that remain). Pins
         added since (a particle grabbed in the viewer) are no anchors: a grab makes no table
         (0.2-0.6 s on a garment)."""
-        work = super().loaded_workspace(model, state)
+        work = self.workspace(model, state)
         if work.tethered:
             made = work.tethered_for
             if made is None or made[0] is not model.cloth or (made[1] & ~model.pinned).any():
                 cloth = model.cloth
-                chain = cloth.spring_indices[cloth.spring_kind == SpringKind.STRETCH]
-                anchors, lengths = tether_table(cloth.rest_position, cloth.mesh.triangles, chain,
-                                                cloth.seam_indices, model.pinned,
-                                                cloth.particle_position)
+                stretch = cloth.spring_kind == SpringKind.STRETCH
+                anchors, lengths = tether_table(
+                    cloth.rest_position, cloth.mesh.triangles, cloth.spring_indices[stretch],
+                    cloth.seam_indices, model.pinned, cloth.particle_position)
                 transfer.upload(((work.tether_anchor, anchors), (work.tether_length, lengths)))
                 work.tethered_for = (model.cloth, model.pinned.copy())   # held: no id reused
+                work.expected_strain = _expected_strain(cloth, lengths)
+            self.strain = (work.expected_strain if self.tethers == "auto" else self.tethers)
+        self.load_settings(work)
         return work
+
+    def copy_reports(self, stepper) -> None:
+        """The strain the tethers hold (`strain`: "auto"'s as the body gave it)."""
+        self.strain = stepper.strain
 
     def saved_history(self, model, state) -> dict:
         """BDF2's per-particle history (module doc), for a saved state."""
