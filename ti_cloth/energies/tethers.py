@@ -30,9 +30,8 @@ least the geodesic, and exact where the rest shape is flat and the straight line
 stays inside the mesh (no boundary edge crossed): a garment's pattern (Cloth(rest="uv")), a
 flat sheet; and never shorter than where the body was placed (a garment starts gathered and
 wrapped, farther from its pins than its pattern says). Each particle keeps its TETHERS
-nearest anchors by that distance. An anchor a handle lets go is skipped (its inverse mass
-is read in the pass), and the table made again without it (integrators/xpbd.py
-XPBD.loaded_workspace). XPBD(tethers="auto") takes s from the body (expected_strain).
+nearest anchors by that distance, a table for each set of pins (integrators/xpbd.py
+XPBD.loaded_workspace); an anchor let go (its inverse mass read in the pass) holds nothing. XPBD(tethers="auto") takes s from the body (expected_strain).
 """
 
 import heapq

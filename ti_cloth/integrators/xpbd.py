@@ -60,6 +60,7 @@ def xpbd_predict(model: ti.template(), state: ti.template(), forces: ti.template
 
 
 SCHEMES = ("backward_euler", "bdf2")     # the step the passes solve (XPBD.scheme)
+TABLES = 4        # tether tables a workspace keeps (XPBD.loaded_workspace)
 
 
 @ti.func
@@ -115,8 +116,9 @@ class _Multipliers:
     (energies/faces.py passes_needed); the model's colourings (read by the phases); with
     `history` (BDF2), each particle's (x_{n-1}, v_{n-1}) and what the last step left of it
     (module doc); with `tethered`, each particle's anchors and rest lengths
-    (energies/tethers.py), made for the body and pins of `tethered_for` (XPBD.loaded_workspace:
-    (the Cloth, its pins then)).
+    (energies/tethers.py), made for the pins `tethered_for` (their bytes) of the body
+    `tables_for` (held: no id reused), and the last tables made for it, by pins (`tables`:
+    XPBD.loaded_workspace).
     """
 
     HISTORY = ("history_position", "history_velocity", "solved_position", "solved_velocity")
@@ -133,6 +135,7 @@ class _Multipliers:
         for name in self.HISTORY if history else ():
             setattr(self, name, fields.vector(3, backend.real(), model.particle_count))
         self.tethered, self.tethered_for, self.expected_strain = tethered, None, 0.0
+        self.tables, self.tables_for = {}, None   # the last tables made, by pins; their body
         if tethered:
             self.tether_anchor = fields.vector(TETHERS, ti.i32, model.particle_count)
             self.tether_length = fields.vector(TETHERS, backend.real(), model.particle_count)
@@ -142,6 +145,17 @@ class _Multipliers:
         self.altitude_colours = model.altitude_colouring()
         if model.face_count:
             self.membrane_colours, self.bending_colours = model.element_colourings()
+
+
+def _tether_table(model) -> tuple:
+    """(anchors, rest lengths, expected strain) of energies/tethers.py for the model's body
+    and its pins now."""
+    cloth = model.cloth
+    stretch = cloth.spring_kind == SpringKind.STRETCH
+    anchors, lengths = tether_table(cloth.rest_position, cloth.mesh.triangles,
+                                    cloth.spring_indices[stretch], cloth.seam_indices,
+                                    model.pinned, cloth.particle_position)
+    return anchors, lengths, _expected_strain(cloth, lengths)
 
 
 def _expected_strain(cloth, lengths) -> float:
@@ -212,10 +226,9 @@ class XPBD(Integrator):
         strain the fabric is not expected to pass (docs/integrators.md, "Tethers"); "auto"
         takes it from the body: the strain at a pin of a strip as long as its longest tether,
         swung down from level (energies/tethers.expected_strain: 0.11 % on issue 53's denim,
-        17 % on an interlock knit), read back as `strain` after a step. Anchors
-        are the particles pinned when the table is made (the first step; again for another
-        body, or once an anchor is let go); paths run along the triangles' edges (a
-        string's, its stretch springs).
+        17 % on an interlock knit), read back as `strain` after a step. Anchors are the
+        particles pinned at the step (a table for each set of pins: loaded_workspace); paths
+        run along the triangles' edges (a string's, its stretch springs).
     scheme: the step the passes solve: "backward_euler" (XPBD as published, the default) or
         "bdf2" (module doc: second order, the same passes on a step of 2/3 h from an origin
         the last step's history extrapolates; each particle keeps two more positions and
@@ -288,23 +301,23 @@ class XPBD(Integrator):
         return (type(self), self.scheme, self.tethers is not None)
 
     def loaded_workspace(self, model, state):
-        """The workspace with its settings and, with tethers, their table made for this body
-        and its pins (energies/tethers.py), again for another body or once an anchor is let
-        go (a handle's release: the particles it anchored take the pins that remain). Pins
-        added since (a particle grabbed in the viewer) are no anchors: a grab makes no table
-        (0.2-0.6 s on a garment)."""
+        """The workspace with its settings and, with tethers, their table for this body and
+        its pins now (energies/tethers.py): a function of them alone, so every run of a
+        simulation steps alike. The last TABLES tables are kept (a handle's hold and release,
+        a restart: uploaded again, not made); another set of pins makes one (a particle
+        grabbed in the viewer: 0.2-0.6 s on a garment, Dijkstra in Python)."""
         work = self.workspace(model, state)
         if work.tethered:
-            made = work.tethered_for
-            if made is None or made[0] is not model.cloth or (made[1] & ~model.pinned).any():
-                cloth = model.cloth
-                stretch = cloth.spring_kind == SpringKind.STRETCH
-                anchors, lengths = tether_table(
-                    cloth.rest_position, cloth.mesh.triangles, cloth.spring_indices[stretch],
-                    cloth.seam_indices, model.pinned, cloth.particle_position)
-                transfer.upload(((work.tether_anchor, anchors), (work.tether_length, lengths)))
-                work.tethered_for = (model.cloth, model.pinned.copy())   # held: no id reused
-                work.expected_strain = _expected_strain(cloth, lengths)
+            if work.tables_for is not model.cloth:     # another body: the pool's next simulation
+                work.tables_for, work.tables, work.tethered_for = model.cloth, {}, None
+            pins = model.pinned.tobytes()
+            if work.tethered_for != pins:
+                made = work.tables.pop(pins, None) or _tether_table(model)
+                work.tables[pins] = made                       # the newest last
+                if len(work.tables) > TABLES:
+                    del work.tables[next(iter(work.tables))]
+                transfer.upload(((work.tether_anchor, made[0]), (work.tether_length, made[1])))
+                work.tethered_for, work.expected_strain = pins, made[2]
             self.strain = (work.expected_strain if self.tethers == "auto" else self.tethers)
         self.load_settings(work)
         return work
