@@ -186,5 +186,12 @@ def test_bad_tethers_are_refused_by_name(value):
         tc.XPBD(tethers=value)
 
 
+def test_tethers_refuse_tearing():
+    """A piece torn off would stay tied to its pin: the two are refused together, naming the
+    field."""
+    with pytest.raises(ValueError, match=r"tearing must be None when xpbd has tethers"):
+        tc.Simulation(denim_sheet(6), integrator=tc.XPBD(tethers=1e-3), tearing=0.3)
+
+
 def test_a_scene_file_sets_the_tethers(tmp_path):
     check_xpbd_scene_option(tmp_path, "tethers", 0.002, -0.5)

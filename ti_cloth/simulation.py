@@ -104,6 +104,9 @@ class Simulation:
         drag = in_range("drag", drag, limits.DRAG)
         if tearing is not None and not isinstance(tearing, Tearing):
             tearing = Tearing(tearing)
+        require(tearing is None or getattr(self.integrator, "tethers", None) is None, "tearing",
+                tearing, "None when xpbd has tethers (XPBD.tethers): a piece torn off would "
+                "stay tied to its pin")
         self.tearing = tearing
         require(isinstance(handles, (list, tuple)), "handles", handles,
                 "a list of Handle and Attachment objects (handles=[Handle(...)])")
