@@ -233,7 +233,7 @@ class XPBD(Integrator):
         strain the fabric is not expected to pass (docs/integrators.md, "Tethers"); "auto"
         takes it from the body: the strain at a pin of a strip as long as its longest tether,
         swung down from level (energies/tethers.expected_strain: 0.20 % on issue 53's denim,
-        17 % on an interlock knit), read back as `strain` after a step. Anchors are the
+        17 % on an interlock knit), read back as `tether_strain` after a step. Anchors are the
         particles pinned at the step (a table for each set of pins: loaded_workspace); paths
         run along the triangles' edges (a string's, its stretch springs).
     scheme: the step the passes solve: "backward_euler" (XPBD as published, the default) or
@@ -276,7 +276,7 @@ class XPBD(Integrator):
             tethers = finite_number("XPBD.tethers", tethers, 0.0)
             require(tethers <= 1.0, "XPBD.tethers", tethers, allowed)
         self.tethers = tethers
-        self.strain = None if tethers == "auto" else tethers   # "auto": the body's (below)
+        self.tether_strain = None if tethers == "auto" else tethers   # "auto": the body's (below)
         self.order = 2 if scheme == "bdf2" else 1
         self.records_history = scheme == "bdf2"    # the start of a run has no history
 
@@ -297,7 +297,7 @@ class XPBD(Integrator):
         values[PASSES] = float(self.iterations)
         values[XPBD_BENDING_TOLERANCE] = self.bending_tolerance
         values[XPBD_MEMBRANE_RELAXATION] = self.membrane_relaxation
-        values[XPBD_TETHER_STRAIN] = self.strain or 0.0
+        values[XPBD_TETHER_STRAIN] = self.tether_strain or 0.0
         return tuple(values)
 
     def workspace(self, model, state):
@@ -325,13 +325,13 @@ class XPBD(Integrator):
                     del work.tables[next(iter(work.tables))]
                 transfer.upload(((work.tether_anchor, made[0]), (work.tether_length, made[1])))
                 work.tethered_for, work.expected_strain = pins, made[2]
-            self.strain = (work.expected_strain if self.tethers == "auto" else self.tethers)
+            self.tether_strain = (work.expected_strain if self.tethers == "auto" else self.tethers)
         self.load_settings(work)
         return work
 
     def copy_reports(self, stepper) -> None:
-        """The strain the tethers hold (`strain`: "auto"'s as the body gave it)."""
-        self.strain = stepper.strain
+        """The strain the tethers hold (`tether_strain`: "auto"'s as the body gave it)."""
+        self.tether_strain = stepper.tether_strain
 
     def saved_history(self, model, state) -> dict:
         """BDF2's per-particle history (module doc), for a saved state."""
