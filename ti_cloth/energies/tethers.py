@@ -100,9 +100,9 @@ def expected_strain(mass: float, extent: float, modulus: float, longest: float) 
     of a uniform rod at the bottom of that swing (2.5 m g) over the strip's width, with rho =
     mass [kg] / extent (its rest area [m^2]; a string's rest length [m]) and E = modulus, its
     weakest in-plane stretch modulus [N/m] (weakest_modulus; a string's springs' k l [N]).
-    On issue 53's denim-like sheet 0.19 %; on the denim preset, soft in shear, 4 %; on the
-    interlock knit of demos/study_fabric.toml about 20 %, where tethers at 0.1 % held it short,
-    4x farther from the elastic flap than BDF2's passes alone. 0 where nothing is known (no
+    On issue 53's denim-like sheet 0.20 %; on the denim preset, soft in shear, 4.3 %; on the
+    interlock knit of demos/study_fabric.toml 17 %, where tethers at 0.1 % held it short, 4x
+    farther from the elastic flap than BDF2's passes alone. 0 where nothing is known (no
     extent, no stiffness)."""
     if extent <= 0.0 or modulus <= 0.0 or longest <= 0.0:
         return 0.0
@@ -114,7 +114,7 @@ def weakest_modulus(moduli: np.ndarray) -> np.ndarray:
     plane-stress (C11, C12, C22, C33) (F, 4): 1 / E(t) = S11 c^4 + S22 s^4 + (2 S12 + S33)
     s^2 c^2 with S = C^-1 (c, s the direction's cosine and sine), sampled every degree. A
     woven fabric soft in shear is weakest on the bias (issue 53's denim-like sheet: 2.9 kN/m
-    at 45 degrees against 5 kN/m along its threads; the denim preset 162 N/m against 205)."""
+    at 45 degrees against 5 kN/m along its threads; the denim preset 156 N/m against 205)."""
     rows, inverse = np.unique(np.asarray(moduli, np.float64).reshape(-1, 4), axis=0,
                               return_inverse=True)
     c11, c12, c22, c33 = rows.T

@@ -258,7 +258,7 @@ class XPBD(Integrator):
 
     def __init__(self, *, iterations: int = 10, bending_tolerance: float = 0.1,
                  membrane_relaxation: float = 1.0, scheme: str = "backward_euler",
-                 tethers: float | None = None):
+                 tethers: float | str | None = None):
         self.iterations = count("XPBD.iterations", iterations, limits.ITERATIONS)
         self.bending_tolerance = finite_number("XPBD.bending_tolerance", bending_tolerance, 0.0)
         require(self.bending_tolerance < 1.0, "XPBD.bending_tolerance", bending_tolerance,
