@@ -65,8 +65,11 @@ def tether_table(rest: np.ndarray, triangles: np.ndarray, chain: np.ndarray, sea
     anchors = np.full((n, count), -1, np.int32)
     lengths = np.zeros((n, count))
     triangles = np.asarray(triangles, np.int64).reshape(-1, 3)
-    edges = (np.unique(np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
-             if len(triangles) else np.asarray(chain, np.int64).reshape(-1, 2))
+    edges, uses = np.unique(np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1),
+                            axis=0, return_counts=True)
+    boundary = edges[uses == 1]
+    if not len(triangles):
+        edges = np.asarray(chain, np.int64).reshape(-1, 2)
     sources = np.flatnonzero(pinned)
     if not len(edges) or not len(sources):
         return anchors, lengths
@@ -82,7 +85,7 @@ def tether_table(rest: np.ndarray, triangles: np.ndarray, chain: np.ndarray, sea
                 anchors[i, k], lengths[i, k] = source, length
     taken = anchors >= 0
     if len(triangles):              # (a string's chord is shorter than its path)
-        straight = straight_inside(rest, triangles, anchors)
+        straight = straight_inside(rest, boundary, anchors)
         direct = np.linalg.norm(rest[:, None, :] - rest[np.maximum(anchors, 0)], axis=2)
         lengths = np.where(taken & straight, np.minimum(direct, lengths), lengths)
     if start is not None:
@@ -151,11 +154,11 @@ def nearest_sources(n: int, ends: np.ndarray, weights: np.ndarray, sources, coun
     return found
 
 
-def straight_inside(rest: np.ndarray, triangles: np.ndarray, anchors: np.ndarray) -> np.ndarray:
+def straight_inside(rest: np.ndarray, boundary: np.ndarray, anchors: np.ndarray) -> np.ndarray:
     """(N, K) bool: where the rest shape is flat, whether the straight segment from each
-    particle to each of its anchors stays in the mesh (crosses no boundary edge, nor passes
-    through a boundary corner; running along the boundary is inside); all False on a curved
-    rest shape."""
+    particle to each of its anchors stays in the mesh (crosses no `boundary` edge (B, 2),
+    nor passes through a boundary corner; running along the boundary is inside); all False
+    on a curved rest shape."""
     straight = np.zeros(anchors.shape, bool)
     centre = rest.mean(axis=0)
     extent = float(np.ptp(rest, axis=0).max()) if len(rest) else 0.0
@@ -163,9 +166,6 @@ def straight_inside(rest: np.ndarray, triangles: np.ndarray, anchors: np.ndarray
     if extent == 0.0 or np.abs((rest - centre) @ axes[2]).max() > FLAT * extent:
         return straight
     flat = (rest - centre) @ axes[:2].T
-    sides = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    edges, uses = np.unique(sides, axis=0, return_counts=True)
-    boundary = edges[uses == 1]
     b0, b1 = flat[boundary[:, 0]], flat[boundary[:, 1]]
     zero = FLAT * extent * extent
     rows, ks = np.nonzero(anchors >= 0)

@@ -30,6 +30,7 @@ import numpy as np
 import taichi as ti
 
 from ..body.material import SpringKind
+from ..body.mesh import Mesh
 from ..energies import PROJECTIONS
 from ..energies.faces import XPBD_BENDING_TOLERANCE
 from ..energies.membrane import XPBD_MEMBRANE_RELAXATION
@@ -140,7 +141,7 @@ class _Multipliers:
         self.bending_needed = fields.scalar(ti.i32, max(model.face_count, 1))
         for name in self.HISTORY if history else ():
             setattr(self, name, fields.vector(3, backend.real(), model.particle_count))
-        self.tethered, self.tethered_for, self.expected_strain = tethered, None, 0.0
+        self.tethered, self.tethered_for = tethered, None
         self.tables, self.tables_for = {}, None   # the last tables made, by pins; their body
         if tethered:
             self.tether_anchor = fields.vector(TETHERS, ti.i32, model.particle_count)
@@ -155,32 +156,24 @@ class _Multipliers:
 
 def _tether_table(model) -> tuple:
     """(anchors, rest lengths, expected strain) of energies/tethers.py for the model's body
-    and its pins now."""
+    and its pins now. The strain (tethers="auto") from its mass over its rest area and its
+    weakest stretch modulus (a Fabric's Young's modulus in its weakest direction, shear
+    included: weakest_modulus; a Material's stretch springs' k), or a string's over its rest
+    length and k l."""
     cloth = model.cloth
     stretch = cloth.spring_kind == SpringKind.STRETCH
+    k, rest = cloth.spring_stiffness[stretch], cloth.spring_rest_length[stretch]
     anchors, lengths = tether_table(cloth.rest_position, cloth.mesh.triangles,
                                     cloth.spring_indices[stretch], cloth.seam_indices,
                                     model.pinned, cloth.particle_position)
-    return anchors, lengths, _expected_strain(cloth, lengths)
-
-
-def _expected_strain(cloth, lengths) -> float:
-    """energies/tethers.expected_strain of `cloth` with its tethers' rest `lengths`: its mass
-    over its rest area and its weakest stretch modulus (a Fabric's Young's modulus in its
-    weakest direction, shear included: energies/tethers.weakest_modulus; a Material's stretch
-    springs' k), or a string's over its rest length and k l."""
-    stretch = cloth.spring_kind == SpringKind.STRETCH
-    k, rest = cloth.spring_stiffness[stretch], cloth.spring_rest_length[stretch]
-    mass = float(cloth.particle_mass.sum())
     if len(cloth.mesh.triangles):
-        corners = cloth.rest_position[cloth.mesh.triangles]
-        area = 0.5 * float(np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
-                                                   corners[:, 2] - corners[:, 0]), axis=1).sum())
+        extent = float(Mesh(cloth.rest_position, cloth.mesh.triangles).triangle_areas().sum())
         moduli = weakest_modulus(cloth.face_moduli) if cloth.face_count else k
-        return expected_strain(mass, area, float(np.min(moduli, initial=np.inf)),
-                               float(lengths.max()))
-    return expected_strain(mass, float(rest.sum()), float(np.min(k * rest, initial=np.inf)),
-                           float(lengths.max()))
+    else:
+        extent, moduli = float(rest.sum()), k * rest
+    strain = expected_strain(float(cloth.particle_mass.sum()), extent,
+                             float(np.min(moduli, initial=np.inf)), float(lengths.max()))
+    return anchors, lengths, strain
 
 
 class XPBD(Integrator):
@@ -324,8 +317,9 @@ class XPBD(Integrator):
                 if len(work.tables) > TABLES:
                     del work.tables[next(iter(work.tables))]
                 transfer.upload(((work.tether_anchor, made[0]), (work.tether_length, made[1])))
-                work.tethered_for, work.expected_strain = pins, made[2]
-            self.tether_strain = (work.expected_strain if self.tethers == "auto" else self.tethers)
+                work.tethered_for = pins
+            self.tether_strain = (work.tables[work.tethered_for][2] if self.tethers == "auto"
+                                  else self.tethers)
         self.load_settings(work)
         return work
 
