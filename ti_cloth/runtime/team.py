@@ -12,9 +12,14 @@ Thread counts never change a bit, by construction rather than by two kernels com
   team of any size run the same compiled kernel (one worker is a pool task too; small
   launches run serially on the launching thread instead, chosen by their work alone:
   stepping.ManySteps.serial);
-- every slice starts at a multiple of CHUNK items from the start of its loop, so LLVM's
-  vectorised loop body and its scalar remainder see each item at the same place whatever the
-  slices: an item is computed by the same instructions for every team size;
+- every slice of a loop starts at a multiple of CHUNK items from the start of its loop, so
+  LLVM's vectorised loop body and its scalar remainder see each item at the same place
+  whatever the slices: an item is computed by the same instructions for every team size. A
+  colour of a sweep (`share_range`) is cut anywhere: its items write their particles through
+  indices read from the mesh, which LLVM's loop vectoriser does not vectorise (a store may
+  alias a later item's loads), and a colour of a few hundred items cut at multiples of 64
+  left one worker nearly twice the other's share (docs/performance.md, "A sweep's colours
+  shared item by item");
 - sums over items are taken in fixed blocks and totalled in block order by the callers
   (implicit_euler.py), never per worker.
 
@@ -92,8 +97,9 @@ class Team:
 
     @ti.func
     def share_range(self, begin, end, worker):
-        """Worker `worker`'s slice of the items begin .. end - 1."""
-        first, last = self.share(end - begin, worker)
+        """Worker `worker`'s slice of the items begin .. end - 1 of a sweep's colour, cut
+        anywhere (module doc)."""
+        first, last = self.share(end - begin, worker, 1)
         return begin + first, begin + last
 
     def stalled(self) -> bool:
