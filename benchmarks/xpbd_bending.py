@@ -4,8 +4,9 @@ triangle needs (XPBD.bending_tolerance; energies/bending.py passes_needed) saves
 Sheets: an N x N, 0.5 m sheet hanging from two adjacent corners, falling from rest for
 --duration s: "denim" is Fabric.preset("denim") (its BendingCurve: the mid-edge tangents),
 "issue 53" issue 53's flat denim-like Fabric(density=0.324, stretch=5e3, shear=1e3,
-bending=1e-4) (flat: the isometric model), and "bending B" that fabric with bending=B on the
-sheet rippled 0.2 mm at rest (curved: the mid-edge tangents). Scenes (--scenes, e.g.
+bending=1e-4) (flat: the isometric model, swept in every pass whatever the tolerance), and
+"bending B" that fabric with bending=B on the sheet rippled 0.2 mm at rest (curved: the
+mid-edge tangents). Scenes (--scenes, e.g.
 demos/cape.toml): the scene's own integrator passes and step, from its start for --duration
 s, with and without its self-collision (--free).
 

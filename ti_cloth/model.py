@@ -10,14 +10,9 @@ import taichi as ti
 from .body.bending_curve import curve_tables
 from .body.material import SpringKind
 from .body.mesh import triangle_edges, unique_rows
-from .body.topology import Cloth, color_springs
+from .body.topology import Cloth, color_neighbours, color_springs
 from .energies.bending import bending_stencils, tangents, weld_groups
-from .energies.isometric import (
-    is_flat,
-    isometric_faces,
-    isometric_matrix,
-    isometric_parts,
-)
+from .energies.isometric import is_flat, isometric_matrix
 from .inputs.validation import require
 from .runtime import backend
 from .runtime.transfer import upload
@@ -74,9 +69,7 @@ class Model:
     particle_bend_start, bend_other, bend_stiffness, bend_damping: with `isometric` (a flat
                           rest sheet), the bending of energies/isometric.isometric_matrix, a CSR
                           of each particle's neighbours, gathered in increasing order; the
-                          hinges' angles are then not computed; face_stencil,
-                          face_stencil_weight (w_i's weights on it, row i at 6 i) and
-                          face_isometric (B', 00 11 22 01 02 12) per triangle, for XPBD
+                          hinges' angles are then not computed (XPBD takes its rows too)
 
     Python attributes read at compile time (fixed for the model's life):
     particle_count, spring_count, altitude_count, face_count, hinge_count, relative_damping,
@@ -104,7 +97,7 @@ class Model:
         self.curve_length = _curve_length(cloth) if self.curved else 1
         require(not (self.curved and isometric), "isometric", isometric,
                 "False for a body whose bending depends on curvature (a BendingCurve)")
-        bends = len(self._isometric_bending(cloth)[0][1]) if self.isometric else 0
+        bends = len(self._isometric_bending(cloth)[1]) if self.isometric else 0
         fields = backend.FieldGroup()
         s1 = max(s, 1)
         self.particle_mass = fields.scalar(real, n)
@@ -157,10 +150,6 @@ class Model:
         self.curve_rigidity = fields.vector(3, real, curves)
         self.curve_slope = fields.vector(3, real, curves)
         self.curve_integral = fields.vector(3, real, curves)
-        iso_faces = f1 if self.isometric else 1
-        self.face_stencil = fields.vector(6, ti.i32, iso_faces)
-        self.face_stencil_weight = fields.vector(18, real, iso_faces)
-        self.face_isometric = fields.vector(6, real, iso_faces)
         fields.finalize(self)
         self._colouring = None
         self._altitude_colouring = None
@@ -211,13 +200,10 @@ class Model:
         hinge_start, hinge_order = corner_adjacency(cloth.hinge_indices, n)
         bending = cloth.face_bending[:, [0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]]
         if self.isometric:
-            (bend_start, *bends), (stencil, weights), reduced = self._isometric_bending(cloth)
+            bend_start, *bends = self._isometric_bending(cloth)
             self._isometric_of = (None,)
-            reduced = reduced[:, [0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]]
             upload(((self.particle_bend_start, bend_start),
-                    *zip((self.bend_other, self.bend_stiffness, self.bend_damping), bends),
-                    (self.face_stencil, stencil), (self.face_stencil_weight, weights.reshape(-1, 18)),
-                    (self.face_isometric, reduced)))
+                    *zip((self.bend_other, self.bend_stiffness, self.bend_damping), bends)))
         if self.softened:
             upload(((self.face_compression, cloth.face_compression),))
         if self.curved:
@@ -264,11 +250,10 @@ class Model:
                 (self.adjacency_hinge, hinge_order)))
 
     def _isometric_bending(self, cloth: Cloth) -> tuple:
-        """(isometric_matrix, isometric_faces, B') of `cloth`, computed once for a cloth both
-        built and loaded (its sizes make the fields, its values are what load() uploads)."""
+        """isometric_matrix of `cloth`, computed once for a cloth both built and loaded (its
+        sizes make the fields, its values are what load() uploads)."""
         if getattr(self, "_isometric_of", (None,))[0] is not cloth:
-            self._isometric_of = (cloth, (isometric_matrix(cloth), isometric_faces(cloth),
-                                          isometric_parts(cloth)[1]))
+            self._isometric_of = (cloth, isometric_matrix(cloth))
         return self._isometric_of[1]
 
     def set_pinned(self, pinned: np.ndarray) -> None:
@@ -305,13 +290,20 @@ class Model:
 
     def element_colourings(self) -> tuple[SpringColouring, SpringColouring]:
         """(membranes, bending): a Fabric's triangles grouped so that no two in a colour share
-        a particle, once by their corners and once by the particles their bending moves
-        (energies/bending.bending_stencils), for position-based passes."""
+        a particle, by their corners; and its bending's, for position-based passes: the
+        triangles by the particles their mid-edge bending moves
+        (energies/bending.bending_stencils), or with `isometric` the particles, no two in a
+        colour coupled by the bending's matrix (energies/isometric.py: a pass per particle)."""
         if self._element_colourings is None:
-            self._element_colourings = tuple(
-                SpringColouring(*color_springs(indices, self.particle_count))
-                for indices in (self.cloth.face_indices,
-                                bending_stencils(self.cloth)))
+            if self.isometric:
+                start, other = isometric_matrix(self.cloth)[:2]
+                bending = SpringColouring(*color_neighbours(start, other))
+            else:
+                bending = SpringColouring(*color_springs(bending_stencils(self.cloth),
+                                                         self.particle_count))
+            self._element_colourings = (
+                SpringColouring(*color_springs(self.cloth.face_indices, self.particle_count)),
+                bending)
         return self._element_colourings
 
 

@@ -142,6 +142,25 @@ def color_springs(indices: np.ndarray, particle_count: int) -> tuple[np.ndarray,
     return order, np.asarray(offsets, np.int64)
 
 
+def color_neighbours(start: np.ndarray, other: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Partition particles into colours in which no two are neighbours, particle i's
+    neighbours being other[start[i]:start[i + 1]] (a symmetric CSR: a matrix's rows), for
+    passes that update particles in place (a point Gauss-Seidel). Greedy in index order: each
+    particle takes the least colour none of its earlier neighbours has.
+
+    Returns (order, offsets) as color_springs does: particles order[offsets[c]:offsets[c + 1]]
+    form colour c, in increasing index."""
+    count = len(start) - 1
+    colour = np.full(count, -1, np.int64)
+    for i in range(count):
+        taken = colour[other[start[i]:start[i + 1]]]
+        free = np.ones(len(taken) + 1, bool)
+        free[taken[(taken >= 0) & (taken <= len(taken))]] = False
+        colour[i] = int(np.argmax(free))
+    order = np.argsort(colour, kind="stable")
+    return order, np.concatenate([[0], np.cumsum(np.bincount(colour, minlength=1))])
+
+
 class Cloth:
     """A mass-spring body ready to simulate: rest positions, lumped masses, springs, pins.
 

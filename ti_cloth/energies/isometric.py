@@ -10,28 +10,45 @@ has no rest angle, so it serves a sheet whose rest hinges are all flat (is_flat)
 cannot tear. Everything each solver needs of it, together:
 
 - rest data: the cotangent weights, the reduced matrices and Q as a CSR per particle
-  (cotangent_weights, isometric_parts, isometric_matrix, isometric_faces); the energy in
+  (cotangent_weights, isometric_parts, isometric_matrix); the energy in
   float64 (isometric_energy);
 - force: one particle loop summing its row of Q times its neighbours' position and velocity
   differences, in increasing neighbour order (isometric_forces, isometric_sum);
 - Hessian: Q itself, positive semi-definite as it is (isometric_velocity, isometric_product);
-- projection: XPBD with the w_i linear constraints of a triangle on each axis, compliance
-  B'^-1 (xpbd_isometric).
+- projection: XPBD's share of the step, a Gauss-Seidel step per particle on Q's rows
+  (xpbd_particle, below).
+
+XPBD (integrators/xpbd.py) takes this energy as what it is, quadratic with a constant Q, so
+its part of the backward Euler step is linear. With x_o the step's origin (x_n; BDF2's x^),
+d the displacement the bending has given the particles so far in the step
+(work.bend_shift), the step asks M d = -h^2 Q x - h beta Q (x - x_o) at its end. A pass
+updates each particle in turn, in colours of particles no two of which Q couples
+(Model.element_colourings), on its row of Q in increasing neighbour order:
+
+    delta_i = (w_i r_i - d_i) / (1 + w_i c_i),   x_i += delta_i,   d_i += delta_i,
+
+r_i particle i's row of the right side, w_i its inverse mass (a pin moves not), c_i = h^2
+Q_ii + h beta Q_ii its row's diagonal. That is Gauss-Seidel on M + h^2 Q + h beta Q,
+symmetric positive definite, so it converges whatever the step and the stiffness. Every
+particle is updated in every pass: skipped after the passes its stiffness ratio w_i c_i asked
+at XPBD.bending_tolerance (as the mid-edge bending's triangles are), each step left that
+part of the bending's load unresolved, and a cantilever rested 1.14e-4 m (0.3 % of its
+overhang) lower at 1/480 s and at 1/960 s alike, 10x less at a tolerance of 0.01 (measured).
+Converged, it is backward
+Euler's step of the energy, as the other projections' are (its gradients, constant, leave
+nothing out). It replaced a Gauss-Seidel solve per triangle (the 3 x 3 of its hinges on each
+axis, 21 colours of triangles against 13 of particles on a grid) that was 64 % of a tethered
+step of issue 53's 64² sheet (docs/performance.md, "XPBD's isometric bending particle by
+particle"); a cantilever that XPBD settles with it rests 18x nearer implicit Euler's
+equilibrium than with the triangles' solve (7.2e-6 against 1.3e-4 m at 1/480 s, both
+converged: tests/test_fabric.py).
 """
 
 import numpy as np
 import taichi as ti
 
 from ..runtime.plan import DT, ITEM, STATE, Loop, Sweep
-from .bending import bending_stencils, hinges, intact_hinges, second_edge
-from .faces import (
-    clear_passes,
-    count_pass,
-    motion_in_step,
-    multiplier_step,
-    needs_pass,
-    stiffness_ratio,
-)
+from .bending import hinges, intact_hinges, second_edge
 
 # A flat rest sheet's bending needs no angle: the isometric model (module doc). Rest angles
 # below this [rad] (a planar mesh's rounding) count as flat.
@@ -115,32 +132,6 @@ def isometric_matrix(cloth) -> tuple:
     return start, other, stiffness, damping
 
 
-def isometric_faces(cloth) -> tuple:
-    """(stencil (F, 6), weights (F, 3, 6)): each triangle's bending stencil (bending_stencils)
-    with w_i = sum_s weights[i, s] x_stencil[s] (the cotangent weights of the hinge across its
-    edge i, isometric_matrix); a particle in two slots has its weights in the first and none in
-    the second, so the slots' particles with weights are distinct (XPBD's per-triangle solve)."""
-    stencil = bending_stencils(cloth)
-    weights = np.zeros((cloth.face_count, 3, 6))
-    present = cloth.face_hinge >= 0
-    hinge = np.where(present, cloth.face_hinge, 0)
-    cot = cotangent_weights(cloth.rest_position, cloth.hinge_indices,
-                            second_edge(cloth))[hinge]                           # (F, 3, 4)
-    weld = cloth.particle_weld            # across a seam a corner is the one sewn to it
-    corners = weld[cloth.hinge_indices[hinge]]                                    # (F, 3, 4)
-    for k in range(4):
-        for s in range(6):
-            weights[:, :, s] += np.where(present & (corners[:, :, k] == weld[stencil[:, None, s]])
-                                         & _first_slot(weld[stencil], s)[:, None], cot[:, :, k],
-                                         0.0)
-    return stencil, weights
-
-
-def _first_slot(stencil: np.ndarray, s: int) -> np.ndarray:
-    """(F,) bool: slot s holds its particle's first appearance in the triangle's stencil."""
-    return ~np.any(stencil[:, :s] == stencil[:, s:s + 1], axis=1)
-
-
 def isometric_energy(cloth, positions: np.ndarray, alive: np.ndarray | None = None) -> float:
     """The isometric model's 1/2 sum_ij B'_ij w_i . w_j summed over triangles [J]
     (isometric_matrix); with `alive` ((F,) bool: not torn), a torn triangle holds none and a
@@ -219,70 +210,42 @@ def implicit_product(model: ti.template(), ws: ti.template(), i, dt, ap):
 
 
 @ti.func
-def xpbd_isometric(model: ti.template(), state: ti.template(), f, multiplier: ti.template(), dt):
-    """XPBD for triangle f's isometric bending (a flat rest sheet: isometric_matrix),
-    its multipliers in multiplier[f] (3 x 3: a hinge's row, an axis's column): the constraint
-    is w_i = sum_s J_is x_s over its stencil s (Model.face_stencil_weight), linear and the same
-    on each axis, with compliance B'^-1. Its gradients do not change within the step, so,
-    converged, this is the backward Euler step of the energy (what XPBD leaves out of the
-    other elements is zero here). Returns its stiffness ratio (faces.stiffness_ratio)."""
-    stencil = model.face_stencil[f]
-    weight = model.face_stencil_weight[f]
-    coupling = ti.Matrix.zero(float, 3, 3)
-    value = ti.Matrix.zero(float, 3, 3)
-    motion = ti.Matrix.zero(float, 3, 3)
-    for s in ti.static(range(6)):
-        p = stencil[s]
-        w = model.particle_inv_mass[p]
-        x = state.particle_position[p]
-        moved = motion_in_step(state, p)
-        for i in ti.static(range(3)):
-            for j in ti.static(range(3)):
-                coupling[i, j] += w * weight[6 * i + s] * weight[6 * j + s]
-            for a in ti.static(range(3)):
-                value[i, a] += weight[6 * i + s] * x[a]
-                motion[i, a] += weight[6 * i + s] * moved[a]
-    b = model.face_isometric[f]                # symmetric: 00, 11, 22, 01, 02, 12
-    bending = ti.Matrix([[b[0], b[3], b[4]], [b[3], b[1], b[5]], [b[4], b[5], b[2]]])
-    gamma = model.face_damping[f] / dt
-    m = multiplier[f]
-    held = ti.Matrix([[m[0], m[1], m[2]], [m[3], m[4], m[5]], [m[6], m[7], m[8]]])
-    stiffness = (dt * dt) * bending
-    step = multiplier_step(stiffness, coupling, value + gamma * motion, held, gamma)
-    for i in ti.static(range(3)):
-        for a in ti.static(range(3)):
-            m[3 * i + a] += step[i, a]
-    multiplier[f] = m
-    for s in ti.static(range(6)):
-        p = stencil[s]
-        move = ti.Vector([0.0, 0.0, 0.0])
-        for i in ti.static(range(3)):
-            move += weight[6 * i + s] * ti.Vector([step[i, 0], step[i, 1], step[i, 2]])
-        state.particle_position[p] = state.particle_position[p] + model.particle_inv_mass[p] * move
-    return stiffness_ratio(stiffness, coupling, gamma)
+def clear_shift(work: ti.template(), i):
+    """No bending displacement of particle i yet in the step (module doc: d)."""
+    work.bend_shift[i] = ti.Vector([0.0, 0.0, 0.0])
 
 
 @ti.func
-def clear_multipliers(work: ti.template(), f):
-    """Triangle f's multipliers 0 and no pass yet."""
-    work.bending[f] = 0.0 * work.bending[f]
-    clear_passes(work, f)
+def xpbd_particle(model: ti.template(), state: ti.template(), work: ti.template(), i, dt):
+    """Particle i's Gauss-Seidel step of the bending's share of the step (module doc), its
+    displacement kept in work.bend_shift[i]."""
+    x = state.particle_position[i]
+    origin = state.particle_prev_position[i]
+    right = ti.Vector([0.0, 0.0, 0.0])
+    diagonal = 0.0
+    for c in range(model.particle_bend_start[i], model.particle_bend_start[i + 1]):
+        other = model.bend_other[c]
+        k, d = model.bend_stiffness[c], model.bend_damping[c]
+        apart = state.particle_position[other] - x
+        right += dt * dt * k * apart + dt * d * (apart - (state.particle_prev_position[other]
+                                                          - origin))
+        diagonal += dt * dt * k + dt * d           # Q_ii = -sum_l Q_il: its rows sum to 0
+    w = model.particle_inv_mass[i]
+    step = (w * right - work.bend_shift[i]) / (1.0 + w * diagonal)
+    state.particle_position[i] = x + step
+    work.bend_shift[i] = work.bend_shift[i] + step
 
 
 @ti.func
 def xpbd_at(model: ti.template(), state: ti.template(), work: ti.template(), t, dt):
-    """XPBD for the triangle at position t of its colouring, in the passes it needs
-    (faces.passes_needed)."""
-    f = work.bending_colours.order[t]
-    if needs_pass(work, f):
-        count_pass(work, f, xpbd_isometric(model, state, f, work.bending, dt))
+    """XPBD for the particle at position t of the bending's colouring."""
+    xpbd_particle(model, state, work, work.bending_colours.order[t], dt)
 
 
 def xpbd_nodes(model, forces, work) -> tuple:
-    """(loops clearing the multipliers, sweeps) of XPBD over the triangles' isometric bending
-    (xpbd.py's workspace `work`), none for a model without them."""
+    """(loops clearing the bending's displacement, sweeps: its particles colour by colour)
+    of XPBD's isometric bending (xpbd.py's workspace `work`), none for a model without it."""
     if not model.hinge_count or not model.isometric:
         return (), ()
-    return ((Loop(model.face_count, clear_multipliers, work, ITEM),),
-            (Sweep(work.bending_colours, xpbd_at, model, STATE, work, ITEM,
-                   DT).with_big_body(),))
+    return ((Loop(model.particle_count, clear_shift, work, ITEM),),
+            (Sweep(work.bending_colours, xpbd_at, model, STATE, work, ITEM, DT),))

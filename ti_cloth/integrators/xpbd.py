@@ -117,10 +117,11 @@ def _bdf2_record(state: ti.template(), work: ti.template(), i):
 @backend.kernel_argument
 class _Multipliers:
     """One Lagrange multiplier per spring (in colour order) and per altitude spring [N s^2],
-    three per triangle for its strain and three for its bending (a Fabric's; nine for the
-    isometric bending of a flat sheet, a hinge's on each axis), reset every
-    step; each triangle's passes of its bending swept so far in the step and needed
-    (energies/faces.py passes_needed); the model's colourings (read by the phases); with
+    three per triangle for its strain and three for its bending (a Fabric's mid-edge bending),
+    reset every step; each triangle's passes of its bending swept so far in the step and
+    needed (energies/faces.py passes_needed); for the isometric bending of a flat sheet, each
+    particle's displacement by it in the step (energies/isometric.py); the model's
+    colourings (read by the phases); with
     `history` (BDF2), each particle's (x_{n-1}, v_{n-1}) and what the last step left of it
     (module doc); with `tethered`, each particle's anchors and rest lengths
     (energies/tethers.py), made for the pins `tethered_for` (their bytes) of the body
@@ -135,10 +136,12 @@ class _Multipliers:
         self.value = fields.scalar(backend.real(), max(model.spring_count, 1))
         self.altitude = fields.scalar(backend.real(), max(model.altitude_count, 1))
         self.membrane = fields.vector(3, backend.real(), max(model.face_count, 1))
-        self.bending = fields.vector(9 if model.isometric else 3, backend.real(),
-                                     max(model.face_count, 1))
-        self.bending_swept = fields.scalar(ti.i32, max(model.face_count, 1))
-        self.bending_needed = fields.scalar(ti.i32, max(model.face_count, 1))
+        hinged = max(model.face_count, 1) if model.hinge_count and not model.isometric else 1
+        self.bending = fields.vector(3, backend.real(), hinged)
+        self.bending_swept = fields.scalar(ti.i32, hinged)
+        self.bending_needed = fields.scalar(ti.i32, hinged)
+        self.bend_shift = fields.vector(3, backend.real(),
+                                        model.particle_count if model.isometric else 1)
         for name in self.HISTORY if history else ():
             setattr(self, name, fields.vector(3, backend.real(), model.particle_count))
         self.tethered, self.tethered_for = tethered, None
@@ -193,7 +196,10 @@ class XPBD(Integrator):
     velocities. Unconverged (few iterations, stiff springs, large h), the cloth is softer
     than its material. The terms it sweeps, and their order: energies.PROJECTIONS.
 
-    A Fabric's bending is swept in the passes it needs, triangle by triangle: its constraints
+    A flat sheet's isometric bending, quadratic with a constant matrix, is a point
+    Gauss-Seidel over its particles in every pass (energies/isometric.py: it converges at any
+    step). A Fabric's mid-edge bending (a curved rest shape, a garment, a BendingCurve) is
+    swept in the passes it needs, triangle by triangle: its constraints
     are compliant against the membrane's at the steps cloth takes, so each pass settles most
     of what is left of them, and after the passes its stiffness at the step asks
     (energies/faces.py passes_needed: about r^k <= bending_tolerance, r = a / (1 + a), a the
@@ -204,8 +210,8 @@ class XPBD(Integrator):
     denim sheet 0.2-0.3 % of what 10 passes miss).
 
     iterations: Gauss-Seidel passes per step, >= 1.
-    bending_tolerance: the part of a triangle's bending residual its passes may leave, in
-        [0, 1); 0 sweeps every triangle's bending in every pass.
+    bending_tolerance: the part of a triangle's mid-edge bending residual its passes may
+        leave, in [0, 1); 0 sweeps every triangle's bending in every pass.
     membrane_relaxation: omega, each update of a Fabric's membrane scaled by it (successive
         over-relaxation), in (0, 2); 1 (the default) is plain Gauss-Seidel. The converged step
         is the same; unconverged passes come nearer it (issue 53's 32² denim sheet at
