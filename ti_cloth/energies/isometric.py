@@ -123,7 +123,7 @@ def isometric_matrix(cloth) -> tuple:
     rows = np.broadcast_to(corners[:, :, :, None, None], local.shape).ravel()
     cols = np.broadcast_to(corners[:, None, None, :, :], local.shape).ravel()
     damped = local * cloth.face_damping[:, None, None, None, None]
-    keep = rows != cols
+    keep = (rows != cols) & (local.ravel() != 0.0)     # absent hinges' slots (k = 0) left out
     unique, inverse = np.unique(rows[keep] * n + cols[keep], return_inverse=True)
     stiffness = -np.bincount(inverse, weights=local.ravel()[keep], minlength=len(unique))
     damping = -np.bincount(inverse, weights=damped.ravel()[keep], minlength=len(unique))
