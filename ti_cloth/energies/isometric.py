@@ -34,10 +34,10 @@ particle is updated in every pass: skipped after the passes its stiffness ratio 
 at XPBD.bending_tolerance (as the mid-edge bending's triangles are), each step left that
 part of the bending's load unresolved, and a cantilever rested 1.14e-4 m (0.3 % of its
 overhang) lower at 1/480 s and at 1/960 s alike, 10x less at a tolerance of 0.01 (measured).
-Converged, it is backward
-Euler's step of the energy, as the other projections' are (its gradients, constant, leave
-nothing out). It replaced a Gauss-Seidel solve per triangle (the 3 x 3 of its hinges on each
-axis, 21 colours of triangles against 13 of particles on a grid) that was 64 % of a tethered
+Converged, it is backward Euler's step of the energy, as the other projections' are (its
+gradients, constant, leave nothing out). It replaced a Gauss-Seidel solve per triangle (the
+3 x 3 of its hinges on each axis, 21 colours of triangles against 10 of particles on a
+grid) that was 64 % of a tethered
 step of issue 53's 64² sheet (docs/performance.md, "XPBD's isometric bending particle by
 particle"); a cantilever that XPBD settles with it rests 18x nearer implicit Euler's
 equilibrium than with the triangles' solve (7.2e-6 against 1.3e-4 m at 1/480 s, both
