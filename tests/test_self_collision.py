@@ -841,9 +841,10 @@ def test_the_passes_keep_the_thickness_beside_the_particles_moved_back(f32):
     those particles held where they are, then the fail-safe checks again: in every step from
     69 to 76 no vertex is nearer than 0.99 of the thickness to a triangle it is not a corner
     of (1.0003, measured; 0.985 with the passes not run again), and none passes through
-    (violations: brute force in this test). The event is of this trajectory: flat sheets (the isometric bending) land without one
-    since their bending is swept particle by particle (energies/isometric.py); before that,
-    with every pass of its triangles swept, they met it at step 67."""
+    (violations: brute force in this test). The event is of this trajectory: flat sheets
+    (the isometric bending) land without one since their bending is swept particle by
+    particle (energies/isometric.py); before that, with every pass of its triangles swept,
+    they met it at step 67."""
     body, options = landing(16, ripple=2e-4)
     sim = tc.Simulation(body, integrator=tc.XPBD(iterations=10), dt=1 / 240,
                         self_collision=tc.SelfCollision(thickness=0.005), **options)
