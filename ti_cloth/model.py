@@ -202,6 +202,7 @@ class Model:
         if self.isometric:
             bend_start, *bends = self._isometric_bending(cloth)
             self._isometric_of = (None,)
+            self._bend_rows = (bend_start, bends[0])      # for XPBD's colouring of particles
             upload(((self.particle_bend_start, bend_start),
                     *zip((self.bend_other, self.bend_stiffness, self.bend_damping), bends)))
         if self.softened:
@@ -296,8 +297,7 @@ class Model:
         colour coupled by the bending's matrix (energies/isometric.py: a pass per particle)."""
         if self._element_colourings is None:
             if self.isometric:
-                start, other = isometric_matrix(self.cloth)[:2]
-                bending = SpringColouring(*color_neighbours(start, other))
+                bending = SpringColouring(*color_neighbours(*self._bend_rows))
             else:
                 bending = SpringColouring(*color_springs(bending_stencils(self.cloth),
                                                          self.particle_count))
