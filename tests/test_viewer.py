@@ -311,7 +311,13 @@ def test_the_window_shows_the_cloth_follows_a_drag_and_quits_on_q(scene_file, tm
     env = dict(os.environ, DISPLAY=display)
     out = tmp_path / "out"
     try:
-        time.sleep(1.0)
+        # the server answers once it is up: a fixed wait failed on a busy machine (Taichi
+        # could not open the window a second after Xvfb started)
+        for _ in range(120):
+            if subprocess.run(["xdotool", "getdisplaygeometry"], env=env,
+                              capture_output=True).returncode == 0:
+                break
+            time.sleep(0.25)
         viewer = subprocess.Popen([sys.executable, "-m", "ti_cloth.app.cli", "view",
                                    str(scene_file), "--out", str(out), "--record",
                                    "--width", str(WIDTH), "--height", str(HEIGHT)],
