@@ -203,7 +203,7 @@ def configurations(cloth: tc.Cloth, n: int, newton: bool, only: tuple = ("",)) -
         iterations=it, membrane_relaxation=1.5, scheme="bdf2", tethers=s), 1 / r)
         for s, it, r in ((1e-3, 4, 120), (1e-3, 10, 120), (1e-3, 6, 240), (1e-3, 7, 240),
                          (1e-3, 8, 240), (1e-3, 10, 240), (1e-3, 3, 400), (1e-3, 2, 480),
-                         (1e-3, 2, 960), (1e-3, 1, 1920),
+                         (1e-3, 2, 960), (1e-3, 1, 1600), (1e-3, 1, 1920),
                          (1e-3, 20, 240), (0.0, 10, 240), (3e-3, 10, 240), ("auto", 10, 240))]
     for name, cls in (("implicit_midpoint", tc.ImplicitMidpoint), ("tr_bdf2", tc.TRBDF2)):
         runs += [(f"{name} 1/{r}", cls(tolerance=1e-4, cg_tolerance=1e-1), 1 / r)
