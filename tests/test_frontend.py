@@ -6,13 +6,14 @@ import inspect
 import numpy as np
 import pytest
 import taichi as ti
+from helpers import use
 from taichi.lang import kernel_impl
 from taichi.lang.ast import ast_transformer_utils
 
 import ti_cloth as tc
 from ti_cloth.contact.broad_phase import contact_pairs
 from ti_cloth.energies import membrane
-from ti_cloth.runtime import frontend
+from ti_cloth.runtime import backend, frontend
 
 
 def test_every_location_of_a_fabric_step_is_taichis_own(f64, monkeypatch):
@@ -71,3 +72,21 @@ def test_a_compile_error_still_names_the_line_with_carets(f64):
     assert f'line {line}, in broken' in message and __file__ in message
     assert "undefined_name * 2.0" in message
     assert "^" * len("undefined_name") in message
+
+
+@pytest.mark.reinitialises
+def test_the_offline_cache_keeps_a_suites_kernels_unless_the_user_says(f64, monkeypatch):
+    """Taichi's offline cache kept 100 MB, least recently used out at each init, where the
+    suite's kernels come to about 380 MB: a rerun compiled most of them again. init asks for
+    backend.OFFLINE_CACHE_BYTES, and Taichi's own environment variable still decides where a
+    user set it."""
+    assert backend.OFFLINE_CACHE_BYTES >= 400 * 2**20
+    assert ti.lang.impl.current_cfg().offline_cache_max_size_of_files == \
+        backend.OFFLINE_CACHE_BYTES
+    monkeypatch.setenv("TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES", str(50 * 2**20))
+    try:
+        tc.init(arch="cpu", precision="f32")
+        assert ti.lang.impl.current_cfg().offline_cache_max_size_of_files == 50 * 2**20
+    finally:
+        monkeypatch.delenv("TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES")
+        use("f64")              # another precision: the worker's runtime starts again

@@ -33,6 +33,11 @@ from . import frontend
 ARCHS = {name: name for name in limits.ARCH_NAMES}          # ti.<value>
 PRECISIONS = dict(zip(limits.PRECISION_NAMES, (ti.f32, ti.f64)))
 NUMPY_PRECISIONS = {"f32": np.float32, "f64": np.float64}
+# Taichi's offline cache of compiled kernels keeps 100 MB by default, least recently used out
+# at each re-initialisation; ti_cloth's kernels are specialised per scene and the test suite's
+# come to about 380 MB, so at 100 MB a rerun compiled most of them again (docs/performance.md,
+# "The quick start and the suite"). TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES still sets it.
+OFFLINE_CACHE_BYTES = 1 << 30
 
 
 @dataclass(frozen=True)
@@ -90,6 +95,8 @@ def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None,
                    fast_math=False, cfg_optimization=False)
     if threads is not None:
         options["cpu_max_num_threads"] = threads
+    if not os.environ.get("TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES"):
+        options["offline_cache_max_size_of_files"] = OFFLINE_CACHE_BYTES
     for user in list(_closed_by_init):    # dead ones too, until the cycle collector runs
         user.close()
     _closed_by_init.clear()
