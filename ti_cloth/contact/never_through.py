@@ -152,9 +152,10 @@ def _safe_between(p0, q0, r0, s0, p1, q1, r1, s1, vertex_triangle):
     else:
         reach = ti.max(((p1 - p0) - (r1 - r0)).norm(), ((p1 - p0) - (s1 - s0)).norm(),
                        ((q1 - q0) - (r1 - r0)).norm(), ((q1 - q0) - (s1 - s0)).norm())
-    safe = reach == 0.0 or (_distance(p0, q0, r0, s0, vertex_triangle)
-                            + _distance(p1, q1, r1, s1, vertex_triangle)
-                            > reach * (1.0 + MARGIN))
+    safe = reach == 0.0
+    if not safe:        # apart: a ti.func in `or` runs whatever the left side
+        safe = (_distance(p0, q0, r0, s0, vertex_triangle)
+                + _distance(p1, q1, r1, s1, vertex_triangle) > reach * (1.0 + MARGIN))
     if not safe:
         if vertex_triangle:     # det(r - q, s - q, p - q): the triangle is q, r, s here
             safe = _never_coplanar(r0 - q0, r1 - q1, s0 - q0, s1 - q1, p0 - q0, p1 - q1)

@@ -278,7 +278,9 @@ def _edge_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template()
         begin, end = cell_range(stage.grid, 1, cell)
         for a in range(begin, end):
             f = stage.grid.cell_item[a] - stage.particle_count
-            if f <= e or not found_at(stage.grid, a, cell, first, lo, hi):
+            if f <= e:          # apart: a ti.func in `or` runs whatever the left side
+                continue
+            if not found_at(stage.grid, a, cell, first, lo, hi):
                 continue
             other = stage.edges[f]
             if not (_joined(model, other[0], ends[0]) or _joined(model, other[0], ends[1])

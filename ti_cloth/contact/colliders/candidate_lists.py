@@ -120,15 +120,16 @@ def visit_near(bodies: ti.template(), lists: ti.template(), slot, b, lo, hi, sta
             g += 1
         else:
             more = False
-        if traverse and stale and candidate >= 0 and _meets(bodies, candidate, lo - reach,
-                                                            hi + reach):
-            if count >= 0 and count < lists.size:
-                lists.listed[slot * lists.size + count] = candidate
-                count += 1
-            else:
-                count = -1
-        if candidate >= 0 and _meets(bodies, candidate, lo, hi):
-            found = visit(bodies, candidate, query, found)
+        if candidate >= 0:      # nested ifs: a ti.func in `and` runs whatever the left side
+            if traverse and stale:
+                if _meets(bodies, candidate, lo - reach, hi + reach):
+                    if count >= 0 and count < lists.size:
+                        lists.listed[slot * lists.size + count] = candidate
+                        count += 1
+                    else:
+                        count = -1
+            if _meets(bodies, candidate, lo, hi):
+                found = visit(bodies, candidate, query, found)
     if stale:
         lists.count[slot] = count
         lists.epoch[slot] = bodies.epoch[b]
