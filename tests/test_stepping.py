@@ -571,3 +571,33 @@ def test_with_self_collision_a_steps_head_is_one_team_launch_with_the_same_bits(
     assert staged_calls == ["integrator", "handles", "colliders", "tearing"] * steps
     np.testing.assert_array_equal(teamed[0], staged.positions())
     np.testing.assert_array_equal(teamed[1], staged.velocities())
+
+
+@ti.func
+def _mark(marks: ti.template(), i):
+    marks[i] = marks[i] + 1
+
+
+class _Marking:
+    """An owner of one phase: a loop over the items in use of a room of 8 (plan.Used)."""
+
+    def __init__(self):
+        self.used = ti.field(ti.i32, 1)
+        self.marks = ti.field(ti.i32, 8)
+
+    def phases(self, model, forces, work):
+        return (runtime_plan.Phase(runtime_plan.Loop(runtime_plan.Used(self.used, 0, 8),
+                                                     _mark, self.marks, runtime_plan.ITEM)),)
+
+
+@pytest.mark.parametrize("serial", [True, False], ids=["serial launch", "launch per phase"])
+def test_a_loop_counted_at_run_time_runs_over_the_items_in_use(f64, serial):
+    """plan.Used: a loop over a list's pairs in use (self-contact's passes, the fail-safe) is
+    as long as the list is now, read when the loop starts, within its room: items 0-2 of 8
+    with 3 in use, then all 8 with 11 asked (a list grown for a dense moment no longer walks
+    its empty room ever after). The serial launch runs a team's share (run_team)."""
+    owner = _Marking()
+    for used, expected in ((3, [1, 1, 1, 0, 0, 0, 0, 0]), (11, [2, 2, 2, 1, 1, 1, 1, 1])):
+        owner.used[0] = used
+        runtime_plan.run(owner, None, None, None, None, 0.01, 0, True, serial=serial)
+        np.testing.assert_array_equal(owner.marks.to_numpy(), expected)

@@ -99,7 +99,7 @@ import taichi as ti
 from ..geometry import segment_distance, triangle_distance
 from ..runtime import backend
 from ..runtime.plan import ITEM, STATE, Loop, Once, Phase, Until
-from .broad_phase.contact_pairs import span_middle, torn_pair
+from .broad_phase.contact_pairs import listed, span_middle, torn_pair
 from .colliders.collision import taken_at
 
 MARGIN = 1e-6       # relative: (1) needs d0 + d1 > R (1 + MARGIN), (2) |b_k| > MARGIN max |b_k|
@@ -283,8 +283,7 @@ def check_pair(stage: ti.template(), pairs: ti.template(), model: ti.template(),
     move (unresolved). Only a pair of a loose particle is tested (module doc, bounds: the
     others pass), and counted in `checked`."""
     corners = pairs.particles[p]
-    if (p < stage.pair_start[stage.triangle_count + stage.edge_count]
-            and stage.loose[corners[0]] + stage.loose[corners[1]] + stage.loose[corners[2]]
+    if (stage.loose[corners[0]] + stage.loose[corners[1]] + stage.loose[corners[2]]
             + stage.loose[corners[3]] > 0):
         ti.atomic_add(stage.checked[None], 1)
         elements = pairs.elements[p]
@@ -356,6 +355,6 @@ def phases(stage, model, pairs) -> tuple:
             Phase(Loop(n, loosen, stage, STATE, ITEM)),
             Until(going,
                   Once(clear_round, stage),
-                  Phase(Loop(pairs.capacity, check_pair, stage, pairs, model, STATE, ITEM)),
+                  Phase(Loop(listed(stage, pairs), check_pair, stage, pairs, model, STATE, ITEM)),
                   Phase(back),
                   args=(stage,)))

@@ -162,6 +162,7 @@ from .broad_phase.contact_pairs import (
     cloth_edges,
     displacement_box,
     list_pairs,
+    listed,
     mean_edge,
     prefix_pairs,
     span_middle,
@@ -657,8 +658,8 @@ class SelfCollisionStage:
                 Until(passing,
                       Once(clear_counts, self),
                       Phase(Loop(n, keep_pass_start, self, STATE, ITEM)),
-                      Phase(Loop(pairs.capacity, evaluate_pair, self, pairs, model, STATE,
-                                 ITEM, DT)),
+                      Phase(Loop(listed(self, pairs), evaluate_pair, self, pairs, model,
+                                 STATE, ITEM, DT)),
                       Phase(Loop(n, apply_means, self, model, STATE, ITEM)),
                       *out_of_colliders,
                       Phase(Loop(n, measure_drift, self, STATE, ITEM)),
@@ -1049,27 +1050,26 @@ def evaluate_pair(stage: ti.template(), pairs: ti.template(), model: ti.template
     the step; a pair skipped in the step's first pass is not) and, in contact, its moves
     (_contact_move); counts the contacts and those unresolved in touching, the smallest gap
     in deepest."""
-    if p < stage.pair_start[stage.triangle_count + stage.edge_count]:
-        first = stage.passes[None] == 0           # the step's first evaluation
-        mark = 2 * stage.stale_count[None] > stage.particle_count   # most: all, unread
-        if stage.stale_count[None] > 0 and not mark:
-            corners = pairs.particles[p]
-            mark = (stage.stale[corners[0]] + stage.stale[corners[1]] + stage.stale[corners[2]]
-                    + stage.stale[corners[3]]) > 0
-        if mark or pairs.near[p]:
-            touching, n, gap, weights = _pair_contact(stage, pairs, state, p)
-            if mark:
-                pairs.near[p] = ti.select(gap < NEAR * stage.thickness[None], 1, 0)
-            pairs.active[p] = ti.select(touching or (pairs.active[p] != 0 and not first), 1, 0)
-            if touching:
-                unresolved = _contact_move(stage, model, state, pairs.particles[p], weights, n,
-                                           gap, stage.friction[None], first, dt)
-                stage.touching[None][0] += 1
-                stage.deepest[None] = ti.min(stage.deepest[None], gap)
-                if unresolved:
-                    stage.touching[None][1] += 1
-        elif first:
-            pairs.active[p] = 0
+    first = stage.passes[None] == 0           # the step's first evaluation
+    mark = 2 * stage.stale_count[None] > stage.particle_count   # most: all, unread
+    if stage.stale_count[None] > 0 and not mark:
+        corners = pairs.particles[p]
+        mark = (stage.stale[corners[0]] + stage.stale[corners[1]] + stage.stale[corners[2]]
+                + stage.stale[corners[3]]) > 0
+    if mark or pairs.near[p]:
+        touching, n, gap, weights = _pair_contact(stage, pairs, state, p)
+        if mark:
+            pairs.near[p] = ti.select(gap < NEAR * stage.thickness[None], 1, 0)
+        pairs.active[p] = ti.select(touching or (pairs.active[p] != 0 and not first), 1, 0)
+        if touching:
+            unresolved = _contact_move(stage, model, state, pairs.particles[p], weights, n,
+                                       gap, stage.friction[None], first, dt)
+            stage.touching[None][0] += 1
+            stage.deepest[None] = ti.min(stage.deepest[None], gap)
+            if unresolved:
+                stage.touching[None][1] += 1
+    elif first:
+        pairs.active[p] = 0
 
 
 @ti.func

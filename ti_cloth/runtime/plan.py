@@ -5,6 +5,7 @@ nodes returned by a method (`phases(model, forces, work)`):
 
     Phase(Loop(count, body, *args), ...)   loops over items that read only what earlier
                                            phases wrote; they end at a synchronisation point
+                                           (count: an int, or Used: read at run time)
     Sweep(colouring, body, *args)          the items of a colouring, colour by colour, a
                                            synchronisation point after each colour
     Once(body, *args)                      a scalar computation (a sum of partial sums, a
@@ -120,15 +121,38 @@ def substep(fraction: float, nodes: tuple) -> tuple:
     return tuple(out)
 
 
+class Used:
+    """A loop's count read at run time: the items in use, field[index], of at most
+    `capacity` (a candidate list's pairs in the room it was given). A list grown once for a
+    dense moment kept the cape's contact passes walking 121,440 slots for its 1,300 pairs
+    ever after."""
+
+    def __init__(self, field, index: int, capacity: int):
+        self.field, self.index, self.capacity = field, int(index), int(capacity)
+
+
 class Loop:
     """body(*args) for every item i in 0 .. count - 1 (count: a Python int, a compile-time
-    constant; ITEM among the args is i). chunk: a team worker's slice starts at a multiple of
-    this many items (team.py: CHUNK, where LLVM may vectorise the loop over items); 1 for a
-    loop over blocks of particles, each block a serial loop of its own, so that a body of a
-    few blocks is still shared (conjugate_gradients.BLOCK)."""
+    constant, or a Used, read when the loop starts; ITEM among the args is i). chunk: a team
+    worker's slice starts at a multiple of this many items (team.py: CHUNK, where LLVM may
+    vectorise the loop over items); 1 for a loop over blocks of particles, each block a
+    serial loop of its own, so that a body of a few blocks is still shared
+    (conjugate_gradients.BLOCK)."""
 
-    def __init__(self, count: int, body, *args, chunk: int = CHUNK):
-        self.count, self.body, self.args, self.chunk = int(count), body, args, int(chunk)
+    def __init__(self, count: int | Used, body, *args, chunk: int = CHUNK):
+        self.count = count if isinstance(count, Used) else int(count)
+        self.body, self.args, self.chunk = body, args, int(chunk)
+
+
+@ti.func
+def items(count: ti.template()):
+    """How many items a Loop of `count` (Loop.count) runs over now."""
+    n = 0
+    if ti.static(isinstance(count, Used)):
+        n = ti.min(count.field[count.index], count.capacity)
+    else:
+        n = count
+    return n
 
 
 class Phase:
@@ -293,7 +317,7 @@ def launch_phases(owner: ti.template(), part: ti.template(), model: ti.template(
     for leaf in ti.static(_segment(nodes_of(owner, part, model, forces, work), path)):
         if ti.static(isinstance(leaf, Phase)):
             for loop in ti.static(leaf.loops):
-                for i in range(loop.count):
+                for i in range(items(loop.count)):
                     now = ti.Struct(dt=dt, step=step, k=0, start=start, row=0, time=time)
                     loop.body(*ti.static(bind(loop.args, i, state, now, STAGELESS)))
         elif ti.static(isinstance(leaf, Sweep)):
@@ -411,7 +435,7 @@ def _run_leaf(leaf: ti.template(), model: ti.template(), state: ti.template(),
               team: ti.template(), worker, now: ti.template()):
     if ti.static(isinstance(leaf, Phase)):
         for loop in ti.static(leaf.loops):
-            begin, end = team.share(loop.count, worker, loop.chunk)
+            begin, end = team.share(items(loop.count), worker, loop.chunk)
             for i in range(begin, end):
                 loop.body(*ti.static(bind(loop.args, i, state, now, stages)))
         team.meet(worker)

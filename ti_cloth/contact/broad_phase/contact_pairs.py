@@ -27,6 +27,7 @@ import taichi as ti
 from ...body.mesh import triangle_edges, unique_rows
 from ...geometry import segment_distance, triangle_distance
 from ...runtime import backend
+from ...runtime.plan import Used
 from .box_grid import BLOCK, box_cell, box_cell_count, cell_box, cell_range, found_at
 
 FOUND_KEPT = 16     # pairs of a triangle or an edge the count keeps for the write
@@ -64,6 +65,12 @@ class PairList:
         self.active = fields.scalar(ti.i32, capacity)
         self.near = fields.scalar(ti.i32, capacity)
         fields.finalize(self)
+
+
+def listed(stage, pairs: PairList) -> Used:
+    """The pairs in use of `pairs` (the last offset of the stage's pair_start, within the
+    list's room), as the count of a loop over them (runtime/plan.py)."""
+    return Used(stage.pair_start, stage.triangle_count + stage.edge_count, pairs.capacity)
 
 
 @backend.kernel
