@@ -146,13 +146,12 @@ class Loop:
 
 @ti.func
 def items(count: ti.template()):
-    """How many items a Loop of `count` (Loop.count) runs over now."""
-    n = 0
+    """How many items a Loop of `count` (Loop.count) runs over now (an int stays the
+    compile-time constant it is)."""
     if ti.static(isinstance(count, Used)):
-        n = ti.min(count.field[count.index], count.capacity)
+        return ti.min(count.field[count.index], count.capacity)
     else:
-        n = count
-    return n
+        return count
 
 
 class Phase:
