@@ -183,6 +183,9 @@ def configurations(cloth: tc.Cloth, n: int, newton: bool, only: tuple = ("",)) -
             for f in (0.95, 0.5)]
     runs += [(f"verlet h={f:g}x stable", "verlet", f * stable) for f in (0.95,)]
     runs += [(f"rk4 h={f:g}x stable", "rk4", f * stable) for f in (1.3,)]
+    # six stages fitted to the damped spectrum (integrators/stabilized_rk2.py), at its own limit
+    limit = tc.stable_dt(cloth, "stabilized_rk2", 0.0, pinned=cloth.pinned)
+    runs += [(f"stabilized_rk2 h={f:g}x stable", "stabilized_rk2", f * limit) for f in (0.95, 0.5)]
     runs += [(f"implicit_euler 1/{r}", tc.ImplicitEuler(tolerance=1e-3), 1 / r) for r in (60, 240, 960)]
     runs += [(f"xpbd {it} it 1/{r}", tc.XPBD(iterations=it), 1 / r)
              for it, r in ((2, 60), (10, 240), (4, 3840))]

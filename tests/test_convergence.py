@@ -14,7 +14,7 @@ import ti_cloth as tc
 # (backward Euler's second term is larger); explicit 1.014, symplectic 1.007, Verlet 2.0003).
 # The tolerance is about twice that shift. The rk4 reference at h0/64 is ~1e-13 m off.
 ORDERS = {"explicit_euler": 1, "symplectic_euler": 1, "implicit_euler": 1, "xpbd": 1, "verlet": 2,
-          "rk4": 4, "implicit_midpoint": 2}
+          "rk4": 4, "implicit_midpoint": 2, "stabilized_rk2": 2}
 # solved to convergence, so the error measured is the method's, not the solver's
 SPECS = {"implicit_euler": lambda: tc.ImplicitEuler(tolerance=1e-12),
          "xpbd": lambda: tc.XPBD(iterations=50),

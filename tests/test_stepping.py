@@ -169,6 +169,8 @@ FEATURES = {"none": {}, "tearing": dict(tearing=0.2),
                             ("symplectic_euler", "braced strands", "none"),
                             ("symplectic_euler", "fabric", "all but strain limit"),
                             ("rk4", "flat fabric", "none"),
+                            # its chain of six stages, their alphas read at run time
+                            ("stabilized_rk2", "flat fabric", "none"),
                             # softened compression in XPBD's constraints and in the
                             # implicit solves' Hessian
                             ("xpbd", "softened flat fabric", "none"),

@@ -170,10 +170,11 @@ class Simulation:
         # the user's integrator gets the reports of the steps (Simulation.step).
         self.forces = POOL.keep(ForceSettings(gravity=tuple(gravity), drag=drag,
                                               tearable=tearing is not None, wind=self.wind))
+        held = pinned if self.handles is None else self.handles.pinned(permanent=True)
+        self.integrator.fit(cloth, drag, held)
         self._stepper = POOL.keep(self.integrator)
         if auto:
-            self.dt = auto_dt(cloth, self.integrator, drag, pinned if self.handles is None
-                              else self.handles.pinned(permanent=True))
+            self.dt = auto_dt(cloth, self.integrator, drag, held)
         self.state.reset(self.cloth.particle_position)
         # the pool's copy of the Tearing, its strain a constant of the kernels (pool.py)
         self._tearing = None if self.tearing is None else POOL.keep(self.tearing)

@@ -32,8 +32,9 @@ def auto_dt(cloth, integrator="symplectic_euler", drag: float = 0.0, pinned=None
     stable = stable_dt(cloth, integrator, drag, pinned)
     if stable == 0:
         raise ValueError(f"dt='auto': no stable step exists for {make_integrator(integrator).name} "
-                         "with these springs (undamped springs make explicit Euler unstable at any "
-                         "step); add spring damping (kd) or choose another integrator")
+                         "with these springs (undamped springs make explicit Euler and "
+                         "stabilized_rk2 unstable at any step); add damping (a Material's kd, a "
+                         "Fabric's damping) or choose another integrator")
     return min(0.5 * stable, AUTO_MAX_DT)
 
 

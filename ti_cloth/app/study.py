@@ -51,8 +51,8 @@ MAX_REFERENCE_HALVINGS = 8
 ENSEMBLE = 2                   # references from perturbed starts, when halving leaves a change
 REFERENCE_BUDGET = 3e8         # particle-steps a reference may take in all (rk4 f64: 0.4-0.9 us each
                                # on a Fabric, 2 cores: a few minutes at most)
-DEFAULT_INTEGRATORS = ("explicit_euler", "symplectic_euler", "verlet", "rk4", "implicit_euler",
-                       "implicit_midpoint", "tr_bdf2", "pbd", "xpbd")
+DEFAULT_INTEGRATORS = ("explicit_euler", "symplectic_euler", "verlet", "rk4", "stabilized_rk2",
+                       "implicit_euler", "implicit_midpoint", "tr_bdf2", "pbd", "xpbd")
 DEFAULT_ITERATIONS = (4, 16)   # passes per step of the position-based integrators
 DEFAULT_SOLVES = ("loose", "bdf2", "tethered")   # presets (Integrator.presets) swept beside
                                      # each one's defaults: the Newton solves' loose, xpbd's

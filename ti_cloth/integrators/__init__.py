@@ -8,6 +8,7 @@ from .implicit_euler import ImplicitEuler
 from .implicit_midpoint import ImplicitMidpoint
 from .pbd import PBD
 from .rk4 import RK4
+from .stabilized_rk2 import StabilizedRK2
 from .symplectic_euler import SymplecticEuler
 from .tr_bdf2 import TRBDF2
 from .verlet import Verlet
@@ -15,7 +16,7 @@ from .xpbd import XPBD
 
 INTEGRATORS: dict[str, type[Integrator]] = {
     cls.name: cls for cls in (ExplicitEuler, SymplecticEuler, Verlet, PBD, XPBD, ImplicitEuler,
-                              ImplicitMidpoint, TRBDF2, RK4)
+                              ImplicitMidpoint, TRBDF2, RK4, StabilizedRK2)
 }
 
 
@@ -30,4 +31,4 @@ def make_integrator(spec) -> Integrator:
 
 
 __all__ = ["Integrator", "ExplicitEuler", "SymplecticEuler", "Verlet", "PBD", "XPBD", "ImplicitEuler",
-           "ImplicitMidpoint", "TRBDF2", "RK4", "INTEGRATORS", "make_integrator"]
+           "ImplicitMidpoint", "TRBDF2", "RK4", "StabilizedRK2", "INTEGRATORS", "make_integrator"]

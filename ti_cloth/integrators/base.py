@@ -122,6 +122,10 @@ class Integrator:
         w2, g = stiffest_mode(cloth, drag, pinned)
         return math.inf if w2 <= 0 else self.mode_stable_step(w2, g)
 
+    def fit(self, cloth, drag: float, pinned) -> None:
+        """Adapt run-time options to the body before its simulation is built (Simulation,
+        with its drag [1/s] and held particles); nothing by default."""
+
     def mode_stable_step(self, w2: float, g: float) -> float:
         """Largest stable step [s] on one mode of angular frequency^2 w2 [1/s^2] and damping
         rate g [1/s], from the linear analysis of this integrator's update matrix."""

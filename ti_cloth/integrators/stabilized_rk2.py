@@ -1,0 +1,272 @@
+"""A six-stage, second-order explicit Runge-Kutta whose stability polynomial is fitted to the
+spectrum of Rayleigh-damped cloth: accurate explicit steps 1.6-2.8 times symplectic Euler's
+per force evaluation where damping limits its step (docs/integrators.md, "A stabilized
+explicit step").
+
+A Fabric damps every element in proportion to its stiffness (Rayleigh damping, beta the
+damping time): a mode of angular frequency w has damping rate g = beta w^2, and the
+eigenvalues of x'' = -w^2 x - g x' lie on the circle |1 + beta lambda| = 1 (under-damped) or
+on the negative real axis (over-damped, beta w > 2). Symplectic Euler's step is then limited
+by the damping, h^2 w^2 + 2 h beta w^2 <= 4, far below its undamped 2 / w on a fine mesh
+(docs/performance.md, "What limits the explicit step"). A Runge-Kutta method of s stages
+applies to each mode a polynomial R(h lambda) of degree s; it is stable where |R| <= 1 on
+every h lambda of the body. Which polynomial holds that spectrum at the largest step depends
+on one number, gamma = beta w_max / 2 (the stiffest mode's damping ratio); POLYNOMIALS holds,
+for a grid of gamma, the order-2 polynomial of degree 6 that does (found as Ketcheson &
+Ahmadia find optimal stability polynomials: "Optimal stability polynomials for numerical
+integration of initial value problems", CAMCoS 7(2), 2012; tools/stability_polynomials.py),
+and the integrator takes, for each body, the one whose exact |R| on that body's own spectrum
+allows the largest step (fit, stable_step). The polynomial is written as
+
+    Y_0 = y_n,   Y_k = y_n + alpha_k h f(Y_{k-1}) (k = 1 .. 6),   y_{n+1} = Y_6,
+
+with y = (x, v), f = (v, M^-1 f(x, v)), so R(z) = 1 + alpha_6 z (1 + alpha_5 z (1 + ...)):
+alpha_6 = 1 and alpha_5 = 1/2 (order 2 for any smooth forces: the weights sum to 1 and the
+last stage is taken at the middle of the step), alpha_k = c_{7-k} / c_{6-k} below, c the
+polynomial's coefficients (the chains of stabilized Runge-Kutta methods: van der Houwen &
+Sommeijer, "On the internal stability of explicit, m-stage Runge-Kutta methods for large
+m-values", ZAMM 60, 1980). The step costs six force evaluations, each as a symplectic
+Euler step does.
+
+The rule needs damping: on an undamped mode |R(i y)| > 1 for small y (every order-2
+polynomial of this family but the one of the imaginary axis), so a body with no damping, or
+whose damping leaves some stiff part undamped, has no stable step (stable_dt 0, dt="auto"
+refused).
+"""
+
+import math
+
+import numpy as np
+import taichi as ti
+
+from ..body.modes import row_bounds, stiffest_mode
+from ..physics import wind
+from ..physics.forces import gather_force, spring_phases
+from ..runtime import backend
+from ..runtime.plan import ITEM, NOW, STATE, Loop, Once, Phase, Repeat
+from ..runtime.team import MAX_WORKERS
+from ..state import store_particle
+from . import fused
+from .base import Integrator, add_settings
+
+STAGES = 6
+ROW = 16                        # slots per worker in the stage counter (a cache line each)
+POLYNOMIALS = (   # gamma, a3, a4, a5, a6 (tools/stability_polynomials.py)
+    (0.4000, 1.307243603e-01, 2.487226972e-02, 2.480718101e-03, 1.892983291e-04),  # h w_max 7.260
+    (0.4664, 1.298876479e-01, 2.356672693e-02, 2.292190094e-03, 1.542096408e-04),  # h w_max 7.596
+    (0.5437, 1.291451159e-01, 2.238061738e-02, 2.111388460e-03, 1.245822256e-04),  # h w_max 7.975
+    (0.6340, 1.288604037e-01, 2.130633435e-02, 1.936292669e-03, 9.916521659e-05),  # h w_max 8.400
+    (0.7391, 1.293791136e-01, 2.044543989e-02, 1.777502499e-03, 7.794699956e-05),  # h w_max 8.871
+    (0.8618, 1.302192942e-01, 1.980661605e-02, 1.637468219e-03, 6.153875037e-05),  # h w_max 9.392
+    (1.0048, 1.327781100e-01, 1.970232838e-02, 1.545243199e-03, 4.956860035e-05),  # h w_max 9.852
+    (1.1715, 1.245481664e-01, 1.609412317e-02, 9.915049152e-04, 2.274008944e-05),  # h w_max 9.400
+    (1.3658, 1.169779254e-01, 1.277849886e-02, 6.333373880e-04, 1.151628653e-05),  # h w_max 8.872
+    (1.5924, 1.026345780e-01, 9.204862031e-03, 3.672722609e-04, 5.358557934e-06),  # h w_max 8.704
+    (1.8566, 8.884302491e-02, 6.754056448e-03, 2.288220974e-04, 2.848022024e-06),  # h w_max 8.257
+    (2.1647, 8.799248854e-02, 6.616659719e-03, 2.217468589e-04, 2.730914340e-06),  # h w_max 6.979
+    (2.5238, 8.799384191e-02, 6.616876434e-03, 2.217581815e-04, 2.731108275e-06),  # h w_max 5.888
+    (2.9426, 8.799166733e-02, 6.616500885e-03, 2.217373544e-04, 2.730740475e-06),  # h w_max 4.992
+    (3.4308, 8.799176791e-02, 6.616549240e-03, 2.217416089e-04, 2.730837079e-06),  # h w_max 4.247
+    (4.0000, 8.799172341e-02, 6.616509385e-03, 2.217382055e-04, 2.730762289e-06),  # h w_max 3.621
+)
+MODES = 600                     # modes of a body's spectrum checked, w / w_max in (0, 1]
+STEPS_CHECKED = 400             # steps h' <= h at which |R| <= 1 is checked
+
+
+def coefficients(row) -> np.ndarray:
+    """c_1 .. c_6 of R(z) = 1 + sum c_k z^k for a row of POLYNOMIALS."""
+    return np.array([1.0, 0.5, *row[1:]])
+
+
+def chain(c) -> tuple[float, ...]:
+    """alpha_1 .. alpha_4 of the stages (module doc; alpha_5 = 1/2 and alpha_6 = 1 are fixed)."""
+    return tuple(float(c[6 - k] / c[5 - k]) for k in range(1, 5))
+
+
+def spectrum(w_max: float, beta: float, drag: float) -> np.ndarray:
+    """The eigenvalues [1/s] of the modes w in (0, w_max] with damping rate drag + beta w^2,
+    and of a rigid motion under drag alone (0 and -drag)."""
+    w = w_max * np.concatenate([np.geomspace(1e-4, 0.05, MODES // 4),
+                                np.linspace(0.05, 1.0, MODES - MODES // 4)])
+    g = drag + beta * w * w
+    root = np.sqrt(g * g - 4.0 * w * w + 0j)
+    return np.concatenate([(-g + root) / 2, (-g - root) / 2, [0.0, -drag]])
+
+
+def reach(c, lam: np.ndarray) -> float:
+    """The largest step [s] h with |R(h' lambda)| <= 1 for every lambda and every h' <= h
+    (checked at STEPS_CHECKED steps, then bisected once more); 0 when none (and for an empty
+    spectrum: body_spectrum's undamped body)."""
+    if not lam.size:
+        return 0.0
+    scale = float(np.max(np.abs(lam)))
+    if scale == 0:
+        return math.inf
+
+    def stable(h):
+        z = h * lam
+        total = np.zeros_like(z)
+        for ck in c[::-1]:                      # Horner: z (c1 + z (c2 + ... z c6))
+            total = (total + ck) * z
+        return bool(np.all(np.abs(1.0 + total) <= 1.0 + 1e-12))   # rounding of a rest mode
+
+    steps = np.linspace(1.0, 4.0 * STAGES * STAGES, STEPS_CHECKED) / scale
+    good = 0.0
+    for h in steps:
+        if not stable(h):
+            break
+        good = h
+    else:
+        return good
+    low, high = good, h
+    for _ in range(30):
+        mid = 0.5 * (low + high)
+        low, high = (mid, high) if stable(mid) else (low, mid)
+    return low
+
+
+def body_spectrum(cloth, drag: float, pinned) -> np.ndarray | None:
+    """The eigenvalues of `cloth`'s modes as the stability rule sees them (module doc): its
+    stiffest mode's w_max (modes.stiffest_mode), every mode damped as the least damped
+    particle is relative to its stiffness (modes.row_bounds: beta = min (g_i - drag) / w_i^2),
+    plus drag. None when nothing is sprung; empty when a stiff part is undamped and there is
+    no drag (no step is stable)."""
+    w2, _ = stiffest_mode(cloth, 0.0, pinned)
+    if w2 <= 0:
+        return None
+    omega2, gamma = row_bounds(cloth, 0.0, pinned)
+    stiff = omega2 > 0
+    beta = float(np.min(gamma[stiff] / omega2[stiff]))
+    if beta <= 0 and drag <= 0:
+        return np.zeros(0, complex)     # undamped: |R(i y)| > 1 at every step (reach: 0)
+    return spectrum(math.sqrt(w2), beta, drag)
+
+
+def best_polynomial(lam: np.ndarray) -> tuple[np.ndarray, float]:
+    """The coefficients of the row of POLYNOMIALS that allows the largest step on `lam`, and
+    that step [s] (0 when none is stable: an undamped mode)."""
+    found = [(reach(coefficients(row), lam), index) for index, row in enumerate(POLYNOMIALS)]
+    step, index = max(found)
+    return coefficients(POLYNOMIALS[index]), step
+
+
+@backend.kernel_argument
+class _Stages:
+    """Start-of-step state, each worker's count of the stages done in this step, and the
+    chain's alpha_1 .. alpha_4 (run-time settings)."""
+
+    def __init__(self, particle_count: int):
+        real = backend.real()
+        fields = backend.FieldGroup()
+        self.x0 = fields.vector(3, real, particle_count)
+        self.v0 = fields.vector(3, real, particle_count)
+        self.stage = fields.scalar(ti.i32, MAX_WORKERS * ROW)
+        add_settings(self, fields)
+        fields.finalize(self)
+
+
+@ti.func
+def chain_stage(model: ti.template(), state: ti.template(), forces: ti.template(),
+                work: ti.template(), i, now: ti.template()):
+    """Stage k of particle i (module doc): f(Y_{k-1}) at the current state (its total force
+    gathered and kept in particle_force), then Y_k = y_n + alpha_k h f(Y_{k-1}), the step's
+    result at the last stage. The stage (0 to 5) is the worker's count."""
+    stage = work.stage[now.row * ROW]
+    state.particle_force[i] = gather_force(model, state, forces, i, True)
+    kx = state.particle_velocity[i]
+    kv = model.particle_inv_mass[i] * state.particle_force[i]
+    if stage == 0:
+        work.x0[i] = state.particle_position[i]
+        work.v0[i] = kx
+    alpha = 1.0
+    if stage < 4:
+        alpha = ti.cast(work.settings[stage], float)
+    elif stage == 4:
+        alpha = 0.5
+    h = alpha * now.dt
+    if stage < STAGES - 1:
+        state.particle_position[i] = work.x0[i] + h * kx
+        state.particle_velocity[i] = work.v0[i] + h * kv
+    else:
+        store_particle(state, i, work.x0[i] + h * kx, work.v0[i] + h * kv, now.step)
+
+
+@ti.func
+def first_stage(work: ti.template(), now: ti.template()):
+    work.stage[now.row * ROW] = 0
+
+
+@ti.func
+def next_stage(work: ti.template(), now: ti.template()):
+    work.stage[now.row * ROW] = work.stage[now.row * ROW] + 1
+
+
+class StabilizedRK2(Integrator):
+    """Six stages of explicit Runge-Kutta, order 2, whose stability polynomial is the one of
+    POLYNOMIALS that holds the body's damped spectrum at the largest step (module doc).
+
+    polynomial: the coefficients (c_1 .. c_6) of R(z) = 1 + sum c_k z^k, c_1 = 1 and
+        c_2 = 1/2; None (the default) takes the best for the body when the Simulation is built
+        (fit). A run-time option: changing it compiles nothing.
+
+    Stability: |R(h lambda)| <= 1 on every mode of the body, the modes damped as its least
+    damped particle (stable_step). Needs damping: undamped springs leave no stable step.
+    """
+
+    name = "stabilized_rk2"
+    order = 2
+    runtime_options = ("polynomial",)
+
+    def __init__(self, *, polynomial=None):
+        if polynomial is not None:
+            c = np.asarray(polynomial, np.float64)
+            if c.shape != (STAGES,) or not np.all(np.isfinite(c)) or np.any(c <= 0) \
+                    or c[0] != 1.0 or c[1] != 0.5:
+                raise ValueError(f"polynomial must be {STAGES} positive coefficients c_1 .. "
+                                 f"c_{STAGES} with c_1 = 1 and c_2 = 0.5 (order 2), got "
+                                 f"{polynomial!r}")
+            polynomial = tuple(float(x) for x in c)
+        self.polynomial = polynomial
+
+    def options(self):
+        return {"polynomial": self.polynomial}
+
+    def fit(self, cloth, drag: float, pinned) -> None:
+        """Take the polynomial of POLYNOMIALS best for `cloth` (unless one was given)."""
+        if self.polynomial is None:
+            lam = body_spectrum(cloth, drag, pinned)
+            c = coefficients(POLYNOMIALS[len(POLYNOMIALS) // 2]) if lam is None \
+                else best_polynomial(lam)[0]
+            self.polynomial = tuple(float(x) for x in c)
+
+    def settings_values(self):
+        """alpha_1 .. alpha_4 of the chain (module doc)."""
+        c = self.polynomial or coefficients(POLYNOMIALS[len(POLYNOMIALS) // 2])
+        return chain(np.asarray(c))
+
+    def stable_step(self, cloth, drag: float, pinned) -> float:
+        """The largest h with |R(h lambda)| <= 1 on the body's spectrum (body_spectrum), for
+        the given polynomial or the best of POLYNOMIALS; inf when nothing is sprung and no
+        drag, 0 when some stiff mode is undamped."""
+        lam = body_spectrum(cloth, drag, pinned)
+        if lam is None:
+            return math.inf if drag == 0 else reach(coefficients(POLYNOMIALS[0]),
+                                                     np.array([-drag + 0j]))
+        if self.polynomial is not None:
+            return reach(np.asarray(self.polynomial), lam)
+        return best_polynomial(lam)[1]
+
+    def workspace(self, model, state):
+        return self.buffers(state, lambda: _Stages(model.particle_count))
+
+    def step_work(self, model):
+        return STAGES * fused.spring_work(model)
+
+    def phases(self, model, forces, work):
+        """Six times: the wind and the springs at the stage's state, then every particle's
+        stage, counted per worker (compiled once, as rk4's)."""
+        stage = (wind.phases(model, forces) + spring_phases(model, forces)
+                 + (Phase(Loop(model.particle_count, chain_stage, model, STATE, forces, work,
+                               ITEM, NOW)),
+                    Once(next_stage, work, NOW)))
+        return (Once(first_stage, work, NOW), Repeat(STAGES, *stage))
