@@ -48,9 +48,9 @@ from ..runtime.team import MAX_WORKERS
 from ..state import store_particle
 from . import fused
 from .base import Integrator, add_settings
+from .rk4 import ROW, first_stage, next_stage  # the stage counter, per worker
 
 STAGES = 6
-ROW = 16                        # slots per worker in the stage counter (a cache line each)
 POLYNOMIALS = (   # gamma, a3, a4, a5, a6 (tools/stability_polynomials.py)
     (0.4000, 1.307243603e-01, 2.487226972e-02, 2.480718101e-03, 1.892983291e-04),  # h w_max 7.260
     (0.4664, 1.298876479e-01, 2.356672693e-02, 2.292190094e-03, 1.542096408e-04),  # h w_max 7.596
@@ -160,7 +160,7 @@ class _Stages:
         fields = backend.FieldGroup()
         self.x0 = fields.vector(3, real, particle_count)
         self.v0 = fields.vector(3, real, particle_count)
-        self.stage = fields.scalar(ti.i32, MAX_WORKERS * ROW)
+        self.stage = fields.scalar(ti.i32, MAX_WORKERS * ROW)     # rk4's counter
         add_settings(self, fields)
         fields.finalize(self)
 
@@ -190,15 +190,6 @@ def chain_stage(model: ti.template(), state: ti.template(), forces: ti.template(
     else:
         store_particle(state, i, work.x0[i] + h * kx, work.v0[i] + h * kv, now.step)
 
-
-@ti.func
-def first_stage(work: ti.template(), now: ti.template()):
-    work.stage[now.row * ROW] = 0
-
-
-@ti.func
-def next_stage(work: ti.template(), now: ti.template()):
-    work.stage[now.row * ROW] = work.stage[now.row * ROW] + 1
 
 
 class StabilizedRK2(Integrator):
