@@ -197,8 +197,8 @@ class StabilizedRK2(Integrator):
     POLYNOMIALS that holds the body's damped spectrum at the largest step (module doc).
 
     polynomial: the coefficients (c_1 .. c_6) of R(z) = 1 + sum c_k z^k, c_1 = 1 and
-        c_2 = 1/2; None (the default) takes the best for the body when the Simulation is built
-        (fit). A run-time option: changing it compiles nothing.
+        c_2 = 1/2; None (the default) takes the best for the body each time a Simulation is
+        built with it (fit). A run-time option: changing it compiles nothing.
 
     Stability: |R(h lambda)| <= 1 on every mode of the body, the modes damped as its least
     damped particle (stable_step). Needs damping: undamped springs leave no stable step.
@@ -218,13 +218,15 @@ class StabilizedRK2(Integrator):
                                  f"{polynomial!r}")
             polynomial = tuple(float(x) for x in c)
         self.polynomial = polynomial
+        self.given = polynomial is not None     # else fit() takes each body's own
 
     def options(self):
         return {"polynomial": self.polynomial}
 
     def fit(self, cloth, drag: float, pinned) -> None:
-        """Take the polynomial of POLYNOMIALS best for `cloth` (unless one was given)."""
-        if self.polynomial is None:
+        """Take the polynomial of POLYNOMIALS best for `cloth` (unless one was given: an
+        integrator lent to several simulations fits each one's body in turn)."""
+        if not self.given:
             lam = body_spectrum(cloth, drag, pinned)
             c = coefficients(POLYNOMIALS[len(POLYNOMIALS) // 2]) if lam is None \
                 else best_polynomial(lam)[0]
