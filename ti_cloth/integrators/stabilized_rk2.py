@@ -130,11 +130,12 @@ def body_spectrum(cloth, drag: float, pinned) -> np.ndarray | None:
     """The eigenvalues of `cloth`'s modes as the stability rule sees them (module doc): its
     stiffest mode's w_max (modes.stiffest_mode), every mode damped as the least damped
     particle is relative to its stiffness (modes.row_bounds: beta = min (g_i - drag) / w_i^2),
-    plus drag. None when nothing is sprung; empty when a stiff part is undamped and there is
-    no drag (no step is stable)."""
+    plus drag (drag alone where nothing is sprung). None when nothing is sprung and there is
+    no drag (any step is stable); empty when a stiff part is undamped and there is no drag (no
+    step is stable)."""
     w2, _ = stiffest_mode(cloth, 0.0, pinned)
     if w2 <= 0:
-        return None
+        return None if drag <= 0 else np.array([0.0, -drag], complex)
     omega2, gamma = row_bounds(cloth, 0.0, pinned)
     stiff = omega2 > 0
     beta = float(np.min(gamma[stiff] / omega2[stiff]))
@@ -192,7 +193,6 @@ def chain_stage(model: ti.template(), state: ti.template(), forces: ti.template(
         store_particle(state, i, work.x0[i] + h * kx, work.v0[i] + h * kv, now.step)
 
 
-
 class StabilizedRK2(Integrator):
     """Six stages of explicit Runge-Kutta, order 2, whose stability polynomial is the one of
     POLYNOMIALS that holds the body's damped spectrum at the largest step (module doc).
@@ -240,12 +240,11 @@ class StabilizedRK2(Integrator):
 
     def stable_step(self, cloth, drag: float, pinned) -> float:
         """The largest h with |R(h lambda)| <= 1 on the body's spectrum (body_spectrum), for
-        the given polynomial or the best of POLYNOMIALS; inf when nothing is sprung and no
-        drag, 0 when some stiff mode is undamped."""
+        the polynomial given or fitted, else the best of POLYNOMIALS; inf when nothing is
+        sprung and there is no drag, 0 when some stiff mode is undamped."""
         lam = body_spectrum(cloth, drag, pinned)
         if lam is None:
-            return math.inf if drag == 0 else reach(coefficients(POLYNOMIALS[0]),
-                                                     np.array([-drag + 0j]))
+            return math.inf
         if self.polynomial is not None:
             return reach(np.asarray(self.polynomial), lam)
         return best_polynomial(lam)[1]
