@@ -79,6 +79,9 @@ def coefficients(row) -> np.ndarray:
     return np.array([1.0, 0.5, *row[1:]])
 
 
+UNFITTED = coefficients(POLYNOMIALS[len(POLYNOMIALS) // 2])   # before fit(), or nothing sprung
+
+
 def chain(c) -> tuple[float, ...]:
     """alpha_1 .. alpha_4 of the stages (module doc; alpha_5 = 1/2 and alpha_6 = 1 are fixed)."""
     return tuple(float(c[6 - k] / c[5 - k]) for k in range(1, 5))
@@ -129,7 +132,7 @@ def reach(c, lam: np.ndarray) -> float:
 def body_spectrum(cloth, drag: float, pinned) -> np.ndarray | None:
     """The eigenvalues of `cloth`'s modes as the stability rule sees them (module doc): its
     stiffest mode's w_max (modes.stiffest_mode), every mode damped as the least damped
-    particle is relative to its stiffness (modes.row_bounds: beta = min (g_i - drag) / w_i^2),
+    particle is relative to its stiffness (modes.row_bounds without drag: beta = min g_i / w_i^2),
     plus drag (drag alone where nothing is sprung). None when nothing is sprung and there is
     no drag (any step is stable); empty when a stiff part is undamped and there is no drag (no
     step is stable)."""
@@ -229,13 +232,12 @@ class StabilizedRK2(Integrator):
         integrator lent to several simulations fits each one's body in turn)."""
         if not self.given:
             lam = body_spectrum(cloth, drag, pinned)
-            c = coefficients(POLYNOMIALS[len(POLYNOMIALS) // 2]) if lam is None \
-                else best_polynomial(lam)[0]
+            c = UNFITTED if lam is None else best_polynomial(lam)[0]
             self.polynomial = tuple(float(x) for x in c)
 
     def settings_values(self):
         """alpha_1 .. alpha_4 of the chain (module doc)."""
-        c = self.polynomial or coefficients(POLYNOMIALS[len(POLYNOMIALS) // 2])
+        c = self.polynomial or UNFITTED
         return chain(np.asarray(c))
 
     def stable_step(self, cloth, drag: float, pinned) -> float:
