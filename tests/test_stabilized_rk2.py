@@ -91,29 +91,31 @@ def test_each_body_takes_the_polynomial_that_holds_its_spectrum_at_the_largest_s
 
 
 @pytest.mark.parametrize("gamma", [1.3, 1.9, 2.6, 4.0])
-def test_well_past_critical_damping_the_step_per_evaluation_is_twice_symplectic_eulers(gamma):
+def test_well_past_critical_damping_the_step_per_evaluation_is_nearly_twice_symplectic_eulers(
+        gamma):
     """On the spectrum of Rayleigh-damped modes (w in (0, w_max], damping ratio of the
     stiffest gamma = beta w_max / 2), symplectic Euler's step is limited by the damping:
     h^2 w^2 + 2 h beta w^2 <= 4, h w_max = 2 (sqrt(gamma^2 + 1) - gamma) (closed form). The
-    best row of POLYNOMIALS holds the spectrum at every step up to one at least twice that per
-    force evaluation, checked exactly (reach: |R| <= 1 at every step up to it). The table
+    best row of POLYNOMIALS holds the spectrum at every step up to one at least 1.8 times that
+    per force evaluation, checked exactly (reach: |R| <= 1 at every step up to it). The table
     solved at the last step alone and inside the polygon around the unit disc got 1.34x at
     gamma 1.9 and 1.22x at 3 (tools/stability_polynomials.py says why)."""
     lam = stabilized_rk2.spectrum(1.0, 2.0 * gamma, 0.0)        # w_max = 1
     _, step = stabilized_rk2.best_polynomial(lam)
     euler = 2.0 * (np.sqrt(gamma * gamma + 1.0) - gamma)
     report(f"gamma {gamma}: h w_max per evaluation / symplectic Euler's",
-           step / stabilized_rk2.STAGES / euler, ">= 2")
-    assert step / stabilized_rk2.STAGES >= 2.0 * euler
+           step / stabilized_rk2.STAGES / euler, ">= 1.8")
+    assert step / stabilized_rk2.STAGES >= 1.8 * euler
 
 
 def test_a_fine_sheet_past_critical_damping_falls_at_nine_tenths_of_its_predicted_step(f32):
     """Issue 53's 64² sheet (damping ratio 1.9: its stiffest modes over-damped). A polynomial
     optimal for the Rayleigh set touches |R| = 1 all along the over-damped segment, and its
     region pinches there; the sheet's modes are not exactly on the set (the membrane's
-    geometric stiffness is undamped), so such a table's polynomial diverged at 0.85 and 0.9
-    of its predicted step, after 0.16-0.25 s. The table's polynomials keep |R| <= 0.9 there
-    (tools/stability_polynomials.py): at 0.9 the sheet falls for the whole 0.3 s."""
+    geometric stiffness is undamped), so the table solved without a margin diverged at 0.9
+    of its predicted step, after 0.06 s (0.16-0.25 s with its rows past gamma 1.5). The
+    table's polynomials keep |R| <= 0.9 there (tools/stability_polynomials.py): at 0.9 the
+    sheet falls for the whole 0.3 s."""
     cloth = denim(n=64, damping=1e-4)
     step = tc.stable_dt(cloth, "stabilized_rk2")
     positions = fall(cloth, "stabilized_rk2", 0.9 * step)

@@ -1,7 +1,7 @@
 """A six-stage, second-order explicit Runge-Kutta whose stability polynomial is fitted to the
 spectrum of Rayleigh-damped cloth: where damping limits symplectic Euler's step, accurate
 explicit steps longer than its per force evaluation (1.76x on issue 53's 32² denim sheet,
-2.64x at 64²; below 1x where damping barely limits it: docs/integrators.md, "A stabilized
+2.11x at 64²; below 1x where damping barely limits it: docs/integrators.md, "A stabilized
 explicit step").
 
 A Fabric damps every element in proportion to its stiffness (Rayleigh damping, beta the
@@ -12,16 +12,17 @@ by the damping, h^2 w^2 + 2 h beta w^2 <= 4, far below its undamped 2 / w on a f
 (docs/performance.md, "What limits the explicit step"). A Runge-Kutta method of s stages
 applies to each mode a polynomial R(h lambda) of degree s; it is stable where |R| <= 1 on
 every h lambda of the body. Which polynomial holds that spectrum at the largest step depends
-on one number, gamma = beta w_max / 2 (the stiffest mode's damping ratio); POLYNOMIALS holds,
+on one number, gamma = beta w_max / 2 (the stiffest mode's damping ratio). POLYNOMIALS holds,
 for a grid of gamma, the order-2 polynomial of degree 6 that does at every step up to the
-largest, with a margin: |R| at most 0.9 (or the mode's own decay) where the set is not near
-0, so that modes a little off the Rayleigh set (the membrane's undamped geometric
-stiffness, the pins) stay stable as they do in damped Chebyshev methods (found as Ketcheson
-& Ahmadia find optimal stability polynomials: "Optimal stability polynomials for numerical
-integration of initial value problems", CAMCoS 7(2), 2012; tools/stability_polynomials.py
-says why each condition), and the integrator takes, for each body, the one whose exact |R|
-on that body's own spectrum allows the largest step (fit, stable_step). The polynomial is
-written as
+largest, found as Ketcheson & Ahmadia find optimal stability polynomials ("Optimal
+stability polynomials for numerical integration of initial value problems", CAMCoS 7(2),
+2012). Each holds the set with a margin: |R| is at most 0.9 (or the mode's own decay) away
+from 0, so that modes a little off the Rayleigh set (the membrane's undamped geometric
+stiffness, the pins) stay stable, as in damped Chebyshev methods. There is no row past
+gamma = 1.47: beyond it the polynomials hug the over-damped modes, and a garment diverged
+at half their predicted step (tools/stability_polynomials.py says why each condition). For
+each body the integrator takes the row whose exact |R| on that body's own spectrum allows
+the largest step (fit, stable_step). The polynomial is written as
 
     Y_0 = y_n,   Y_k = y_n + alpha_k h f(Y_{k-1}) (k = 1 .. 6),   y_{n+1} = Y_6,
 
@@ -72,9 +73,6 @@ POLYNOMIALS = (   # gamma, a3, a4, a5, a6 (tools/stability_polynomials.py)
     (1.2032, 1.248001938e-01, 1.595065594e-02, 9.663764296e-04, 2.178819393e-05),  # h w_max 9.017
     (1.3298, 1.196838229e-01, 1.372437091e-02, 7.227986826e-04, 1.403222184e-05),  # h w_max 8.681
     (1.4699, 1.143138579e-01, 1.168555383e-02, 5.323340928e-04, 8.850232741e-06),  # h w_max 8.611
-    (1.6246, 1.021738762e-01, 9.160755942e-03, 3.666719242e-04, 5.379072400e-06),  # h w_max 8.400
-    (1.7957, 9.327138418e-02, 7.525174188e-03, 2.712438935e-04, 3.593610907e-06),  # h w_max 8.101
-    (1.9848, 9.012116021e-02, 6.989536000e-03, 2.422252010e-04, 3.088431558e-06),  # h w_max 7.440
 )
 MODES = 600                     # modes of a body's spectrum checked, w / w_max in (0, 1]
 STEPS_CHECKED = 400             # steps h' <= h at which |R| <= 1 is checked
