@@ -7,7 +7,7 @@ largest h w_max.
 For a fixed step the conditions |R(z_j)| <= 1 are convex in the coefficients, so the largest
 step is found by bisection, each step a linear feasibility problem: Ketcheson & Ahmadia,
 "Optimal stability polynomials for numerical integration of initial value problems", CAMCoS
-7(2), 2012. Three details decide whether the result holds on a cloth:
+7(2), 2012. Four details decide whether the result holds on a cloth:
 
 - **Every step up to h, not h alone.** A step h' < h puts the modes at h' lambda, which is not
   a part of h lambda's set. The union over h' <= h is a region (the circle |1 + beta lambda|
@@ -32,19 +32,18 @@ step is found by bisection, each step a linear feasibility problem: Ketcheson & 
   J. Comput. Appl. Math. 88, 1998). It costs 3 % of the step at gamma 1.9, 13 % at 0.4.
   Points within |z| <= 1 are left out: there R = 1 + z + z^2/2 + O(z^3) is fixed by the
   order, |R| is 1 - O(|z|^2) on the damped modes and no bound below 1 holds R(0) = 1.
-
 - **No row past gamma = 1.5.** Above it the optimal polynomials are those of the
-  over-damped modes' real segment, and their regions hug it. On demos/skirt_walk.toml (a
-  garment that starts wrapped round its figure, its seams being sewn and its waistband
-  attached: modes off the Rayleigh set) the rows of 1.80 and 1.98 diverged at half their
-  predicted step, the step dt="auto" takes, where the rows up to 1.47 ran (every row
-  diverged at 0.9). A body past 1.47 takes that row: 2.1x symplectic Euler per evaluation
-  at gamma 1.9 instead of 2.6x.
+  over-damped modes' real segment, and their regions hug it. On demos/skirt_walk.toml
+  without self-collision (a garment that starts wrapped round its figure, its seams being
+  sewn and its waistband attached: modes off the Rayleigh set) the rows of 1.80 and 1.98
+  diverged at half their predicted step, the step dt="auto" takes, where the rows up to
+  1.47 ran (every row diverged at 0.9). A body past 1.47 takes that row: 2.1x symplectic
+  Euler per evaluation at gamma 1.9 instead of 2.6x.
 
 The integrator checks the exact |R| on each body's own spectrum at every step up to the one
 it takes (stabilized_rk2.reach); this only proposes polynomials.
 
-    python tools/stability_polynomials.py        # needs scipy (in the base install); ~6 min
+    python tools/stability_polynomials.py        # needs scipy (in the base install); ~3 min
 """
 
 import numpy as np
@@ -100,23 +99,12 @@ def optimal(gamma: float):
     return low, best
 
 
-def table():
-    """[(gamma, a3..a6, h w_max found)], a row left out where its polynomial is the last
-    one's."""
-    rows = []
-    for gamma in GAMMAS:
-        reach, a = optimal(float(gamma))
-        if rows and np.allclose(a, rows[-1][1], rtol=1e-4, atol=0.0):
-            continue
-        rows.append((float(gamma), a, reach))
-    return rows
-
-
 if __name__ == "__main__":
     from ti_cloth.integrators.stabilized_rk2 import reach, spectrum
 
     print("POLYNOMIALS = (   # gamma, a3, a4, a5, a6 (tools/stability_polynomials.py)")
-    for gamma, a, found in table():
+    for gamma in GAMMAS:
+        a = optimal(float(gamma))[1]
         exact = reach(np.array([1.0, 0.5, *a]), spectrum(1.0, 2.0 * gamma, 0.0))
         print(f"    ({gamma:.4f}, {a[0]:.9e}, {a[1]:.9e}, {a[2]:.9e}, {a[3]:.9e}),"
               f"  # h w_max {exact:.3f}", flush=True)
