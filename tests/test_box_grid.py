@@ -12,7 +12,8 @@ from ti_cloth.contact.broad_phase.box_grid import (
     box_cell_count,
     cell_box,
     cell_range,
-    found_at,
+    first_shared,
+    meets,
 )
 from ti_cloth.runtime import backend
 
@@ -29,8 +30,9 @@ def _query(grid: ti.template(), kind: ti.i32, lo: ti.types.ndarray(), hi: ti.typ
             cell = box_cell(first, last, k)
             begin, end = cell_range(grid, kind, cell)
             for a in range(begin, end):
-                if found_at(grid, a, cell, first, qlo, qhi):
-                    found[q, grid.cell_item[a]] += 1
+                if meets(grid, a, qlo, qhi):
+                    if first_shared(grid, a, cell, first):
+                        found[q, grid.cell_item[a]] += 1
 
 
 def reported(lo, hi, query_lo, query_hi, cell, counts=None, kind=0):

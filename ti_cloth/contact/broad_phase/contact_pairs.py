@@ -28,7 +28,7 @@ from ...body.mesh import triangle_edges, unique_rows
 from ...geometry import segment_distance, triangle_distance
 from ...runtime import backend
 from ...runtime.plan import Used
-from .box_grid import BLOCK, box_cell, box_cell_count, cell_box, cell_range, found_at
+from .box_grid import BLOCK, box_cell, box_cell_count, cell_box, cell_range, first_shared, meets
 
 FOUND_KEPT = 16     # pairs of a triangle or an edge the count keeps for the write
 
@@ -239,7 +239,9 @@ def _triangle_pairs(stage: ti.template(), pairs: ti.template(), model: ti.templa
         cell = box_cell(first, last, k)
         begin, end = cell_range(stage.grid, 0, cell)
         for a in range(begin, end):
-            if not found_at(stage.grid, a, cell, first, lo, hi):    # the cell's boxes in turn
+            if not meets(stage.grid, a, lo, hi):        # the cell's boxes in turn
+                continue
+            if not first_shared(stage.grid, a, cell, first):
                 continue
             v = stage.grid.cell_item[a]
             if not (_joined(model, v, tri[0]) or _joined(model, v, tri[1])
@@ -287,7 +289,9 @@ def _edge_pairs(stage: ti.template(), pairs: ti.template(), model: ti.template()
             f = stage.grid.cell_item[a] - stage.particle_count
             if f <= e:          # apart: a ti.func in `or` runs whatever the left side
                 continue
-            if not found_at(stage.grid, a, cell, first, lo, hi):
+            if not meets(stage.grid, a, lo, hi):
+                continue
+            if not first_shared(stage.grid, a, cell, first):
                 continue
             other = stage.edges[f]
             if not (_joined(model, other[0], ends[0]) or _joined(model, other[0], ends[1])
