@@ -49,8 +49,10 @@ from .sweep import Failure, as_workers, run_tasks
 REFERENCE_TOLERANCE = 1e-9     # halving the reference step changes positions by less than this x size
 MAX_REFERENCE_HALVINGS = 8
 ENSEMBLE = 2                   # references from perturbed starts, when halving leaves a change
-REFERENCE_BUDGET = 3e8         # particle-steps a reference may take in all (rk4 f64: 0.4-0.9 us each
-                               # on a Fabric, 2 cores: a few minutes at most)
+REFERENCE_BUDGET = 1e9         # particle-steps a reference may take in all (rk4 f64 on a Fabric,
+                               # 2 cores: 0.13 us each on issue 53's 64² denim sheet, so about 2
+                               # minutes at most; within 3e8 that sheet's reference made no
+                               # halving, and no error was measured: docs/performance.md)
 DEFAULT_INTEGRATORS = ("explicit_euler", "symplectic_euler", "verlet", "rk4", "stabilized_rk2",
                        "implicit_euler", "implicit_midpoint", "tr_bdf2", "pbd", "xpbd")
 DEFAULT_ITERATIONS = (4, 16)   # passes per step of the position-based integrators
