@@ -46,6 +46,31 @@ def use(precision: str, threads: int | None = None) -> None:
         tc.init(arch="cpu", precision=precision, threads=threads)
 
 
+OPTIMIZATION = "TI_ADVANCED_OPTIMIZATION"      # Taichi's, read by every ti.init (conftest.py)
+
+
+@contextmanager
+def users_runtime(precision: str = "f64", threads: int = 1):
+    """A runtime of `threads` CPU threads that compiles as users' runs do, with Taichi's
+    advanced optimization (the suite's runtimes compile without it: conftest.py); then a
+    runtime of every core as the suite compiles. A test that compares the two compares the
+    builds too."""
+    import taichi as ti
+
+    suites = os.environ.get(OPTIMIZATION)
+    os.environ[OPTIMIZATION] = "1"
+    try:
+        tc.init(arch="cpu", precision=precision, threads=threads)
+        assert ti.cfg.advanced_optimization, "the users' build"
+        yield
+    finally:
+        if suites is None:
+            del os.environ[OPTIMIZATION]
+        else:
+            os.environ[OPTIMIZATION] = suites
+        tc.init(arch="cpu", precision=precision)
+
+
 def forget_compiled(*kernels) -> None:
     """Start counting these kernels' compilations afresh, so `compiled` tells what runs from
     now on (backend.compilations; counting is on for the whole suite: conftest.py)."""

@@ -4,7 +4,7 @@ the stable step, and the same bits in every launch plan and thread count."""
 
 import numpy as np
 import pytest
-from helpers import report
+from helpers import report, users_runtime
 
 import ti_cloth as tc
 from ti_cloth.body.topology import color_springs
@@ -272,9 +272,10 @@ def test_the_stable_step_counts_altitude_springs(f64):
 def test_braced_strands_give_the_same_bits_on_one_thread_and_all_cores():
     """Altitude forces are gathered per particle in a fixed order: implicit Euler (its CG
     sums in fixed blocks) gives identical positions on one CPU thread and on every core (two
-    on CI), and a rerun repeats them. (Every integrator's one worker against a team of two:
-    test_stepping; pbd and xpbd's parallel sweeps against the serial one:
-    test_implicit_and_xpbd.)"""
+    on CI), the one thread compiled as users' runs are and the others as the suite's
+    (helpers.users_runtime), and a rerun repeats them. (Every integrator's one worker
+    against a team of two: test_stepping; pbd and xpbd's parallel sweeps against the serial
+    one: test_implicit_and_xpbd.)"""
     body = tc.hair(2, 5, 0.2, mass=1e-3, curl=(0.02, 0.02))
     results = {}
 
@@ -286,12 +287,9 @@ def test_braced_strands_give_the_same_bits_on_one_thread_and_all_cores():
             sim.step(40)
             results.setdefault(integrator, []).append(sim.positions())
 
-    try:
-        tc.init(arch="cpu", precision="f64", threads=1)
+    with users_runtime():
         run()
-    finally:
-        tc.init(arch="cpu", precision="f64")      # every core (two on CI), twice
-    run()
+    run()                                          # every core (two on CI), twice
     run()
     assert backend.cpu_threads() == backend.cpu_cores()
     for integrator, runs in results.items():

@@ -6,6 +6,7 @@ its closed form), and a refined scene runs to the same bits on every rerun and t
 
 import numpy as np
 import pytest
+from helpers import users_runtime
 
 import ti_cloth as tc
 from ti_cloth.app.scene import SceneError, load_scene
@@ -233,11 +234,8 @@ def test_a_refined_scene_reruns_to_the_same_bits_on_any_thread_count(tmp_path):
         sim.step(400)
         runs.append(sim.positions())
 
-    try:
-        tc.init(arch="cpu", precision="f64", threads=1)
+    with users_runtime():                      # one thread, compiled as users' runs are
         run()
-    finally:
-        tc.init(arch="cpu", precision="f64")
     run()
     run()
     assert backend.cpu_threads() == backend.cpu_cores()

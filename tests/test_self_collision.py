@@ -5,7 +5,7 @@ import warnings
 
 import numpy as np
 import pytest
-from helpers import positions_over, report, twisted_sheet, wound_twist
+from helpers import positions_over, report, twisted_sheet, users_runtime, wound_twist
 from scipy.spatial.transform import Rotation
 
 import ti_cloth as tc
@@ -323,7 +323,9 @@ def test_one_thread_and_all_cores_and_a_rerun_give_the_same_bits():
     levels, integer writes in list order), a pile settling on an animated plate (levels
     seeded by its contacts), and the fail-safe (never_through and keep_thickness) moving
     particles back in a twisted sheet (its marks and rounds: integer writes and counts).
-    The default runtime comes back after the one-thread run and serves the other two (one
+    The one thread compiles as users' runs do, with Taichi's advanced optimization, the
+    suite's runtime without it (helpers.users_runtime): the same bits from both builds too.
+    The suite's runtime comes back after the one-thread run and serves the other two (one
     re-initialisation fewer: each drops every kernel this worker compiled)."""
     from ti_cloth.runtime import backend
     body = two_sheets(8, height=0.05)
@@ -352,11 +354,8 @@ def test_one_thread_and_all_cores_and_a_rerun_give_the_same_bits():
                 listed.vertex_triangle, listed.edge_edge, twist.positions(),
                 twist.velocities(), settle_pile(still_plate(), True, steps=30)[2])
 
-    try:
-        tc.init(arch="cpu", precision="f64", threads=1)
+    with users_runtime():
         runs = [run()]
-    finally:
-        tc.init(arch="cpu", precision="f64")
     runs += [run(), run()]
     assert backend.cpu_threads() == backend.cpu_cores()
     for other in runs[1:]:                   # positions, the grid's cells, the candidate lists
