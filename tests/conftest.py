@@ -25,8 +25,8 @@ from ti_cloth.runtime import backend
 
 # The suite compiles without Taichi's advanced optimization: its own IR passes, half the
 # compile time of the garments' and the implicit solvers' kernels, which is most of the
-# suite (10 min 14 s against 8 min 11 s cold on 2 cores, the same 1,124 tests passing;
-# docs/performance.md). Users' runs keep it (their garments' steps are 5-10 % faster with
+# suite (10 min 13 s against 8 min 11 s cold on 2 cores, the same 1,124 tests passing;
+# docs/performance.md). Users' runs keep it (their garments' steps are 0-10 % faster with
 # it); the tests of one thread against every core run their one thread as users compile
 # (helpers.users_runtime), so they also show that both builds step to the same bits. A
 # developer's own TI_ADVANCED_OPTIMIZATION is kept.
