@@ -440,14 +440,18 @@ def test_the_automatic_camera_frames_the_whole_motion(tmp_path, f32, text):
 
 
 def test_self_collision_takes_its_fail_safe_switches_by_name(tmp_path):
-    """[simulation] self_collision's never_through and keep_thickness reach SelfCollision (on
-    and off unless given), and anything but a boolean is refused naming the key."""
+    """[simulation] self_collision's never_through, keep_thickness and in_solve reach
+    SelfCollision (on, off and off unless given), and anything but a boolean is refused naming
+    the key."""
     given = GRID.replace("fps = 50", "fps = 50\nself_collision = { thickness = 0.004, "
-                         "keep_thickness = true, never_through = false }", 1)
+                         "keep_thickness = true, never_through = false, in_solve = true }", 1)
     settings = load_scene(write(tmp_path, given)).self_collision
     assert settings == tc.SelfCollision(thickness=0.004, keep_thickness=True,
-                                        never_through=False)
+                                        never_through=False, in_solve=True)
     assert not tc.SelfCollision().keep_thickness and tc.SelfCollision().never_through
+    assert not tc.SelfCollision().in_solve
+    with pytest.raises(SceneError, match=r"self_collision\.in_solve must be .*got 1"):
+        load_scene(write(tmp_path, given.replace("in_solve = true", "in_solve = 1")))
     with pytest.raises(SceneError, match=r"self_collision\.keep_thickness must be .*got 1"):
         load_scene(write(tmp_path, given.replace("keep_thickness = true",
                                                  "keep_thickness = 1")))

@@ -10,6 +10,7 @@ tested against a launch per phase).
 """
 
 
+import dataclasses
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
@@ -152,6 +153,9 @@ class Simulation:
                 "self_collision", self_collision, "None or a SelfCollision(thickness=...)")
         if self_collision is not None:
             warn_if_thick(self_collision, cloth)
+            require(not self_collision.in_solve or self.integrator.name == "xpbd",
+                    "self_collision.in_solve", True, f"False with {self.integrator.name!r}: "
+                    "the contacts join the passes of the xpbd integrator only")
             parts["self_collision"] = (SelfCollisionStage, (self_collision, cloth))
         if handles:
             parts["handle_table"] = (HandleTable, (len(self.handles.index),))
@@ -170,6 +174,7 @@ class Simulation:
         # the user's integrator gets the reports of the steps (Simulation.step).
         self.forces = POOL.keep(ForceSettings(gravity=tuple(gravity), drag=drag,
                                               tearable=tearing is not None, wind=self.wind))
+        self._in_solve = self_collision is not None and self_collision.in_solve
         held = pinned if self.handles is None else self.handles.pinned(permanent=True)
         self.integrator.fit(cloth, drag, held)
         self._stepper = POOL.keep(self.integrator)
@@ -392,6 +397,7 @@ class Simulation:
             for stage in self._tail:
                 if stage in self._before:
                     stage.before_step(self.state, self.time)
+            self._list_for_solve()
             if self.many_steps.run(self._stepper, self.model, self.state, self.forces, self.dt,
                                    self.step_count, 1, self.handles, run_length=n) == 0:
                 self._step_once()
@@ -405,10 +411,26 @@ class Simulation:
         """One step, launch by launch: the stages of STEP_ORDER this simulation has."""
         for stage in self._before:
             stage.before_step(self.state, self.time)
+        self._list_for_solve()
         self._stepper.step(self.model, self.state, self.dt, self.forces, self.step_count)
         self.step_count += 1
         for stage in self._stages.values():
             stage.after_step(self.model, self.state, self.time, self.dt, self.step_count - 1)
+
+    def _list_for_solve(self) -> None:
+        """SelfCollision.in_solve: the list for this step's predicted path, and the force
+        settings that carry it into the integrator's passes (new ones when the list grew:
+        its kernels compile again)."""
+        if not self._in_solve:
+            return
+        stage = self.self_collision
+        stage.list_for_solve(self.model, self.state, self.dt, self.forces.gravity,
+                             self.step_count)
+        if self.forces.contact is None or self.forces.contact[1] is not stage.candidates:
+            still = self.colliders if self.colliders is not None and not self.colliders.moving \
+                else None
+            self.forces = POOL.keep(dataclasses.replace(
+                self.forces, contact=(stage, stage.candidates, still)))
 
     @property
     def many_steps(self) -> stepping.ManySteps | None:

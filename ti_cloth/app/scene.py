@@ -273,6 +273,7 @@ def load_scene(path, note=None) -> Scene:
         contact.optional(options, "iterations", "integer", minimum=1)
         contact.optional(options, "never_through", "boolean")
         contact.optional(options, "keep_thickness", "boolean")
+        contact.optional(options, "in_solve", "boolean")
         self_collision = contact.build(SelfCollision, **options)
         contact.finish()
     sewing_table = sim.table("sewing")

@@ -218,7 +218,16 @@ class SelfCollision:
     a collider, a pin, a handle (module doc: shock propagation), so the passes settle a pile
     about a layer a pass; False: every contact mass-weighted (piles take many more passes and
     sink deeper into each other). Impacts and contacts in the air are mass-weighted either
-    way."""
+    way.
+    in_solve: with the xpbd integrator, the contacts join its passes (Simulation runs it): a
+    list made before each step for the step's predicted path (each free particle at x + h v
+    + h^2 g, held ones where they are), and in every pass, after the membrane and the
+    bending, each listed pair in contact projected out (mass-weighted, in list order), then
+    every particle out of the colliders that stand still. The passes after the step and the
+    fail-safe stay, and keep the list while the step ended within its skin of the
+    prediction. The elastic passes then see the contacts and do not undo them, so a large
+    step keeps the thickness (docs/performance.md: a landing at 1/60 s); at small steps it
+    costs a list a step more. False (the default): contact after the integrator."""
 
     thickness: float = 0.005
     friction: float = 0.0
@@ -226,6 +235,7 @@ class SelfCollision:
     never_through: bool = True
     keep_thickness: bool = False
     stacking: bool = True
+    in_solve: bool = False
 
     def __post_init__(self):
         thickness = finite_number("SelfCollision.thickness", self.thickness, 0.0, strict=True,
@@ -242,6 +252,8 @@ class SelfCollision:
         require(isinstance(self.keep_thickness, bool), "SelfCollision.keep_thickness",
                 self.keep_thickness, "True or False")
         require(isinstance(self.stacking, bool), "SelfCollision.stacking", self.stacking,
+                "True or False")
+        require(isinstance(self.in_solve, bool), "SelfCollision.in_solve", self.in_solve,
                 "True or False")
 
     @property
@@ -549,6 +561,18 @@ class SelfCollisionStage:
 
     def before_step(self, state, t: float) -> None:
         copy_positions(state, self.step_start)
+
+    def list_for_solve(self, model, state, dt: float, gravity, step_index: int) -> None:
+        """SelfCollision.in_solve: after before_step, the list for the step's predicted path
+        (each free particle at x + h v + h^2 g, a held one where it is: the boxes swept from
+        the step's start to there, with the skin), made for the passes of the integrator;
+        the positions left as they were. After the step, after_step keeps it while the
+        cloth ended within the skin of the prediction (listed_at)."""
+        if self.triangle_count == 0:
+            return
+        predict_path(model, state, dt, gravity[0], gravity[1], gravity[2])
+        self._make_list(model, state, step_index)
+        restore_positions(state, self.step_start)
 
     def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
         """The self-collision stage of a step ending at time t (stages.STEP_ORDER): the list
@@ -1037,6 +1061,45 @@ def _pair_contact(stage: ti.template(), pairs: ti.template(), state: ti.template
     touching = touching and not torn_pair(stage, state, pairs.elements[p],
                                           p < stage.pair_start[stage.triangle_count])
     return touching, n, gap, weights
+
+
+@ti.func
+def project_listed(stage: ti.template(), pairs: ti.template(), model: ti.template(),
+                   state: ti.template(), item):
+    """SelfCollision.in_solve, in a pass of the integrator (a loop of one item: the pairs in
+    list order, the same bits in every run): each listed pair in contact at the current
+    positions (_pair_contact: the side taken from the step's start) moved apart to the reach,
+    mass-weighted along its weights."""
+    total = stage.pair_start[stage.triangle_count + stage.edge_count]
+    for p in range(ti.min(total, pairs.capacity)):
+        touching, n, gap, weights = _pair_contact(stage, pairs, state, p)
+        if touching:
+            corners = pairs.particles[p]
+            norm = 0.0
+            for k in ti.static(range(4)):
+                norm += model.particle_inv_mass[corners[k]] * weights[k] * weights[k]
+            if norm > 0:
+                for k in ti.static(range(4)):
+                    i = corners[k]
+                    state.particle_position[i] += (-model.particle_inv_mass[i] * weights[k]
+                                                   * gap / norm) * n
+
+
+@backend.kernel
+def predict_path(model: ti.template(), state: ti.template(), dt: float, gx: float, gy: float,
+                 gz: float):
+    """Each free particle's position moved to x + dt v + dt^2 g (list_for_solve)."""
+    g = ti.Vector([gx, gy, gz])
+    for i in state.particle_position:
+        if model.particle_inv_mass[i] > 0:
+            state.particle_position[i] += dt * state.particle_velocity[i] + (dt * dt) * g
+
+
+@backend.kernel
+def restore_positions(state: ti.template(), source: ti.template()):
+    """particle_position[i] = source[i] (copy_positions the other way)."""
+    for i in source:
+        state.particle_position[i] = source[i]
 
 
 @ti.func

@@ -31,6 +31,8 @@ import taichi as ti
 
 from ..body.material import SpringKind
 from ..body.mesh import Mesh
+from ..contact.colliders.collision import push_out
+from ..contact.self_collision import project_listed
 from ..energies import PROJECTIONS
 from ..energies.faces import XPBD_BENDING_TOLERANCE
 from ..energies.membrane import XPBD_MEMBRANE_RELAXATION
@@ -115,6 +117,16 @@ def _bdf2_record(state: ti.template(), work: ti.template(), i):
 
 
 @backend.kernel_argument
+def contact_nodes(model, stage, pairs, colliders) -> tuple:
+    """The end of a pass where self-collision joins the solve (SelfCollision.in_solve): the
+    listed pairs in contact moved apart, in list order (a loop of one item), then every
+    particle out of the colliders (`colliders`: those that stand still, or None)."""
+    nodes = (Phase(Loop(1, project_listed, stage, pairs, model, STATE, ITEM)),)
+    if colliders is not None:
+        nodes += (Phase(Loop(model.particle_count, push_out, model, STATE, colliders, ITEM)),)
+    return nodes
+
+
 class _Multipliers:
     """One Lagrange multiplier per spring (in colour order) and per altitude spring [N s^2],
     three per triangle for its strain and three for its bending (a Fabric's mid-edge bending),
@@ -356,13 +368,16 @@ class XPBD(Integrator):
 
     def phases(self, model, forces, work):
         """Predict under the external loads (and the wind) with the multipliers cleared,
-        `iterations` passes colour by colour (work: the _Multipliers), velocities from
-        positions, and on a relative-damped body one pass of implicit damping; with BDF2, on
-        a step of 2/3 h from its origin."""
+        `iterations` passes colour by colour (work: the _Multipliers), each ending with the
+        self-contacts and the colliders where they join the solve (forces.contact), velocities
+        from positions, and on a relative-damped body one pass of implicit damping; with BDF2,
+        on a step of 2/3 h from its origin."""
         clear, passes = (), ()
         for term in PROJECTIONS:         # energies.PROJECTIONS, in that order
             clears, sweeps = term.xpbd_nodes(model, forces, work)
             clear, passes = clear + clears, passes + sweeps
+        if forces.contact is not None and passes:     # SelfCollision.in_solve
+            passes += contact_nodes(model, *forces.contact)
         damping = ()
         if model.spring_count and model.relative_damping:
             damping = (Sweep(work.colours, damp, model, STATE, work.colours, ITEM, DT,

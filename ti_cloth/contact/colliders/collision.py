@@ -468,18 +468,25 @@ def taken_at(colliders: ti.template(), i, x):
 
 
 @ti.func
-def project_particle_out(model: ti.template(), state: ti.template(), colliders: ti.template(),
-                         i, applying: ti.template()):
-    """Project particle i (if free, and while applying[None]) out of every collider,
-    position only (no friction, the velocity left to the caller): for stages that move
-    particles after the collision stage (self-collision) and must not push them back into a
-    collider."""
-    if applying[None] and model.particle_inv_mass[i] > 0:
+def push_out(model: ti.template(), state: ti.template(), colliders: ti.template(), i):
+    """Project particle i (if free) out of every collider, position only (no friction, the
+    velocity left to the caller): for what moves particles after the collision stage
+    (self-collision's passes) or before it (xpbd's passes, where self-collision joins the
+    solve: SelfCollision.in_solve) and must not push them into a collider."""
+    if model.particle_inv_mass[i] > 0:
         x = state.particle_position[i]
         v = state.particle_velocity[i]
         for c in range(colliders.count):
             x, v, _ = _collide_with(colliders, c, i, colliders.step_start[i], x, v, 1.0, False)
         state.particle_position[i] = x
+
+
+@ti.func
+def project_particle_out(model: ti.template(), state: ti.template(), colliders: ti.template(),
+                         i, applying: ti.template()):
+    """push_out while applying[None]."""
+    if applying[None]:
+        push_out(model, state, colliders, i)
 
 
 @backend.kernel
