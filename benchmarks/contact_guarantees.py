@@ -13,8 +13,9 @@ Simulation.collider_distance: the demos' figures are closed animated meshes), th
 run's wall time (checks included: compare it between fail-safes of one scene in one run),
 and the wall time per step with and without self-contact (medians of --repeats alternated
 runs in this process, after a warm-up); each scene with each --fail-safe: on (never_through
-and keep_thickness), through (never_through alone, the default) and off (the contact
-passes alone).
+and keep_thickness), through (never_through alone, the default), off (the contact
+passes alone) and solve (never_through, the contacts also in xpbd's passes:
+SelfCollision.in_solve; xpbd only).
 
 Scenes (N particles a side: 16, 24 and 6 times --scale, or --size; the issue's sizes are
 --scenes pile --size 64 --layers 16 and --scenes twist --size 128):
@@ -165,7 +166,8 @@ SCENES = {"pile": made(pile, THICKNESS), "twist": made(twist, THICKNESS),
           "cape": demo("cape.toml"), "skirt": demo("skirt_walk.toml")}
 FAIL_SAFES = {"on": dict(never_through=True, keep_thickness=True),
               "through": dict(never_through=True, keep_thickness=False),     # the defaults
-              "off": dict(never_through=False, keep_thickness=False)}
+              "off": dict(never_through=False, keep_thickness=False),
+              "solve": dict(never_through=True, keep_thickness=False, in_solve=True)}
 SIDES = {"pile": 16, "twist": 24, "press": 6, "land": 16}    # particles a side at --scale 1
 
 

@@ -565,13 +565,16 @@ class SelfCollisionStage:
     def list_for_solve(self, model, state, dt: float, gravity, step_index: int) -> None:
         """SelfCollision.in_solve: after before_step, the list for the step's predicted path
         (each free particle at x + h v + h^2 g, a held one where it is: the boxes swept from
-        the step's start to there, with the skin), made for the passes of the integrator;
-        the positions left as they were. After the step, after_step keeps it while the
-        cloth ended within the skin of the prediction (listed_at)."""
+        the step's start to there, with the skin), for the passes of the integrator: the
+        list kept where the prediction is within its skin (less the margin) of where it was
+        made, as after_step keeps it, else made again; the positions left as they were.
+        After the step, after_step keeps it while the cloth ended within the skin of where
+        it was made (listed_at)."""
         if self.triangle_count == 0:
             return
         predict_path(model, state, dt, gravity[0], gravity[1], gravity[2])
-        self._make_list(model, state, step_index)
+        if not self.listed or self._moved_past(state, self.skin - MARGIN):
+            self._make_list(model, state, step_index)
         restore_positions(state, self.step_start)
 
     def after_step(self, model, state, t: float, dt: float, step_index: int) -> None:
