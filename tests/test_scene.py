@@ -439,15 +439,19 @@ def test_the_automatic_camera_frames_the_whole_motion(tmp_path, f32, text):
         assert outside["rest"] > 0
 
 
-def test_self_collision_takes_its_fail_safe_switches_by_name(tmp_path):
+def test_self_collision_takes_its_fail_safe_switches_by_name(tmp_path, f64):
     """[simulation] self_collision's never_through, keep_thickness and in_solve reach
     SelfCollision (on, off and off unless given), and anything but a boolean is refused naming
-    the key."""
+    the key. A scene in xpbd's solve built with another integrator (the study's rk4
+    reference) takes the contacts after its step."""
     given = GRID.replace("fps = 50", "fps = 50\nself_collision = { thickness = 0.004, "
                          "keep_thickness = true, never_through = false, in_solve = true }", 1)
-    settings = load_scene(write(tmp_path, given)).self_collision
+    scene = load_scene(write(tmp_path, given))
+    settings = scene.self_collision
     assert settings == tc.SelfCollision(thickness=0.004, keep_thickness=True,
                                         never_through=False, in_solve=True)
+    assert scene.build(integrator="xpbd").self_collision.settings.in_solve
+    assert not scene.build(integrator="rk4").self_collision.settings.in_solve
     assert not tc.SelfCollision().keep_thickness and tc.SelfCollision().never_through
     assert not tc.SelfCollision().in_solve
     with pytest.raises(SceneError, match=r"self_collision\.in_solve must be .*got 1"):

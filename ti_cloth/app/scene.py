@@ -201,18 +201,27 @@ class Scene:
         (refined(): particle i of the scene file is particle i of the simulation); options:
         further Simulation arguments. The divergence guard's box (position_limit) reaches
         GUARD_SIZES body sizes beyond the rest positions: anything further has left the
-        scene."""
+        scene. Self-collision in the solve (SelfCollision.in_solve) is xpbd's: another
+        integrator (the study's reference, its sweep) takes the contacts after its step."""
         if resolution is not None and resolution != self.resolution:
             return self.refined(resolution).build(integrator, dt, **options)
         options.setdefault("position_limit", GUARD_SIZES * self.size
                            + float(np.abs(self.cloth.particle_position).max()))
         integrator = self.integrator if integrator is None else integrator
         dt = self.frame_dt / self.resolved_substeps() if dt is None else dt
+        contact = self.self_collision
+        if contact is not None and contact.in_solve and _name_of(integrator) != "xpbd":
+            contact = replace(contact, in_solve=False)
         return Simulation(self.cloth, integrator=integrator, dt=dt, gravity=self.gravity,
                           drag=self.drag, wind=self.wind, tearing=self.tearing,
                           handles=self.handles, colliders=self.colliders,
-                          strain_limit=self.strain_limit, self_collision=self.self_collision,
+                          strain_limit=self.strain_limit, self_collision=contact,
                           sewing=self.sewing, **options)
+
+
+def _name_of(integrator) -> str:
+    """The name of an integrator given by name or as an object."""
+    return integrator if isinstance(integrator, str) else getattr(integrator, "name", "")
 
 
 def load_scene(path, note=None) -> Scene:
