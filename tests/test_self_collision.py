@@ -331,8 +331,9 @@ def test_one_thread_and_all_cores_and_a_rerun_give_the_same_bits():
     thread and on every core (two on CI), and on a rerun; with them a turning mesh collider
     (a ball under the lower sheet lifting the upper one, which holds up the layers: stacking's
     levels, integer writes in list order), a pile settling on an animated plate (levels
-    seeded by its contacts), and the fail-safe (never_through and keep_thickness) moving
-    particles back in a twisted sheet (its marks and rounds: integer writes and counts).
+    seeded by its contacts), the fail-safe (never_through and keep_thickness) moving
+    particles back in a twisted sheet (its marks and rounds: integer writes and counts), and
+    a landing with the contacts in xpbd's passes (SelfCollision.in_solve).
     The one thread compiles as users' runs do, with Taichi's advanced optimization, the
     suite's runtime without it (helpers.users_runtime): the same bits from both builds too.
     The suite's runtime comes back after the one-thread run and serves the other two (one
@@ -360,9 +361,12 @@ def test_one_thread_and_all_cores_and_a_rerun_give_the_same_bits():
             warnings.simplefilter("ignore")
             twist.step(90)
         assert twist.self_contacts().moved_back > 0, "the fail-safe moved particles back"
+        landed = land_in_solve(8, True)        # the contacts in xpbd's passes
+        landed.step(24)
         return (sim.positions(), grid.cell_start.to_numpy(), grid.cell_item.to_numpy(),
                 listed.vertex_triangle, listed.edge_edge, twist.positions(),
-                twist.velocities(), settle_pile(still_plate(), True, steps=30)[2])
+                twist.velocities(), settle_pile(still_plate(), True, steps=30)[2],
+                landed.positions(), landed.velocities())
 
     with users_runtime():
         runs = [run()]
@@ -909,23 +913,18 @@ def test_the_contacts_in_the_solve_keep_the_thickness_at_a_large_step(f64):
     assert results[True][0] >= 0.99 and results[True][1:] == (0, 0)
 
 
-@pytest.mark.reinitialises
-def test_the_contacts_in_the_solve_give_the_same_bits_everywhere(tmp_path):
+def test_the_contacts_in_the_solve_give_the_same_bits_grown_and_resumed(tmp_path, f64):
     """The landing (8 x 8, 1/60 s, 24 steps) with the contacts in xpbd's passes gives the
-    same bits on one thread (users' build: helpers.users_runtime) and on every core, on a
-    rerun, from a list that starts too small and grows (a new setting, its kernels compiled
-    again: self_contacts().grown), and resumed from a state saved at step 12 (the list is made
-    again before each step from the state alone)."""
+    same bits from a list that starts too small and grows (a new setting, its kernels
+    compiled again: self_contacts().grown) and resumed from a state saved at step 12 (the
+    list is made again before each step from the state alone); one thread against every
+    core: test_one_thread_and_all_cores_and_a_rerun_give_the_same_bits."""
     from ti_cloth.contact.broad_phase.contact_pairs import PairList
 
-    def run():
-        sim = land_in_solve(8, True)
-        sim.step(24)
-        return sim.positions(), sim.velocities()
-
-    with users_runtime():
-        runs = [run()]
-    runs += [run(), run()]
+    runs = []
+    sim = land_in_solve(8, True)
+    sim.step(24)
+    runs.append((sim.positions(), sim.velocities()))
     grown = land_in_solve(8, True)
     grown.self_collision.candidates = PairList(4)     # (a lent stage keeps its grown room)
     grown.step(24)
