@@ -423,14 +423,15 @@ class Simulation:
         its kernels compile again)."""
         if not self._in_solve:
             return
-        stage = self.self_collision
+        stage, colliders = self.self_collision, self.colliders
         stage.list_for_solve(self.model, self.state, self.dt, self.forces.gravity,
                              self.step_count)
+        met = colliders if colliders is not None and not colliders.animated else None
+        if met is not None and met.moving:       # where its stage puts it: the passes meet it
+            met.place(self.time + self.dt, self.dt)
         if self.forces.contact is None or self.forces.contact[1] is not stage.candidates:
-            still = self.colliders if self.colliders is not None and not self.colliders.moving \
-                else None
             self.forces = POOL.keep(dataclasses.replace(
-                self.forces, contact=(stage, stage.candidates, still)))
+                self.forces, contact=(stage, stage.candidates, met)))
 
     @property
     def many_steps(self) -> stepping.ManySteps | None:

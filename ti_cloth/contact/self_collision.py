@@ -223,7 +223,8 @@ class SelfCollision:
     list made before each step for the step's predicted path (each free particle at x + h v
     + h^2 g, held ones where they are), and in every pass, after the membrane and the
     bending, each listed pair in contact projected out (mass-weighted, in list order), then
-    every particle out of the colliders that stand still. The passes after the step and the
+    every particle out of the colliders (a moving one placed first where its stage puts it
+    at the step's end; animated meshes only after the step). The passes after the step and the
     fail-safe stay, and keep the list while the step ended within its skin of the
     prediction. The elastic passes then see the contacts and do not undo them, so a large
     step keeps the thickness (docs/performance.md: a landing at 1/60 s); at small steps it

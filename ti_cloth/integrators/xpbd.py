@@ -120,7 +120,8 @@ def _bdf2_record(state: ti.template(), work: ti.template(), i):
 def contact_nodes(model, stage, pairs, colliders) -> tuple:
     """The end of a pass where self-collision joins the solve (SelfCollision.in_solve): the
     listed pairs in contact moved apart, in list order (a loop of one item), then every
-    particle out of the colliders (`colliders`: those that stand still, or None)."""
+    particle out of the colliders (`colliders`: a ColliderSet without animated meshes, placed
+    for the step's end; or None)."""
     nodes = (Phase(Loop(1, project_listed, stage, pairs, model, STATE, ITEM)),)
     if colliders is not None:
         nodes += (Phase(Loop(model.particle_count, push_out, model, STATE, colliders, ITEM)),)

@@ -43,9 +43,10 @@ class ForceSettings:
     tearable: springs carry an alive flag that force loops must test (compile-time switch; on
         when the simulation has Tearing).
     wind: a wind.WindField (per-triangle aerodynamics) or None (its kernel is never compiled).
-    contact: (self-collision stage, its candidate PairList, ColliderSet or None) when the
-        contacts join the integrator's passes (SelfCollision.in_solve: xpbd), else None; a
-        bigger list is another setting (its kernels compile again, once).
+    contact: (self-collision stage, its candidate PairList, the ColliderSet met in the passes
+        or None: one with animated meshes is met after them) when the contacts join the
+        integrator's passes (SelfCollision.in_solve: xpbd), else None; a bigger list is
+        another setting (its kernels compile again, once).
     """
 
     gravity: tuple[float, float, float] = (0.0, -9.81, 0.0)
