@@ -116,7 +116,6 @@ def _bdf2_record(state: ti.template(), work: ti.template(), i):
     work.solved_velocity[i] = state.particle_velocity[i]
 
 
-@backend.kernel_argument
 def contact_nodes(model, stage, pairs, colliders) -> tuple:
     """The end of a pass where self-collision joins the solve (SelfCollision.in_solve): the
     listed pairs in contact moved apart, in list order (a loop of one item), then every
@@ -128,6 +127,7 @@ def contact_nodes(model, stage, pairs, colliders) -> tuple:
     return nodes
 
 
+@backend.kernel_argument
 class _Multipliers:
     """One Lagrange multiplier per spring (in colour order) and per altitude spring [N s^2],
     three per triangle for its strain and three for its bending (a Fabric's mid-edge bending),
