@@ -428,7 +428,7 @@ class Simulation:
                              self.step_count)
         met = colliders if colliders is not None and not colliders.animated else None
         if met is not None and met.moving:       # where its stage puts it: the passes meet it
-            met.place(self.time + self.dt, self.dt)
+            met.place((self.step_count + 1) * self.dt, self.dt)   # its after_step time
         if self.forces.contact is None or self.forces.contact[1] is not stage.candidates:
             self.forces = POOL.keep(dataclasses.replace(
                 self.forces, contact=(stage, stage.candidates, met)))
