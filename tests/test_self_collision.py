@@ -915,12 +915,12 @@ def test_the_contacts_in_the_solve_keep_the_thickness_at_a_large_step(f64):
 
 def test_the_contacts_in_the_solve_meet_a_moving_collider_where_its_stage_puts_it(f64):
     """Two 12 x 12 denim sheets lying 15 mm apart, a ball rising under them at 0.5 m/s for
-    0.6 s, xpbd at 1/60 s; every step checked by brute force (violations). The passes meet
-    the ball where the collision stage puts it at the step's end (placed before the step):
-    no pair comes nearer than 0.95 of the thickness (0.974 measured), where with the contacts
-    after the solve pairs come to 0.16 (and to 0.159 with the contacts in the passes but the
-    ball met only after them: measured). Stepping launch by launch ("per stage") gives the
-    bits of the default plan: the placement before the step is the stage's own."""
+    0.6 s (36 steps of xpbd at 1/60 s), every step checked by brute force (violations). The
+    passes meet the ball where the collision stage puts it at the step's end (placed before
+    the step): no pair comes nearer than 0.99 of the thickness (0.999 measured, at 0.45,
+    0.49 and 0.51 m/s too), where with the contacts after the solve pairs come to 0.16 as it
+    lifts them (0.03 to 0.40 at those speeds). Stepping launch by launch ("per stage") gives
+    the bits of the default plan: the placement before the step is the stage's own."""
     def sheet(size: float, y: float) -> tc.Cloth:
         mesh = tc.grid_mesh(12, 12, size=(size, size), plane="xz",
                             origin=(-size / 2, y, -size / 2))
@@ -940,17 +940,18 @@ def test_the_contacts_in_the_solve_meet_a_moving_collider_where_its_stage_puts_i
         checked = []
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            for _ in range(60):
+            for _ in range(36):
                 sim.step(1)
                 checked.append(violations(body, sim.positions()))
         assert sum(k for _, k in checked) == 0
         closest[in_solve] = min(c for c, _ in checked) / 0.005
-    report("closest / thickness: after the solve, in it", closest, "< 0.95, >= 0.95")
-    assert closest[False] < 0.95 <= closest[True]
+    report("closest / thickness while the ball rises: after the solve, in it", closest,
+           "< 0.5, >= 0.99")
+    assert closest[False] < 0.5 and closest[True] >= 0.99
     per_stage = simulation(True)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        per_stage.step(60, plan="per stage")
+        per_stage.step(36, plan="per stage")
     np.testing.assert_array_equal(per_stage.positions(), sim.positions())
 
 
