@@ -169,7 +169,7 @@ from .broad_phase.contact_pairs import (
     sweep_boxes,
     torn_pair,
 )
-from .colliders.collision import project_particle_out, rests_on
+from .colliders.collision import near_surface, project_particle_out, rests_on
 
 PAIRS_PER_PARTICLE = 32     # candidate list room at first, per particle
 MAX_PAIRS_PER_PARTICLE = 256
@@ -573,6 +573,10 @@ class SelfCollisionStage:
         it was made (listed_at)."""
         if self.triangle_count == 0:
             return
+        if self.colliders is None:
+            seed_levels(self, model)
+        else:
+            seed_levels_on(self, model, state, self.colliders)
         predict_path(model, state, dt, gravity[0], gravity[1], gravity[2])
         if not self.listed or self._moved_past(state, self.skin - MARGIN):
             self._make_list(model, state, step_index)
@@ -1079,14 +1083,40 @@ def project_listed(stage: ti.template(), pairs: ti.template(), model: ti.templat
         touching, n, gap, weights = _pair_contact(stage, pairs, state, p)
         if touching:
             corners = pairs.particles[p]
+            motion = ti.Vector([0.0, 0.0, 0.0])
+            for k in ti.static(range(4)):
+                motion += weights[k] * (state.particle_position[corners[k]]
+                                        - stage.step_start[corners[k]])
+            shares, _ = stack_shares(stage, corners, weights, motion, n)
             norm = 0.0
             for k in ti.static(range(4)):
-                norm += model.particle_inv_mass[corners[k]] * weights[k] * weights[k]
+                norm += (model.particle_inv_mass[corners[k]] * shares[k] * weights[k]
+                         * weights[k])
             if norm > 0:
                 for k in ti.static(range(4)):
                     i = corners[k]
-                    state.particle_position[i] += (-model.particle_inv_mass[i] * weights[k]
-                                                   * gap / norm) * n
+                    state.particle_position[i] += (-model.particle_inv_mass[i] * shares[k]
+                                                   * weights[k] * gap / norm) * n
+
+
+@backend.kernel
+def seed_levels(stage: ti.template(), model: ti.template()):
+    """Every particle's level before the integrator's passes (in_solve): 0 held, else
+    UNHELD (seed_level: from the state alone)."""
+    for i in stage.level:
+        stage.level[i] = ti.select(model.particle_inv_mass[i] > 0, UNHELD, 0)
+
+
+@backend.kernel
+def seed_levels_on(stage: ti.template(), model: ti.template(), state: ti.template(),
+                   colliders: ti.template()):
+    """seed_levels, and 0 for a particle within half a thickness of a collider's surface
+    (collision.near_surface: animated bodies are not asked, nor whether the last step's
+    response touched it, which a saved state does not hold)."""
+    for i in stage.level:
+        stage.level[i] = ti.select(model.particle_inv_mass[i] > 0, UNHELD, 0)
+        if near_surface(colliders, i, state.particle_position[i], 0.5 * stage.thickness[None]):
+            stage.level[i] = 0
 
 
 @backend.kernel

@@ -436,12 +436,22 @@ def rests_on(colliders: ti.template(), i, x, reach):
     animated bodies are not asked, their distance being a search): what holds a layer up
     (self_collision.py, stacking)."""
     resting = colliders.touched[i] != 0
-    for c in range(colliders.count if not resting else 0):     # touched: no distance needed
+    if not resting:                                  # touched: no distance needed
+        resting = near_surface(colliders, i, x, reach)
+    return resting
+
+
+@ti.func
+def near_surface(colliders: ti.template(), i, x, reach):
+    """Whether particle i, at x, is within `reach` [m] of a collider's contact surface
+    (animated bodies are not asked: rests_on)."""
+    near = False
+    for c in range(colliders.count):
         if colliders.kind[c] != ANIMATED:
             d, _ = collider_distance(colliders, c, x, colliders.step_start[i])
             if d - colliders.thickness[c] < reach:
-                resting = True
-    return resting
+                near = True
+    return near
 
 
 @ti.func
