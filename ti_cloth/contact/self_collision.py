@@ -222,13 +222,15 @@ class SelfCollision:
     in_solve: with the xpbd integrator, the contacts join its passes (Simulation runs it): a
     list made before each step for the step's predicted path (each free particle at x + h v
     + h^2 g, held ones where they are), and in every pass, after the membrane and the
-    bending, each listed pair in contact projected out (mass-weighted, in list order), then
-    every particle out of the colliders (a moving one placed first where its stage puts it
-    at the step's end; animated meshes only after the step). The passes after the step and the
-    fail-safe stay, and keep the list while the step ended within its skin of the
-    prediction. The elastic passes then see the contacts and do not undo them, so a large
-    step keeps the thickness (docs/performance.md: a landing at 1/60 s); at small steps it
-    costs a list a step more. False (the default): contact after the integrator."""
+    bending, each listed pair in contact projected out (in list order, mass-weighted but for
+    the stage's stacking: levels seeded before the step, held particles and those resting on
+    a collider at 0), then every particle out of the colliders (a moving one placed first
+    where its stage puts it at the step's end; animated meshes only after the step). The
+    passes after the step and the fail-safe stay, and keep the list while the step ended
+    within its skin of where it was made. The elastic passes then see the contacts and do
+    not undo them, so a large step keeps the cloth apart (docs/performance.md: a landing at
+    1/60 s); at small steps it may cost a list a step more. False (the default): contact
+    after the integrator."""
 
     thickness: float = 0.005
     friction: float = 0.0
@@ -1077,7 +1079,8 @@ def project_listed(stage: ti.template(), pairs: ti.template(), model: ti.templat
     """SelfCollision.in_solve, in a pass of the integrator (a loop of one item: the pairs in
     list order, the same bits in every run): each listed pair in contact at the current
     positions (_pair_contact: the side taken from the step's start) moved apart to the reach,
-    mass-weighted along its weights."""
+    mass-weighted along its weights, each corner's share by stacking (stack_shares, on the
+    levels seed_levels gave before the step)."""
     total = stage.pair_start[stage.triangle_count + stage.edge_count]
     for p in range(ti.min(total, pairs.capacity)):
         touching, n, gap, weights = _pair_contact(stage, pairs, state, p)
