@@ -1102,12 +1102,18 @@ def project_listed(stage: ti.template(), pairs: ti.template(), model: ti.templat
                                                    * weights[k] * gap / norm) * n
 
 
+@ti.func
+def _held_level(stage: ti.template(), model: ti.template(), i):
+    """Particle i's level before the integrator's passes (in_solve): 0 held, else UNHELD
+    (seed_level's, from the state alone: not from the last step's moves back)."""
+    stage.level[i] = ti.select(model.particle_inv_mass[i] > 0, UNHELD, 0)
+
+
 @backend.kernel
 def seed_levels(stage: ti.template(), model: ti.template()):
-    """Every particle's level before the integrator's passes (in_solve): 0 held, else
-    UNHELD (seed_level: from the state alone)."""
+    """Every particle's _held_level."""
     for i in stage.level:
-        stage.level[i] = ti.select(model.particle_inv_mass[i] > 0, UNHELD, 0)
+        _held_level(stage, model, i)
 
 
 @backend.kernel
@@ -1117,7 +1123,7 @@ def seed_levels_on(stage: ti.template(), model: ti.template(), state: ti.templat
     (collision.near_surface: animated bodies are not asked, nor whether the last step's
     response touched it, which a saved state does not hold)."""
     for i in stage.level:
-        stage.level[i] = ti.select(model.particle_inv_mass[i] > 0, UNHELD, 0)
+        _held_level(stage, model, i)
         if near_surface(colliders, i, state.particle_position[i], 0.5 * stage.thickness[None]):
             stage.level[i] = 0
 
