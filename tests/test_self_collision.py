@@ -964,18 +964,21 @@ def test_the_contacts_in_the_solve_give_the_same_bits_grown_and_resumed(tmp_path
     core: test_one_thread_and_all_cores_and_a_rerun_give_the_same_bits."""
     from ti_cloth.contact.broad_phase.contact_pairs import PairList
 
-    runs = []
+    runs = []          # each simulation dropped before the next: they share its lent parts
     sim = land_in_solve(8, True)
     sim.step(24)
     runs.append((sim.positions(), sim.velocities()))
+    del sim
     grown = land_in_solve(8, True)
     grown.self_collision.candidates = PairList(4)     # (a lent stage keeps its grown room)
     grown.step(24)
     assert grown.self_contacts().grown, "the list grew"
     runs.append((grown.positions(), grown.velocities()))
+    del grown
     saved = land_in_solve(8, True)
     saved.step(12)
     path = saved.save_state(tmp_path / "landing.npz")
+    del saved
     resumed = land_in_solve(8, True)
     resumed.load_state(path)
     resumed.step(12)
