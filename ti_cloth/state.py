@@ -176,3 +176,10 @@ def copy_positions(state: ti.template(), target: ti.template()):
     """target[i] = particle_position[i] (a snapshot for corrections applied after a step)."""
     for i in target:
         target[i] = state.particle_position[i]
+
+
+@backend.kernel
+def restore_positions(state: ti.template(), source: ti.template()):
+    """particle_position[i] = source[i] (copy_positions the other way)."""
+    for i in source:
+        state.particle_position[i] = source[i]

@@ -24,7 +24,7 @@ from ..contact.colliders.shapes import Box, Capsule, Collider, Plane, Sphere
 from ..contact.self_collision import SelfCollision
 from ..inputs import limits
 from ..inputs.scene_file import SceneError, Table, load_toml
-from ..integrators import INTEGRATORS
+from ..integrators import INTEGRATORS, make_integrator
 from ..physics.sewing import Sewing
 from ..physics.strain_limit import StrainLimit
 from ..physics.wind import Wind
@@ -210,18 +210,13 @@ class Scene:
         integrator = self.integrator if integrator is None else integrator
         dt = self.frame_dt / self.resolved_substeps() if dt is None else dt
         contact = self.self_collision
-        if contact is not None and contact.in_solve and _name_of(integrator) != "xpbd":
+        if contact is not None and contact.in_solve and make_integrator(integrator).name != "xpbd":
             contact = replace(contact, in_solve=False)
         return Simulation(self.cloth, integrator=integrator, dt=dt, gravity=self.gravity,
                           drag=self.drag, wind=self.wind, tearing=self.tearing,
                           handles=self.handles, colliders=self.colliders,
                           strain_limit=self.strain_limit, self_collision=contact,
                           sewing=self.sewing, **options)
-
-
-def _name_of(integrator) -> str:
-    """The name of an integrator given by name or as an object."""
-    return integrator if isinstance(integrator, str) else getattr(integrator, "name", "")
 
 
 def load_scene(path, note=None) -> Scene:

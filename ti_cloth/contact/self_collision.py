@@ -153,7 +153,7 @@ from ..inputs.validation import count, finite_number, keyword_only, require
 from ..runtime import backend, plan
 from ..runtime.plan import DT, ITEM, STATE, Loop, Once, Phase, Until
 from ..runtime.transfer import upload
-from ..state import copy_positions
+from ..state import copy_positions, restore_positions
 from . import never_through
 from .broad_phase.box_grid import BLOCK, BoxGrid
 from .broad_phase.contact_pairs import (
@@ -1136,13 +1136,6 @@ def predict_path(model: ti.template(), state: ti.template(), dt: float, gx: floa
     for i in state.particle_position:
         if model.particle_inv_mass[i] > 0:
             state.particle_position[i] += dt * state.particle_velocity[i] + (dt * dt) * g
-
-
-@backend.kernel
-def restore_positions(state: ti.template(), source: ti.template()):
-    """particle_position[i] = source[i] (copy_positions the other way)."""
-    for i in source:
-        state.particle_position[i] = source[i]
 
 
 @ti.func
