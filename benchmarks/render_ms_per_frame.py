@@ -15,7 +15,14 @@ ray-cast anew).
 
 `--scenes`: each scene file as `ti-cloth view` runs it without its window (app.view.viewer_for,
 960 x 540 by default there too, no supersampling): a frame's steps and its drawing, the
-camera still and turning, the real-time ratio and frames per second they allow.
+camera still and turning, the real-time ratio and frames per second they allow. `--preview`
+times each scene's preview after it (`ti-cloth view --preview`: app/scene_preview.py);
+`--frames 0` every frame of the scene after the first 5, where the ratio over the whole run
+(its mean frame) and the frames over their budget (a frame's simulated time) show the dear
+stretches a median hides.
+
+    python benchmarks/render_ms_per_frame.py --sizes --scenes demos/cape.toml \
+        demos/skirt_walk.toml --preview --frames 0 --width 960 --height 540
 """
 
 import argparse
@@ -84,30 +91,36 @@ def render_ms_per_frame(renderer, sim, frames, window=False, turning=False):
     return 1e3 * statistics.median(times)
 
 
-def viewer_ms_per_frame(path, frames, width, height):
-    """A scene's frame as the live viewer runs it: (ms of its steps, ms of its drawing with
-    the camera still, the same turning), medians of `frames` frames after 5."""
-    viewer = viewer_for(load_scene(path), width=width, height=height)
+def viewer_ms_per_frame(path, frames, width, height, preview=False):
+    """A scene's frame as the live viewer runs it (or its preview's): (ms of its steps: the
+    median and the 90th percentile, ms of its drawing with the camera still, the same
+    turning, the real-time ratio of the mean frame, the share of frames over frame_dt,
+    frame_dt, steps a frame), medians of `frames` frames after 5 (0: every frame left)."""
+    scene = load_scene(path, preview=preview)
+    viewer = viewer_for(scene, width=width, height=height)
     camera = viewer.camera
     for _ in range(5):
         viewer.advance()
         viewer.window_image()
     steps, still, turning = [], [], []
-    for k in range(frames):
+    for k in range(frames or max(scene.frames - 5, 1)):
         start = time.perf_counter()
         viewer.advance()
         steps.append(time.perf_counter() - start)
         start = time.perf_counter()
         viewer.window_image()
         still.append(time.perf_counter() - start)
-    for k in range(frames):
+    for k in range(min(len(steps), 15)):
         viewer.camera = turned(camera, k + 1)
         start = time.perf_counter()
         viewer.window_image()
         turning.append(time.perf_counter() - start)
     viewer.camera = camera
-    return (1e3 * statistics.median(steps), viewer.frame_dt, viewer.substeps,
-            1e3 * statistics.median(still), 1e3 * statistics.median(turning))
+    frame = np.add(steps, still)
+    return (1e3 * statistics.median(steps), 1e3 * np.percentile(steps, 90),
+            1e3 * statistics.median(still), 1e3 * statistics.median(turning),
+            viewer.frame_dt / frame.mean(), float((frame > viewer.frame_dt).mean()),
+            viewer.frame_dt, viewer.substeps)
 
 
 def main(argv=None):
@@ -118,8 +131,14 @@ def main(argv=None):
     parser.add_argument("--arch", default="cpu", choices=limits.ARCH_NAMES)
     parser.add_argument("--width", type=int, default=1280)
     parser.add_argument("--height", type=int, default=720)
-    parser.add_argument("--frames", type=int, default=7, help="timed frames per case (median)")
+    parser.add_argument("--frames", type=int, default=7, help="timed frames per case (median); "
+                        "0: every frame of a --scenes scene")
+    parser.add_argument("--preview", action="store_true",
+                        help="time each of --scenes' preview too (ti-cloth view --preview)")
     args = parser.parse_args(argv)
+    if args.frames < 0 or (args.frames == 0 and args.sizes):
+        parser.error(f"--frames must be >= 1 (0: every frame, with --scenes only), "
+                     f"got {args.frames}")
     tc.init(arch=args.arch, precision="f32")
     if args.sizes:
         print(f"arch={args.arch}, {args.width}x{args.height}, median of {args.frames} frames; "
@@ -144,17 +163,20 @@ def main(argv=None):
                   f"{substeps:>9} {sim_ms:>13.0f} {ms / sim_ms:>11.4f} {ms / step_ms:>15.0f} "
                   f"{window:>10.1f} {turning:>8.1f}")
     if args.scenes:
+        told = f"{args.frames} frames" if args.frames else "every frame"
         print(f"\nthe live viewer, {args.width}x{args.height}, no supersampling, medians of "
-              f"{args.frames} frames after 5")
-        print(f"{'scene':>24} {'steps a frame':>14} {'steps ms':>9} {'drawing ms':>11} "
-              f"{'turning':>8} {'real time':>10} {'frames/s':>9}")
+              f"{told} after 5")
+        print(f"{'scene':>24} {'steps a frame':>14} {'steps ms':>9} {'90 %':>6} "
+              f"{'drawing ms':>11} {'turning':>8} {'real time':>10} {'whole run':>10} "
+              f"{'over budget':>12} {'frames/s':>9}")
     for path in args.scenes:
-        steps, frame_dt, substeps, still, turning = viewer_ms_per_frame(
-            path, args.frames, args.width, args.height)
-        print(f"{Path(path).stem:>24} {substeps:>14} {steps:>9.1f} {still:>11.1f} "
-              f"{turning:>8.1f} {1e3 * frame_dt / (steps + still):>9.2f}x "
-              f"{1e3 / (steps + still):>9.0f}")
-
+        for preview in (False, True) if args.preview else (False,):
+            steps, tail, still, turning, whole, over, frame_dt, substeps = viewer_ms_per_frame(
+                path, args.frames, args.width, args.height, preview)
+            name = Path(path).stem + (" preview" if preview else "")
+            print(f"{name:>24} {substeps:>14} {steps:>9.1f} {tail:>6.1f} {still:>11.1f} "
+                  f"{turning:>8.1f} {1e3 * frame_dt / (steps + still):>9.2f}x {whole:>9.2f}x "
+                  f"{over:>11.0%} {1e3 / (steps + still):>9.0f}", flush=True)
 
 if __name__ == "__main__":
     main()

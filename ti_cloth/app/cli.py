@@ -333,9 +333,10 @@ def info() -> int:
 
 
 def view(scene_path, *, out=None, width=960, height=540, arch="cpu", record=False,
-         mp4=False) -> int:
-    """Open a window on the scene (app/view.py); exit code 0 when it closes, 2 for a scene it
-    refuses (the message names the key) or no display, 74 for a file it cannot write."""
+         mp4=False, preview=False) -> int:
+    """Open a window on the scene (app/view.py), or on its preview (app/scene_preview.py);
+    exit code 0 when it closes, 2 for a scene it refuses (the message names the key) or no
+    display, 74 for a file it cannot write."""
     from ..inputs.scene_file import SceneError
     from .scene import load_scene
     from ..runtime import backend
@@ -346,12 +347,14 @@ def view(scene_path, *, out=None, width=960, height=540, arch="cpu", record=Fals
         return 2
     try:
         require_display()
-        scene = load_scene(scene_path)
+        scene = load_scene(scene_path, preview=preview)
         if scene.automatic:
             from .advisor import resolve
 
             scene, why = resolve(scene, out or scene.output.folder, arch=arch)
             print(f"integrator auto: {why}", file=sys.stderr)
+        for change in scene.preview:
+            print(f"preview: {change}", file=sys.stderr)
         backend.ensure(arch=arch, precision=scene.precision)
         open_view(scene, width=width, height=height, folder=out, record=record, mp4=mp4)
     except OutputError as err:                  # a recorded frame, a snapshot, advice
@@ -386,7 +389,7 @@ def main(argv=None) -> int:
         return fit(args)
     if args.command == "view":
         return view(args.scene, out=args.out, width=args.width, height=args.height,
-                    arch=args.arch, record=args.record, mp4=args.mp4)
+                    arch=args.arch, record=args.record, mp4=args.mp4, preview=args.preview)
     if args.command == "study":
         return study(args.scene, out=args.out, integrators=args.integrators, dts=args.dts,
                      precisions=args.precisions, iterations=args.iterations, solves=args.solves,
@@ -515,6 +518,10 @@ def build_parser() -> argparse.ArgumentParser:
                              help="write what the window shows as PNG frames and a GIF")
     view_parser.add_argument("--mp4", action="store_true",
                              help="record an MP4 too (implies --record; needs imageio-ffmpeg)")
+    view_parser.add_argument("--preview", action="store_true",
+                             help="run the scene's preview: garment panels cut at twice their "
+                                  "edge length, xpbd and pbd stepping at most 1/60 s (a real-time "
+                                  "view of the cape and the skirt on two cores)")
     commands.add_parser("info", parents=[common],
                         help="versions, architecture, threads and the extras installed")
     fit_parser = commands.add_parser(

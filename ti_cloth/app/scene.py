@@ -34,6 +34,7 @@ from ..simulation import Simulation
 from ..stability import auto_substeps
 from .scene_bodies import DIMENSION, build_bodies, read_body, read_mesh_file, read_path
 from .scene_output import Output, read_camera, read_output
+from .scene_preview import previewed
 
 COLLIDER_TYPES = {"plane": Plane, "sphere": Sphere, "box": Box, "capsule": Capsule,
                   "mesh": MeshCollider, "animated_mesh": AnimatedMeshCollider}
@@ -85,6 +86,7 @@ class Scene:
     resolution: int = 1                   # `cloth` is the bodies refined this many times
     file_particles: int = 0               # particles of the bodies as the file gives them
     sewing: Sewing | None = None          # how a garment's seams close ([simulation.sewing])
+    preview: tuple = ()                   # what a preview changed, in words (scene_preview.py)
 
     @property
     def own_particles(self) -> np.ndarray:
@@ -219,14 +221,19 @@ class Scene:
                           sewing=self.sewing, **options)
 
 
-def load_scene(path, note=None) -> Scene:
+def load_scene(path, note=None, preview: bool = False) -> Scene:
     """Read a scene file; raises SceneError naming the key, the value and what is allowed.
     note(message), when given, hears before a slow step of loading begins (a body of more than
-    limits.LARGE_BODY springs: its stable-step analysis takes seconds to a minute)."""
+    limits.LARGE_BODY springs: its stable-step analysis takes seconds to a minute). preview:
+    the file's preview instead (scene_preview.py: coarser garment panels, longer
+    position-based steps; Scene.preview says what changed)."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"scene file not found: {path}")
-    root = Table(load_toml(path), "", str(path))
+    raw, changes = load_toml(path), ()
+    if preview:
+        raw, changes = previewed(raw)
+    root = Table(raw, "", str(path))
     meta = root.table("scene") or Table({}, "scene", str(path))
     name = _name(meta, path.stem)
     description = meta.string("description", "")
@@ -318,7 +325,8 @@ def load_scene(path, note=None) -> Scene:
                   strain_limit=strain_limit, self_collision=self_collision, handles=handles,
                   colliders=colliders, camera=camera,
                   camera_fit=camera_fit, output=output, advice=advice, bodies=bodies,
-                  resolution=resolution, file_particles=file_particles, sewing=sewing)
+                  resolution=resolution, file_particles=file_particles, sewing=sewing,
+                  preview=changes)
     if note is not None and cloth.spring_count > limits.LARGE_BODY:
         note(f"'{name}' has {cloth.particle_count:,} particles and {cloth.spring_count:,} "
              "springs: finding its stable step takes a while")

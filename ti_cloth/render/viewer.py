@@ -65,16 +65,17 @@ class Event:
 class Viewer:
     """sim seen by `camera` in width x height pixels through `renderer` (a Renderer of that
     size); `frame_dt` [s] of simulated time and `substeps` steps a frame; `folder` where "s"
-    saves `<name>.view.npz`."""
+    saves `<name>.view.npz`; `note`: a line the window always shows (a scene's preview)."""
 
     def __init__(self, sim, renderer, camera: Camera, *, name: str, frame_dt: float,
-                 substeps: int, folder, paint):
+                 substeps: int, folder, paint, note: str = ""):
         self.sim, self.renderer, self.camera = sim, renderer, camera
         self.first_distance = max(float(np.linalg.norm(np.subtract(camera.position,
                                                                     camera.target))), 1e-6)
         self.name, self.frame_dt, self.substeps = name, frame_dt, substeps
         self.folder = Path(folder)
         self.paint = paint                     # paint(renderer, sim, wireframe): the scene
+        self.note = note
         self.width, self.height = renderer.width, renderer.height
         self.paused = self.wireframe = self.quit = False
         self.held = None                       # (particle, depth, scene pinned it, target)
@@ -269,12 +270,12 @@ class Viewer:
 
     def status(self) -> list[str]:
         """The lines the window shows: time, real-time ratio and steps per second of the
-        running time, "paused"; the keys; the last save ("saved <path>"), a refused one, or
-        the divergence that stopped the run."""
+        running time, "paused"; the keys; the note, if any; the last save ("saved <path>"), a
+        refused one, or the divergence that stopped the run."""
         rate = (f"{self.simulated / self.running:.2f} x real time   "
                 f"{self.steps_run / self.running:,.0f} steps/s") if self.running > 0 else ""
         lines = [f"t = {self.sim.time:.3f} s   {rate}" + ("   paused" if self.paused else ""),
-                 KEYS_HELP]
+                 KEYS_HELP] + ([self.note] if self.note else [])
         if self.diverged is not None:
             lines.append(f"{self.diverged}"[:110] + ": press r to start again")
         elif self.unsaved is not None:

@@ -1,0 +1,119 @@
+"""A scene's preview (app/scene_preview.py, `ti-cloth view --preview`): garment panels cut at
+twice their edge length, position-based steps of at most 1/60 s, everything else as the file
+has it; the viewer says so on screen and saves its states apart from the file's scene."""
+
+import numpy as np
+import pytest
+
+from ti_cloth.app.cli import build_parser
+from ti_cloth.app.scene import load_scene
+from ti_cloth.app.scene_preview import PREVIEW_COARSENING, PREVIEW_STEP
+from ti_cloth.app.view import viewer_for
+from ti_cloth.inputs.scene_file import SceneError
+
+SCENE = """
+[simulation]
+integrator = "{integrator}"
+fps = 30
+{steps}
+
+[[bodies]]
+type = "grid"
+rows = 5
+cols = 4
+size = [0.3, 0.2]
+origin = [1.0, 1.0, 0.0]
+pinned = ["top_left"]
+
+[[bodies]]
+type = "garment"
+fabric = "denim"
+pinned = ["panel0_edge2"]
+
+[[bodies.panels]]
+outline = [[0.0, 0.0], [0.6, 0.0], [0.6, 0.4], [0.0, 0.4]]
+edge_length = {edge}
+translate = [0.0, 1.0, 0.0]
+"""
+
+
+def scene_text(integrator="xpbd", steps="substeps = 8", edge=0.04):
+    return SCENE.format(integrator=integrator, steps=steps, edge=edge)
+
+
+def write(tmp_path, text):
+    path = tmp_path / "scene.toml"
+    path.write_text(text)
+    return path
+
+
+def mean_edge(positions: np.ndarray, triangles: np.ndarray) -> float:
+    """The mean length of the mesh's edges, each once (computed here, not by the package)."""
+    ends = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    ends = np.unique(ends, axis=0)
+    return float(np.linalg.norm(positions[ends[:, 0]] - positions[ends[:, 1]], axis=1).mean())
+
+
+def garment_part(scene, grid_count=20):
+    """The garment's positions and triangles (the grid's 20 particles come first)."""
+    x, triangles = scene.cloth.particle_position, scene.cloth.mesh.triangles
+    mine = triangles[(triangles >= grid_count).all(axis=1)] - grid_count
+    return x[grid_count:], mine
+
+
+def test_a_preview_cuts_the_panels_coarser_and_steps_xpbd_at_a_sixtieth(tmp_path):
+    path = write(tmp_path, scene_text())
+    scene, preview = load_scene(path), load_scene(path, preview=True)
+    assert scene.preview == () and scene.resolved_substeps() == 8
+    ratio = mean_edge(*garment_part(preview)) / mean_edge(*garment_part(scene))
+    print(f"mean garment edge, preview / file: {ratio:.3f}; particles "
+          f"{preview.cloth.particle_count} / {scene.cloth.particle_count}")
+    assert abs(ratio - PREVIEW_COARSENING) < 0.25 * PREVIEW_COARSENING
+    assert preview.cloth.particle_count - 20 < 0.4 * (scene.cloth.particle_count - 20)
+    # the grid is as the file has it, and its pin
+    np.testing.assert_array_equal(preview.cloth.particle_position[:20],
+                                  scene.cloth.particle_position[:20])
+    assert preview.cloth.pinned[:20].tolist() == scene.cloth.pinned[:20].tolist()
+    # the garment's named edge is pinned at the new cut too: along the panel's top
+    top = preview.cloth.particle_position[20:][preview.cloth.pinned[20:]]
+    assert len(top) >= 3 and np.allclose(top[:, 1], 1.4)
+    assert preview.resolved_substeps() == round(1 / (30 * PREVIEW_STEP)) == 2
+    assert preview.preview == ("garment panels cut at 8 cm (the file's 4)",
+                               "steps of 1/60 s (the file's: 1/240 s)")
+
+
+@pytest.mark.parametrize("integrator, steps, changed", [
+    ("symplectic_euler", "substeps = 8", None),     # its step is bounded by its stability
+    ("implicit_euler", "substeps = 8", None),       # costs as much a simulated second
+    ("xpbd", "substeps = 1", None),                 # never more steps than the file's
+    ("xpbd", "dt = 0.002", "steps of 1/60 s (the file's: 1/510 s)"),
+    ("xpbd", "", "steps of 1/60 s (the file's: auto)"),
+])
+def test_a_preview_steps_longer_only_where_a_position_based_step_is(tmp_path, integrator,
+                                                                     steps, changed):
+    path = write(tmp_path, scene_text(integrator, steps))
+    file, preview = load_scene(path), load_scene(path, preview=True)
+    assert preview.preview[1:] == ((changed,) if changed else ())
+    if changed is None:
+        assert preview.substeps == file.substeps
+    else:
+        assert preview.resolved_substeps() == 2
+
+
+def test_a_preview_leaves_a_bad_value_for_the_reader_to_name(tmp_path):
+    path = write(tmp_path, scene_text(edge=-0.04))
+    with pytest.raises(SceneError, match=r"edge_length.*-0\.04"):
+        load_scene(path, preview=True)
+
+
+def test_the_viewer_of_a_preview_says_so_and_saves_apart(tmp_path, f64):
+    path = write(tmp_path, scene_text())
+    viewer = viewer_for(load_scene(path, preview=True), width=64, height=48, folder=tmp_path)
+    viewer.advance()
+    assert viewer.sim.dt == pytest.approx(1 / 60)
+    assert viewer.status()[2] == ("preview: garment panels cut at 8 cm (the file's 4); "
+                                  "steps of 1/60 s (the file's: 1/240 s)")
+    assert viewer.save() == tmp_path / "scene_preview.view.npz"
+    plain = viewer_for(load_scene(path), width=64, height=48, folder=tmp_path)
+    assert len(plain.status()) == 2 and plain.name == "scene"
+    assert build_parser().parse_args(["view", str(path), "--preview"]).preview
