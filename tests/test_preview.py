@@ -1,13 +1,14 @@
-"""A scene's preview (app/scene_preview.py, `ti-cloth view --preview`): garment panels cut at
-twice their edge length, position-based steps of at most 1/60 s, everything else as the file
-has it; the viewer says so on screen and saves its states apart from the file's scene."""
+"""A scene's preview (app/scene_preview.py, `ti-cloth view --preview`): garment panels cut
+coarser until they hold about PREVIEW_PARTICLES particles, position-based steps of at most
+1/60 s, everything else as the file has it; the viewer says so on screen and saves its states
+apart from the file's scene."""
 
 import numpy as np
 import pytest
 
 from ti_cloth.app.cli import build_parser
 from ti_cloth.app.scene import load_scene
-from ti_cloth.app.scene_preview import PREVIEW_COARSENING, PREVIEW_STEP
+from ti_cloth.app.scene_preview import PREVIEW_PARTICLES, PREVIEW_STEP
 from ti_cloth.app.view import viewer_for
 from ti_cloth.inputs.scene_file import SceneError
 
@@ -37,7 +38,7 @@ translate = [0.0, 1.0, 0.0]
 """
 
 
-def scene_text(integrator="xpbd", steps="substeps = 8", edge=0.04):
+def scene_text(integrator="xpbd", steps="substeps = 8", edge=0.01):
     return SCENE.format(integrator=integrator, steps=steps, edge=edge)
 
 
@@ -61,25 +62,36 @@ def garment_part(scene, grid_count=20):
     return x[grid_count:], mine
 
 
-def test_a_preview_cuts_the_panels_coarser_and_steps_xpbd_at_a_sixtieth(tmp_path):
+def test_a_preview_cuts_the_panels_to_its_budget_and_steps_xpbd_at_a_sixtieth(tmp_path):
     path = write(tmp_path, scene_text())
     scene, preview = load_scene(path), load_scene(path, preview=True)
     assert scene.preview == () and scene.resolved_substeps() == 8
     ratio = mean_edge(*garment_part(preview)) / mean_edge(*garment_part(scene))
-    print(f"mean garment edge, preview / file: {ratio:.3f}; particles "
-          f"{preview.cloth.particle_count} / {scene.cloth.particle_count}")
-    assert abs(ratio - PREVIEW_COARSENING) < 0.25 * PREVIEW_COARSENING
-    assert preview.cloth.particle_count - 20 < 0.4 * (scene.cloth.particle_count - 20)
+    particles = preview.cloth.particle_count - 20
+    print(f"mean garment edge, preview / file: {ratio:.3f}; garment particles {particles} "
+          f"of {scene.cloth.particle_count - 20}")
+    # the panel (0.24 m² at 1 cm: about 2,800 particles) cut at about 600, so its edges are
+    # longer by about the square root of that ratio
+    assert abs(particles - PREVIEW_PARTICLES) < 0.25 * PREVIEW_PARTICLES
+    expected = np.sqrt((scene.cloth.particle_count - 20) / particles)
+    assert abs(ratio - expected) < 0.15 * expected
     # the grid is as the file has it, and its pin
     np.testing.assert_array_equal(preview.cloth.particle_position[:20],
                                   scene.cloth.particle_position[:20])
     assert preview.cloth.pinned[:20].tolist() == scene.cloth.pinned[:20].tolist()
     # the garment's named edge is pinned at the new cut too: along the panel's top
     top = preview.cloth.particle_position[20:][preview.cloth.pinned[20:]]
-    assert len(top) >= 3 and np.allclose(top[:, 1], 1.4)
+    assert len(top) >= 8 and np.allclose(top[:, 1], 1.4)
     assert preview.resolved_substeps() == round(1 / (30 * PREVIEW_STEP)) == 2
-    assert preview.preview == ("garment panels cut at 8 cm (the file's 4)",
+    assert preview.preview == ("garment panels cut at 2.1 cm (the file's 1)",
                                "steps of 1/60 s (the file's: 1/240 s)")
+
+
+def test_a_garment_within_the_budget_keeps_its_cut(tmp_path):
+    path = write(tmp_path, scene_text(edge=0.04))      # about 170 particles
+    scene, preview = load_scene(path), load_scene(path, preview=True)
+    assert preview.cloth.particle_count == scene.cloth.particle_count
+    assert preview.preview == ("steps of 1/60 s (the file's: 1/240 s)",)
 
 
 @pytest.mark.parametrize("integrator, steps, changed", [
@@ -101,8 +113,8 @@ def test_a_preview_steps_longer_only_where_a_position_based_step_is(tmp_path, in
 
 
 def test_a_preview_leaves_a_bad_value_for_the_reader_to_name(tmp_path):
-    path = write(tmp_path, scene_text(edge=-0.04))
-    with pytest.raises(SceneError, match=r"edge_length.*-0\.04"):
+    path = write(tmp_path, scene_text(edge=-0.01))
+    with pytest.raises(SceneError, match=r"edge_length.*-0\.01"):
         load_scene(path, preview=True)
 
 
@@ -111,7 +123,7 @@ def test_the_viewer_of_a_preview_says_so_and_saves_apart(tmp_path, f64):
     viewer = viewer_for(load_scene(path, preview=True), width=64, height=48, folder=tmp_path)
     viewer.advance()
     assert viewer.sim.dt == pytest.approx(1 / 60)
-    assert viewer.status()[2] == ("preview: garment panels cut at 8 cm (the file's 4); "
+    assert viewer.status()[2] == ("preview: garment panels cut at 2.1 cm (the file's 1); "
                                   "steps of 1/60 s (the file's: 1/240 s)")
     assert viewer.save() == tmp_path / "scene_preview.view.npz"
     plain = viewer_for(load_scene(path), width=64, height=48, folder=tmp_path)

@@ -519,9 +519,9 @@ def build_parser() -> argparse.ArgumentParser:
     view_parser.add_argument("--mp4", action="store_true",
                              help="record an MP4 too (implies --record; needs imageio-ffmpeg)")
     view_parser.add_argument("--preview", action="store_true",
-                             help="run the scene's preview: garment panels cut at twice their "
-                                  "edge length, xpbd and pbd stepping at most 1/60 s (a real-time "
-                                  "view of the cape and the skirt on two cores)")
+                             help="run the scene's preview: garment panels cut coarser, to "
+                                  "about 600 particles, xpbd and pbd stepping at most 1/60 s (a "
+                                  "real-time view of the cape and the skirt on two cores)")
     commands.add_parser("info", parents=[common],
                         help="versions, architecture, threads and the extras installed")
     fit_parser = commands.add_parser(

@@ -1,9 +1,12 @@
 """A scene's preview (`ti-cloth view --preview`, `load_scene(path, preview=True)`): the scene
 file as read, with the values that set its cost per simulated second changed, as Marvelous
 Designer's particle distance and Vellum's substeps are turned down while a garment is
-arranged: every garment panel cut at PREVIEW_COARSENING times its edge length (about a
-quarter of the particles), and a position-based integrator (xpbd, pbd) stepping at most
-PREVIEW_STEP (two steps a frame at 30 frames a second, where the demos' garments take eight).
+arranged: the garment panels cut coarser, by one factor, until they hold about
+PREVIEW_PARTICLES particles in all (the demos' cape, 3,795 particles at 1.5 cm, is cut at
+3.7 cm: 646), and a position-based integrator (xpbd, pbd) stepping at most PREVIEW_STEP
+(two steps a frame at 30 frames a second, where the demos' garments take eight). The cape
+and the skirt then keep real time on two cores (docs/performance.md, "A preview of the
+garments in real time").
 Other bodies and integrators are left as the file has them: a grid, a string or hair is
 resolution-free to read only at its own size, and an explicit step is bounded by its
 stability, an implicit one costs as much per simulated second at a larger step
@@ -23,7 +26,7 @@ from numbers import Real
 from ..integrators import INTEGRATORS
 from ..simulation import Simulation
 
-PREVIEW_COARSENING = 2.0    # a preview's garment panels: this many times their edge length
+PREVIEW_PARTICLES = 600     # a preview's garment panels hold about this many particles
 PREVIEW_STEP = 1.0 / 60.0   # s: a preview's longest step, for a position-based integrator
 
 
@@ -43,18 +46,43 @@ def previewed(raw: dict) -> tuple[dict, tuple[str, ...]]:
 
 
 def _coarser_panels(bodies) -> list[tuple[float, float]]:
-    """Every garment panel's edge_length times PREVIEW_COARSENING, in place; the distinct
-    (file's, preview's) lengths."""
+    """Every garment panel's edge_length times one factor, in place, so that the panels hold
+    about PREVIEW_PARTICLES particles in all (never finer than the file's); the distinct
+    (file's, preview's) lengths. A panel's particles are estimated from its outline's area,
+    a particle for each two equilateral triangles of its edge length."""
+    panels = [(panel, panel["edge_length"], _area(panel.get("outline")))
+              for body in (bodies if isinstance(bodies, list) else ())
+              if isinstance(body, dict) and body.get("type") == "garment"
+              for panel in (body.get("panels") if isinstance(body.get("panels"), list) else ())
+              if isinstance(panel, dict) and _positive(panel.get("edge_length"))]
+    particles = sum(area / (math.sqrt(3.0) / 2.0 * length ** 2)
+                    for _, length, area in panels)
+    factor = math.sqrt(particles / PREVIEW_PARTICLES)
+    if factor <= 1.0:
+        return []
     cut = {}
-    for body in bodies if isinstance(bodies, list) else ():
-        if not (isinstance(body, dict) and body.get("type") == "garment"):
-            continue
-        panels = body.get("panels")
-        for panel in panels if isinstance(panels, list) else ():
-            length = panel.get("edge_length") if isinstance(panel, dict) else None
-            if isinstance(length, Real) and not isinstance(length, bool) and length > 0:
-                panel["edge_length"] = cut.setdefault(length, PREVIEW_COARSENING * length)
+    for panel, length, _ in panels:
+        panel["edge_length"] = cut.setdefault(length, float(f"{factor * length:.2g}"))
     return sorted(cut.items())
+
+
+def _area(outline) -> float:
+    """The area of a panel's outline [(x, y), ...] (the shoelace formula), 0 where it is not
+    one (the reader names it)."""
+    if not (isinstance(outline, list) and len(outline) >= 3
+            and all(isinstance(p, list) and len(p) == 2 and all(map(_number, p))
+                    for p in outline)):
+        return 0.0
+    x, y = zip(*outline)
+    return 0.5 * abs(sum(x[k] * y[k - 1] - x[k - 1] * y[k] for k in range(len(x))))
+
+
+def _number(value) -> bool:
+    return isinstance(value, Real) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _positive(value) -> bool:
+    return _number(value) and value > 0
 
 
 def _longer_steps(simulation) -> str | None:
@@ -68,17 +96,16 @@ def _longer_steps(simulation) -> str | None:
     fps = simulation.get("fps", 30.0)
     if (not isinstance(name, str) or name not in INTEGRATORS
             or not INTEGRATORS[name].position_based
-            or not isinstance(fps, Real) or isinstance(fps, bool) or not fps > 0):
+            or not _positive(fps)):
         return None
     fewest = max(1, math.ceil(1.0 / (fps * PREVIEW_STEP) - 1e-9))
     given = simulation.get("substeps", "auto")
     if "dt" in simulation:
         dt = simulation["dt"]
-        if not (isinstance(dt, Real) and not isinstance(dt, bool) and dt > 0):
+        if not _positive(dt):
             return None
         given = max(1, math.ceil(1.0 / fps / dt - 1e-9))
-    elif given != "auto" and not (isinstance(given, int) and not isinstance(given, bool)
-                                  and given >= 1):
+    elif given != "auto" and not (_positive(given) and isinstance(given, int)):
         return None
     if given != "auto" and given <= fewest:      # (auto steps at most 1/240 s: more)
         return None
