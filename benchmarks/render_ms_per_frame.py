@@ -19,7 +19,8 @@ camera still and turning, the real-time ratio and frames per second they allow. 
 times each scene's preview after it (`ti-cloth view --preview`: app/scene_preview.py);
 `--frames 0` every frame of the scene after the first 5, where the ratio over the whole run
 (its mean frame) and the frames over their budget (a frame's simulated time) show the dear
-stretches a median hides.
+stretches a median hides; "window" is the ratio the window holds over them (its loop replayed
+with the measured costs: a slow frame made up by the next ones, never ahead of real time).
 
     python benchmarks/render_ms_per_frame.py --sizes --scenes demos/cape.toml \
         demos/skirt_walk.toml --preview --frames 0 --width 960 --height 540
@@ -94,8 +95,9 @@ def render_ms_per_frame(renderer, sim, frames, window=False, turning=False):
 def viewer_ms_per_frame(path, frames, width, height, preview=False):
     """A scene's frame as the live viewer runs it (or its preview's): (ms of its steps: the
     median and the 90th percentile, ms of its drawing with the camera still, the same
-    turning, the real-time ratio of the mean frame, the share of frames over frame_dt,
-    frame_dt, steps a frame), medians of `frames` frames after 5 (0: every frame left)."""
+    turning, the real-time ratio of the mean frame, the share of frames over frame_dt, the
+    ratio the window holds, frame_dt, steps a frame), medians of `frames` frames after 5
+    (0: every frame left)."""
     scene = load_scene(path, preview=preview)
     viewer = viewer_for(scene, width=width, height=height)
     camera = viewer.camera
@@ -120,7 +122,21 @@ def viewer_ms_per_frame(path, frames, width, height, preview=False):
     return (1e3 * statistics.median(steps), 1e3 * np.percentile(steps, 90),
             1e3 * statistics.median(still), 1e3 * statistics.median(turning),
             viewer.frame_dt / frame.mean(), float((frame > viewer.frame_dt).mean()),
-            viewer.frame_dt, viewer.substeps)
+            in_the_window(viewer, steps, still), viewer.frame_dt, viewer.substeps)
+
+
+def in_the_window(viewer, steps, draws):
+    """The real-time ratio the window (app/view.py) holds over the frames timed: its loop
+    replayed on a clock of its own with the measured costs, `steps` [s] of each frame and
+    `draws` [s] of each drawing (Viewer.frames_due: a slow frame made up by the next ones,
+    at most CATCH_UP frames a drawing; Viewer.wait: never ahead of real time)."""
+    now, k, drawn = 0.0, 0, 0
+    while k < len(steps):
+        due = viewer.frames_due(now)
+        now += sum(steps[k:k + due]) + draws[min(drawn, len(draws) - 1)]
+        k, drawn = k + due, drawn + 1
+        now += viewer.wait(now)
+    return len(steps) * viewer.frame_dt / now
 
 
 def main(argv=None):
@@ -171,12 +187,12 @@ def main(argv=None):
               f"{'over budget':>12} {'frames/s':>9}")
     for path in args.scenes:
         for preview in (False, True) if args.preview else (False,):
-            steps, tail, still, turning, whole, over, frame_dt, substeps = viewer_ms_per_frame(
-                path, args.frames, args.width, args.height, preview)
+            (steps, tail, still, turning, whole, over, window, frame_dt,
+             substeps) = viewer_ms_per_frame(path, args.frames, args.width, args.height, preview)
             name = Path(path).stem + (" preview" if preview else "")
             print(f"{name:>24} {substeps:>14} {steps:>9.1f} {tail:>6.1f} {still:>11.1f} "
                   f"{turning:>8.1f} {1e3 * frame_dt / (steps + still):>9.2f}x {whole:>9.2f}x "
-                  f"{over:>11.0%} {1e3 / (steps + still):>9.0f}", flush=True)
+                  f"{over:>11.0%} {window:>6.2f}x {1e3 / (steps + still):>9.0f}", flush=True)
 
 if __name__ == "__main__":
     main()

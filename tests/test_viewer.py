@@ -20,7 +20,14 @@ import ti_cloth as tc
 from ti_cloth.app.scene import load_scene
 from ti_cloth.app.view import viewer_for
 from ti_cloth.render import viewer as viewer_module
-from ti_cloth.render.viewer import HELD_COLOUR, KEYS_HELP, PICK_PIXELS, Event
+from ti_cloth.render.viewer import (
+    CATCH_UP,
+    HELD_COLOUR,
+    KEYS_HELP,
+    MOST_BEHIND,
+    PICK_PIXELS,
+    Event,
+)
 
 SCENE = """
 [scene]
@@ -232,6 +239,58 @@ def test_the_held_particle_is_marked_and_the_status_freezes_while_paused(scene_f
     assert ratio in viewer.status()[0] and viewer.status()[0].endswith("paused")
     viewer.handle(Event("key", key="s"))
     assert viewer.status()[-1] == f"saved {tmp_path / 'curtain.view.npz'}"
+
+
+def window_loop(viewer, step_cost, draw, frames, start):
+    """The window's loop (app/view.py) on a clock of its own, without stepping: each drawn
+    frame advances viewer.frames_due frames, the k-th costing step_cost(k) seconds, draws in
+    `draw` and waits viewer.wait; returns (frames advanced, seconds of the wall clock, the
+    most frames one drawn frame advanced, the largest lag behind the wall clock) after
+    `frames` simulated frames, started at `start` [s]."""
+    now, advanced, most, lag = start, 0, 0, 0.0
+    while advanced < frames:
+        due = viewer.frames_due(now)
+        most = max(most, due)
+        now += sum(step_cost(advanced + k) for k in range(due)) + draw
+        advanced += due
+        lag = max(lag, (now - start) - advanced * viewer.frame_dt)
+        now += viewer.wait(now)
+    return advanced, now - start, most, lag
+
+
+def test_a_slow_frame_is_made_up_by_the_next_ones_and_an_overloaded_machine_falls_behind(
+        scene_file, tmp_path):
+    """frames_due keeps the simulated time on the wall clock. Frames that step in half a
+    frame_dt and draw in 0.3, but for five that step in 3 (a burst of contacts), put the
+    run about 10 frames behind the wall clock (a window that drew every frame and waited
+    out each frame's rest stayed 5 x 2.3 frames behind for good); the frames after it
+    advance up to CATCH_UP frames a drawing, and 100 frames end within one frame of 100
+    frame_dt. A machine on which every frame steps in twice frame_dt falls
+    behind for good (3 frames in 6.3 frame_dt a drawing): when frames are quick again, no
+    more than the last MOST_BEHIND of its lag is made up. A pause is not made up at all."""
+    viewer = viewer_for(load_scene(scene_file), width=WIDTH, height=HEIGHT, folder=tmp_path)
+    dt = viewer.frame_dt
+
+    def burst(k):
+        return 3.0 * dt if 20 <= k < 25 else 0.5 * dt
+
+    advanced, wall, most, lag = window_loop(viewer, burst, 0.3 * dt, 100, 1000.0)
+    print(f"burst: the most behind {lag / dt:.2f} frames, at the end "
+          f"{(wall - advanced * dt) / dt:.2f}")
+    assert lag > CATCH_UP * dt, "the burst put the run several frames behind"
+    assert most == CATCH_UP and abs(wall - advanced * dt) <= dt
+    viewer.handle(Event("key", key=" "))           # a pause of 10 s, then on
+    viewer.frames_due(5000.0)
+    viewer.handle(Event("key", key=" "))
+    assert viewer.frames_due(5010.0) == 1 and viewer.wait(5010.0) == pytest.approx(dt)
+    advanced, wall, most, _ = window_loop(viewer, lambda k: 2.0 * dt, 0.3 * dt, 200, 6000.0)
+    print(f"overloaded: {advanced * dt / wall:.3f} x real time")
+    assert most == CATCH_UP and 0.4 < advanced * dt / wall < 0.5
+    # then quick frames: the lag made up is the last MOST_BEHIND of it at most
+    fast, spent, _, _ = window_loop(viewer, lambda k: 0.5 * dt, 0.3 * dt, 120, 6000.0 + wall)
+    made_up = fast * dt - spent
+    print(f"then made up {made_up:.3f} s of a lag of {wall - advanced * dt:.3f} s")
+    assert 0.5 * MOST_BEHIND < made_up <= MOST_BEHIND + CATCH_UP * dt
 
 
 def test_a_run_that_diverges_pauses_the_viewer_until_r(scene_file, tmp_path, f64):

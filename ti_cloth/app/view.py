@@ -18,7 +18,7 @@ import numpy as np
 
 from ..inputs.validation import integer, require
 from ..render import Camera, FrameSequence, Renderer, SurfaceStyle
-from ..render.viewer import Event, Viewer
+from ..render.viewer import CATCH_UP, Event, Viewer
 
 BUTTONS = {"LMB": "left", "RMB": "right"}
 KEYS = {"Escape": "escape"}
@@ -137,8 +137,9 @@ def events_of(gui) -> list[Event]:
 def view(subject, *, width: int = 960, height: int = 540, folder=None,
          record: bool = False, mp4: bool = False) -> Viewer:
     """Open a window on `subject` (a Scene or a Simulation) and run it until "q", Escape or
-    the window is closed, a frame at most every frame_dt of wall time (real time, or as fast
-    as it can); returns the Viewer. NoDisplay without an X11 display."""
+    the window is closed, its simulated time on the wall clock (real time: a slow frame made
+    up by the next ones, Viewer.frames_due), or as fast as it can; returns the Viewer.
+    NoDisplay without an X11 display."""
     import taichi as ti
 
     require_display()
@@ -146,13 +147,15 @@ def view(subject, *, width: int = 960, height: int = 540, folder=None,
     gui = ti.GUI(f"ti_cloth: {viewer.name}", res=(width, height), fast_gui=False)
     frames = (FrameSequence(viewer.folder, fps=1 / viewer.frame_dt, name=viewer.name, mp4=mp4)
               if record or mp4 else None)
-    shown = time.perf_counter()
     try:
         while gui.running and not viewer.quit:
             for event in events_of(gui):
                 viewer.handle(event)
-            viewer.tick(time.perf_counter())
-            viewer.advance()
+            now = time.perf_counter()
+            viewer.tick(now)
+            # a slow frame made up by the next; a recording draws every frame
+            for _ in range(viewer.frames_due(now, most=1 if frames is not None else CATCH_UP)):
+                viewer.advance()
             if frames is not None:
                 image = viewer.image()
                 frames.write(image)
@@ -164,8 +167,7 @@ def view(subject, *, width: int = 960, height: int = 540, folder=None,
                 gui.text(line, (0.01, 0.98 - 0.04 * row), font_size=14 if row else 16,
                          color=0xA01010 if alert else 0x202020)
             gui.show()
-            time.sleep(max(0.0, viewer.frame_dt - (time.perf_counter() - shown)))
-            shown = time.perf_counter()
+            time.sleep(viewer.wait(time.perf_counter()))
     finally:
         if frames is not None:
             frames.close()

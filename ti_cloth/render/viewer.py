@@ -41,6 +41,8 @@ ORBIT = math.pi         # radians of turn for a drag across the whole window
 ZOOM = 1.15             # distance factor per wheel notch or +/- press
 ZOOM_RANGE = (1e-3, 1e3)   # the camera's distance to its target, over its first distance
 ZOOM_NOTCHES = 100         # wheel notches one event counts at most (1.15^100 = 1.2e6)
+CATCH_UP = 3        # frames of simulated time one drawn frame advances at most (frames_due)
+MOST_BEHIND = 1.0   # s: a lag behind the wall clock beyond this is given up (frames_due)
 KINDS = ("press", "release", "motion", "key", "wheel")
 
 
@@ -89,6 +91,7 @@ class Viewer:
         self.simulated = 0.0        # simulated seconds advanced while running
         self.steps_run = 0          # steps taken while running
         self._ticked = None
+        self._clock = None          # wall time [s] the simulated time advanced so far is due
 
     # -- events -------------------------------------------------------------------------------
 
@@ -259,6 +262,29 @@ class Viewer:
         if not self.paused:
             self.simulated += self.frame_dt
             self.steps_run += self.substeps
+
+    def frames_due(self, now: float, most: int = CATCH_UP) -> int:
+        """How many frames to advance before the next drawing, at wall time `now` [s] (a
+        monotonic clock): those whose time on the wall clock has come, at least one and at
+        most `most` (1 where every frame is drawn: a recording). A slow frame (a burst of contacts) is made up by the next ones: a
+        drawn frame then advances two or three frames of simulated time (frames drawn are
+        dropped, not simulated time nor input), so a scene whose mean frame fits frame_dt
+        keeps real time over the run. A lag past MOST_BEHIND (a machine that cannot keep up)
+        is given up rather than made up in a burst later; paused or stopped, the clock
+        starts again when the run does. `wait(now)` says how long to wait before the next."""
+        if self._clock is None or self.paused or self.diverged is not None:
+            self._clock = now
+        lag = now - self._clock
+        if lag > MOST_BEHIND:
+            self._clock, lag = now, 0.0
+        due = min(most, 1 + int(max(lag, 0.0) / self.frame_dt))
+        self._clock += due * self.frame_dt
+        return due
+
+    def wait(self, now: float) -> float:
+        """Seconds from `now` until the frames advanced are due on the wall clock (0 when
+        late): how long the window waits before the next frame (real time, not faster)."""
+        return max(0.0, self._clock - now) if self._clock is not None else 0.0
 
     def tick(self, now: float) -> None:
         """Count the wall time since the last tick (`now` [s], a monotonic clock) as running
