@@ -11,6 +11,7 @@ from ti_cloth.app.scene import load_scene
 from ti_cloth.app.scene_preview import PREVIEW_PARTICLES, PREVIEW_STEP
 from ti_cloth.app.view import viewer_for
 from ti_cloth.inputs.scene_file import SceneError
+from ti_cloth.render.viewer import TIP_AFTER, TIP_BELOW
 
 SCENE = """
 [simulation]
@@ -42,8 +43,8 @@ def scene_text(integrator="xpbd", steps="substeps = 8", edge=0.01):
     return SCENE.format(integrator=integrator, steps=steps, edge=edge)
 
 
-def write(tmp_path, text):
-    path = tmp_path / "scene.toml"
+def write(tmp_path, text, name="scene.toml"):
+    path = tmp_path / name
     path.write_text(text)
     return path
 
@@ -128,4 +129,19 @@ def test_the_viewer_of_a_preview_says_so_and_saves_apart(tmp_path, f64):
     assert viewer.save() == tmp_path / "scene_preview.view.npz"
     plain = viewer_for(load_scene(path), width=64, height=48, folder=tmp_path)
     assert len(plain.status()) == 2 and plain.name == "scene"
+    # a file's scene run at a third of real time for TIP_AFTER suggests its preview (a grid
+    # alone: the preview would change its steps)
+    grid = write(tmp_path, "[[bodies]]".join(scene_text().split("[[bodies]]")[:2]), "grid.toml")
+    plain = viewer_for(load_scene(grid), width=64, height=48, folder=tmp_path)
+    tip = "tip: --preview: steps of 1/60 s (the file's: 1/240 s)"
+    plain.tick(0.0)
+    frames = int(TIP_AFTER / plain.frame_dt / 3) + 1
+    for k in range(frames):
+        plain.advance()
+        plain.tick(3 * (k + 1) * plain.frame_dt)
+        assert (tip in plain.status()) == (3 * (k + 1) * plain.frame_dt >= TIP_AFTER)
+    for k in range(4 * frames):                    # then faster than real time: no tip
+        plain.advance()
+        plain.tick(3 * frames * plain.frame_dt + 0.5 * (k + 1) * plain.frame_dt)
+    assert plain.simulated >= TIP_BELOW * plain.running and tip not in plain.status()
     assert build_parser().parse_args(["view", str(path), "--preview"]).preview

@@ -80,13 +80,15 @@ def viewer_for(subject, *, width: int = 960, height: int = 540, folder=None) -> 
 
     integer("width", width, 16, 4096)
     integer("height", height, 16, 4096)
-    note = ""
+    note = tip = ""
     if isinstance(subject, Scene):
         substeps = subject.resolved_substeps()
         sim = subject.build(dt=subject.frame_dt / substeps)
         name, frame_dt = subject.name, subject.frame_dt
         if subject.preview:              # its saved states are not the file's scene's
             name, note = f"{name}_preview", "preview: " + "; ".join(subject.preview)
+        else:
+            tip = preview_tip(subject.source)
         camera = subject.camera or Camera.fit(subject.motion_bounds(), aspect=width / height,
                                               **subject.camera_fit)
         ground, style = subject.output.ground, subject.output.style
@@ -111,7 +113,21 @@ def viewer_for(subject, *, width: int = 960, height: int = 540, folder=None) -> 
         renderer.draw_simulation(sim, replace(style, wireframe=WIRE) if wireframe else style)
 
     return Viewer(sim, Renderer(width, height, camera, supersample=1), camera, name=name,
-                  frame_dt=frame_dt, substeps=substeps, folder=folder, paint=paint, note=note)
+                  frame_dt=frame_dt, substeps=substeps, folder=folder, paint=paint, note=note,
+                  tip=tip)
+
+
+def preview_tip(source) -> str:
+    """What the window suggests to a scene slower than real time: its preview, where the
+    preview would change something ("" where not, or where its file cannot be read again)."""
+    from ..inputs.scene_file import SceneError, load_toml
+    from .scene_preview import previewed
+
+    try:
+        changes = previewed(load_toml(source))[1]
+    except (OSError, SceneError):
+        return ""
+    return "tip: --preview: " + "; ".join(changes) if changes else ""
 
 
 def events_of(gui) -> list[Event]:
@@ -163,7 +179,7 @@ def view(subject, *, width: int = 960, height: int = 540, folder=None,
             else:
                 gui.set_image(viewer.window_image())
             for row, line in enumerate(viewer.status()):
-                alert = row >= 2 and not line.startswith(("saved", "preview"))
+                alert = row >= 2 and not line.startswith(("saved", "preview", "tip"))
                 gui.text(line, (0.01, 0.98 - 0.04 * row), font_size=14 if row else 16,
                          color=0xA01010 if alert else 0x202020)
             gui.show()

@@ -43,6 +43,8 @@ ZOOM_RANGE = (1e-3, 1e3)   # the camera's distance to its target, over its first
 ZOOM_NOTCHES = 100         # wheel notches one event counts at most (1.15^100 = 1.2e6)
 CATCH_UP = 3        # frames of simulated time one drawn frame advances at most (frames_due)
 MOST_BEHIND = 1.0   # s: a lag behind the wall clock beyond this is given up (frames_due)
+TIP_AFTER = 2.0     # s of running below TIP_BELOW x real time before the tip is shown
+TIP_BELOW = 0.9
 KINDS = ("press", "release", "motion", "key", "wheel")
 
 
@@ -67,17 +69,19 @@ class Event:
 class Viewer:
     """sim seen by `camera` in width x height pixels through `renderer` (a Renderer of that
     size); `frame_dt` [s] of simulated time and `substeps` steps a frame; `folder` where "s"
-    saves `<name>.view.npz`; `note`: a line the window always shows (a scene's preview)."""
+    saves `<name>.view.npz`; `note`: a line the window always shows (a scene's preview);
+    `tip`: a line it shows once the run has kept below TIP_BELOW x real time for TIP_AFTER
+    seconds of running (what would run faster)."""
 
     def __init__(self, sim, renderer, camera: Camera, *, name: str, frame_dt: float,
-                 substeps: int, folder, paint, note: str = ""):
+                 substeps: int, folder, paint, note: str = "", tip: str = ""):
         self.sim, self.renderer, self.camera = sim, renderer, camera
         self.first_distance = max(float(np.linalg.norm(np.subtract(camera.position,
                                                                     camera.target))), 1e-6)
         self.name, self.frame_dt, self.substeps = name, frame_dt, substeps
         self.folder = Path(folder)
         self.paint = paint                     # paint(renderer, sim, wireframe): the scene
-        self.note = note
+        self.note, self.tip = note, tip
         self.width, self.height = renderer.width, renderer.height
         self.paused = self.wireframe = self.quit = False
         self.held = None                       # (particle, depth, scene pinned it, target)
@@ -296,12 +300,16 @@ class Viewer:
 
     def status(self) -> list[str]:
         """The lines the window shows: time, real-time ratio and steps per second of the
-        running time, "paused"; the keys; the note, if any; the last save ("saved <path>"), a
-        refused one, or the divergence that stopped the run."""
+        running time, "paused"; the keys; the note, and the tip where the run is slow, if
+        any; the last save ("saved <path>"), a refused one, or the divergence that stopped
+        the run."""
         rate = (f"{self.simulated / self.running:.2f} x real time   "
                 f"{self.steps_run / self.running:,.0f} steps/s") if self.running > 0 else ""
         lines = [f"t = {self.sim.time:.3f} s   {rate}" + ("   paused" if self.paused else ""),
                  KEYS_HELP] + ([self.note] if self.note else [])
+        if (self.tip and self.running >= TIP_AFTER
+                and self.simulated < TIP_BELOW * self.running):
+            lines.append(self.tip)
         if self.diverged is not None:
             lines.append(f"{self.diverged}"[:110] + ": press r to start again")
         elif self.unsaved is not None:
