@@ -273,9 +273,10 @@ class Viewer:
         most `most` (1 where every frame is drawn: a recording). A slow frame (a burst of
         contacts) is made up by the next ones: a drawn frame then advances two or three
         frames of simulated time (frames drawn are dropped, not simulated time nor input),
-        so a scene whose mean frame fits frame_dt keeps real time over the run. A lag past MOST_BEHIND (a machine that cannot keep up)
-        is given up rather than made up in a burst later; paused or stopped, the clock
-        starts again when the run does. `wait(now)` says how long to wait before the next."""
+        so a scene whose mean frame fits frame_dt keeps real time over the run. A lag past
+        MOST_BEHIND (a machine that cannot keep up) is given up rather than made up in a
+        burst later; paused or stopped, the clock starts again when the run does.
+        `wait(now)` says how long to wait before the next."""
         if self._clock is None or self.paused or self.diverged is not None:
             self._clock = now
         lag = now - self._clock
