@@ -163,6 +163,7 @@ def view(subject, *, width: int = 960, height: int = 540, folder=None,
     gui = ti.GUI(f"ti_cloth: {viewer.name}", res=(width, height), fast_gui=False)
     frames = (FrameSequence(viewer.folder, fps=1 / viewer.frame_dt, name=viewer.name, mp4=mp4)
               if record or mp4 else None)
+    first = True
     try:
         while gui.running and not viewer.quit:
             for event in events_of(gui):
@@ -183,6 +184,9 @@ def view(subject, *, width: int = 960, height: int = 540, folder=None,
                 gui.text(line, (0.01, 0.98 - 0.04 * row), font_size=14 if row else 16,
                          color=0xA01010 if alert else 0x202020)
             gui.show()
+            if first:                   # its build and compile are not running time
+                viewer.started(time.perf_counter())
+                first = False
             time.sleep(viewer.wait(time.perf_counter()))
     finally:
         if frames is not None:

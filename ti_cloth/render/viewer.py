@@ -286,6 +286,14 @@ class Viewer:
         self._clock += due * self.frame_dt
         return due
 
+    def started(self, now: float) -> None:
+        """The run's clocks start at wall time `now` [s], after its first frame is shown: the
+        time that frame took (the scene's kernels compiled, seconds for a garment) counts
+        neither in the real-time ratio nor as a lag to make up."""
+        self.running = self.simulated = 0.0
+        self.steps_run = 0
+        self._ticked = self._clock = now
+
     def wait(self, now: float) -> float:
         """Seconds from `now` until the frames advanced are due on the wall clock (0 when
         late): how long the window waits before the next frame (real time, not faster)."""
