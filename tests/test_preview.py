@@ -3,6 +3,8 @@ coarser until they hold about PREVIEW_PARTICLES particles, position-based steps 
 1/60 s, everything else as the file has it; the viewer says so on screen and saves its states
 apart from the file's scene."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -145,3 +147,20 @@ def test_the_viewer_of_a_preview_says_so_and_saves_apart(tmp_path, f64):
         plain.tick(3 * frames * plain.frame_dt + 0.5 * (k + 1) * plain.frame_dt)
     assert plain.simulated >= TIP_BELOW * plain.running and tip not in plain.status()
     assert build_parser().parse_args(["view", str(path), "--preview"]).preview
+
+
+def test_a_preview_run_writes_its_frames_beside_the_files(tmp_path, monkeypatch, f64):
+    """`ti-cloth run --preview` and a demo's --preview write into the output folder with
+    `_preview` after its name, never over the file's frames and states."""
+    from ti_cloth.app.cli import demo_main, main
+
+    out = tmp_path / "out"
+    text = scene_text(edge=0.04) + f'\n[output]\nwidth = 64\nheight = 48\nfolder = "{out}"\n'
+    path = write(tmp_path, text)
+    assert main(["run", str(path), "--preview", "--frames", "2", "--no-progress"]) == 0
+    assert sorted(p.name for p in (tmp_path / "out_preview").glob("*.png"))[:2] == \
+        ["frame_00000.png", "frame_00001.png"]
+    assert not out.exists()
+    monkeypatch.chdir(tmp_path)
+    frames = demo_main(path, ["--preview", "--test", "--frames", "1", "--no-progress"])
+    assert frames and frames[0].parent == Path("renders") / "scene_preview"

@@ -43,6 +43,9 @@ def _run_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--resume", action="store_true",
                         help="continue from the state saved in the output folder by an earlier, "
                              "stopped run of the same scene (same frames as a run never stopped)")
+    parser.add_argument("--preview", action="store_true",
+                        help="run the scene's preview (garment panels cut coarser, xpbd and pbd "
+                             "at 1/60 s) into the output folder + _preview")
     parser.add_argument("--checkpoint-every", type=_positive, metavar="K",
                         help="save the state every K frames (default: the scene's, else about "
                              "5 s of work)")
@@ -110,8 +113,9 @@ def _formats(text: str) -> tuple[str, ...]:
 
 def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progress=True,
         test=False, mp4=None, export=None, resume=False,
-        checkpoint_every=None) -> tuple[int, list[Path]]:
-    """Load, initialise, run and report; returns (exit code, frame paths). Exit codes: 0 done,
+        checkpoint_every=None, preview=False) -> tuple[int, list[Path]]:
+    """Load (the scene's preview with `preview`: app/scene_preview.py), initialise, run and
+    report; returns (exit code, frame paths). Exit codes: 0 done,
     1 diverged, 2 a scene the run refuses (the message names the key) or a state it cannot
     resume from, 74 (sysexits' EX_IOERR) a file it could not write (disk full, no permission,
     read-only), 128 + signal when stopped by Ctrl-C (130) or SIGTERM (143)."""
@@ -127,8 +131,10 @@ def run(scene_path, *, out=None, frames=None, arch="cpu", precision=None, progre
         return 2, []
     try:
         with signals.stop_signals_raise():
-            scene = load_scene(scene_path, note=lambda message: print(f"note: {message}",
-                                                                      file=sys.stderr))
+            scene = load_scene(scene_path, preview=preview,
+                               note=lambda message: print(f"note: {message}", file=sys.stderr))
+            for change in scene.preview:
+                print(f"preview: {change}", file=sys.stderr)
             output = scene.output
             if test:
                 frames = min(frames or TEST_FRAMES, TEST_FRAMES)
@@ -405,7 +411,7 @@ def main(argv=None) -> int:
     code, _ = run(args.scene, out=args.out, frames=args.frames, arch=args.arch,
                   precision=args.precision, progress=not args.no_progress, export=args.export,
                   mp4=args.mp4 or None, resume=args.resume,
-                  checkpoint_every=args.checkpoint_every)
+                  checkpoint_every=args.checkpoint_every, preview=args.preview)
     return code
 
 
@@ -663,20 +669,22 @@ def demo_main(scene_path, argv=None, description: str | None = None) -> list[Pat
     paths (exits with the run's code when it fails)."""
     scene_path = Path(scene_path)
     parser = argparse.ArgumentParser(description=description)
-    parser.add_argument("--out-dir", type=Path, default=Path("renders") / scene_path.stem,
-                        help=f"output folder (default renders/{scene_path.stem})")
+    parser.add_argument("--out-dir", type=Path,
+                        help=f"output folder (default renders/{scene_path.stem}, with --preview "
+                             f"renders/{scene_path.stem}_preview)")
     parser.add_argument("--test", action="store_true",
                         help=f"tiny and fast: {TEST_FRAMES} frames at {TEST_SIZE[0]}x{TEST_SIZE[1]}")
     _run_arguments(parser)
     args = parser.parse_args(argv)
     quiet_taichi(args.verbose)
-    refused = refuse_output(args.out_dir)
+    out = args.out_dir or Path("renders") / (scene_path.stem + "_preview" * args.preview)
+    refused = refuse_output(out)
     if refused is not None:
         raise SystemExit(refused)
-    code, frames = run(scene_path, out=args.out_dir, frames=args.frames, arch=args.arch,
+    code, frames = run(scene_path, out=out, frames=args.frames, arch=args.arch,
                        precision=args.precision, progress=not args.no_progress, test=args.test,
                        mp4=args.mp4 or None, export=args.export, resume=args.resume,
-                       checkpoint_every=args.checkpoint_every)
+                       checkpoint_every=args.checkpoint_every, preview=args.preview)
     if code:
         raise SystemExit(code)
     return frames

@@ -226,7 +226,8 @@ def load_scene(path, note=None, preview: bool = False) -> Scene:
     note(message), when given, hears before a slow step of loading begins (a body of more than
     limits.LARGE_BODY springs: its stable-step analysis takes seconds to a minute). preview:
     the file's preview instead (scene_preview.py: coarser garment panels, longer
-    position-based steps; Scene.preview says what changed)."""
+    position-based steps; Scene.preview says what changed), named `<name>_preview`, its
+    output folder beside the file's with that suffix."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"scene file not found: {path}")
@@ -327,6 +328,9 @@ def load_scene(path, note=None, preview: bool = False) -> Scene:
                   camera_fit=camera_fit, output=output, advice=advice, bodies=bodies,
                   resolution=resolution, file_particles=file_particles, sewing=sewing,
                   preview=changes)
+    if changes:               # its frames and states are not the file's scene's
+        scene = replace(scene, name=f"{name}_preview", output=replace(
+            output, folder=output.folder.with_name(f"{output.folder.name}_preview")))
     if note is not None and cloth.spring_count > limits.LARGE_BODY:
         note(f"'{name}' has {cloth.particle_count:,} particles and {cloth.spring_count:,} "
              "springs: finding its stable step takes a while")

@@ -85,8 +85,8 @@ def viewer_for(subject, *, width: int = 960, height: int = 540, folder=None) -> 
         substeps = subject.resolved_substeps()
         sim = subject.build(dt=subject.frame_dt / substeps)
         name, frame_dt = subject.name, subject.frame_dt
-        if subject.preview:              # its saved states are not the file's scene's
-            name, note = f"{name}_preview", "preview: " + "; ".join(subject.preview)
+        if subject.preview:
+            note = "preview: " + "; ".join(subject.preview)
         else:
             tip = preview_tip(subject.source)
         camera = subject.camera or Camera.fit(subject.motion_bounds(), aspect=width / height,
