@@ -194,5 +194,6 @@ def main(argv=None):
                   f"{turning:>8.1f} {1e3 * frame_dt / (steps + still):>9.2f}x {whole:>9.2f}x "
                   f"{over:>11.0%} {window:>6.2f}x {1e3 / (steps + still):>9.0f}", flush=True)
 
+
 if __name__ == "__main__":
     main()

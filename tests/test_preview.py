@@ -164,3 +164,13 @@ def test_a_preview_run_writes_its_frames_beside_the_files(tmp_path, monkeypatch,
     monkeypatch.chdir(tmp_path)
     frames = demo_main(path, ["--preview", "--test", "--frames", "1", "--no-progress"])
     assert frames and frames[0].parent == Path("renders") / "scene_preview"
+
+
+@pytest.mark.parametrize("folder, preview_folder", [("renders/cape", "renders/cape_preview"),
+                                                    (".", "preview")])
+def test_a_preview_is_named_apart_and_writes_beside_the_files_folder(tmp_path, folder,
+                                                                      preview_folder):
+    path = write(tmp_path, scene_text() + f'\n[output]\nfolder = "{folder}"\n')
+    file, preview = load_scene(path), load_scene(path, preview=True)
+    assert (file.name, preview.name) == ("scene", "scene_preview")
+    assert preview.output.folder == Path(preview_folder)

@@ -329,8 +329,9 @@ def load_scene(path, note=None, preview: bool = False) -> Scene:
                   resolution=resolution, file_particles=file_particles, sewing=sewing,
                   preview=changes)
     if changes:               # its frames and states are not the file's scene's
-        scene = replace(scene, name=f"{name}_preview", output=replace(
-            output, folder=output.folder.with_name(f"{output.folder.name}_preview")))
+        folder = output.folder
+        folder = folder.with_name(f"{folder.name}_preview") if folder.name else folder / "preview"
+        scene = replace(scene, name=f"{name}_preview", output=replace(output, folder=folder))
     if note is not None and cloth.spring_count > limits.LARGE_BODY:
         note(f"'{name}' has {cloth.particle_count:,} particles and {cloth.spring_count:,} "
              "springs: finding its stable step takes a while")

@@ -6,11 +6,9 @@ PREVIEW_PARTICLES particles in all (the demos' cape, 3,795 particles at 1.5 cm, 
 3.7 cm: 646), and a position-based integrator (xpbd, pbd) stepping at most PREVIEW_STEP
 (two steps a frame at 30 frames a second, where the demos' garments take eight). The cape
 and the skirt then keep real time on two cores (docs/performance.md, "A preview of the
-garments in real time").
-Other bodies and integrators are left as the file has them: a grid, a string or hair is
-resolution-free to read only at its own size, and an explicit step is bounded by its
-stability, an implicit one costs as much per simulated second at a larger step
-(docs/performance.md, "Where a garment's step goes").
+garments in real time"). Other bodies keep their particles and other integrators their
+step: an explicit step is bounded by its stability, and an implicit one costs as much per
+simulated second at a larger step (docs/performance.md, "Where a garment's step goes").
 
 It changes the file's values before they are read, so every check of the reader applies to
 the preview's values too, and `Scene.preview` says what it changed.
