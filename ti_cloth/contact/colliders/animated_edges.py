@@ -27,8 +27,10 @@ instead flings a particle pushed out of a fresh contact). Edge contacts take no 
 particles' own contacts carry it. The mean under-corrects a particle whose edges push it
 different ways (one sitting on a ridge), so the pass runs EDGE_PASSES times, each after the
 first only over edges whose particles the pass before moved: on a blade's edge the gap left
-is then under 2 % of the thickness, 19 % after one pass. Edges whose spring tore, and bodies
-with no tested edge, are skipped.
+is then under 2 % of the thickness, 19 % after one pass. A pass ends with the particles it
+moved resolved against the colliders again (collision.resolve_moved): an edge's move knows
+nothing of the body's faces, and at a large step it carried particles into the faces beside
+the edge. Edges whose spring tore, and bodies with no tested edge, are skipped.
 
 Not covered: a body's vertex (a cone's tip) through the inside of a cloth triangle.
 """
