@@ -73,7 +73,7 @@ def test_a_preview_cuts_the_panels_to_its_budget_and_steps_xpbd_at_a_sixtieth(tm
     particles = preview.cloth.particle_count - 20
     print(f"mean garment edge, preview / file: {ratio:.3f}; garment particles {particles} "
           f"of {scene.cloth.particle_count - 20}")
-    # the panel (0.24 m² at 1 cm: about 2,800 particles) cut at about 600, so its edges are
+    # the panel (0.24 m² at 1 cm: about 2,800 particles) cut at about 500, so its edges are
     # longer by about the square root of that ratio
     assert abs(particles - PREVIEW_PARTICLES) < 0.25 * PREVIEW_PARTICLES
     expected = np.sqrt((scene.cloth.particle_count - 20) / particles)
@@ -86,7 +86,7 @@ def test_a_preview_cuts_the_panels_to_its_budget_and_steps_xpbd_at_a_sixtieth(tm
     top = preview.cloth.particle_position[20:][preview.cloth.pinned[20:]]
     assert len(top) >= 8 and np.allclose(top[:, 1], 1.4)
     assert preview.resolved_substeps() == round(1 / (30 * PREVIEW_STEP)) == 2
-    assert preview.preview == ("garment panels cut at 2.1 cm (the file's 1)",
+    assert preview.preview == ("garment panels cut at 2.4 cm (the file's 1)",
                                "steps of 1/60 s (the file's: 1/240 s)")
 
 
@@ -126,7 +126,7 @@ def test_the_viewer_of_a_preview_says_so_and_saves_apart(tmp_path, f64):
     viewer = viewer_for(load_scene(path, preview=True), width=64, height=48, folder=tmp_path)
     viewer.advance()
     assert viewer.sim.dt == pytest.approx(1 / 60)
-    assert viewer.status()[2] == ("preview: garment panels cut at 2.1 cm (the file's 1); "
+    assert viewer.status()[2] == ("preview: garment panels cut at 2.4 cm (the file's 1); "
                                   "steps of 1/60 s (the file's: 1/240 s)")
     assert viewer.save() == tmp_path / "scene_preview.view.npz"
     plain = viewer_for(load_scene(path), width=64, height=48, folder=tmp_path)

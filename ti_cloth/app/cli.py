@@ -526,7 +526,7 @@ def build_parser() -> argparse.ArgumentParser:
                              help="record an MP4 too (implies --record; needs imageio-ffmpeg)")
     view_parser.add_argument("--preview", action="store_true",
                              help="run the scene's preview: garment panels cut coarser, to "
-                                  "about 600 particles, xpbd and pbd stepping at most 1/60 s (a "
+                                  "about 500 particles, xpbd and pbd stepping at most 1/60 s (a "
                                   "real-time view of the cape and the skirt on two cores)")
     commands.add_parser("info", parents=[common],
                         help="versions, architecture, threads and the extras installed")

@@ -3,7 +3,7 @@ file as read, with the values that set its cost per simulated second changed, as
 Designer's particle distance and Vellum's substeps are turned down while a garment is
 arranged: the garment panels cut coarser, by one factor, until they hold about
 PREVIEW_PARTICLES particles in all (the demos' cape, 3,795 particles at 1.5 cm, is cut at
-3.7 cm: 646), and a position-based integrator (xpbd, pbd) stepping at most PREVIEW_STEP
+4.1 cm: 541), and a position-based integrator (xpbd, pbd) stepping at most PREVIEW_STEP
 (two steps a frame at 30 frames a second, where the demos' garments take eight). The cape
 and the skirt then keep real time on two cores (docs/performance.md, "A preview of the
 garments in real time"). Other bodies keep their particles and other integrators their
@@ -24,7 +24,7 @@ from numbers import Real
 from ..integrators import INTEGRATORS
 from ..simulation import Simulation
 
-PREVIEW_PARTICLES = 600     # a preview's garment panels hold about this many particles
+PREVIEW_PARTICLES = 500     # a preview's garment panels hold about this many particles
 PREVIEW_STEP = 1.0 / 60.0   # s: a preview's longest step, for a position-based integrator
 
 

@@ -27,10 +27,10 @@ instead flings a particle pushed out of a fresh contact). Edge contacts take no 
 particles' own contacts carry it. The mean under-corrects a particle whose edges push it
 different ways (one sitting on a ridge), so the pass runs EDGE_PASSES times, each after the
 first only over edges whose particles the pass before moved: on a blade's edge the gap left
-is then under 2 % of the thickness, 19 % after one pass. A pass ends with the particles it
-moved resolved against the colliders again (collision.resolve_moved): an edge's move knows
-nothing of the body's faces, and at a large step it carried particles into the faces beside
-the edge. Edges whose spring tore, and bodies with no tested edge, are skipped.
+is then under 2 % of the thickness, 19 % after one pass. The passes end with the particles
+they moved resolved against the colliders again (collision.resolve_shifted): an edge's move
+knows nothing of the body's faces, and at a large step it carried particles into the faces
+beside the edge. Edges whose spring tore, and bodies with no tested edge, are skipped.
 
 Not covered: a body's vertex (a cone's tip) through the inside of a cloth triangle.
 """
@@ -54,7 +54,8 @@ class EdgeContacts:
     """A cloth's edges for contact with animated meshes: each edge's particles and spring,
     each edge's moves of its two ends (move[2 e + k]), whether it touched and the velocity of
     the body point it touched over the step (surface[e]); per particle whether the last pass
-    moved it (moved[i]) and the slots 2 e + k that move it (CSR in edge order:
+    moved it (moved[i]), whether any pass of the step did (shifted[i]) and the slots 2 e + k
+    that move it (CSR in edge order:
     slot[start[i]:start[i + 1]]); and the edges' candidate lists (`bodies` animated bodies)."""
 
     def __init__(self, cloth, bodies: int):
@@ -70,6 +71,7 @@ class EdgeContacts:
         self.start = fields.scalar(ti.i32, self.particle_count + 1)
         self.slot = fields.scalar(ti.i32, max(2 * self.count, 1))
         self.moved = fields.scalar(ti.i32, self.particle_count)
+        self.shifted = fields.scalar(ti.i32, self.particle_count)
         fields.finalize(self)
         self.lists = CandidateLists(max(self.count, 1) * bodies, 2, EDGE_LISTED)
         self.load(cloth, bodies)
@@ -192,6 +194,6 @@ def follow_edges(model: ti.template(), state: ti.template(), colliders: ti.templ
             if approach < 0.0:
                 v -= approach * n
             state.particle_position[i] = x
-            edges.moved[i] = 1
+            edges.moved[i] = edges.shifted[i] = 1
             state.particle_velocity[i] = v
             state.particle_prev_position[i] = x - v * now.dt

@@ -142,15 +142,15 @@ class ColliderSet:
         meshes placed, then every particle out of the colliders where they are placed
         (resolve), from its position at the step's start (step_start), then the cloth's
         edges out of the animated meshes' edges in EDGE_PASSES passes (animated_edges.py),
-        each ending with the particles it moved out of the colliders again (resolve_moved)."""
+        then the particles they moved out of the colliders again (resolve_shifted)."""
         placing = self.bodies.phases(self) if self.animated else ()
         edges = ((Repeat(EDGE_PASSES,
                          Phase(Loop(self.edges.count, edge_against_bodies, model, STATE, work,
                                     ITEM, NOW)),
                          Phase(Loop(model.particle_count, follow_edges, model, STATE, work, ITEM,
-                                    NOW)),
-                         Phase(Loop(model.particle_count, resolve_moved, model, STATE, work,
-                                    ITEM, NOW))),)
+                                    NOW))),
+                  Phase(Loop(model.particle_count, resolve_shifted, model, STATE, work, ITEM,
+                             NOW)))
                  if self.edge_contact else ())
         return (placing + (Phase(Loop(model.particle_count, resolve, model, STATE, work, ITEM,
                                       NOW)),)
@@ -429,18 +429,19 @@ def resolve(model: ti.template(), state: ti.template(), colliders: ti.template()
     resolve_particle(model, state, colliders, i, colliders.step_start[i], now.dt)
     if ti.static(colliders.edge_contact):
         colliders.edges.moved[i] = 1
+        colliders.edges.shifted[i] = 0
 
 
 @ti.func
-def resolve_moved(model: ti.template(), state: ti.template(), colliders: ti.template(), i,
-                  now: ti.template()):
-    """resolve_particle again for particle i if the pass over the cloth's edges moved it: an
+def resolve_shifted(model: ti.template(), state: ti.template(), colliders: ti.template(), i,
+                    now: ti.template()):
+    """resolve_particle again for particle i if a pass over the cloth's edges moved it: an
     edge's move takes no account of the body's faces, and at a large step a cloth edge
     pushed off a body's edge carried its particles into the faces beside it (a 0.4 m box
     turning at 6 rad/s under a sheet, steps of 1/60 s: a particle inside the box in 109 of
-    120 steps, 19 mm deep, and none with this; docs/performance.md). Moved out, it stays
-    marked, so the next pass tests its edges again."""
-    if colliders.edges.moved[i]:
+    120 steps, 19 mm deep, and none with this; docs/performance.md). Once, after the last
+    pass: after each pass it cost the cape's preview a third of its step."""
+    if colliders.edges.shifted[i]:
         resolve_particle(model, state, colliders, i, colliders.step_start[i], now.dt)
 
 
