@@ -50,7 +50,7 @@ def test_a_sheet_on_a_box_turning_fast_stays_out_of_it_at_a_large_step(f64):
     no particle inside the box, by its exact signed distance (the box's rotation undone,
     computed here), and none nearer its faces than half the thickness. The passes over the
     cloth's edges (animated_edges.py) push cloth edges off the box's rims into the faces
-    beside them; without the particles they moved resolved again (collision.resolve_moved)
+    beside them; without the particles they moved resolved again (collision.resolve_shifted)
     particles were left up to 19 mm inside the box in most steps."""
     half, omega, thickness = 0.2, 6.0, 0.01
     box = tc.box_mesh((-half, -half, -half), (half, half, half))
