@@ -43,7 +43,6 @@ def frames_inside(collider, motion, seconds=0.5, fps=50):
     return np.array(inside), sim
 
 
-@pytest.mark.slow
 def test_a_sheet_on_a_box_turning_fast_stays_out_of_it_at_a_large_step(f64):
     """A 0.4 m box (an animated mesh) turning at 6 rad/s about its vertical axis under a
     falling 16² sheet, xpbd at 1/60 s, the box's corners moving 28 mm a step: in every step
@@ -78,6 +77,7 @@ def test_a_sheet_on_a_box_turning_fast_stays_out_of_it_at_a_large_step(f64):
     assert nearest > 0.5 * thickness
 
 
+@pytest.mark.slow
 def test_a_breathing_sphere_keeps_a_falling_sheet_outside_in_every_frame(f64):
     """A sheet falls onto a sphere whose radius swings +-30 % once a second: in no frame is a
     particle inside the sphere as it is at the frame's time (the winding number above).
