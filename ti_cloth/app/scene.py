@@ -23,7 +23,7 @@ from ..contact.colliders.mesh_collider import MeshCollider
 from ..contact.colliders.shapes import Box, Capsule, Collider, Plane, Sphere
 from ..contact.self_collision import SelfCollision
 from ..inputs import limits
-from ..inputs.scene_file import SceneError, Table, load_toml
+from ..inputs.scene_file import SceneError, Table, argument_default, load_toml
 from ..integrators import INTEGRATORS, make_integrator
 from ..physics.sewing import Sewing
 from ..physics.strain_limit import StrainLimit
@@ -243,7 +243,7 @@ def load_scene(path, note=None, preview: bool = False) -> Scene:
     sim = root.table("simulation") or Table({}, "simulation", str(path))
     automatic = sim.value("integrator", None) == "auto"
     integrator = "auto" if automatic else _integrator(sim)
-    fps = sim.number("fps", 30.0, within=limits.FPS)
+    fps = sim.number("fps", limits.FPS_DEFAULT, within=limits.FPS)
     frames = round(sim.number("duration", 3.0, within=limits.DURATION) * fps)
     substeps = sim.value("substeps", "auto")
     if substeps != "auto":
@@ -257,7 +257,7 @@ def load_scene(path, note=None, preview: bool = False) -> Scene:
             sim.bad("dt", dt, f">= {1.0 / fps / limits.SUBSTEPS.high:.3g} s at fps = {fps:g} "
                      f"(at most {limits.SUBSTEPS.high:_} steps per frame)")
     advice = _advice_request(sim, fps, frames) if automatic else None
-    precision = sim.string("precision", _default(backend.init, "precision"),
+    precision = sim.string("precision", argument_default(backend.init, "precision"),
                            sorted(backend.PRECISIONS))
     if automatic:
         if sim.has("substeps") or sim.has("dt"):
@@ -298,8 +298,9 @@ def load_scene(path, note=None, preview: bool = False) -> Scene:
     sim.finish()
 
     forces = root.table("forces") or Table({}, "forces", str(path))
-    gravity = forces.vector("gravity", _default(Simulation, "gravity"), within=limits.ACCELERATION)
-    drag = forces.number("drag", _default(Simulation, "drag"), within=limits.DRAG)
+    gravity = forces.vector("gravity", argument_default(Simulation, "gravity"),
+                            within=limits.ACCELERATION)
+    drag = forces.number("drag", argument_default(Simulation, "drag"), within=limits.DRAG)
     wind_table = forces.table("wind")
     wind = _wind(wind_table) if wind_table is not None else None
     forces.finish()
@@ -422,13 +423,9 @@ def check_runnable(scene: Scene, root: Table) -> None:
             root.fail(f"camera: {err}")
 
 
-def _default(constructor, name: str):
-    """The default of a constructor's argument: the scene reader repeats none of them."""
-    return inspect.signature(constructor).parameters[name].default
-
 
 def _integrator(sim: Table):
-    spec = sim.value("integrator", _default(Simulation, "integrator"))
+    spec = sim.value("integrator", argument_default(Simulation, "integrator"))
     if isinstance(spec, str):
         spec = {"name": spec}
     table = Table(spec, sim.path("integrator"), sim.source)

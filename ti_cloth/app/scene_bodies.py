@@ -12,7 +12,6 @@ inside it at every resolution. Spring constants are rebuilt for the modulus they
 
 from __future__ import annotations
 
-import inspect
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -30,7 +29,7 @@ from ..contact.colliders.attachment import Attachment
 from ..contact.colliders.shapes import Collider
 from ..inputs import limits
 from ..inputs.limits import Range
-from ..inputs.scene_file import Table, quoted
+from ..inputs.scene_file import Table, argument_default, quoted
 from ..physics.handles import Handle
 from ..physics.paths import INTERPOLATIONS, Keyframes, Oscillation
 
@@ -131,7 +130,7 @@ class Body:
         builder = getattr(builders, self.kind)
         options = dict(self.options)
         for key in SPRING_KEYS[self.kind]:
-            value = options.get(key, _default(builder, key))
+            value = options.get(key, argument_default(builder, key))
             options[key] = refine.springs_at(value, factor, DIMENSION[self.kind])
         return options
 
@@ -152,7 +151,7 @@ class Body:
 
     def _tet_block(self, factor: int):
         options = self._refined_options(factor)
-        cells = np.asarray(options.pop("cells", _default(builders.tet_block, "cells")))
+        cells = np.asarray(options.pop("cells", argument_default(builders.tet_block, "cells")))
         cloth = builders.tet_block(cells * factor, **options)
         return cloth, refine.tet_refinement(cells.astype(np.int64), factor), {}
 
@@ -310,9 +309,6 @@ def _garment(table: Table) -> Garment:
         table.bad("seams", seams, "a list of [panel_a, edge_a, panel_b, edge_b]")
     return table.build(Garment, pieces, seams)
 
-
-def _default(constructor, name: str):
-    return inspect.signature(constructor).parameters[name].default
 
 
 def _springs(table: Table | None, default: SpringParams | None) -> SpringParams | None:

@@ -17,10 +17,11 @@ the preview's values too, and `Scene.preview` says what it changed.
 from __future__ import annotations
 
 import copy
-import inspect
 import math
 from numbers import Real
 
+from ..inputs import limits
+from ..inputs.scene_file import argument_default
 from ..integrators import INTEGRATORS
 from ..simulation import Simulation
 
@@ -89,9 +90,9 @@ def _longer_steps(simulation) -> str | None:
     if not isinstance(simulation, dict):     # the default integrator is not position-based
         return None
     spec = simulation.get(
-        "integrator", inspect.signature(Simulation).parameters["integrator"].default)
+        "integrator", argument_default(Simulation, "integrator"))
     name = spec.get("name") if isinstance(spec, dict) else spec
-    fps = simulation.get("fps", 30.0)
+    fps = simulation.get("fps", limits.FPS_DEFAULT)
     if (not isinstance(name, str) or name not in INTEGRATORS
             or not INTEGRATORS[name].position_based
             or not _positive(fps)):

@@ -47,6 +47,7 @@ GATHER = Range(0.05, 1.0, "", "a panel's top edge placed gathered: its placed le
 DRAG = Range(0.0, 1e4, "1/s", "air drag")
 DT = Range(1e-7, 1.0, "s", "time step dt")
 FPS = Range(1.0, 1000.0, "frames/s", "frame rate")
+FPS_DEFAULT = 30.0      # frames/s: a scene file's [simulation] fps when it gives none
 DURATION = Range(1e-3, 3600.0, "s", "scene duration")
 TIME = Range(0.0, 1e6, "s", "handle release time")
 SUBSTEPS = Range(1, 100_000, "", "steps per frame")

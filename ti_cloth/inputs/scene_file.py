@@ -8,6 +8,7 @@ error naming the key, its value and the keys allowed there, never a silently ign
 from __future__ import annotations
 
 import difflib
+import inspect
 import math
 from typing import Any
 
@@ -43,6 +44,11 @@ def did_you_mean(word: str, allowed) -> str:
     near = difflib.get_close_matches(str(word).lower(), [str(a) for a in allowed], n=1,
                                      cutoff=0.6)
     return f" (did you mean {near[0]!r}?)" if near else ""
+
+
+def argument_default(constructor, name: str):
+    """The default of a constructor's argument: the scene reader repeats none of them."""
+    return inspect.signature(constructor).parameters[name].default
 
 
 def load_toml(path) -> dict:
