@@ -4,9 +4,13 @@ For each scene, with self-collision on (and, for the cost, off: the free step), 
 `--every` steps: the edge-triangle crossings of the cloth (segment through triangle, sharing
 no particle, by float64 orientation tests: Moller-Trumbore with a determinant filter), also
 over the elements with no held particle alone (the never-through fail-safe's assumption),
-and the closest far vertex-triangle pair (sharing no particle and at least two thicknesses
-apart at rest; also over those with no held particle), both over candidate pairs a k-d tree
-finds within reach; then the run's totals, the closest pair as a fraction of the thickness,
+and the closest far vertex-triangle pair (sharing no particle, and not mesh neighbours: a
+particle of each on one mesh edge and under two thicknesses apart at rest, which
+SelfCollision.keep_thickness leaves to the passes; also over those with no held particle),
+both over candidate pairs a k-d tree finds within reach, and the most stretched mesh edge
+(its length over its rest length: a fail-safe that froze particles while the cloth around
+them moved on shows there); then the run's totals, the closest pair as a fraction of the
+thickness,
 the particles the fail-safe moved back and those it left where a collider had taken their
 step start (stayed), the most particles inside a collider at a checked step (a negative
 Simulation.collider_distance: the demos' figures are closed animated meshes), the checked
@@ -20,8 +24,8 @@ SelfCollision.in_solve; xpbd only).
 Scenes (N particles a side: 16, 24 and 6 times --scale, or --size; the issue's sizes are
 --scenes pile --size 64 --layers 16 and --scenes twist --size 128):
   pile     --layers sheets of N x N (0.5 m) dropped 4 cm apart onto a horizontal cylinder
-  twist    an N x N sheet (0.6 m) whose two opposite edges turn opposite ways (Newton's
-           cloth_twist)
+  twist    an N x N sheet (0.6 m) whose two opposite edges turn opposite ways at pi/3 rad/s
+           each, with no gravity, for 5 s (Newton's cloth_twist: 1.67 turns in all)
   press    a sheet pressed onto another by a handle, 6 mm over the ground, thickness 20 mm
            (the dense pile the docs report: no pass can make room)
   land     an N x N sheet of issue 53's denim (0.4 m) dropped 15 cm onto another (0.5 m) that
@@ -76,6 +80,10 @@ def pile(n: int, layers: int):
     return body, dict(colliders=colliders), 1.5
 
 
+TWIST_SPEED = np.pi / 3     # rad/s each edge turns, opposite ways (Newton's cloth_twist)
+TWIST_SECONDS = 5.0         # Newton's example runs 300 frames at 60 fps: 1.67 turns in all
+
+
 def twist(n: int, layers: int):
     body = sheet(n, 0.6, (0.0, 0.5, -0.3))
     x = body.particle_position
@@ -85,10 +93,10 @@ def twist(n: int, layers: int):
             y, z = x[i, 1] - 0.5, x[i, 2]
 
             def turned(t, y=y, z=z, sense=sense):
-                a = sense * np.pi * min(t, 2.0)          # a turn each way in 2 s
+                a = sense * TWIST_SPEED * t
                 return (0.0, y * np.cos(a) - z * np.sin(a) - y, y * np.sin(a) + z * np.cos(a) - z)
             handles.append(tc.Handle([i], turned))
-    return body, dict(handles=handles, gravity=(0.0, 0.0, 0.0)), 2.5
+    return body, dict(handles=handles, gravity=(0.0, 0.0, 0.0)), TWIST_SECONDS
 
 
 def press(n: int, layers: int):
@@ -200,17 +208,27 @@ def crossings(x: np.ndarray, triangles: np.ndarray, edges: np.ndarray, reach: fl
 
 
 def closest_far(x: np.ndarray, rest: np.ndarray, triangles: np.ndarray, reach: float,
-                far: float, held: np.ndarray, weld: np.ndarray) -> tuple[float, float]:
-    """The nearest vertex-triangle distance over pairs sharing no particle (up to `weld`)
-    whose rest distance (vertex to centroid) is at least `far`, and over those of them with
-    no `held` particle; inf when none is within `reach`."""
+                far: float, held: np.ndarray, weld: np.ndarray,
+                edges: np.ndarray) -> tuple[float, float]:
+    """The nearest vertex-triangle distance over far pairs: sharing no particle (up to
+    `weld`), and not mesh neighbours (the vertex on a mesh edge, of `edges`, with a corner,
+    and nearer than `far` to the triangle in the rest shape: SelfCollision.keep_thickness
+    leaves those to the passes); and over those of them with no `held` particle; inf when
+    none is within `reach`."""
     tree = cKDTree(x[triangles].mean(axis=1))
     pairs = [(v, t) for v, near in enumerate(tree.query_ball_point(x, reach)) for t in near]
     if not pairs:
         return np.inf, np.inf
     v, t = np.array(pairs).T
     keep = ~(weld[triangles[t]] == weld[v][:, None]).any(axis=1)
-    keep &= np.linalg.norm(rest[v] - rest[triangles[t]].mean(axis=1), axis=1) >= far
+    count = len(x)
+    keys = np.sort(edges, axis=1) @ np.array([count, 1])
+    corners = triangles[t]
+    joined = np.isin(np.minimum(v[:, None], corners) * count + np.maximum(v[:, None], corners),
+                     keys).any(axis=1)
+    rest_corners = rest[corners]
+    keep &= ~joined | (point_triangle(rest[v], rest_corners[:, 0], rest_corners[:, 1],
+                                      rest_corners[:, 2]) >= far)
     v, t = v[keep], t[keep]
     if not len(v):
         return np.inf, np.inf
@@ -259,6 +277,7 @@ def measure(name: str, n: int, layers: int, every: int, repeats: int,
     free_triangles = triangles[~np.isin(triangles, held).any(axis=1)]
     free_edges = edges[~np.isin(edges, held).any(axis=1)]
     crossed, crossed_free, nearest, nearest_free, watched, inside = 0, 0, np.inf, np.inf, 0, 0
+    rest_length, stretched = rest_edges(body), 0.0
     sim = sims[True]
     start = time.perf_counter()
     for check in range(steps // every):
@@ -267,14 +286,18 @@ def measure(name: str, n: int, layers: int, every: int, repeats: int,
         crossed += crossings(x, triangles, edges, reach, weld)
         crossed_free += crossings(x, free_triangles, free_edges, reach, weld)
         closest, closest_free = closest_far(x, body.particle_position, triangles, reach,
-                                            2 * thickness, held, weld)
+                                            2 * thickness, held, weld, edges)
         nearest, nearest_free = min(nearest, closest), min(nearest_free, closest_free)
         inside = max(inside, int((sim.collider_distance(x)[0] < 0).sum()))
+        stretched = max(stretched, float((np.linalg.norm(x[edges[:, 0]] - x[edges[:, 1]], axis=1)
+                                          / rest_length).max()))
         watched += 1
         if progress and (check + 1) % progress == 0:     # a long run at the issue's sizes
             print(f"  {name}: step {(check + 1) * every} of {steps}, "
                   f"{time.perf_counter() - start:.0f} s, crossings {crossed}, closest far pair "
-                  f"{nearest / thickness:.4f} thicknesses", file=sys.stderr, flush=True)
+                  f"{nearest / thickness:.4f} thicknesses, most stretched edge "
+                  f"{stretched:.2f}, moved back {sim.self_contacts().moved_back:,}",
+                  file=sys.stderr, flush=True)
     run_s = time.perf_counter() - start
     moved_back, stayed = sim.self_contacts().moved_back, sim.self_contacts().stayed
     cost = {True: [], False: []}
@@ -286,6 +309,7 @@ def measure(name: str, n: int, layers: int, every: int, repeats: int,
             timed.step(4 * every)
             cost[contact].append((time.perf_counter() - start) / (4 * every))
     return dict(scene=name, moved_back=moved_back, stayed=stayed, inside=inside, run_s=run_s,
+                stretched=stretched,
                 particles=body.particle_count, thickness=thickness,
                 frames=watched, crossings=crossed, free_crossings=crossed_free,
                 closest=nearest / thickness, closest_free=nearest_free / thickness,
@@ -313,10 +337,10 @@ def main() -> None:
     tc.init(arch=args.arch, precision="f32")
     print(f"{args.integrator} at {args.dt:.4g} s on {args.arch}")
     print("| scene | fail-safe | particles | thickness | frames checked | crossings | "
-          "of free elements | closest far pair / thickness | of free elements | moved back | "
-          "stayed | most inside a collider | run (checks included) | step with contact | "
-          "free step | ratio |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "of free elements | closest far pair / thickness | of free elements | "
+          "most stretched edge | moved back | stayed | most inside a collider | "
+          "run (checks included) | step with contact | free step | ratio |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name in args.scenes:
         n = args.size or SIDES.get(name, 0) * args.scale
         for fail_safe in args.fail_safe:
@@ -325,7 +349,7 @@ def main() -> None:
             print(f"| {r['scene']} | {fail_safe} | {r['particles']:,} | "
                   f"{r['thickness'] * 1e3:g} mm | {r['frames']} | {r['crossings']} | "
                   f"{r['free_crossings']} | {r['closest']:.4f} | {r['closest_free']:.4f} | "
-                  f"{r['moved_back']:,} | {r['stayed']:,} | {r['inside']} | "
+                  f"{r['stretched']:.2f} | {r['moved_back']:,} | {r['stayed']:,} | {r['inside']} | "
                   f"{r['run_s']:.0f} s | {r['contact_ms']:.2f} ms | "
                   f"{r['free_ms']:.2f} ms | {r['contact_ms'] / r['free_ms']:.1f}x |",
                   flush=True)

@@ -270,9 +270,10 @@ def base_install():
         sys.modules.update(saved)
 
 
-def twisted_sheet(n=12, size=0.4, turns=1.0):
+def twisted_sheet(n=12, size=0.4, turns=1.0, seconds=1.0):
     """An n x n sheet whose two opposite edges (handles) turn opposite ways about its middle
-    line, `turns` half turns each in a second (Newton's cloth_twist); with the edges held."""
+    line, `turns` half turns each a second for `seconds` (Newton's cloth_twist: a third of a
+    half turn for 10 s); with the edges held."""
     body = tc.Cloth(tc.grid_mesh(n, n, size=(size, size), plane="xz", origin=(0.0, 0.5, -size / 2)),
                     tc.Material.preset("cotton_springs"))
     x = body.particle_position
@@ -282,7 +283,7 @@ def twisted_sheet(n=12, size=0.4, turns=1.0):
             y, z = x[i, 1] - 0.5, x[i, 2]
 
             def turned(t, y=y, z=z, sense=sense):
-                a = sense * np.pi * turns * min(t, 1.0)
+                a = sense * np.pi * turns * min(t, seconds)
                 return (0.0, y * np.cos(a) - z * np.sin(a) - y, y * np.sin(a) + z * np.cos(a) - z)
             handles.append(tc.Handle([i], turned))
     held = np.concatenate([h.particles for h in handles])

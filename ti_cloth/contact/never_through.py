@@ -1,6 +1,7 @@
 """The self-contact fail-safe (issue 56): after the contact passes of a step, no listed pair
-has passed through itself during the step (SelfCollision.never_through), nor come nearer
-than KEEP thicknesses (SelfCollision.keep_thickness), by construction.
+has passed through itself during the step (SelfCollision.never_through), nor, unless mesh
+neighbours, come nearer than KEEP thicknesses (SelfCollision.keep_thickness), by
+construction.
 
 The theorem. Over a step every particle moves on the straight line from x0 (the step's
 start) to x1 (where the step leaves it). For a vertex p and a triangle abc, and for two edges
@@ -56,13 +57,23 @@ particles of a listed pair whose distance d at the step's end is
 
     d(1) < KEEP (1 + ROUNDING) thickness   and   d(1) < d(0)                  (3)
 
-(d the vertex's distance to the triangle's nearest point, or the two segments'). Where the
-rounds end no listed pair meets (3), unless held particles moved it (counted in
-`unresolved` as above): a pair whose particles are all back has d(1) = d(0). So every pair
-ends a step at least min(d(0), KEEP (1 + ROUNDING) thickness) apart, and by induction a cloth
-that starts with no pair nearer than KEEP thicknesses never has one, whatever the contact
+(d the vertex's distance to the triangle's nearest point, or the two segments'), unless
+the pair is one of mesh neighbours: a particle of each element on one mesh edge, and the
+elements nearer than APART thicknesses in the rest shape. Where the rounds end no listed
+pair meets (3), unless held particles moved it (counted in `unresolved` as above): a pair
+whose particles are all back has d(1) = d(0). So every pair but mesh neighbours ends a step
+at least min(d(0), KEEP (1 + ROUNDING) thickness) apart, and by induction a cloth that
+starts with no such pair nearer than KEEP thicknesses never has one, whatever the contact
 passes leave when they run out (a fast twist, a landing at a large step); one that starts
-nearer (an overlap the scene began with) never has that pair nearer than it began. The
+nearer (an overlap the scene began with) never has that pair nearer than it began. Mesh
+neighbours are the membrane's: where the thickness nears half an edge, a cloth squeezed in
+its plane (beside a twist's turning edge) brings a vertex within the thickness of a
+triangle one edge away, and the passes push it apart as best they can. Held to (3) such a
+pair froze its vertex for good: one beside the turning edge of a 64 x 64 twist (Newton's
+cloth_twist, thickness 0.53 of an edge) was moved back in every step from step 226 while its
+neighbours turned on, 220 mm from where a step's solve put it by step 404. Layers share no
+mesh edge, and a sheet folded onto itself shares them only at its crease: (3) holds them.
+The
 pairs nearer than a thickness at the step's end are listed (the list holds the pairs that
 came within thickness + skin over the step), so the list's assumption is the same as above.
 ROUNDING covers the positions' rounding (f32: about 1e-5 of a 5 mm thickness at a metre from
@@ -105,6 +116,7 @@ from .colliders.collision import taken_at
 MARGIN = 1e-6       # relative: (1) needs d0 + d1 > R (1 + MARGIN), (2) |b_k| > MARGIN max |b_k|
 PIECES = 8          # a step's parts, each checked by (1) or (2), for a pair the whole step fails
 KEEP = 0.999        # keep_thickness: no pair is left nearer than this (in thicknesses), (3)
+APART = 2.0         # thicknesses: mesh neighbours nearer than this at rest are not held to (3)
 ROUNDING = 1e-4     # relative: (3) is checked at KEEP (1 + ROUNDING) thicknesses, in floats
 BOUND_SLACK = 1e-3  # thicknesses: a particle this near its bound is loose (its pairs tested)
 FAR = 1e30          # m_i of a particle in no listed pair
@@ -203,6 +215,36 @@ def _nearer(start: ti.template(), now: ti.template(), corners, vertex_triangle, 
     return near
 
 
+@ti.func
+def _adjacent(stage: ti.template(), i, j):
+    """Whether particles i and j are the ends of a mesh edge."""
+    found = False
+    for k in range(stage.neighbour_start[i], stage.neighbour_start[i + 1]):
+        if stage.neighbours[k] == j:
+            found = True
+    return found
+
+
+@ti.func
+def _mesh_neighbours(stage: ti.template(), rest: ti.template(), corners, vertex_triangle):
+    """Whether the pair on `corners` is one of mesh neighbours (module doc, (3)): a particle of
+    each element on one mesh edge, the elements nearer than APART thicknesses at rest."""
+    joined = False
+    if vertex_triangle:         # the vertex and a corner
+        for k in ti.static(range(1, 4)):
+            if _adjacent(stage, corners[0], corners[k]):
+                joined = True
+    else:                       # an end of each edge
+        for k in ti.static(range(4)):
+            if _adjacent(stage, corners[k // 2], corners[2 + k % 2]):
+                joined = True
+    near = False
+    if joined:
+        near = (_distance(rest[corners[0]], rest[corners[1]], rest[corners[2]],
+                          rest[corners[3]], vertex_triangle) < APART * stage.thickness[None])
+    return near
+
+
 @backend.kernel
 def pair_bounds(stage: ti.template(), pairs: ti.template(), x: ti.template()):
     """bound[i]: the least distance of a listed pair of particle i at positions x, where the
@@ -278,10 +320,10 @@ def check_pair(stage: ti.template(), pairs: ti.template(), model: ti.template(),
                state: ti.template(), p):
     """Listed pair p (not beside a tear: torn pieces pass through the opening): if it may have
     met in the step (never_through), or the step left it nearer than the kept distance and
-    than it started (keep_thickness), mark its free particles not yet moved back (marked:
-    written 1 by any pair, the same value in any order); count it if it has none left to
-    move (unresolved). Only a pair of a loose particle is tested (module doc, bounds: the
-    others pass), and counted in `checked`."""
+    than it started, unless mesh neighbours (keep_thickness), mark its free particles not
+    yet moved back (marked: written 1 by any pair, the same value in any order); count it if
+    it has none left to move (unresolved). Only a pair of a loose particle is tested (module
+    doc, bounds: the others pass), and counted in `checked`."""
     corners = pairs.particles[p]
     if (stage.loose[corners[0]] + stage.loose[corners[1]] + stage.loose[corners[2]]
             + stage.loose[corners[3]] > 0):
@@ -296,6 +338,9 @@ def check_pair(stage: ti.template(), pairs: ti.template(), model: ti.template(),
             if not failed:
                 failed = _nearer(stage.step_start, state.particle_position, corners,
                                  vertex_triangle, stage.keep[None])
+                if failed:
+                    failed = not _mesh_neighbours(stage, model.particle_rest_position,
+                                                  corners, vertex_triangle)
         if failed:
             left = 0
             for k in ti.static(range(4)):

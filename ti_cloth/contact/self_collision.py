@@ -208,12 +208,14 @@ class SelfCollision:
     keep_thickness: the same rounds also move back the free particles of a pair the step
     left nearer than 0.999 of the thickness and nearer than it started it, so that no pair
     that starts a step farther apart than that ever ends one nearer, whatever the passes
-    leave (the same module's theorem); False (the default): the passes keep the thickness
-    as far as `iterations` allow, and report what they leave (closest_left). A particle is
-    moved back only where no collider took its place since (else it stays: a figure pressing
-    the cloth is warned about, where the guarantee yields). Off by default for what it costs
-    the garment demos (docs/api.md): time, and much of the cloth frozen for the step where a
-    figure presses it.
+    leave (the same module's theorem; but mesh neighbours, a particle of each on one mesh
+    edge and under two thicknesses apart at rest, which the membrane squeezes, are the
+    passes'); False (the
+    default): the passes keep the thickness as far as `iterations` allow, and report what
+    they leave (closest_left). A particle is moved back only where no collider took its
+    place since (else it stays: a figure pressing the cloth is warned about, where the
+    guarantee yields). Off by default for what it costs the garment demos (docs/api.md):
+    time, and much of the cloth frozen for the step where a figure presses it.
     stacking: a resting contact moves the side farther (in contacts) from what holds it up:
     a collider, a pin, a handle (module doc: shock propagation), so the passes settle a pile
     about a layer a pass; False: every contact mass-weighted (piles take many more passes and
@@ -344,6 +346,8 @@ class SelfCollisionStage:
         self.triangle_spring = fields.vector(3, ti.i32, max(len(triangles), 1))
         self.triangle_face = fields.scalar(ti.i32, max(len(triangles), 1))
         self.edge_spring = fields.scalar(ti.i32, max(len(edges), 1))
+        self.neighbour_start = fields.scalar(ti.i32, n + 1)     # each particle's mesh edges'
+        self.neighbours = fields.scalar(ti.i32, max(2 * len(edges), 1))     # other ends
         self.step_start = fields.vector(3, real, n)
         self.before = fields.vector(3, real, n)
         self.listed_at = fields.vector(3, real, n)
@@ -398,7 +402,11 @@ class SelfCollisionStage:
         self.grid = BoxGrid(n, len(edges))         # particles, then edges
         self.candidates = PairList(PAIRS_PER_PARTICLE * max(n, 1))
         self.load(settings, cloth)
-        upload(((self.triangles, triangles), (self.edges, edges)))
+        ends = np.concatenate([edges, edges[:, ::-1]]) if len(edges) else np.zeros((0, 2))
+        ends = ends[np.lexsort((ends[:, 1], ends[:, 0]))]
+        upload(((self.triangles, triangles), (self.edges, edges),
+                (self.neighbour_start, np.searchsorted(ends[:, 0], np.arange(n + 1))),
+                (self.neighbours, ends[:, 1])))
 
     @staticmethod
     def structure(settings: SelfCollision, cloth) -> tuple:
