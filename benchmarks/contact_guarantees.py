@@ -89,13 +89,14 @@ def twist(n: int, layers: int):
     x = body.particle_position
     handles = []
     for edge, sense in ((np.isclose(x[:, 0], 0.0), 1.0), (np.isclose(x[:, 0], 0.6), -1.0)):
-        for i in np.flatnonzero(edge):
-            y, z = x[i, 1] - 0.5, x[i, 2]
+        held = np.flatnonzero(edge)
+        y, z = x[held, 1] - 0.5, x[held, 2]
 
-            def turned(t, y=y, z=z, sense=sense):
-                a = sense * TWIST_SPEED * t
-                return (0.0, y * np.cos(a) - z * np.sin(a) - y, y * np.sin(a) + z * np.cos(a) - z)
-            handles.append(tc.Handle([i], turned))
+        def turned(t, y=y, z=z, sense=sense):      # the edge's offsets, one row a particle
+            a = sense * TWIST_SPEED * t
+            return np.stack([np.zeros_like(y), y * np.cos(a) - z * np.sin(a) - y,
+                             y * np.sin(a) + z * np.cos(a) - z], axis=1)
+        handles.append(tc.Handle(held, turned))
     return body, dict(handles=handles, gravity=(0.0, 0.0, 0.0)), TWIST_SECONDS
 
 
