@@ -423,7 +423,6 @@ def check_runnable(scene: Scene, root: Table) -> None:
             root.fail(f"camera: {err}")
 
 
-
 def _integrator(sim: Table):
     spec = sim.value("integrator", argument_default(Simulation, "integrator"))
     if isinstance(spec, str):

@@ -310,7 +310,6 @@ def _garment(table: Table) -> Garment:
     return table.build(Garment, pieces, seams)
 
 
-
 def _springs(table: Table | None, default: SpringParams | None) -> SpringParams | None:
     if table is None:
         return default

@@ -210,12 +210,12 @@ class SelfCollision:
     that starts a step farther apart than that ever ends one nearer, whatever the passes
     leave (the same module's theorem; but mesh neighbours, a particle of each on one mesh
     edge and under two thicknesses apart at rest, which the membrane squeezes, are the
-    passes'); False (the
-    default): the passes keep the thickness as far as `iterations` allow, and report what
-    they leave (closest_left). A particle is moved back only where no collider took its
-    place since (else it stays: a figure pressing the cloth is warned about, where the
-    guarantee yields). Off by default for what it costs the garment demos (docs/api.md):
-    time, and much of the cloth frozen for the step where a figure presses it.
+    passes'); False (the default): the passes keep the thickness as far as `iterations`
+    allow, and report what they leave (closest_left). A particle is moved back only where
+    no collider took its place since (else it stays: a figure pressing the cloth is warned
+    about, where the guarantee yields). Off by default for what it costs the garment demos
+    (docs/api.md): time, and much of the cloth frozen for the step where a figure presses
+    it.
     stacking: a resting contact moves the side farther (in contacts) from what holds it up:
     a collider, a pin, a handle (module doc: shock propagation), so the passes settle a pile
     about a layer a pass; False: every contact mass-weighted (piles take many more passes and
