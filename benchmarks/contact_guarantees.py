@@ -11,9 +11,10 @@ both over candidate pairs a k-d tree finds within reach, and the most stretched 
 (its length over its rest length: a fail-safe that froze particles while the cloth around
 them moved on shows there); then the run's totals, the closest pair as a fraction of the
 thickness, the particles the fail-safe moved back and those it left where a collider had
-taken their step start (stayed), the most particles inside a collider at a checked step (a negative
-Simulation.collider_distance: the demos' figures are closed animated meshes), the checked
-run's wall time (checks included: compare it between fail-safes of one scene in one run),
+taken their step start (stayed), the most particles inside a collider at a checked step (a
+negative Simulation.collider_distance: the demos' figures are closed animated meshes), the
+checked run's wall time (checks included: compare it between fail-safes of one scene in one
+run),
 and the wall time per step with and without self-contact (medians of --repeats alternated
 runs in this process, after a warm-up); each scene with each --fail-safe: on (never_through
 and keep_thickness), through (never_through alone, the default), off (the contact
