@@ -74,8 +74,9 @@ cloth_twist, thickness 0.53 of an edge) was moved back in every step from step 2
 neighbours turned on, 220 mm from where a step's solve put it by step 404. Layers share no
 mesh edge, and a sheet folded onto itself shares them only at its crease: (3) holds them.
 The pairs nearer than a thickness at the step's end are listed (the list holds the pairs
-that came within thickness + skin over the step), so the list's assumption is the same as
-above.
+that came within thickness + skin over the step, and with keep_thickness it is made again
+before the rounds once the passes moved two particles apart by more than the skin:
+self_collision.py, _reach_kept), so the list's assumption is the same as above.
 ROUNDING covers the positions' rounding (f32: about 1e-5 of a 5 mm thickness at a metre from
 the origin), so that the guarantee holds measured in float64 too. What it costs is the
 passes' work left undone: a pair they could not part in a step stops where the step started
