@@ -725,23 +725,33 @@ def free_crossings(body, held, x):
     return int(segments_cross_triangles(x[edges[e[apart]]], x[tris[t[apart]]]).sum())
 
 
-def closest_free(body, held, x):
+def closest_free(body, held, x, neighbours_within=0.0):
     """The nearest pair over free elements (no held particle) sharing no particle: vertex to
-    triangle (point_triangle_distances) and edge to edge (segment_distances), brute force."""
+    triangle (point_triangle_distances) and edge to edge (segment_distances), brute force;
+    but mesh neighbours (a particle of each on one mesh edge) nearer than
+    `neighbours_within` in the rest shape, which keep_thickness leaves to the passes."""
+    rest = body.particle_position
     tris = body.mesh.triangles
+    edges = mesh_edges(tris)
+    joined = np.zeros((len(x), len(x)), bool)
+    joined[edges[:, 0], edges[:, 1]] = joined[edges[:, 1], edges[:, 0]] = True
     free = tris[~np.isin(tris, held).any(axis=1)]
     v, t = np.meshgrid(np.setdiff1d(np.arange(len(x)), held), np.arange(len(free)),
                        indexing="ij")
     v, t = v.ravel(), t.ravel()
-    apart = ~(free[t] == v[:, None]).any(axis=1)
-    nearest = point_triangle_distances(x[v[apart]], x[free[t[apart]]]).min()
-    edges = mesh_edges(tris)
+    kept = ~(free[t] == v[:, None]).any(axis=1)
+    kept &= ~(joined[v[:, None], free[t]].any(axis=1)
+              & (point_triangle_distances(rest[v], rest[free[t]]) < neighbours_within))
+    nearest = point_triangle_distances(x[v[kept]], x[free[t[kept]]]).min()
     edges = edges[~np.isin(edges, held).any(axis=1)]
     e, f = np.triu_indices(len(edges), 1)
-    apart = ~(edges[e][:, :, None] == edges[f][:, None, :]).any(axis=(1, 2))
-    ends = x[edges[e[apart]]], x[edges[f[apart]]]
-    return min(nearest, segment_distances(ends[0][:, 0], ends[0][:, 1], ends[1][:, 0],
-                                          ends[1][:, 1]).min())
+    a, b = edges[e], edges[f]
+    kept = ~(a[:, :, None] == b[:, None, :]).any(axis=(1, 2))
+    kept &= ~(joined[a[:, :, None], b[:, None, :]].any(axis=(1, 2))
+              & (segment_distances(rest[a[:, 0]], rest[a[:, 1]], rest[b[:, 0]], rest[b[:, 1]])
+                 < neighbours_within))
+    a, b = a[kept], b[kept]
+    return min(nearest, segment_distances(x[a[:, 0]], x[a[:, 1]], x[b[:, 0]], x[b[:, 1]]).min())
 
 
 def test_the_fail_safe_keeps_a_twisted_sheet_from_passing_through_itself_and_apart(f64):
@@ -806,35 +816,6 @@ def test_the_fail_safe_holds_where_the_passes_carry_particles_past_the_list(f64)
     assert crossings == 0 and moved_back > 0
 
 
-def closest_kept_pair(body, held, x, thickness):
-    """The nearest vertex-triangle and edge-edge pair over free elements (no held particle)
-    sharing no particle, but mesh neighbours (a particle of each on one mesh edge, and under
-    two thicknesses apart in the rest shape: keep_thickness leaves them to the passes),
-    brute force."""
-    rest = body.particle_position
-    tris = body.mesh.triangles
-    edges = mesh_edges(tris)
-    joined = np.zeros((len(x), len(x)), bool)
-    joined[edges[:, 0], edges[:, 1]] = joined[edges[:, 1], edges[:, 0]] = True
-    free = tris[~np.isin(tris, held).any(axis=1)]
-    v, t = np.meshgrid(np.setdiff1d(np.arange(len(x)), held), np.arange(len(free)),
-                       indexing="ij")
-    v, t = v.ravel(), t.ravel()
-    kept = ~(free[t] == v[:, None]).any(axis=1)
-    kept &= ~(joined[v[:, None], free[t]].any(axis=1)
-              & (point_triangle_distances(rest[v], rest[free[t]]) < 2 * thickness))
-    nearest = point_triangle_distances(x[v[kept]], x[free[t[kept]]]).min()
-    edges = edges[~np.isin(edges, held).any(axis=1)]
-    e, f = np.triu_indices(len(edges), 1)
-    a, b = edges[e], edges[f]
-    kept = ~(a[:, :, None] == b[:, None, :]).any(axis=(1, 2))
-    kept &= ~(joined[a[:, :, None], b[:, None, :]].any(axis=(1, 2))
-              & (segment_distances(rest[a[:, 0]], rest[a[:, 1]], rest[b[:, 0]], rest[b[:, 1]])
-                 < 2 * thickness))
-    a, b = a[kept], b[kept]
-    return min(nearest, segment_distances(x[a[:, 0]], x[a[:, 1]], x[b[:, 0]], x[b[:, 1]]).min())
-
-
 def test_keep_thickness_leaves_squeezed_mesh_neighbours_to_the_passes(f64):
     """A 12 x 12 sheet (0.6 m) whose edges turn pi / 3 rad/s each way (Newton's cloth_twist),
     with a thickness of half its mean rest edge: beside the turning edges the membrane
@@ -856,7 +837,7 @@ def test_keep_thickness_leaves_squeezed_mesh_neighbours_to_the_passes(f64):
         warnings.simplefilter("ignore")
         for _ in range(20):
             sim.step(16)
-            closest.append(closest_kept_pair(body, held, sim.positions(), thickness)
+            closest.append(closest_free(body, held, sim.positions(), 2 * thickness)
                            / thickness)
     moved_back = sim.self_contacts().moved_back
     report("moved back, closest free pair but mesh neighbours / thickness",
