@@ -818,19 +818,20 @@ def test_the_fail_safe_holds_where_the_passes_carry_particles_past_the_list(f64)
 
 
 def test_keep_thickness_makes_the_list_again_once_the_passes_carry_particles_past_its_skin(f64):
-    """Three layers 5 mm (a thickness) and more apart at rest: a 0.1 m square, a small
-    triangle 2.1 thicknesses above it (out of the first list, whose reach is 1.02 thicknesses
-    and its skin 1) and a square 1000x as heavy 0.8 thicknesses above the triangle. In the
-    first step the passes push the triangle 0.22 thicknesses down. In the second the square
-    below rises 0.05 thicknesses and the heavy one falls 0.9, past where the triangle was: the
-    particles moved apart by 0.95 thicknesses, less than the skin, so the list stands; the
-    passes push the triangle back under the heavy square, 0.9 thicknesses down, which leaves it
-    0.93 thicknesses from the square below. That pair is not in the list: keep_thickness makes
-    the list again once the passes moved particles past its skin (1.17 thicknesses here) and
-    its rounds move particles back, so no pair is nearer than 0.999 thicknesses (brute force,
-    closest_free). With the list made again only past a thickness and the skin, as
-    never_through needs, the step ended with that pair at 0.93 thicknesses and nothing moved
-    back (measured; a 128 x 128 twist at Newton's speed ended a pair at 0.92 in step 1,084)."""
+    """Three layers built 5 thicknesses (5 mm each) apart, since pairs nearer than the thickness at
+    rest are never listed, then placed: a 0.1 m square, a small triangle 2.1 thicknesses above it
+    (out of the first list, whose reach is 1.02 thicknesses and its skin 1) and a square 1000x as
+    heavy 0.8 thicknesses above the triangle. In the first step the passes push the triangle 0.22
+    thicknesses down. In the second (the triangle at rest) the square below rises 0.05 thicknesses
+    and the heavy one falls 0.9, past where the triangle was: the particles moved apart by 0.95
+    thicknesses, less than the skin, so the list stands; the passes push the triangle back under the
+    heavy square, 0.9 thicknesses down, which leaves it 0.93 thicknesses from the square below. That
+    pair is not in the list: keep_thickness makes the list again once the passes moved particles
+    past its skin (1.17 thicknesses here) and its rounds move particles back, so no pair is nearer
+    than 0.999 thicknesses (brute force, closest_free). With the list made again only past a
+    thickness and the skin, as never_through needs, the step ended with that pair at 0.93
+    thicknesses and nothing moved back (measured; a 128 x 128 twist at Newton's speed ended a pair
+    at 0.92 in step 1,084)."""
     thickness = 0.005
     square = tc.grid_mesh(2, 2, size=(0.1, 0.1), plane="xz")
     small = tc.Mesh(np.array([[0.06, 0.0, 0.02], [0.08, 0.0, 0.02], [0.07, 0.0, 0.04]]),
