@@ -30,14 +30,17 @@ Scenes (N particles a side: 16, 24 and 6 times --scale, or --size; the issue's s
            (the dense pile the docs report: no pass can make room)
   land     an N x N sheet of issue 53's denim (0.4 m) dropped 15 cm onto another (0.5 m) that
            lies on a ball: the large steps' case (--dt 1/60, and --integrator)
+  ribbon   a 1.6 m x 0.12 m ribbon (5 N x 6 particles) built waved (height 0.35 + 0.2
+           sin(2 pi x / 0.4) m: its rest shape), dropped on the ground for 2 s, folding onto
+           itself; 1 cm thick (issue 56's unseen scene)
   cape     demos/cape.toml as it is (its own step, xpbd, thickness 4 mm and friction; its
            attached neck held), over its 3.3 s
   skirt    demos/skirt_walk.toml likewise (two panels sewn on a walking figure; particles its
            seams sew together count as one)
-(all but the press and the demos 5 mm thick, or half the mean rest edge where that is less,
+(all but the press, the ribbon and the demos 5 mm thick, or half the mean rest edge where that is less,
 as SelfCollision asks of a mesh)
 
-    python benchmarks/contact_guarantees.py [--scenes cape land pile press skirt twist]
+    python benchmarks/contact_guarantees.py [--scenes cape land pile press ribbon skirt twist]
                                             [--scale 1] [--size N] [--layers 4]
                                             [--fail-safe on off]
                                             [--integrator xpbd] [--dt 0.0041667]
@@ -122,6 +125,16 @@ def land(n: int, layers: int):
     return tc.Cloth.combine([lower, upper]), dict(colliders=colliders), 1.5
 
 
+def ribbon(n: int, layers: int):
+    """Issue 56's unseen scene as the issue describes it: a ribbon built waved, dropped on the
+    ground, folding onto itself."""
+    mesh = tc.grid_mesh(6, 5 * n, size=(1.6, 0.12), plane="xz", origin=(-0.8, 0.0, -0.06))
+    x = mesh.vertices.copy()
+    x[:, 1] = 0.35 + 0.2 * np.sin(x[:, 0] * 2.0 * np.pi / 0.4)     # its rest shape: waved
+    body = tc.Cloth(tc.Mesh(x, mesh.triangles), tc.Material())
+    return body, dict(colliders=[tc.Plane(static_friction=0.5)], drag=0.3), 2.0
+
+
 def demo(file: str):
     """A demo's scene file as it is (its integrator, step, colliders, attachments and
     self-collision), with the fail-safe measured: (body, simulation(FAIL_SAFES' flags, or
@@ -172,12 +185,14 @@ def rest_edges(body) -> np.ndarray:
 
 SCENES = {"pile": made(pile, THICKNESS), "twist": made(twist, THICKNESS),
           "press": made(press, 0.02), "land": made(land, THICKNESS),
+          "ribbon": made(ribbon, 0.01),
           "cape": demo("cape.toml"), "skirt": demo("skirt_walk.toml")}
 FAIL_SAFES = {"on": dict(never_through=True, keep_thickness=True),
               "through": dict(never_through=True, keep_thickness=False),     # the defaults
               "off": dict(never_through=False, keep_thickness=False),
               "solve": dict(never_through=True, keep_thickness=False, in_solve=True)}
-SIDES = {"pile": 16, "twist": 24, "press": 6, "land": 16}    # particles a side at --scale 1
+SIDES = {"pile": 16, "twist": 24, "press": 6, "land": 16,     # particles a side at --scale 1
+         "ribbon": 16}                                          # (the ribbon: 5 N along, 6 across)
 
 
 def crossings(x: np.ndarray, triangles: np.ndarray, edges: np.ndarray, reach: float,
@@ -321,7 +336,7 @@ def measure(name: str, n: int, layers: int, every: int, repeats: int,
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--scenes", nargs="+", choices=sorted(SCENES),
-                        default=["land", "pile", "press", "twist"])
+                        default=["land", "pile", "press", "ribbon", "twist"])
     parser.add_argument("--scale", type=int, default=1)
     parser.add_argument("--size", type=int, help="particles a side (overrides --scale)")
     parser.add_argument("--fail-safe", nargs="+", choices=sorted(FAIL_SAFES),
