@@ -37,8 +37,8 @@ Scenes (N particles a side: 16, 24 and 6 times --scale, or --size; the issue's s
            attached neck held), over its 3.3 s
   skirt    demos/skirt_walk.toml likewise (two panels sewn on a walking figure; particles its
            seams sew together count as one)
-(all but the press, the ribbon and the demos 5 mm thick, or half the mean rest edge where that is less,
-as SelfCollision asks of a mesh)
+(all but the press, the ribbon and the demos 5 mm thick, or half the mean rest edge where
+that is less, as SelfCollision asks of a mesh)
 
     python benchmarks/contact_guarantees.py [--scenes cape land pile press ribbon skirt twist]
                                             [--scale 1] [--size N] [--layers 4]
