@@ -177,6 +177,11 @@ def mesh_edges(triangles: np.ndarray) -> np.ndarray:
     return np.unique(np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
 
 
+def edge_key(a, b, count: int):
+    """One integer for the particle pair (a, b) in either order, of `count` particles."""
+    return np.minimum(a, b) * count + np.maximum(a, b)
+
+
 def rest_edges(body) -> np.ndarray:
     """The rest lengths of the mesh's edges."""
     edges, x = mesh_edges(body.mesh.triangles), body.particle_position
@@ -225,23 +230,20 @@ def crossings(x: np.ndarray, triangles: np.ndarray, edges: np.ndarray, reach: fl
 
 def closest_far(x: np.ndarray, rest: np.ndarray, triangles: np.ndarray, reach: float,
                 far: float, held: np.ndarray, weld: np.ndarray,
-                edges: np.ndarray) -> tuple[float, float]:
+                edge_keys: np.ndarray) -> tuple[float, float]:
     """The nearest vertex-triangle distance over far pairs: sharing no particle (up to
-    `weld`), and not mesh neighbours (the vertex on a mesh edge, of `edges`, with a corner,
-    and nearer than `far` to the triangle in the rest shape: SelfCollision.keep_thickness
-    leaves those to the passes); and over those of them with no `held` particle; inf when
-    none is within `reach`."""
+    `weld`), and not mesh neighbours (the vertex on a mesh edge with a corner, `edge_keys`
+    the mesh edges' edge_key, and nearer than `far` to the triangle in the rest shape:
+    SelfCollision.keep_thickness leaves those to the passes); and over those of them with no
+    `held` particle; inf when none is within `reach`."""
     tree = cKDTree(x[triangles].mean(axis=1))
     pairs = [(v, t) for v, near in enumerate(tree.query_ball_point(x, reach)) for t in near]
     if not pairs:
         return np.inf, np.inf
     v, t = np.array(pairs).T
     keep = ~(weld[triangles[t]] == weld[v][:, None]).any(axis=1)
-    count = len(x)
-    keys = np.sort(edges, axis=1) @ np.array([count, 1])
     corners = triangles[t]
-    joined = np.isin(np.minimum(v[:, None], corners) * count + np.maximum(v[:, None], corners),
-                     keys).any(axis=1)
+    joined = np.isin(edge_key(v[:, None], corners, len(x)), edge_keys).any(axis=1)
     rest_corners = rest[corners]
     keep &= ~joined | (point_triangle(rest[v], rest_corners[:, 0], rest_corners[:, 1],
                                       rest_corners[:, 2]) >= far)
@@ -285,7 +287,9 @@ def measure(name: str, n: int, layers: int, every: int, repeats: int,
     body, simulation, seconds, held, thickness = SCENES[name](n, layers, integrator, dt)
     triangles = body.mesh.triangles
     edges = mesh_edges(triangles)
-    reach = float(rest_edges(body).max()) + 2 * thickness
+    edge_keys = edge_key(edges[:, 0], edges[:, 1], body.particle_count)
+    rest_length = rest_edges(body)
+    reach = float(rest_length.max()) + 2 * thickness
     sims = {contact: simulation(FAIL_SAFES[fail_safe] if contact else None)
             for contact in (True, False)}
     steps = int(round(seconds / sims[True].dt))
@@ -293,7 +297,7 @@ def measure(name: str, n: int, layers: int, every: int, repeats: int,
     free_triangles = triangles[~np.isin(triangles, held).any(axis=1)]
     free_edges = edges[~np.isin(edges, held).any(axis=1)]
     crossed, crossed_free, nearest, nearest_free, watched, inside = 0, 0, np.inf, np.inf, 0, 0
-    rest_length, stretched = rest_edges(body), 0.0
+    stretched = 0.0
     sim = sims[True]
     start = time.perf_counter()
     for check in range(steps // every):
@@ -302,7 +306,7 @@ def measure(name: str, n: int, layers: int, every: int, repeats: int,
         crossed += crossings(x, triangles, edges, reach, weld)
         crossed_free += crossings(x, free_triangles, free_edges, reach, weld)
         closest, closest_free = closest_far(x, body.particle_position, triangles, reach,
-                                            2 * thickness, held, weld, edges)
+                                            2 * thickness, held, weld, edge_keys)
         nearest, nearest_free = min(nearest, closest), min(nearest_free, closest_free)
         inside = max(inside, int((sim.collider_distance(x)[0] < 0).sum()))
         stretched = max(stretched, float((np.linalg.norm(x[edges[:, 0]] - x[edges[:, 1]], axis=1)
