@@ -24,13 +24,15 @@ and a cubic whose four Bernstein coefficients on [0, 1] share a strict sign has 
 A pair that meets neither over the step is checked again over each of PIECES equal parts of
 the step (the positions on the way are the straight lines' at those times, so the theorem
 holds for each part: a pair safe in every part is safe; it tells a pair that passed fast
-beside another from one that met). One that fails a part may have met: the fail-safe moves
-its free particles back to x0 (their velocity 0: they did not move in the step), then checks
-every pair again, until a round moves nobody. It ends (each round moves at least one particle
-back, and one moved back stays), and where it ends every listed pair meets (1) or (2), or has
-all its particles back at x0 or held (a pin, a handle: scripted, never moved back). By
-induction over the steps: a cloth that starts with no pair passing through another never has
-one, with these assumptions, stated in docs/api.md:
+beside another from one that met). One that fails a part may have met. The fail-safe then
+holds it apart by its band ((4), below: only the move across a plane between the elements
+taken off), or, where the band has no room or a corner outside it may not be moved, moves
+its free particles back to x0 (their velocity 0: they did not move in the step); then it
+checks every pair again, until a round moves nobody. It ends ((4)), and where it ends every
+listed pair meets (1), (2) or (4), or has all its particles back at x0 or held (a pin, a
+handle: scripted, never moved back). By induction over the steps: a cloth that starts with
+no pair passing through another never has one, with these assumptions, stated in
+docs/api.md:
 - the pairs are the candidate list's: those farther apart than the thickness in the rest
   shape (neighbours nearer than that are not contacts), made from the boxes swept in the
   step, so that no pair can meet unlisted (contact_pairs.py); the paths are the particles'
@@ -60,9 +62,10 @@ particles of a listed pair whose distance d at the step's end is
 (d the vertex's distance to the triangle's nearest point, or the two segments'), unless
 the pair is one of mesh neighbours: a particle of each element on one mesh edge, and the
 elements nearer than APART thicknesses in the rest shape. Where the rounds end no listed
-pair meets (3), unless held particles moved it (counted in `unresolved` as above): a pair
-whose particles are all back has d(1) = d(0). So every pair but mesh neighbours ends a step
-at least min(d(0), KEEP (1 + ROUNDING) thickness) apart, and by induction a cloth that
+pair meets (3) unless its band holds it (then d(1) >= G, (4)) or held particles moved it
+(counted in `unresolved` as above): a pair whose particles are all back has d(1) = d(0). So
+every pair but mesh neighbours ends a step at least min(d(0), KEEP (1 + ROUNDING) thickness)
+apart (d(0) less its rounding, for a band's), and by induction a cloth that
 starts with no such pair nearer than KEEP thicknesses never has one, whatever the contact
 passes leave when they run out (a fast twist, a landing at a large step); one that starts
 nearer (an overlap the scene began with) never has that pair nearer than it began. Mesh
@@ -77,10 +80,45 @@ The pairs nearer than a thickness at the step's end are listed (the list holds t
 that came within thickness + skin over the step, and with keep_thickness it is made again
 before the rounds once the passes moved two particles apart by more than the skin:
 self_collision.py, _reach_kept), so the list's assumption is the same as above.
+Bands: the move across, not the step. Two convex sets apart have a plane between them (the
+separating planes of Newton's "Divide and Truncate", VBD, SIGGRAPH 2026). For a pair as the
+step started it, n is the unit vector from the nearest point of the second element (the
+triangle, or the second edge) to that of the first (the vertex, or the first edge); the
+supports a = min n.x0 over the first's corners and b = max n.x0 over the second's leave
+a - b = d(0) (but for rounding; any n with a > b will do). The pair's band keeps the first's
+corners at n.x >= above and the second's at n.x <= below, with
+
+    above - below = G = min(a - b, KEEP (1 + ROUNDING) thickness)
+
+and the room a - b - G shared between the sides by their inverse masses (the lighter side
+the more, each at least LEAST_SHARE of it). A point of an element is a convex combination of
+its corners, so a pair whose corners are inside the band at x0 (by construction) and at x1
+is on its sides of the plane all along the straight paths:
+
+    it never met, and it ends at least G apart                                 (4)
+
+A failed pair with a corner outside its band (less than INSIDE / 2 thicknesses in: beyond
+the slacks' rounding) has each such free corner hit. A hit particle goes onto the band of its
+hitting pair of the highest index (projected: the move across the plane taken off, INSIDE
+thicknesses in, the rest of its step kept: a layer pressed by another slides on along it),
+up to PROJECTIONS times a step; after that, to the least share of its path from x0 that ends
+INSIDE thicknesses inside each band that hit it (x0 and that point are inside, so the whole
+path between is, and a band it was cut to holds it for good). Its velocity is its move over
+the step over dt. The passes that follow hold it where it is (as one moved back), so its
+pairs are held to (3) whether or not keep_thickness is on: the passes could not part it
+from a neighbour. Where a corner outside its band may not be moved (held, kept by a
+collider) or is at x0 (the band has no room: a pair that began the step nearer than G
+leaves none), the pair's free particles go back to x0 as above. The rounds end: a particle
+is projected at most PROJECTIONS times a step and each cut holds its bands for good, and
+after PLANE_ROUNDS rounds of a run what fails goes back to x0 (each such round moves at
+least one particle back, and one moved back stays). On a wound twist the bands let the
+middle move on where moving back stopped it (docs/performance.md).
+
 ROUNDING covers the positions' rounding (f32: about 1e-5 of a 5 mm thickness at a metre from
 the origin), so that the guarantee holds measured in float64 too. What it costs is the
-passes' work left undone: a pair they could not part in a step stops where the step started
-it, at rest, instead of sinking into the other.
+passes' work left undone: a pair they could not part in a step moves no nearer than its
+band allows (or, without room, stops where the step started it) instead of sinking into the
+other.
 
 Bounds: most pairs need no test. The list records, for each particle i, the least distance
 m_i of a listed pair of its at the positions L where the list was made (pair_bounds). A
@@ -108,9 +146,15 @@ moved back (benchmarks/contact_guarantees.py measures it).
 
 import taichi as ti
 
-from ..geometry import segment_distance, triangle_distance
+from ..geometry import (
+    TINY,
+    segment_distance,
+    segment_parameters,
+    triangle_closest,
+    triangle_distance,
+)
 from ..runtime import backend
-from ..runtime.plan import ITEM, STATE, Loop, Once, Phase, Until
+from ..runtime.plan import DT, ITEM, STATE, Loop, Once, Phase, Until
 from .broad_phase.contact_pairs import listed, span_middle, torn_pair
 from .colliders.collision import taken_at
 
@@ -121,6 +165,10 @@ APART = 2.0         # thicknesses: mesh neighbours nearer than this at rest are 
 ROUNDING = 1e-4     # relative: (3) is checked at KEEP (1 + ROUNDING) thicknesses, in floats
 BOUND_SLACK = 1e-3  # thicknesses: a particle this near its bound is loose (its pairs tested)
 FAR = 1e30          # m_i of a particle in no listed pair
+LEAST_SHARE = 0.05  # (4): the least share of a band's room either side is given
+INSIDE = 1e-4       # thicknesses: (4)'s moves end this far inside their half-space
+PROJECTIONS = 4     # (4): a particle is projected this many times a step at most, then cut
+PLANE_ROUNDS = 8    # rounds of (4) in a run; after them, what fails is moved back to x0
 
 
 @ti.func
@@ -246,6 +294,122 @@ def _mesh_neighbours(stage: ti.template(), rest: ti.template(), corners, vertex_
     return near
 
 
+@ti.func
+def _band(stage: ti.template(), corners, vertex_triangle):
+    """The pair's band (module doc, (4)), from where the step started it: (n, below, above,
+    found). Side A (the vertex, or the first edge) keeps n.x >= above, side B (the triangle,
+    or the second edge) n.x <= below; found is False where the start gives no band (the
+    elements touching, or the closest points' rounding leaving no gap between the supports).
+    The room is shared by how far each side came towards the other along n in the step as
+    its first passes left it (`first_end`: the same for every round of the step)."""
+    a, b, c, d = corners[0], corners[1], corners[2], corners[3]
+    p, q, r, s = stage.step_start[a], stage.step_start[b], stage.step_start[c], stage.step_start[d]
+    between = p - r
+    if vertex_triangle:
+        closest, _, _ = triangle_closest(p, q, r, s)
+        between = p - closest
+    else:
+        u, w = segment_parameters(p, q, r, s)
+        between = p + u * (q - p) - r - w * (s - r)
+    n = between / ti.max(between.norm(), TINY)
+    least_a = n.dot(p)                      # the supports: A's lowest, B's highest along n
+    most_b = ti.max(n.dot(q), n.dot(r), n.dot(s))
+    towards_a = -n.dot(stage.first_end[a] - p)      # each side's move towards the other
+    towards_b = ti.max(n.dot(stage.first_end[b] - q), n.dot(stage.first_end[c] - r),
+                       n.dot(stage.first_end[d] - s))
+    if not vertex_triangle:
+        least_a = ti.min(least_a, n.dot(q))
+        most_b = ti.max(n.dot(r), n.dot(s))
+        towards_a = ti.max(towards_a, -n.dot(stage.first_end[b] - q))
+        towards_b = ti.max(n.dot(stage.first_end[c] - r), n.dot(stage.first_end[d] - s))
+    towards_a, towards_b = ti.max(towards_a, 0.0), ti.max(towards_b, 0.0)
+    gap = least_a - most_b
+    kept = ti.min(gap, KEEP * (1.0 + ROUNDING) * stage.thickness[None])
+    share = 0.5                             # of the room, side B's
+    if towards_a + towards_b > 0.0:
+        share = ti.math.clamp(towards_b / (towards_a + towards_b), LEAST_SHARE,
+                              1.0 - LEAST_SHARE)
+    below = most_b + share * (gap - kept)
+    return n, below, below + kept, gap > 0.0
+
+
+@ti.func
+def _side(k: ti.template(), vertex_triangle):
+    """1 for a corner of side A (the vertex, or the first edge), -1 for side B."""
+    side = -1.0
+    if ti.static(k == 0):
+        side = 1.0
+    if ti.static(k == 1):
+        side = ti.select(vertex_triangle, -1.0, 1.0)
+    return side
+
+
+@ti.func
+def _slack(n, below, above, x, k: ti.template(), vertex_triangle):
+    """How far corner k at x is inside its half-space of the band (negative: outside)."""
+    side = _side(k, vertex_triangle)
+    return side * n.dot(x) - ti.select(side > 0.0, above, -below)
+
+
+@ti.func
+def _movable(stage: ti.template(), model: ti.template(), i):
+    """Whether the rounds may move particle i: free, and neither back at its step's start
+    nor kept where it is by a collider (back 1, 2); one cut or projected (back 3) may be cut
+    again."""
+    return model.particle_inv_mass[i] > 0 and (stage.back[i] == 0 or stage.back[i] == 3)
+
+
+@ti.func
+def _inside(stage: ti.template(), n, below, above, x: ti.template(), corners, vertex_triangle):
+    """Whether every corner of the pair at positions x is inside its half-space of the band,
+    by half INSIDE thicknesses at least (beyond the rounding of the slacks)."""
+    inside = True
+    for k in ti.static(range(4)):
+        if (_slack(n, below, above, x[corners[k]], k, vertex_triangle)
+                < 0.5 * INSIDE * stage.thickness[None]):
+            inside = False
+    return inside
+
+
+@ti.func
+def _divide(stage: ti.template(), model: ti.template(), state: ti.template(),
+            colliders: ti.template(), outside: ti.template(), corners, vertex_triangle, p, n,
+            below, above):
+    """Failed pair p, its band (n, below, above) not holding it (module doc, (4)): each
+    corner outside its half-space (less than half INSIDE thicknesses in) is hit (hits; the
+    pair, `which`; the share of its step that ends INSIDE thicknesses before the plane,
+    `fraction`: the least of its pairs'), or, where a corner outside may not be moved, is
+    where the step started it (the band has no room there) or is driven by a collider (one
+    took its step's start: `outside`, colliders.taken_at), the pair's movable particles are
+    marked to go back to x0, as without bands."""
+    inside = 0.5 * INSIDE * stage.thickness[None]
+    stuck = False
+    for k in ti.static(range(4)):
+        i = corners[k]
+        if _slack(n, below, above, state.particle_position[i], k, vertex_triangle) < inside:
+            if (not _movable(stage, model, i)
+                    or (state.particle_position[i] == stage.step_start[i]).all()):
+                stuck = True
+        if ti.static(outside):
+            if taken_at(colliders, i, stage.step_start[i]):
+                stuck = True
+    for k in ti.static(range(4)):
+        i = corners[k]
+        if _movable(stage, model, i):
+            if stuck:
+                stage.marked[i] = 1
+            else:
+                now = _slack(n, below, above, state.particle_position[i], k, vertex_triangle)
+                if now < inside:
+                    begin = _slack(n, below, above, stage.step_start[i], k, vertex_triangle)
+                    kept = 0.0
+                    if begin > 4.0 * inside:
+                        kept = (begin - 2.0 * inside) / (begin - now)
+                    ti.atomic_add(stage.hits[i], 1)
+                    ti.atomic_max(stage.which[i], p)
+                    ti.atomic_min(stage.fraction[i], kept)
+
+
 @backend.kernel
 def pair_bounds(stage: ti.template(), pairs: ti.template(), x: ti.template()):
     """bound[i]: the least distance of a listed pair of particle i at positions x, where the
@@ -273,6 +437,8 @@ def keep_frame(stage: ti.template(), k: ti.i32):
 def begin_rounds(stage: ti.template()):
     stage.moved_back[None] = 1
     stage.moved_total[None] = 0
+    stage.cut[None] = 0
+    stage.placed[None] = 0
     stage.stayed[None] = 0
     stage.rounds[None] = 0
     stage.checked[None] = 0
@@ -284,6 +450,9 @@ def loosen(stage: ti.template(), state: ti.template(), i):
     less BOUND_SLACK thicknesses (module doc, bounds); every particle where the list has no
     bounds (loosening 0: a list is given them from its second step, so a list made every
     step, as a busy pile's is, costs none)."""
+    _reset_hits(stage, i)
+    if stage.again[None] == 0:                      # the step's first run: as the passes left it
+        stage.first_end[i] = state.particle_position[i]
     stage.loose[i] = 1
     if stage.loosening[None]:
         at = stage.listed_at[i]
@@ -300,7 +469,8 @@ def loosen(stage: ti.template(), state: ti.template(), i):
 def going(stage: ti.template()):
     """Another round while the last moved a particle back or held it (at most one a
     particle)."""
-    return stage.moved_back[None] > 0 and stage.rounds[None] <= stage.particle_count
+    return (stage.moved_back[None] > 0
+            and stage.rounds[None] <= stage.particle_count + PLANE_ROUNDS)
 
 
 @ti.func
@@ -314,11 +484,42 @@ def clear_round(stage: ti.template()):
 def clear_back(stage: ti.template(), i):
     stage.back[i] = 0
     stage.marked[i] = 0
+    stage.projections[i] = 0
+
+
+@ti.func
+def _kept(stage: ti.template(), corners):
+    """The distance (3) holds the pair to: keep_thickness's, or, for a pair with a particle
+    its band placed (back 3: held there by the passes that follow, which cannot part it
+    from its neighbours), the same distance without keep_thickness; 0 (none) otherwise."""
+    keep = stage.keep[None]
+    if keep == 0.0:
+        placed = False
+        for k in ti.static(range(4)):
+            if stage.back[corners[k]] == 3:
+                placed = True
+        if placed:
+            keep = KEEP * (1.0 + ROUNDING) * stage.thickness[None]
+    return keep
 
 
 @ti.func
 def check_pair(stage: ti.template(), pairs: ti.template(), model: ti.template(),
                state: ti.template(), p):
+    """_check without colliders."""
+    _check(stage, pairs, model, state, stage, False, p)
+
+
+@ti.func
+def check_pair_outside(stage: ti.template(), pairs: ti.template(), model: ti.template(),
+                       state: ti.template(), colliders: ti.template(), p):
+    """_check with colliders: a corner one drives is not placed by a band."""
+    _check(stage, pairs, model, state, colliders, True, p)
+
+
+@ti.func
+def _check(stage: ti.template(), pairs: ti.template(), model: ti.template(),
+           state: ti.template(), colliders: ti.template(), outside: ti.template(), p):
     """Listed pair p (not beside a tear: torn pieces pass through the opening): if it may have
     met in the step (never_through), or the step left it nearer than the kept distance and
     than it started, unless mesh neighbours (keep_thickness), mark its free particles not
@@ -338,19 +539,30 @@ def check_pair(stage: ti.template(), pairs: ti.template(), model: ti.template(),
                                    vertex_triangle)
             if not failed:
                 failed = _nearer(stage.step_start, state.particle_position, corners,
-                                 vertex_triangle, stage.keep[None])
+                                 vertex_triangle, _kept(stage, corners))
                 if failed:
                     failed = not _mesh_neighbours(stage, model.particle_rest_position,
                                                   corners, vertex_triangle)
+        n = 0.0 * stage.step_start[corners[0]]
+        below, above, found = 0.0, 0.0, False
+        if failed:                  # (4): held apart by its band, it passes
+            n, below, above, found = _band(stage, corners, vertex_triangle)
+            if found:
+                failed = not _inside(stage, n, below, above, state.particle_position,
+                                     corners, vertex_triangle)
         if failed:
             left = 0
             for k in ti.static(range(4)):
-                i = corners[k]
-                if model.particle_inv_mass[i] > 0 and stage.back[i] == 0:
-                    stage.marked[i] = 1
-                    left += 1
+                left += ti.select(_movable(stage, model, corners[k]), 1, 0)
             if left == 0:
                 ti.atomic_add(stage.unresolved[None], 1)
+            elif found and stage.rounds[None] <= PLANE_ROUNDS:
+                _divide(stage, model, state, colliders, outside, corners, vertex_triangle, p,
+                        n, below, above)
+            else:
+                for k in ti.static(range(4)):
+                    if _movable(stage, model, corners[k]):
+                        stage.marked[corners[k]] = 1
 
 
 @ti.func
@@ -372,18 +584,82 @@ def _put_back(stage: ti.template(), state: ti.template(), i, free):
 
 
 @ti.func
-def move_back(stage: ti.template(), state: ti.template(), i):
-    """A marked particle goes back to the step's start (no colliders)."""
-    if stage.marked[i]:
-        _put_back(stage, state, i, True)
+def _cut(stage: ti.template(), pairs: ti.template(), state: ti.template(), i):
+    """Where hit particle i goes (module doc, (4)), and the unit normal of the band it was
+    projected onto, towards its own side (0 if cut short): projected fewer than PROJECTIONS
+    times this step, onto the band of its hitting pair of the highest index (`which`),
+    INSIDE thicknesses in (its move across the band taken off, the rest of its step kept);
+    else the share `fraction` of its path, which keeps it inside every band that hit it."""
+    start, x = stage.step_start[i], state.particle_position[i]
+    target = start + stage.fraction[i] * (x - start)
+    normal = 0.0 * x
+    if stage.projections[i] < PROJECTIONS:
+        p = stage.which[i]
+        corners = pairs.particles[p]
+        vertex_triangle = p < stage.pair_start[stage.triangle_count]
+        n, below, above, _ = _band(stage, corners, vertex_triangle)
+        for k in ti.static(range(4)):
+            if corners[k] == i:
+                normal = _side(k, vertex_triangle) * n
+                target = x + (INSIDE * stage.thickness[None]
+                              - _slack(n, below, above, x, k, vertex_triangle)) * normal
+        stage.projections[i] += 1
+    return target, normal
 
 
 @ti.func
-def move_back_outside(stage: ti.template(), state: ti.template(), colliders: ti.template(), i):
+def _place(stage: ti.template(), state: ti.template(), i, target, normal, dt):
+    """Hit particle i placed at `target` (back 3: held there by the passes that follow, and
+    movable by the next rounds). Projected onto a band (`normal` its unit normal towards
+    the particle's side), its velocity is its step's move over dt less any part of it
+    towards the band (a contact ends the approach; it keeps sliding); cut short on its path,
+    it is at rest, as one moved back."""
+    if stage.back[i] != 3:
+        ti.atomic_add(stage.placed[None], 1)        # its first placing in the step
+    stage.back[i] = 3
+    stage.loose[i] = 1              # a new path: its pairs are tested again
+    state.particle_position[i] = target
+    v = (target - stage.step_start[i]) / dt
+    state.particle_velocity[i] = ti.select(normal.dot(normal) > 0.0,
+                                           v - ti.min(v.dot(normal), 0.0) * normal, 0.0 * v)
+    ti.atomic_add(stage.cut[None], 1)
+    ti.atomic_add(stage.moved_back[None], 1)
+
+
+@ti.func
+def _reset_hits(stage: ti.template(), i):
+    stage.hits[i] = 0
+    stage.which[i] = -1
+    stage.fraction[i] = 1.0
+
+
+@ti.func
+def move_back(stage: ti.template(), pairs: ti.template(), state: ti.template(), i, dt):
+    """A marked particle goes back to the step's start, a hit one where its bands allow
+    (no colliders)."""
+    if stage.marked[i]:
+        _put_back(stage, state, i, True)
+    elif stage.hits[i] > 0:
+        target, normal = _cut(stage, pairs, state, i)
+        _place(stage, state, i, target, normal, dt)
+    _reset_hits(stage, i)
+
+
+@ti.func
+def move_back_outside(stage: ti.template(), pairs: ti.template(), state: ti.template(),
+                      colliders: ti.template(), i, dt):
     """A marked particle goes back to the step's start where no collider took that place at
-    the step's end (module doc: the colliders' assumption)."""
+    the step's end (module doc: the colliders' assumption); a hit one where its bands allow
+    if no collider took that place either, else as a marked one."""
     if stage.marked[i]:
         _put_back(stage, state, i, not taken_at(colliders, i, stage.step_start[i]))
+    elif stage.hits[i] > 0:
+        target, normal = _cut(stage, pairs, state, i)
+        if taken_at(colliders, i, target):
+            _put_back(stage, state, i, not taken_at(colliders, i, stage.step_start[i]))
+        else:
+            _place(stage, state, i, target, normal, dt)
+    _reset_hits(stage, i)
 
 
 def phases(stage, model, pairs) -> tuple:
@@ -395,12 +671,16 @@ def phases(stage, model, pairs) -> tuple:
     before the step's contact passes)."""
     n = model.particle_count
     colliders = stage.colliders
-    back = (Loop(n, move_back, stage, STATE, ITEM) if colliders is None else
-            Loop(n, move_back_outside, stage, STATE, colliders, ITEM))
+    back = (Loop(n, move_back, stage, pairs, STATE, ITEM, DT) if colliders is None else
+            Loop(n, move_back_outside, stage, pairs, STATE, colliders, ITEM, DT))
+    check = (Loop(listed(stage, pairs), check_pair, stage, pairs, model, STATE, ITEM)
+             if colliders is None else
+             Loop(listed(stage, pairs), check_pair_outside, stage, pairs, model, STATE,
+                  colliders, ITEM))
     return (Once(begin_rounds, stage),
             Phase(Loop(n, loosen, stage, STATE, ITEM)),
             Until(going,
                   Once(clear_round, stage),
-                  Phase(Loop(listed(stage, pairs), check_pair, stage, pairs, model, STATE, ITEM)),
+                  Phase(check),
                   Phase(back),
                   args=(stage,)))

@@ -16,11 +16,12 @@ apart by more than a thickness and its skin since it was made: a pair that met i
 was then nearer than that where the list was made, so the list holds it, as the
 never-through fail-safe assumes (never_through.py; before this check a 24² twist kept 228
 crossings through the fail-safe, the passes having carried particles past a lean list's
-reach). After a run of the fail-safe that moved particles back, the passes run again with
-those held where the step started them (a particle moved back beside one the passes had
-moved is nearer than the thickness: a landing at 1/240 s left a pair 0.709 of it apart,
-the 24² twist 0.001), the list made again where the particles moved that far (the paths of
-those moved back changed), and the fail-safe checks again, until a run moves nobody back.
+reach). After a run of the fail-safe that moved particles (back to where the step started
+them, or onto a pair's band: never_through.py), the passes run again with those held where
+it put them (a particle moved back beside one the passes had moved is nearer than the
+thickness: a landing at 1/240 s left a pair 0.709 of it apart, the 24² twist 0.001), the
+list made again where the particles moved that far (the paths of those moved changed), and
+the fail-safe checks again, until a run moves nobody.
 
 Each contact pass evaluates every listed pair:
 - vertex v and triangle t: v's foot on t's plane inside t, and v's height over t, measured on
@@ -201,21 +202,22 @@ class SelfCollision:
     than 0.1 % of the thickness. A contact the passes leave nearer than half the thickness (a
     layer pressed between a pin or a collider and another layer, or a pile too dense for the
     passes) is reported: a warning, once a run, and SelfContacts.closest_left.
-    never_through: after the passes, the fail-safe of contact/never_through.py moves back to
-    the step's start every free particle of a pair that may have passed through the other in
-    the step, so that no listed pair ever does (a theorem, with its assumptions, in that
-    module and docs/api.md); False: the passes alone, which a fast twist or fold can beat.
-    keep_thickness: the same rounds also move back the free particles of a pair the step
-    left nearer than 0.999 of the thickness and nearer than it started it, so that no pair
+    never_through: after the passes, the fail-safe of contact/never_through.py holds every
+    pair that may have passed through the other in the step apart by a plane between them as
+    the step started them (its band: only its particles' moves across the plane are taken
+    off; where the band has no room, they go back to the step's start), so that no listed
+    pair ever passes through another (a theorem, with its assumptions, in that module and
+    docs/api.md); False: the passes alone, which a fast twist or fold can beat.
+    keep_thickness: the same rounds also hold apart so a pair the step left nearer than
+    0.999 of the thickness and nearer than it started it, so that no pair
     that starts a step farther apart than that ever ends one nearer, whatever the passes
     leave (the same module's theorem; but mesh neighbours, a particle of each on one mesh
     edge and under two thicknesses apart at rest, which the membrane squeezes, are the
     passes'); False (the default): the passes keep the thickness as far as `iterations`
-    allow, and report what they leave (closest_left). A particle is moved back only where
-    no collider took its place since (else it stays: a figure pressing the cloth is warned
+    allow, and report what they leave (closest_left). A particle is moved only where no
+    collider took that place since (else it stays: a figure pressing the cloth is warned
     about, where the guarantee yields). Off by default for what it costs the garment demos
-    (docs/api.md): time, and much of the cloth frozen for the step where a figure presses
-    it.
+    (docs/api.md): time, and cloth stopped short where a figure presses it.
     stacking: a resting contact moves the side farther (in contacts) from what holds it up:
     a collider, a pin, a handle (module doc: shock propagation), so the passes settle a pile
     about a layer a pass; False: every contact mass-weighted (piles take many more passes and
@@ -277,7 +279,9 @@ class SelfContacts:
     has room for; grown: (step, capacity) each time a step found more pairs than it had room
     for and the list grew (it never drops a pair: a list past MAX_PAIRS_PER_PARTICLE a
     particle is a CrushedContact). moved_back: the particles the never-through fail-safe
-    moved back to their step's start, over the run so far; stayed: those it left where the
+    moved back to their step's start, over the run so far; cut: those it placed on a pair's
+    band instead (never_through.py, (4): the move across a plane between the pair taken off,
+    or their path cut short), over the run so far; stayed: those it left where the
     step left them instead, a collider having taken their step's start (never_through.py),
     over the run so far; unresolved: (pairs, step) when a step left pairs that may have met,
     or nearer than the thickness (keep_thickness), that only held particles (or particles
@@ -302,6 +306,7 @@ class SelfContacts:
     passes: int = 0
     skin: float = 0.0
     tested: int = 0
+    cut: int = 0
 
 
 def warn_if_thick(settings: SelfCollision, cloth) -> None:
@@ -387,6 +392,13 @@ class SelfCollisionStage:
         self.marked = fields.scalar(ti.i32, n)        # to move back in this round
         self.moved_back = fields.scalar(ti.i32, ())   # in this round
         self.moved_total = fields.scalar(ti.i32, ())  # in this step
+        self.cut = fields.scalar(ti.i32, ())          # in this run: placings by bands
+        self.placed = fields.scalar(ti.i32, ())       # in this run: particles first placed
+        self.hits = fields.scalar(ti.i32, n)          # never_through.py (4): bands it is out of
+        self.which = fields.scalar(ti.i32, n)         # the last such pair
+        self.fraction = fields.scalar(real, n)        # the share of its step they allow it
+        self.projections = fields.scalar(ti.i32, n)   # onto a band, in this step
+        self.first_end = fields.vector(3, real, n)    # where the step's first passes left it
         self.stayed = fields.scalar(ti.i32, ())       # in this step: a collider took the place
         self.rounds = fields.scalar(ti.i32, ())
         self.unresolved = fields.scalar(ti.i32, ())
@@ -448,6 +460,7 @@ class SelfCollisionStage:
         self.closest_left = None
         self.grown = []
         self.moved_total_run = 0
+        self.cut_run = 0
         self.stayed_run = 0
         self.unresolved_left = None
         self.passed = False             # the last step ran the passes (else it made none)
@@ -644,9 +657,11 @@ class SelfCollisionStage:
                         never_through.keep_frame(self, k)                  # c0 and c1
                 plan.run(self, model, state, None, self.candidates, dt, step_index, False,
                          part="fail_safe", serial=True)
-                moved = int(self.moved_total[None])
+                back = int(self.moved_total[None])
+                moved = back + int(self.cut[None])
                 self.tested += int(self.checked[None])
-                self.moved_total_run += moved
+                self.moved_total_run += back
+                self.cut_run += int(self.placed[None])
                 self.stayed_run += int(self.stayed[None])
                 if moved == 0:
                     break
@@ -749,9 +764,9 @@ class SelfCollisionStage:
         if first or distance < self.closest_left[0]:
             self.closest_left = (distance, step_index)
         if first:
-            kept = (" keep_thickness then moves the free particles of such a pair back to "
-                    "where the step started them, so it ends the step no nearer than it "
-                    "began, that part of the cloth stopped for the step."
+            kept = (" keep_thickness then holds such a pair apart by a plane between its "
+                    "elements as the step started them, so it ends the step no nearer than it "
+                    "began, that part of the cloth moving only along the plane."
                     if self.settings.keep_thickness else "")
             warnings.warn(
                 f"self-collision left a contact {distance / thickness:.2f} of the thickness "
@@ -809,7 +824,7 @@ class SelfCollisionStage:
                             self.closest_left, self.candidates.capacity, tuple(self.grown),
                             self.moved_total_run, self.stayed_run, self.unresolved_left,
                             int(self.passes[None]) if self.passed else 0,
-                            self.skin * self.settings.thickness, self.tested)
+                            self.skin * self.settings.thickness, self.tested, self.cut_run)
 
     def _rows(self, active: bool) -> tuple:
         """The (vertex, triangle) and (edge, edge) rows of the listed pairs, or of those
