@@ -520,12 +520,14 @@ def check_pair_outside(stage: ti.template(), pairs: ti.template(), model: ti.tem
 @ti.func
 def _check(stage: ti.template(), pairs: ti.template(), model: ti.template(),
            state: ti.template(), colliders: ti.template(), outside: ti.template(), p):
-    """Listed pair p (not beside a tear: torn pieces pass through the opening): if it may have
-    met in the step (never_through), or the step left it nearer than the kept distance and
-    than it started, unless mesh neighbours (keep_thickness), mark its free particles not
-    yet moved back (marked: written 1 by any pair, the same value in any order); count it if
-    it has none left to move (unresolved). Only a pair of a loose particle is tested (module
-    doc, bounds: the others pass), and counted in `checked`."""
+    """Listed pair p (not beside a tear: torn pieces pass through the opening) fails if it may
+    have met in the step (never_through), or the step left it nearer than the kept distance
+    and than it started, unless mesh neighbours (keep_thickness, or a particle of it placed:
+    _kept), and its band does not hold it ((4)). A failed pair's corners outside its band
+    are hit (_divide), or, in rounds past PLANE_ROUNDS or with no band, its movable
+    particles are marked to go back (marked: written 1 by any pair, the same value in any
+    order); it is counted if it has none left to move (unresolved). Only a pair of a loose
+    particle is tested (module doc, bounds: the others pass), and counted in `checked`."""
     corners = pairs.particles[p]
     if (stage.loose[corners[0]] + stage.loose[corners[1]] + stage.loose[corners[2]]
             + stage.loose[corners[3]] > 0):
