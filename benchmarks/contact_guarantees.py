@@ -317,11 +317,11 @@ def measure(name: str, n: int, layers: int, every: int, repeats: int,
                   f"{time.perf_counter() - start:.0f} s, crossings {crossed}, closest far pair "
                   f"{nearest / thickness:.4f} thicknesses, most stretched edge "
                   f"{stretched:.2f}, moved back {sim.self_contacts().moved_back:,}, placed "
-                  f"{sim.self_contacts().cut:,}",
+                  f"{sim.self_contacts().placed:,}",
                   file=sys.stderr, flush=True)
     run_s = time.perf_counter() - start
     report = sim.self_contacts()
-    moved_back, placed, stayed = report.moved_back, report.cut, report.stayed
+    moved_back, placed, stayed = report.moved_back, report.placed, report.stayed
     cost = {True: [], False: []}
     for _ in range(repeats):
         for contact, timed in sims.items():

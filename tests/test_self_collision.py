@@ -61,7 +61,7 @@ def moved(sim: tc.Simulation) -> int:
     """The particles the fail-safe moved over the run: back to their step's start, or
     placed by a pair's band (never_through.py, (4))."""
     report = sim.self_contacts()
-    return report.moved_back + report.cut
+    return report.moved_back + report.placed
 
 
 def violations(cloth, x):
@@ -837,9 +837,9 @@ def test_a_wound_twist_moves_on_where_the_fail_safe_places_particles_on_their_ba
             before = x
     report("free particles standing still a step over steps 161-320 (mean), free crossings, "
            "closest free pair / thickness, placed by a band",
-           (np.mean(still), crossings, min(closest), sim.self_contacts().cut),
+           (np.mean(still), crossings, min(closest), sim.self_contacts().placed),
            f"< {len(free) / 4:g}, 0, >= 0.999, > 0")
-    assert np.mean(still) < len(free) / 4 and sim.self_contacts().cut > 0
+    assert np.mean(still) < len(free) / 4 and sim.self_contacts().placed > 0
     assert crossings == 0 and min(closest) >= 0.999
 
 

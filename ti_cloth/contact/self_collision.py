@@ -208,15 +208,16 @@ class SelfCollision:
     off; where the band has no room, they go back to the step's start), so that no listed
     pair ever passes through another (a theorem, with its assumptions, in that module and
     docs/api.md); False: the passes alone, which a fast twist or fold can beat.
-    keep_thickness: the same rounds also hold apart so a pair the step left nearer than
-    0.999 of the thickness and nearer than it started it, so that no pair
-    that starts a step farther apart than that ever ends one nearer, whatever the passes
+    keep_thickness: the same rounds also hold apart, by its band, a pair the step left
+    nearer than 0.999 of the thickness and nearer than it started it, so that no pair that
+    starts a step farther apart than that ever ends one nearer, whatever the passes
     leave (the same module's theorem; but mesh neighbours, a particle of each on one mesh
     edge and under two thicknesses apart at rest, which the membrane squeezes, are the
     passes'); False (the default): the passes keep the thickness as far as `iterations`
     allow, and report what they leave (closest_left). A particle is moved only where no
-    collider took that place since (else it stays: a figure pressing the cloth is warned
-    about, where the guarantee yields). Off by default for what it costs the garment demos
+    collider took that place since, and a pair with a particle a collider drives goes back
+    rather than by its band (else it stays: a figure pressing the cloth is warned about,
+    where the guarantee yields). Off by default for what it costs the garment demos
     (docs/api.md): time, and cloth stopped short where a figure presses it.
     stacking: a resting contact moves the side farther (in contacts) from what holds it up:
     a collider, a pin, a handle (module doc: shock propagation), so the passes settle a pile
@@ -279,7 +280,7 @@ class SelfContacts:
     has room for; grown: (step, capacity) each time a step found more pairs than it had room
     for and the list grew (it never drops a pair: a list past MAX_PAIRS_PER_PARTICLE a
     particle is a CrushedContact). moved_back: the particles the never-through fail-safe
-    moved back to their step's start, over the run so far; cut: those it placed on a pair's
+    moved back to their step's start, over the run so far; placed: those it placed on a pair's
     band instead (never_through.py, (4): the move across a plane between the pair taken off,
     or their path cut short), over the run so far; stayed: those it left where the
     step left them instead, a collider having taken their step's start (never_through.py),
@@ -306,7 +307,7 @@ class SelfContacts:
     passes: int = 0
     skin: float = 0.0
     tested: int = 0
-    cut: int = 0
+    placed: int = 0
 
 
 def warn_if_thick(settings: SelfCollision, cloth) -> None:
@@ -395,7 +396,7 @@ class SelfCollisionStage:
         self.cut = fields.scalar(ti.i32, ())          # in this run: placings by bands
         self.placed = fields.scalar(ti.i32, ())       # in this run: particles first placed
         self.hits = fields.scalar(ti.i32, n)          # never_through.py (4): bands it is out of
-        self.which = fields.scalar(ti.i32, n)         # the last such pair
+        self.which = fields.scalar(ti.i32, n)         # such a pair: the highest index
         self.fraction = fields.scalar(real, n)        # the share of its step they allow it
         self.projections = fields.scalar(ti.i32, n)   # onto a band, in this step
         self.first_end = fields.vector(3, real, n)    # where the step's first passes left it
@@ -460,7 +461,7 @@ class SelfCollisionStage:
         self.closest_left = None
         self.grown = []
         self.moved_total_run = 0
-        self.cut_run = 0
+        self.placed_run = 0
         self.stayed_run = 0
         self.unresolved_left = None
         self.passed = False             # the last step ran the passes (else it made none)
@@ -661,7 +662,7 @@ class SelfCollisionStage:
                 moved = back + int(self.cut[None])
                 self.tested += int(self.checked[None])
                 self.moved_total_run += back
-                self.cut_run += int(self.placed[None])
+                self.placed_run += int(self.placed[None])
                 self.stayed_run += int(self.stayed[None])
                 if moved == 0:
                     break
@@ -824,7 +825,7 @@ class SelfCollisionStage:
                             self.closest_left, self.candidates.capacity, tuple(self.grown),
                             self.moved_total_run, self.stayed_run, self.unresolved_left,
                             int(self.passes[None]) if self.passed else 0,
-                            self.skin * self.settings.thickness, self.tested, self.cut_run)
+                            self.skin * self.settings.thickness, self.tested, self.placed_run)
 
     def _rows(self, active: bool) -> tuple:
         """The (vertex, triangle) and (edge, edge) rows of the listed pairs, or of those
