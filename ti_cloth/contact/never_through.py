@@ -390,9 +390,12 @@ def _divide(stage: ti.template(), model: ti.template(), state: ti.template(),
             if (not _movable(stage, model, i)
                     or (state.particle_position[i] == stage.step_start[i]).all()):
                 stuck = True
-        if ti.static(outside):
-            if taken_at(colliders, i, stage.step_start[i]):
-                stuck = True
+    if ti.static(outside):
+        for k in range(4):      # not unrolled: the colliders' query compiled once, not 4 times
+            i = ti.select(k < 2, ti.select(k == 0, corners[0], corners[1]),
+                          ti.select(k == 2, corners[2], corners[3]))
+            if not stuck:
+                stuck = taken_at(colliders, i, stage.step_start[i])
     for k in ti.static(range(4)):
         i = corners[k]
         if _movable(stage, model, i):
@@ -638,12 +641,15 @@ def _reset_hits(stage: ti.template(), i):
 @ti.func
 def move_back(stage: ti.template(), pairs: ti.template(), state: ti.template(), i, dt):
     """A marked particle goes back to the step's start, a hit one where its bands allow
-    (no colliders)."""
+    (no colliders; cut short to its start, it is moved back)."""
     if stage.marked[i]:
         _put_back(stage, state, i, True)
     elif stage.hits[i] > 0:
         target, normal = _cut(stage, pairs, state, i)
-        _place(stage, state, i, target, normal, dt)
+        if (target == stage.step_start[i]).all():
+            _put_back(stage, state, i, True)
+        else:
+            _place(stage, state, i, target, normal, dt)
     _reset_hits(stage, i)
 
 
@@ -652,15 +658,25 @@ def move_back_outside(stage: ti.template(), pairs: ti.template(), state: ti.temp
                       colliders: ti.template(), i, dt):
     """A marked particle goes back to the step's start where no collider took that place at
     the step's end (module doc: the colliders' assumption); a hit one where its bands allow
-    if no collider took that place either, else as a marked one."""
-    if stage.marked[i]:
-        _put_back(stage, state, i, not taken_at(colliders, i, stage.step_start[i]))
-    elif stage.hits[i] > 0:
-        target, normal = _cut(stage, pairs, state, i)
-        if taken_at(colliders, i, target):
-            _put_back(stage, state, i, not taken_at(colliders, i, stage.step_start[i]))
-        else:
-            _place(stage, state, i, target, normal, dt)
+    if no collider took that place either (cut short to its start, it is moved back), else
+    as a marked one."""
+    if stage.marked[i] or stage.hits[i] > 0:
+        start = stage.step_start[i]
+        target, normal = start, 0.0 * start
+        if not stage.marked[i]:
+            target, normal = _cut(stage, pairs, state, i)
+        done = False
+        for _ in range(2):      # the target, then the start: the colliders' query compiled once
+            if not done:
+                taken = taken_at(colliders, i, target)
+                if (target == start).all():
+                    _put_back(stage, state, i, not taken)
+                    done = True
+                elif not taken:
+                    _place(stage, state, i, target, normal, dt)
+                    done = True
+                else:
+                    target = start
     _reset_hits(stage, i)
 
 
