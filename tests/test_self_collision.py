@@ -810,7 +810,7 @@ def test_a_wound_twist_moves_on_where_the_fail_safe_places_particles_on_their_ba
     elements as the step started them, each side kept beyond it) takes off only the move
     across it: a particle pressed by a layer slides on (projected onto the band), or is
     stopped short on its path, and goes back to its step's start only where no band has room.
-    Over steps 161-320 a step ends with 8 of the 120 free particles where they started it on
+    Over steps 161-320 a step ends with 13 of the 120 free particles where they started it on
     average (measured, f64); 67 when every failed pair's particles went back to their step's
     start, the rule before the bands (the wound middle stood still while the edges turned
     on). Fewer than a quarter stand still, and every 32nd step no free edge passes through a
