@@ -1059,8 +1059,9 @@ def test_the_contacts_in_the_solve_meet_a_moving_collider_where_its_stage_puts_i
     passes meet the ball where the collision stage puts it at the step's end (placed before
     the step): no pair comes nearer than 0.99 of the thickness (0.999 measured, at 0.45,
     0.49 and 0.51 m/s too), where with the contacts after the solve pairs come to 0.37 as it
-    lifts them (0.16 before the fail-safe's bands; 0.03 to 0.40 at those speeds then). Stepping launch by launch ("per stage") gives
-    the bits of the default plan: the placement before the step is the stage's own."""
+    lifts them (0.16 before the fail-safe's bands; 0.03 to 0.40 at those speeds then).
+    Stepping launch by launch ("per stage") gives the bits of the default plan: the
+    placement before the step is the stage's own."""
     def sheet(size: float, y: float) -> tc.Cloth:
         mesh = tc.grid_mesh(12, 12, size=(size, size), plane="xz",
                             origin=(-size / 2, y, -size / 2))
