@@ -90,8 +90,10 @@ corners at n.x >= above and the second's at n.x <= below, with
 
     above - below = G = min(a - b, KEEP (1 + ROUNDING) thickness)
 
-and the room a - b - G shared between the sides by their inverse masses (the lighter side
-the more, each at least LEAST_SHARE of it). A point of an element is a convex combination of
+and the room a - b - G shared between the sides by how far each came towards the other along
+n in the step, as its first passes left it (each at least LEAST_SHARE of it; by inverse
+masses instead, the lower of two landed sheets, lying on the ground, was pushed into it and
+crossed itself). A point of an element is a convex combination of
 its corners, so a pair whose corners are inside the band at x0 (by construction) and at x1
 is on its sides of the plane all along the straight paths:
 
@@ -103,12 +105,16 @@ hitting pair of the highest index (projected: the move across the plane taken of
 thicknesses in, the rest of its step kept: a layer pressed by another slides on along it),
 up to PROJECTIONS times a step; after that, to the least share of its path from x0 that ends
 INSIDE thicknesses inside each band that hit it (x0 and that point are inside, so the whole
-path between is, and a band it was cut to holds it for good). Its velocity is its move over
-the step over dt. The passes that follow hold it where it is (as one moved back), so its
+path between is, and a band it was cut to holds it for good). Projected, its velocity is its
+move over the step over dt less any approach along the band's normal; cut short, it is at
+rest (cut to x0, it is moved back). The passes that follow hold it where it is (as one moved
+back), so its
 pairs are held to (3) whether or not keep_thickness is on: the passes could not part it
 from a neighbour. Where a corner outside its band may not be moved (held, kept by a
 collider) or is at x0 (the band has no room: a pair that began the step nearer than G
-leaves none), the pair's free particles go back to x0 as above. The rounds end: a particle
+leaves none), or a collider drives a corner of the pair (took its step's start: a band
+would push it back into the collider), the pair's free particles go back to x0 as above.
+The rounds end: a particle
 is projected at most PROJECTIONS times a step and each cut holds its bands for good, and
 after PLANE_ROUNDS rounds of a run what fails goes back to x0 (each such round moves at
 least one particle back, and one moved back stays). On a wound twist the bands let the
