@@ -301,6 +301,12 @@ def _mesh_neighbours(stage: ti.template(), rest: ti.template(), corners, vertex_
 
 
 @ti.func
+def _thickness_kept(stage: ti.template()):
+    """The distance (3) and (4) keep: KEEP thicknesses, checked with the rounding's margin."""
+    return KEEP * (1.0 + ROUNDING) * stage.thickness[None]
+
+
+@ti.func
 def _band(stage: ti.template(), corners, vertex_triangle):
     """The pair's band (module doc, (4)), from where the step started it: (n, below, above,
     found). Side A (the vertex, or the first edge) keeps n.x >= above, side B (the triangle,
@@ -330,7 +336,7 @@ def _band(stage: ti.template(), corners, vertex_triangle):
         towards_b = ti.max(n.dot(stage.first_end[c] - r), n.dot(stage.first_end[d] - s))
     towards_a, towards_b = ti.max(towards_a, 0.0), ti.max(towards_b, 0.0)
     gap = least_a - most_b
-    kept = ti.min(gap, KEEP * (1.0 + ROUNDING) * stage.thickness[None])
+    kept = ti.min(gap, _thickness_kept(stage))
     share = 0.5                             # of the room, side B's
     if towards_a + towards_b > 0.0:
         share = ti.math.clamp(towards_b / (towards_a + towards_b), LEAST_SHARE,
@@ -411,12 +417,12 @@ def _divide(stage: ti.template(), model: ti.template(), state: ti.template(),
                 now = _slack(n, below, above, state.particle_position[i], k, vertex_triangle)
                 if now < inside:
                     begin = _slack(n, below, above, stage.step_start[i], k, vertex_triangle)
-                    kept = 0.0
+                    share = 0.0
                     if begin > 4.0 * inside:
-                        kept = (begin - 2.0 * inside) / (begin - now)
+                        share = (begin - 2.0 * inside) / (begin - now)
                     ti.atomic_add(stage.hits[i], 1)
                     ti.atomic_max(stage.which[i], p)
-                    ti.atomic_min(stage.fraction[i], kept)
+                    ti.atomic_min(stage.fraction[i], share)
 
 
 @backend.kernel
@@ -508,7 +514,7 @@ def _kept(stage: ti.template(), corners):
             if stage.back[corners[k]] == 3:
                 placed = True
         if placed:
-            keep = KEEP * (1.0 + ROUNDING) * stage.thickness[None]
+            keep = _thickness_kept(stage)
     return keep
 
 
@@ -656,7 +662,8 @@ def move_back(stage: ti.template(), pairs: ti.template(), state: ti.template(), 
             _put_back(stage, state, i, True)
         else:
             _place(stage, state, i, target, normal, dt)
-    _reset_hits(stage, i)
+    if stage.hits[i] > 0:                  # the others are as loosen left them
+        _reset_hits(stage, i)
 
 
 @ti.func
@@ -683,7 +690,8 @@ def move_back_outside(stage: ti.template(), pairs: ti.template(), state: ti.temp
                     done = True
                 else:
                     target = start
-    _reset_hits(stage, i)
+    if stage.hits[i] > 0:                  # the others are as loosen left them
+        _reset_hits(stage, i)
 
 
 def phases(stage, model, pairs) -> tuple:
