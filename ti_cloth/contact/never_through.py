@@ -139,15 +139,20 @@ d(0) + d(1) >= 2 m - 2 (D_a + D_b) >= m and R <= 2 (D_a + D_b) <= m (with m its 
 at L, at least each corner's m_i), so it meets (1), strictly by the slack below; with
 keep_thickness D_i <= (m_i - KEEP ...) / 2 as well makes d(1) >= m - (D_a + D_b) at least
 the kept distance, so it does not meet (3). The
-rounds test only the pairs of a particle past those bounds (loose; BOUND_SLACK thicknesses
-inside them, far beyond rounding), and of one moved back: the pairs they skip are exactly
-those the tests would pass, so the rounds move back what they moved before, the same bits, for
-a test of a few particles where the body moves as a whole or rests (a 16-layer pile of 64²
-sheets falling: its 3.1 million pairs were tested every step).
+first round tests only the pairs of a particle past those bounds (loose; BOUND_SLACK
+thicknesses inside them, far beyond rounding): the pairs it skips are exactly those the tests
+would pass, so the rounds move back what they moved before, the same bits, for a test of a
+few particles where the body moves as a whole or rests (a 16-layer pile of 64² sheets
+falling: its 3.1 million pairs were tested every step). Each later round tests only the
+pairs of a particle the round before moved (or held): a pair none of whose particles changed
+is as the round before found it, passed, or failed with nothing of it left to move (counted
+in `unresolved` once, when found). A wound twist's run takes about a hundred rounds, each of
+which tested every loose pair (docs/performance.md).
 
-Cost: the bounds with each list (a distance a pair), then per step a pass over the particles
-and the tests of the loose particles' pairs a round, one round in a step where nothing is
-moved back (benchmarks/contact_guarantees.py measures it).
+Cost: the bounds with each list (a distance a pair), then per step a pass over the particles,
+the tests of the loose particles' pairs, and a round's tests of the pairs of the particles
+the round before moved: one round in a step where nothing is moved back
+(benchmarks/contact_guarantees.py measures it).
 """
 
 import taichi as ti
@@ -457,6 +462,7 @@ def begin_rounds(stage: ti.template()):
     stage.stayed[None] = 0
     stage.rounds[None] = 0
     stage.checked[None] = 0
+    stage.unresolved[None] = 0
 
 
 @ti.func
@@ -491,7 +497,6 @@ def going(stage: ti.template()):
 @ti.func
 def clear_round(stage: ti.template()):
     stage.moved_back[None] = 0
-    stage.unresolved[None] = 0
     stage.rounds[None] += 1
 
 
@@ -541,8 +546,10 @@ def _check(stage: ti.template(), pairs: ti.template(), model: ti.template(),
     _kept), and its band does not hold it ((4)). A failed pair's corners outside its band
     are hit (_divide), or, in rounds past PLANE_ROUNDS or with no band, its movable
     particles are marked to go back (marked: written 1 by any pair, the same value in any
-    order); it is counted if it has none left to move (unresolved). Only a pair of a loose
-    particle is tested (module doc, bounds: the others pass), and counted in `checked`."""
+    order); it is counted if it has none left to move (unresolved: its particles stay as they
+    are, so no later round tests it again). Only a pair of a loose particle is tested (module
+    doc, bounds: past its bound in the first round, moved in the round before later; the
+    others are as their last test left them), and counted in `checked`."""
     corners = pairs.particles[p]
     if (stage.loose[corners[0]] + stage.loose[corners[1]] + stage.loose[corners[2]]
             + stage.loose[corners[3]] > 0):
@@ -588,7 +595,7 @@ def _put_back(stage: ti.template(), state: ti.template(), i, free):
     not `free` (a collider took that place: colliders.taken_at): then it stays where the step
     left it, held there for the rest of the step as one moved back is (back 2, `stayed`)."""
     stage.marked[i] = 0
-    stage.loose[i] = 1              # a new path: its pairs are tested again
+    stage.loose[i] = 1              # a new path: its pairs are tested next round
     if free:
         stage.back[i] = 1
         state.particle_position[i] = stage.step_start[i]
@@ -634,7 +641,7 @@ def _place(stage: ti.template(), state: ti.template(), i, target, normal, dt):
     if stage.back[i] != 3:
         ti.atomic_add(stage.placed[None], 1)        # its first placing in the step
     stage.back[i] = 3
-    stage.loose[i] = 1              # a new path: its pairs are tested again
+    stage.loose[i] = 1              # a new path: its pairs are tested next round
     state.particle_position[i] = target
     v = (target - stage.step_start[i]) / dt
     state.particle_velocity[i] = ti.select(normal.dot(normal) > 0.0,
@@ -653,7 +660,9 @@ def _reset_hits(stage: ti.template(), i):
 @ti.func
 def move_back(stage: ti.template(), pairs: ti.template(), state: ti.template(), i, dt):
     """A marked particle goes back to the step's start, a hit one where its bands allow
-    (no colliders; cut short to its start, it is moved back)."""
+    (no colliders; cut short to its start, it is moved back). Only the particles it moves are
+    loose in the next round."""
+    stage.loose[i] = 0
     if stage.marked[i]:
         _put_back(stage, state, i, True)
     elif stage.hits[i] > 0:
@@ -673,6 +682,7 @@ def move_back_outside(stage: ti.template(), pairs: ti.template(), state: ti.temp
     the step's end (module doc: the colliders' assumption); a hit one where its bands allow
     if no collider took that place either (cut short to its start, it is moved back), else
     as a marked one."""
+    stage.loose[i] = 0              # loose in the next round if moved (or held) here
     if stage.marked[i] or stage.hits[i] > 0:
         start = stage.step_start[i]
         target, normal = start, 0.0 * start
@@ -697,10 +707,10 @@ def move_back_outside(stage: ti.template(), pairs: ti.template(), state: ti.temp
 def phases(stage, model, pairs) -> tuple:
     """The fail-safe's rounds (module doc), after the contact passes and their velocities:
     stage.moved_total[None] the particles moved back in this run, stage.unresolved[None] the
-    pairs left that held particles carried (their last round's). A step may run them again
-    on a list made for the paths of the particles moved back (self_collision.py); the
-    particles moved back stay marked back over the step (`back`, cleared by clear_back
-    before the step's contact passes)."""
+    pairs left that held particles carried (each counted in the round that found it). A step
+    may run them again on a list made for the paths of the particles moved back
+    (self_collision.py); the particles moved back stay marked back over the step (`back`,
+    cleared by clear_back before the step's contact passes)."""
     n = model.particle_count
     colliders = stage.colliders
     back = (Loop(n, move_back, stage, pairs, STATE, ITEM, DT) if colliders is None else
