@@ -189,6 +189,7 @@ RESTING = 0.25              # a contact approaching by at most this (in thicknes
 UNHELD = 1 << 20            # the level of a particle nothing is known to hold up
 NEAR = 0.5                  # a pair within this (in thicknesses) of contact is evaluated every pass
 MOVED = 0.5                 # a particle moving this far (thicknesses) in a step is stale
+PASSES_AGAIN = 1            # runs of the passes after the fail-safe's, a step (_fail_safe)
 INSIDE = 1e-6               # a foot this far outside a triangle (in barycentric terms) is inside
 
 
@@ -642,8 +643,13 @@ class SelfCollisionStage:
         those paths, and the passes run again with them held where they started (one moved
         back beside one that was not is nearer than the thickness; nor is it projected out
         of a collider again: the rounds could not move it back twice), then the rounds check
-        again. Those moved back stay back: each run moves new ones, or is the last."""
+        again. Those moved back stay back: each run moves new ones, or is the last. The
+        passes run again at most PASSES_AGAIN times a step: a run of the rounds ends with
+        every listed pair passing, so after that the rounds run again only on a list made
+        again for the paths they changed (a wound 64 x 64 twist ran the passes about six
+        times a step for a tail of a few particles a run: docs/performance.md)."""
         again = False
+        passes_again = 0
         try:
             while True:
                 if self._moved_past(state, self._reach_kept() + self.skin - MARGIN):
@@ -668,10 +674,15 @@ class SelfCollisionStage:
                     break
                 if not again:
                     self.again[None] = again = 1
+                if passes_again == PASSES_AGAIN:    # the run left every listed pair passing:
+                    if self._moved_past(state, self._reach_kept() + self.skin - MARGIN):
+                        continue                    # another run on the list made again
+                    break
                 if self._moved_past(state, self.skin - MARGIN):
                     self._list_again(model, state, step_index)
                 plan.run(self, model, state, None, self.candidates, dt, step_index, False,
                          serial=True)
+                passes_again += 1
         finally:        # the next step's passes start with nobody moved back
             if again:
                 self.again[None] = 0
