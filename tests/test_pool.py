@@ -22,16 +22,20 @@ def resident_mb() -> float:
     return pages * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
+DT = 5e-4      # below cloth()'s stable step (8.8e-4 s or more; a single step needs none)
+
+
 def cloth(k=500.0, damping="axial", pinned=(0, 7), density=0.2):
     material = tc.Material(density=density, stretch=tc.SpringParams(k, 0.5), damping=damping)
     return tc.Cloth(tc.grid_mesh(8, 8, plane="xz"), material, pinned=list(pinned))
 
 
 def every_stage(body, integrator="symplectic_euler", radius=0.3, strain=0.1, wind=(1.0, 0, 0)):
-    return tc.Simulation(body, integrator=integrator, dt=1e-3,
+    return tc.Simulation(body, integrator=integrator, dt=DT,
                          colliders=[tc.Sphere(centre=(0.5, -0.4, 0.5), radius=radius)],
                          handles=[tc.Handle([63], lambda t: (0, 0.2 * t, 0))], tearing=2.0,
-                         strain_limit=tc.StrainLimit(max_strain=strain), wind=tc.Wind(velocity=wind))
+                         strain_limit=tc.StrainLimit(max_strain=strain),
+                         wind=tc.Wind(velocity=wind))
 
 
 @pytest.mark.parametrize("features", ["plain", "every stage"])
@@ -44,7 +48,7 @@ def test_building_and_dropping_simulations_does_not_grow_memory(f64, features):
     rss = []
     for index in range(30):
         integrator = integrators[index % len(integrators)]
-        sim = (tc.Simulation(body, integrator=integrator, dt=1e-3) if features == "plain"
+        sim = (tc.Simulation(body, integrator=integrator, dt=DT) if features == "plain"
                else every_stage(body, integrator))
         sim.step(5)
         sim.step(1)
@@ -61,11 +65,11 @@ def test_a_dropped_simulations_kernels_serve_the_next_one(f64):
     distinct template arguments it was launched with, keyed as Taichi keys them) stays put."""
     body = cloth()
     backend.forget_compilations(stepping.advance_many)
-    tc.Simulation(body, dt=1e-3).step(1)
+    tc.Simulation(body, dt=DT).step(1)
     gc.collect()
     assert backend.compilations(stepping.advance_many) == 1
     for _ in range(5):
-        tc.Simulation(body, dt=1e-3).step(1)
+        tc.Simulation(body, dt=DT).step(1)
         gc.collect()
     assert backend.compilations(stepping.advance_many) == 1
 
@@ -73,11 +77,11 @@ def test_a_dropped_simulations_kernels_serve_the_next_one(f64):
 BALL = tc.Sphere(centre=(0.5, -0.4, 0.5), radius=0.42)   # the sheet's middle starts in it
 PAIRS = {
     "other stiffness, density and pins": (
-        lambda: tc.Simulation(cloth(), dt=1e-3),
-        lambda: tc.Simulation(cloth(k=900.0, density=0.3, pinned=(0,)), dt=1e-3)),
+        lambda: tc.Simulation(cloth(), dt=DT),
+        lambda: tc.Simulation(cloth(k=900.0, density=0.3, pinned=(0,)), dt=DT)),
     "other integrator options": (
-        lambda: tc.Simulation(cloth(), integrator=tc.Verlet(damping=0.0), dt=1e-3),
-        lambda: tc.Simulation(cloth(k=700.0), integrator=tc.Verlet(damping=0.01), dt=1e-3)),
+        lambda: tc.Simulation(cloth(), integrator=tc.Verlet(damping=0.0), dt=DT),
+        lambda: tc.Simulation(cloth(k=700.0), integrator=tc.Verlet(damping=0.01), dt=DT)),
     "other colliders, stiffness and wind": (
         lambda: every_stage(cloth()),
         lambda: every_stage(cloth(k=800.0), radius=0.2, wind=(0, 0, 2.0))),
@@ -88,8 +92,8 @@ PAIRS = {
     # a fused integrator's particles collide inside its step (stepping.TeamStages), xpbd's
     # after it: the second must not inherit the first's plan
     "a fused then a position-based integrator": (
-        lambda: tc.Simulation(cloth(), dt=1e-3, colliders=[BALL]),
-        lambda: tc.Simulation(cloth(), integrator="xpbd", dt=1e-3, colliders=[BALL])),
+        lambda: tc.Simulation(cloth(), dt=DT, colliders=[BALL]),
+        lambda: tc.Simulation(cloth(), integrator="xpbd", dt=DT, colliders=[BALL])),
     # a solve's tolerances and caps and a position-based step's passes are read at run time
     # (Integrator.runtime_options): the second runs the first's kernels with its own values
     "other solve tolerances and caps": (
@@ -102,11 +106,11 @@ PAIRS = {
         lambda: tc.Simulation(cloth(), integrator=tc.ImplicitMidpoint(
             **tc.ImplicitMidpoint.presets["loose"]), dt=1e-2)),
     "other passes": (
-        lambda: tc.Simulation(cloth(), integrator=tc.XPBD(iterations=2), dt=1e-3),
-        lambda: tc.Simulation(cloth(), integrator=tc.XPBD(iterations=9), dt=1e-3)),
+        lambda: tc.Simulation(cloth(), integrator=tc.XPBD(iterations=2), dt=DT),
+        lambda: tc.Simulation(cloth(), integrator=tc.XPBD(iterations=9), dt=DT)),
     "other damping model": (
-        lambda: tc.Simulation(cloth(), dt=1e-3),
-        lambda: tc.Simulation(cloth(damping="relative"), dt=1e-3)),
+        lambda: tc.Simulation(cloth(), dt=DT),
+        lambda: tc.Simulation(cloth(damping="relative"), dt=DT)),
 }
 
 
@@ -176,7 +180,7 @@ def test_a_solves_tolerances_caps_and_passes_compile_nothing(f64, name):
 def test_live_simulations_never_share_a_set(f64):
     """Two simulations alive at once each get their own State and Model, and step apart."""
     body = cloth()
-    a, b = tc.Simulation(body, dt=1e-3), tc.Simulation(body, dt=1e-3)
+    a, b = tc.Simulation(body, dt=DT), tc.Simulation(body, dt=DT)
     assert a.state is not b.state and a.model is not b.model
     a.step(20)
     np.testing.assert_array_equal(b.positions(), body.particle_position)
@@ -187,8 +191,8 @@ def test_a_users_integrator_is_the_one_its_simulation_steps_with(f64):
     on its user's object (an equal kept one only keeps the compiled kernels alive)."""
     body = cloth()
     first, second = tc.ImplicitEuler(), tc.ImplicitEuler()
-    a = tc.Simulation(body, integrator=first, dt=1e-3)
-    b = tc.Simulation(body, integrator=second, dt=1e-3)
+    a = tc.Simulation(body, integrator=first, dt=DT)
+    b = tc.Simulation(body, integrator=second, dt=DT)
     assert a.integrator is first and b.integrator is second
     b.step(3)
     assert second.last_iterations > 0 and first.last_iterations == 0
@@ -199,12 +203,12 @@ def test_a_users_integrator_is_the_one_its_simulation_steps_with(f64):
 @pytest.mark.reinitialises
 def test_a_new_runtime_drops_the_pool(f64):
     body = cloth()
-    sim = tc.Simulation(body, dt=1e-3)
+    sim = tc.Simulation(body, dt=DT)
     model = sim.model
     del sim
     gc.collect()
     tc.init(precision="f64")
-    assert tc.Simulation(body, dt=1e-3).model is not model
+    assert tc.Simulation(body, dt=DT).model is not model
 
 
 def test_the_free_list_is_bounded_in_count_and_bytes(f64, monkeypatch):
@@ -213,16 +217,16 @@ def test_the_free_list_is_bounded_in_count_and_bytes(f64, monkeypatch):
     monkeypatch.setattr(simulation, "POOL", Pool())
     monkeypatch.setattr(pool, "FREE_LIMIT", 2)
     for rows in (4, 5, 6, 7):
-        tc.Simulation(tc.Cloth(tc.grid_mesh(rows, 4), tc.Material()), dt=1e-3).step(1)
+        tc.Simulation(tc.Cloth(tc.grid_mesh(rows, 4), tc.Material()), dt=DT).step(1)
         gc.collect()
         assert simulation.POOL.free_count() == min(rows - 3, 2)
     body = tc.Cloth(tc.grid_mesh(4, 4), tc.Material())
     small = limits.memory_needed(body.particle_count, body.spring_count)
     monkeypatch.setattr(pool, "FREE_BYTES", small)
-    tc.Simulation(body, dt=1e-3).step(1)
+    tc.Simulation(body, dt=DT).step(1)
     gc.collect()
     assert simulation.POOL.free_count() == 1 and simulation.POOL.free_bytes() <= small
-    tc.Simulation(tc.Cloth(tc.grid_mesh(9, 9), tc.Material()), dt=1e-3).step(1)
+    tc.Simulation(tc.Cloth(tc.grid_mesh(9, 9), tc.Material()), dt=DT).step(1)
     gc.collect()
     assert simulation.POOL.free_bytes() <= small
 
@@ -235,11 +239,11 @@ def test_the_pool_gives_its_field_trees_to_a_live_simulation_that_needs_them(f64
     gc.collect()
     backend.free_dead_trees()
     for rows in (4, 5, 6):             # three structures waiting, a model and a state each
-        tc.Simulation(tc.Cloth(tc.grid_mesh(rows, 4), tc.Material()), dt=1e-3).step(1)
+        tc.Simulation(tc.Cloth(tc.grid_mesh(rows, 4), tc.Material()), dt=DT).step(1)
         gc.collect()
     assert simulation.POOL.free_count() == 3
     monkeypatch.setattr(backend, "TREE_BUDGET", backend.tree_count() + 2)
-    alive = [tc.Simulation(cloth(), dt=1e-3) for _ in range(3)]     # 6 trees, room for 2
+    alive = [tc.Simulation(cloth(), dt=DT) for _ in range(3)]     # 6 trees, room for 2
     assert len(alive) == 3 and simulation.POOL.free_count() == 0
     assert backend.tree_count() <= backend.TREE_BUDGET
 
@@ -257,8 +261,8 @@ def test_too_many_live_field_trees_is_refused_before_taichi_crashes(f64, monkeyp
     alive = []
     with pytest.raises(RuntimeError, match="too many simulations"):
         for _ in range(5):
-            alive.append(tc.Simulation(body, dt=1e-3))
+            alive.append(tc.Simulation(body, dt=DT))
     assert len(alive) == 2                      # a model and a state each
     alive.clear()
     gc.collect()
-    tc.Simulation(body, dt=1e-3).step(1)        # the dead ones' trees are freed for it
+    tc.Simulation(body, dt=DT).step(1)        # the dead ones' trees are freed for it
