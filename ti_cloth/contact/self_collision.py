@@ -189,7 +189,7 @@ RESTING = 0.25              # a contact approaching by at most this (in thicknes
 UNHELD = 1 << 20            # the level of a particle nothing is known to hold up
 NEAR = 0.5                  # a pair within this (in thicknesses) of contact is evaluated every pass
 MOVED = 0.5                 # a particle moving this far (thicknesses) in a step is stale
-PASSES_AGAIN = 2            # runs of the passes after the fail-safe's, a step (_fail_safe)
+PASSES_AGAIN = 2            # most runs of the passes after the fail-safe's, a step (_fail_safe)
 INSIDE = 1e-6               # a foot this far outside a triangle (in barycentric terms) is inside
 
 
@@ -647,9 +647,9 @@ class SelfCollisionStage:
         passes run again at most PASSES_AGAIN times a step: a run of the rounds ends with
         every listed pair passing, so after that the rounds run again only on a list made
         again for the paths they changed (a wound 64 x 64 twist ran the passes about six
-        times a step for a tail of a few particles a run; once, a press thicker than half an
-        edge crossed itself between mesh neighbours, pairs no list holds:
-        docs/performance.md)."""
+        times a step for a tail of a few particles a run; with the passes run again once, a
+        press thicker than half an edge crossed itself between mesh neighbours, pairs no list
+        holds: docs/performance.md)."""
         again = False
         passes_again = 0
         try:
