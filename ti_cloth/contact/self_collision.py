@@ -652,9 +652,10 @@ class SelfCollisionStage:
         holds: docs/performance.md)."""
         again = False
         passes_again = 0
+        stale = self._list_stale(state)
         try:
             while True:
-                if self._moved_past(state, self._reach_kept() + self.skin - MARGIN):
+                if stale:
                     self._list_again(model, state, step_index)
                 if not self.bounded and self.listed_step < step_index:
                     never_through.pair_bounds(self, self.candidates, self.listed_at)
@@ -677,19 +678,26 @@ class SelfCollisionStage:
                 if not again:
                     self.again[None] = again = 1
                 if passes_again == PASSES_AGAIN:    # the run left every listed pair passing:
-                    if self._moved_past(state, self._reach_kept() + self.skin - MARGIN):
-                        continue                    # another run on the list made again
-                    break
+                    stale = self._list_stale(state)     # another run only on a list made again
+                    if not stale:
+                        break
+                    continue
                 if self._moved_past(state, self.skin - MARGIN):
                     self._list_again(model, state, step_index)
                 plan.run(self, model, state, None, self.candidates, dt, step_index, False,
                          serial=True)
                 passes_again += 1
+                stale = self._list_stale(state)
         finally:        # the next step's passes start with nobody moved back
             if again:
                 self.again[None] = 0
         if self.unresolved[None]:
             self._unresolved(int(self.unresolved[None]), step_index)
+
+    def _list_stale(self, state) -> bool:
+        """Whether the rounds need the list made again first: two particles moved apart by
+        more than _reach_kept and the skin (less the margin) since it was made."""
+        return self._moved_past(state, self._reach_kept() + self.skin - MARGIN)
 
     def _reach_kept(self) -> float:
         """How near [thicknesses] a pair left out of the list may come before the fail-safe
